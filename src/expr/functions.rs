@@ -1,0 +1,82 @@
+//! The model's functions and their derivatives as DAG roots: what `lower` produces from a checked
+//! model and what both the reference evaluator and `codegen` consume.
+//!
+//! Derivatives are taken with respect to *every* parameter; a consumer that needs only some
+//! parameters filters the sparse entries. Sparse containers hold only structurally non-zero
+//! entries, in ascending (row, column) order.
+
+use super::node::ExprId;
+use super::store::ExprStore;
+
+/// A sparse vector: `(index, expression)` for each structurally non-zero entry, ascending.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SparseVec {
+    pub entries: Vec<(u32, ExprId)>,
+}
+
+/// A sparse matrix: `(row, column, expression)` for each structurally non-zero entry, ascending
+/// by row, then column.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SparseMat {
+    pub n_rows: u32,
+    pub n_cols: u32,
+    pub entries: Vec<(u32, u32, ExprId)>,
+}
+
+/// Flow of one mode: `der(x) = f(t, x, p)`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModeFunctions {
+    /// `f[i]`, one per state.
+    pub flow: Vec<ExprId>,
+    /// `df_i/dx_k`: n_states x n_states.
+    pub flow_x: SparseMat,
+    /// `df_i/dp_j`: n_states x n_params.
+    pub flow_p: SparseMat,
+    /// `df_i/dt`.
+    pub flow_t: SparseVec,
+}
+
+/// One event: guard, enabling condition and reset map with their derivatives.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EventFunctions {
+    /// `g(t, x, p) = lhs - rhs`.
+    pub guard: ExprId,
+    pub guard_x: SparseVec,
+    pub guard_p: SparseVec,
+    /// `dg/dt` (the constant 0 node when `t` does not appear).
+    pub guard_t: ExprId,
+    /// 1.0 where the event is enabled, 0.0 otherwise; `None` means always enabled.
+    pub condition: Option<ExprId>,
+    /// The whole post-event state `R(t, x, p)`, one entry per state (`x_i` itself where the event
+    /// does not assign `x_i`).
+    pub reset: Vec<ExprId>,
+    /// `dR_i/dx_k`: n_states x n_states (the identity rows for unassigned states).
+    pub reset_x: SparseMat,
+    /// `dR_i/dp_j`: n_states x n_params.
+    pub reset_p: SparseMat,
+    /// `dR_i/dt`.
+    pub reset_t: SparseVec,
+}
+
+/// Everything hybc compiles for one model, sharing one store.
+#[derive(Clone, Debug)]
+pub struct ModelFunctions {
+    pub store: ExprStore,
+    pub n_states: u32,
+    pub n_params: u32,
+    /// Indexed by `ModeId`.
+    pub modes: Vec<ModeFunctions>,
+    /// Indexed by `EventIdx`.
+    pub events: Vec<EventFunctions>,
+    /// Initial state `x0(p)`, one per state.
+    pub init: Vec<ExprId>,
+    /// `dx0_i/dp_j`: n_states x n_params.
+    pub init_p: SparseMat,
+    /// Outputs `h(t, x, p)`, one per output.
+    pub outputs: Vec<ExprId>,
+    /// n_outputs x n_states.
+    pub output_x: SparseMat,
+    /// n_outputs x n_params.
+    pub output_p: SparseMat,
+    pub output_t: SparseVec,
+}

@@ -1,0 +1,108 @@
+//! The nodes of the expression DAG. Knows no spans, no IO and no Cranelift.
+
+/// Handle of a node in an [`ExprStore`](super::ExprStore). Equal ids mean structurally equal
+/// expressions (hash-consing); ids are dense and children always have smaller ids than parents,
+/// so ascending id order is a valid evaluation order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct ExprId(pub u32);
+
+impl ExprId {
+    pub fn index(self) -> usize {
+        self.0 as usize
+    }
+}
+
+/// One-argument operations. Boolean-valued nodes (comparisons, `Not`, `And`, `Or`) produce
+/// exactly 0.0 or 1.0.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum UnaryOp {
+    Neg,
+    Sin,
+    Cos,
+    Tan,
+    Asin,
+    Acos,
+    Atan,
+    Sinh,
+    Cosh,
+    Tanh,
+    Exp,
+    Log,
+    Sqrt,
+    Abs,
+    Sign,
+    /// Boolean negation: 1.0 where the argument is 0.0, else 0.0.
+    Not,
+}
+
+/// Two-argument operations. There is no `Sub`: `a - b` is `a + (-b)`, so sums stay canonical.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum BinaryOp {
+    Add,
+    Mul,
+    Div,
+    Pow,
+    Atan2,
+    Hypot,
+    Min,
+    Max,
+    /// Comparisons yield 1.0 (true) or 0.0 (false).
+    Lt,
+    Le,
+    /// Boolean and/or of two 0.0/1.0 values.
+    And,
+    Or,
+}
+
+impl BinaryOp {
+    pub fn is_commutative(self) -> bool {
+        matches!(
+            self,
+            BinaryOp::Add
+                | BinaryOp::Mul
+                | BinaryOp::Hypot
+                | BinaryOp::Min
+                | BinaryOp::Max
+                | BinaryOp::And
+                | BinaryOp::Or
+        )
+    }
+}
+
+/// A node. `Const` holds the bit pattern of an f64 so nodes can be hashed; `-0.0` and `0.0` are
+/// distinct constants, and NaN constants are never created by simplification.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Node {
+    Const(u64),
+    State(u32),
+    Param(u32),
+    Time,
+    Unary(UnaryOp, ExprId),
+    Binary(BinaryOp, ExprId, ExprId),
+    /// `Select(c, a, b)` is `a` where `c != 0.0`, else `b`.
+    Select(ExprId, ExprId, ExprId),
+}
+
+impl Node {
+    pub fn constant(value: f64) -> Node {
+        Node::Const(value.to_bits())
+    }
+
+    pub fn as_const(&self) -> Option<f64> {
+        match *self {
+            Node::Const(bits) => Some(f64::from_bits(bits)),
+            _ => None,
+        }
+    }
+
+    /// The node's operands, in order.
+    pub fn children(&self) -> impl Iterator<Item = ExprId> {
+        let (a, b, c) = match *self {
+            Node::Const(_) | Node::State(_) | Node::Param(_) | Node::Time => (None, None, None),
+            Node::Unary(_, a) => (Some(a), None, None),
+            Node::Binary(_, a, b) => (Some(a), Some(b), None),
+            Node::Select(c, a, b) => (Some(c), Some(a), Some(b)),
+        };
+        a.into_iter().chain(b).chain(c)
+    }
+}

@@ -1,0 +1,245 @@
+//! The checked model: the output of `sema`, the input of every later stage.
+//!
+//! Names are resolved to indices, `let`s are resolved to their (shared) definitions, every mode
+//! has exactly one flow per state. Spans are kept only where later stages report runtime problems
+//! against the source (events); no later stage needs the AST.
+
+use crate::syntax::Span;
+
+/// Index of a continuous state, in declaration order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct StateIdx(pub u32);
+
+/// Index of a parameter, in declaration order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct ParamIdx(pub u32);
+
+/// Index of a discrete mode. A model without `mode` blocks has one implicit mode `main`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct ModeId(pub u16);
+
+/// Index of an event, in declaration order over the whole file (top-level and mode events
+/// interleaved as written): events at one instant fire in this order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct EventIdx(pub u32);
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Model {
+    pub name: String,
+    pub params: Vec<Param>,
+    pub states: Vec<State>,
+    pub modes: Vec<Mode>,
+    pub initial_mode: ModeId,
+    pub events: Vec<Event>,
+    pub outputs: Vec<Output>,
+    pub simulate: SimulateDefaults,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Param {
+    pub name: String,
+    pub default: f64,
+    /// Allowed closed interval `[lo, hi]`, if declared.
+    pub range: Option<(f64, f64)>,
+    pub span: Span,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct State {
+    pub name: String,
+    /// Initial value: an expression of parameters only (no `t`, no states).
+    pub init: Expr,
+    pub span: Span,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Mode {
+    pub name: String,
+    /// `flows[i]` is `der(states[i])` in this mode.
+    pub flows: Vec<Expr>,
+    /// Events that can fire in this mode (its own and the top-level ones), ascending.
+    pub events: Vec<EventIdx>,
+    pub span: Span,
+}
+
+/// The direction in which the guard function `g = lhs - rhs` must cross zero.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Direction {
+    /// `<=` / `<`: from positive to non-positive.
+    Falling,
+    /// `>=` / `>`: from negative to non-negative.
+    Rising,
+    /// `crosses`: either way.
+    Either,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Event {
+    pub name: String,
+    /// The guard function `g = lhs - rhs`; the event fires when `g` crosses zero in `direction`.
+    pub guard: Expr,
+    pub direction: Direction,
+    /// Enabling condition, evaluated on the state just before the event.
+    pub condition: Option<Cond>,
+    /// Simultaneous resets `x_i := expr`, ascending by state; unassigned states keep their value.
+    pub resets: Vec<(StateIdx, Expr)>,
+    /// Mode after the event; `None` keeps the current mode.
+    pub target: Option<ModeId>,
+    pub is_stop: bool,
+    /// `None` for a top-level event (active in every mode).
+    pub owner: Option<ModeId>,
+    pub span: Span,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Output {
+    pub name: String,
+    pub expr: Expr,
+    pub span: Span,
+}
+
+/// Defaults from the `simulate` statement; the command line overrides them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SimulateDefaults {
+    pub t_end: Option<f64>,
+    pub rtol: Option<f64>,
+    pub atol: Option<f64>,
+}
+
+/// A resolved real-valued expression. `let`s are already substituted: a `let` used twice appears
+/// as two clones of one subtree, which the hash-consed DAG in `expr` merges again.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Expr {
+    Num(f64),
+    State(StateIdx),
+    Param(ParamIdx),
+    Time,
+    Neg(Box<Expr>),
+    Binary(BinOp, Box<Expr>, Box<Expr>),
+    Call(Func, Vec<Expr>),
+    If(Box<Cond>, Box<Expr>, Box<Expr>),
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum BinOp {
+    Add,
+    Sub,
+    Mul,
+    Div,
+    Pow,
+}
+
+/// The language's functions. `arity` is checked by `sema`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Func {
+    Sin,
+    Cos,
+    Tan,
+    Asin,
+    Acos,
+    Atan,
+    Atan2,
+    Sinh,
+    Cosh,
+    Tanh,
+    Exp,
+    Log,
+    Sqrt,
+    Abs,
+    Sign,
+    Min,
+    Max,
+    Pow,
+    Hypot,
+}
+
+impl Func {
+    pub const ALL: [Func; 19] = [
+        Func::Sin,
+        Func::Cos,
+        Func::Tan,
+        Func::Asin,
+        Func::Acos,
+        Func::Atan,
+        Func::Atan2,
+        Func::Sinh,
+        Func::Cosh,
+        Func::Tanh,
+        Func::Exp,
+        Func::Log,
+        Func::Sqrt,
+        Func::Abs,
+        Func::Sign,
+        Func::Min,
+        Func::Max,
+        Func::Pow,
+        Func::Hypot,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Func::Sin => "sin",
+            Func::Cos => "cos",
+            Func::Tan => "tan",
+            Func::Asin => "asin",
+            Func::Acos => "acos",
+            Func::Atan => "atan",
+            Func::Atan2 => "atan2",
+            Func::Sinh => "sinh",
+            Func::Cosh => "cosh",
+            Func::Tanh => "tanh",
+            Func::Exp => "exp",
+            Func::Log => "log",
+            Func::Sqrt => "sqrt",
+            Func::Abs => "abs",
+            Func::Sign => "sign",
+            Func::Min => "min",
+            Func::Max => "max",
+            Func::Pow => "pow",
+            Func::Hypot => "hypot",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Func> {
+        Func::ALL.into_iter().find(|f| f.name() == name)
+    }
+
+    pub fn arity(self) -> usize {
+        match self {
+            Func::Atan2 | Func::Min | Func::Max | Func::Pow | Func::Hypot => 2,
+            _ => 1,
+        }
+    }
+}
+
+/// A resolved boolean expression (in `if` and event conditions).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Cond {
+    Cmp(CmpOp, Expr, Expr),
+    And(Box<Cond>, Box<Cond>),
+    Or(Box<Cond>, Box<Cond>),
+    Not(Box<Cond>),
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum CmpOp {
+    Lt,
+    Le,
+    Gt,
+    Ge,
+}
+
+impl Model {
+    pub fn n_states(&self) -> usize {
+        self.states.len()
+    }
+    pub fn n_params(&self) -> usize {
+        self.params.len()
+    }
+    pub fn param_index(&self, name: &str) -> Option<ParamIdx> {
+        self.params.iter().position(|p| p.name == name).map(|i| ParamIdx(i as u32))
+    }
+    pub fn mode_index(&self, name: &str) -> Option<ModeId> {
+        self.modes.iter().position(|m| m.name == name).map(|i| ModeId(i as u16))
+    }
+}

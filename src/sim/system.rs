@@ -1,0 +1,130 @@
+//! What the integrator needs from a model: its shape ([`SystemInfo`]) and its functions
+//! ([`HybridSystem`]). `sim` depends only on this trait, not on Cranelift, so integrator tests can
+//! implement it with plain closures.
+//!
+//! Array layouts (n = states, m = differentiated parameters, k = outputs):
+//! - state-like vectors `x`, `dx`, `r`: length n.
+//! - sensitivities and every `_p` array are column-per-parameter: `s[j * n + i] = dx_i/dp_j`
+//!   (length n * m; for outputs `yp[j * k + i]`, length k * m; for guards `gp[j]`, length m).
+//! - `_x` Jacobians are row-major: `rx[i * n + c] = dR_i/dx_c` (n * n; outputs k * n).
+//!
+//! Implementations may assume the lengths above; callers must guarantee them (the JIT-backed
+//! implementation checks them before entering native code).
+
+/// Crossing direction of a guard `g`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Direction {
+    /// From positive to non-positive.
+    Falling,
+    /// From negative to non-negative.
+    Rising,
+    /// Either way.
+    Either,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModeInfo {
+    pub name: String,
+    /// Events that can fire in this mode, ascending (declaration order = firing order).
+    pub events: Vec<usize>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct EventInfo {
+    pub name: String,
+    pub direction: Direction,
+    /// Mode after the event; `None` keeps the current one.
+    pub target_mode: Option<usize>,
+    pub is_stop: bool,
+    pub has_condition: bool,
+}
+
+/// The static shape of a compiled hybrid model.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SystemInfo {
+    pub state_names: Vec<String>,
+    pub output_names: Vec<String>,
+    /// Names of all parameters, in declaration order (the `p` slices have this length).
+    pub param_names: Vec<String>,
+    /// Indices into `param_names` of the differentiated parameters, in sensitivity column order.
+    pub grad_params: Vec<usize>,
+    pub modes: Vec<ModeInfo>,
+    pub events: Vec<EventInfo>,
+    pub initial_mode: usize,
+}
+
+impl SystemInfo {
+    pub fn n_states(&self) -> usize {
+        self.state_names.len()
+    }
+    pub fn n_outputs(&self) -> usize {
+        self.output_names.len()
+    }
+    pub fn n_params(&self) -> usize {
+        self.param_names.len()
+    }
+    /// Number of differentiated parameters (sensitivity columns).
+    pub fn n_grad(&self) -> usize {
+        self.grad_params.len()
+    }
+}
+
+/// The functions of a hybrid model. `p` always holds all parameters (length `n_params`);
+/// derivatives `_p` are taken only with respect to `grad_params`.
+pub trait HybridSystem: Sync {
+    fn info(&self) -> &SystemInfo;
+
+    /// Initial state `x0(p)`.
+    fn initial_state(&self, p: &[f64], x0: &mut [f64]);
+    /// Initial sensitivities `dx0/dp` (n * m).
+    fn initial_sens(&self, p: &[f64], s0: &mut [f64]);
+
+    /// Flow of `mode`: `dx = f(t, x, p)`.
+    fn flow(&self, mode: usize, t: f64, x: &[f64], p: &[f64], dx: &mut [f64]);
+    /// Flow and sensitivity right-hand side in one call: `dx = f`, `ds = f_x s + f_p`.
+    fn flow_sens(
+        &self,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        s: &[f64],
+        p: &[f64],
+        dx: &mut [f64],
+        ds: &mut [f64],
+    );
+    /// Guards of every event active in `mode`, in the order of `ModeInfo::events`.
+    fn guards(&self, mode: usize, t: f64, x: &[f64], p: &[f64], g: &mut [f64]);
+    /// Partial derivatives of one guard: `gx` (n), `gp` (m), returns `g_t`.
+    fn guard_grad(&self, event: usize, t: f64, x: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64])
+        -> f64;
+    /// Whether the enabling condition holds (true for events without one).
+    fn condition(&self, event: usize, t: f64, x: &[f64], p: &[f64]) -> bool;
+
+    /// Reset map: the post-event state `r = R(t, x, p)`.
+    fn reset(&self, event: usize, t: f64, x: &[f64], p: &[f64], r: &mut [f64]);
+    /// Reset Jacobians `rx` (n * n, row-major), `rp` (n * m), `rt` (n).
+    fn reset_jac(
+        &self,
+        event: usize,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+        rx: &mut [f64],
+        rp: &mut [f64],
+        rt: &mut [f64],
+    );
+
+    /// Outputs `y = h(t, x, p)`.
+    fn outputs(&self, t: f64, x: &[f64], p: &[f64], y: &mut [f64]);
+    /// Output Jacobians `yx` (k * n, row-major), `yp` (k * m), `yt` (k).
+    fn output_jac(
+        &self,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+        yx: &mut [f64],
+        yp: &mut [f64],
+        yt: &mut [f64],
+    );
+}
