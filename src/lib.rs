@@ -7,6 +7,7 @@
 pub mod codegen;
 pub mod diag;
 pub mod expr;
+pub mod lower;
 pub mod sema;
 pub mod sim;
 pub mod syntax;
