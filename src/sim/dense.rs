@@ -1,0 +1,164 @@
+//! Stage 5 (sim): dense output of the last accepted Runge-Kutta step: a polynomial in
+//! `s = (t - t0) / h` for every component, with its time derivative. Knows the stepper's stage
+//! layout, nothing of events or models.
+//!
+//! Both methods use Hairer's nested form in which the coefficient vectors `r_0 .. r_K` are
+//! multiplied alternately by `s` and `1 - s`:
+//! `P(s) = r0 + s (r1 + (1-s) (r2 + s (r3 + (1-s) (r4 + ...))))`,
+//! with `r0 = y0`, `r1 = y1 - y0`, `r2 = h f0 - r1`, `r3 = r1 - h f1 - r2` (cubic Hermite
+//! interpolation of both ends and their derivatives) and the remaining vectors `h sum_j d_ij k_j`.
+//! Dormand-Prince 5(4) has one correction (4th-order accurate), DOP853 four, built from three extra
+//! stages (7th-order accurate). Because of the Hermite part, `P'` matches `f` at both ends.
+
+use super::rk::Rk;
+use super::tableau::DenseKind;
+
+pub(crate) struct Dense {
+    pub t0: f64,
+    pub h: f64,
+    nz: usize,
+    n_coef: usize,
+    r: Vec<f64>,
+}
+
+impl Dense {
+    pub fn new(nz: usize) -> Dense {
+        // Room for DOP853's 8 vectors; Dopri5 uses 5.
+        Dense {
+            t0: 0.0,
+            h: 0.0,
+            nz,
+            n_coef: 0,
+            r: vec![0.0; 8 * nz],
+        }
+    }
+
+    /// Builds the interpolant of the last attempt of `rk` (before `rk.accept()`: `rk.y` is the
+    /// start point, `rk.y_new` the end). DOP853 evaluates its three extra stages here.
+    pub fn build<F: FnMut(f64, &[f64], &mut [f64])>(&mut self, rk: &mut Rk, rhs: &mut F) {
+        let nz = self.nz;
+        let h = rk.h;
+        let tab = rk.tab;
+        if tab.all_stages > tab.stages {
+            rk.eval_stages(tab.stages, tab.all_stages, h, rhs);
+        }
+        self.t0 = rk.t;
+        self.h = h;
+        self.n_coef = match tab.dense {
+            DenseKind::Dopri5 => 5,
+            DenseKind::Dop853 => 8,
+        };
+        let f1 = (tab.stages - 1) * nz;
+        for i in 0..nz {
+            let y0 = rk.y[i];
+            let ydiff = rk.y_new[i] - y0;
+            let bspl = h * rk.k[i] - ydiff;
+            self.r[i] = y0;
+            self.r[nz + i] = ydiff;
+            self.r[2 * nz + i] = bspl;
+            self.r[3 * nz + i] = ydiff - h * rk.k[f1 + i] - bspl;
+        }
+        for (row, d) in tab.d.iter().enumerate() {
+            let out = &mut self.r[(4 + row) * nz..(5 + row) * nz];
+            out.fill(0.0);
+            for (j, &dj) in d.iter().enumerate() {
+                if dj != 0.0 {
+                    let kj = &rk.k[j * nz..(j + 1) * nz];
+                    for (o, kv) in out.iter_mut().zip(kj) {
+                        *o += dj * kv;
+                    }
+                }
+            }
+            for o in out.iter_mut() {
+                *o *= h;
+            }
+        }
+    }
+
+    /// Interpolated values of the first `out.len()` components at time `t`.
+    pub fn eval(&self, t: f64, out: &mut [f64]) {
+        let s = if self.h != 0.0 {
+            (t - self.t0) / self.h
+        } else {
+            0.0
+        };
+        let s1 = 1.0 - s;
+        let nz = self.nz;
+        for (i, o) in out.iter_mut().enumerate() {
+            let mut acc = self.r[(self.n_coef - 1) * nz + i];
+            for j in (0..self.n_coef - 1).rev() {
+                // The factor in front of r_{j+1} is s for odd j+1, (1-s) for even.
+                let mult = if (j + 1) % 2 == 1 { s } else { s1 };
+                acc = self.r[j * nz + i] + mult * acc;
+            }
+            *o = acc;
+        }
+    }
+
+    /// Interpolated time derivatives of the first `out.len()` components at time `t`.
+    pub fn eval_deriv(&self, t: f64, out: &mut [f64]) {
+        let s = if self.h != 0.0 {
+            (t - self.t0) / self.h
+        } else {
+            0.0
+        };
+        let s1 = 1.0 - s;
+        let nz = self.nz;
+        for (i, o) in out.iter_mut().enumerate() {
+            let mut acc = self.r[(self.n_coef - 1) * nz + i];
+            let mut dacc = 0.0;
+            for j in (0..self.n_coef - 1).rev() {
+                let (mult, dmult) = if (j + 1) % 2 == 1 { (s, 1.0) } else { (s1, -1.0) };
+                dacc = dmult * acc + mult * dacc;
+                acc = self.r[j * nz + i] + mult * acc;
+            }
+            *o = if self.h != 0.0 { dacc / self.h } else { 0.0 };
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::tableau::{Tableau, DOP853, DOPRI5};
+    use super::*;
+
+    /// One step of y' = cos t (y = sin t) and the interpolant inside it, value and derivative.
+    fn interpolation_error(tab: &'static Tableau, h: f64) -> (f64, f64) {
+        let mut rk = Rk::new(tab, 1, 1, 1e-8, 1e-8);
+        let mut rhs = |t: f64, _y: &[f64], dy: &mut [f64]| dy[0] = t.cos();
+        rk.t = 0.3;
+        rk.y[0] = 0.3f64.sin();
+        rk.restart(&mut rhs);
+        rk.attempt(h, &mut rhs);
+        let mut dense = Dense::new(1);
+        dense.build(&mut rk, &mut rhs);
+        let (mut ev, mut ed) = (0.0f64, 0.0f64);
+        for i in 0..=10 {
+            let t = 0.3 + h * i as f64 / 10.0;
+            let (mut v, mut d) = ([0.0], [0.0]);
+            dense.eval(t, &mut v);
+            dense.eval_deriv(t, &mut d);
+            ev = ev.max((v[0] - t.sin()).abs());
+            ed = ed.max((d[0] - t.cos()).abs());
+        }
+        (ev, ed)
+    }
+
+    #[test]
+    fn dopri5_dense_output_is_fourth_order() {
+        let (e1, _) = interpolation_error(&DOPRI5, 0.2);
+        let (e2, d2) = interpolation_error(&DOPRI5, 0.1);
+        // Local interpolation error O(h^5): halving h divides it by about 32.
+        assert!(e1 / e2 > 20.0, "ratio {}", e1 / e2);
+        assert!(e2 < 1e-7 && d2 < 1e-5, "{e2} {d2}");
+    }
+
+    #[test]
+    fn dop853_dense_output_is_seventh_order() {
+        let (e1, _) = interpolation_error(&DOP853, 0.4);
+        let (e2, d2) = interpolation_error(&DOP853, 0.2);
+        // O(h^8): halving h divides the error by about 256.
+        assert!(e1 / e2 > 120.0, "ratio {}", e1 / e2);
+        assert!(e2 < 1e-11 && d2 < 1e-9, "{e2} {d2}");
+    }
+}

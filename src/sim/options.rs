@@ -1,0 +1,89 @@
+//! Stage 5 (sim): what a caller can ask of one simulation run. Plain data with a `Default`;
+//! knows nothing of models, tableaux or the step loop.
+
+use serde::Serialize;
+
+/// Which Runge-Kutta pair integrates the flow.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// DOP853 when `rtol < 1e-7` (high accuracy pays for its 12 stages), Dormand-Prince 5(4)
+    /// otherwise.
+    Auto,
+    /// Dormand-Prince 5(4), 7 stages (FSAL), 4th-order dense output.
+    Dopri5,
+    /// Hairer's DOP853, 8th order with 5th/3rd-order error estimators and 7th-order dense output.
+    Dop853,
+}
+
+impl Method {
+    /// The concrete method `Auto` stands for at tolerance `rtol`.
+    pub fn resolve(self, rtol: f64) -> Method {
+        match self {
+            Method::Auto if rtol < 1e-7 => Method::Dop853,
+            Method::Auto => Method::Dopri5,
+            other => other,
+        }
+    }
+}
+
+/// Which rows the result's trajectory holds.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub enum TrajectoryRequest {
+    /// No trajectory (the fast path: nothing is allocated per step).
+    None,
+    /// The start, every accepted step end, both sides of every event, and the end.
+    Steps,
+    /// Every multiple of this interval from the start, taken from the dense output.
+    Sample(f64),
+}
+
+/// Options of [`run`](super::run). Times are model time; tolerances are per component, applied
+/// as `atol + rtol * |x_i|` to states and (by default) to sensitivities.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SimOptions {
+    /// Start time of the run.
+    pub t_start: f64,
+    /// End time; the run stops here unless an event stops it earlier.
+    pub t_end: f64,
+    pub rtol: f64,
+    pub atol: f64,
+    pub method: Method,
+    /// Largest number of events before the run stops as Zeno.
+    pub max_events: usize,
+    /// Largest number of attempted steps (accepted + rejected) before the run stops with a fault.
+    pub max_steps: usize,
+    /// An event whose crossing speed `|g_x f + g_t|` is at most `graze_tol` times its scale
+    /// `|g_x| |f| + |g_t|` is grazing: its time gradient does not exist.
+    pub graze_tol: f64,
+    /// Whether sensitivities take part in the step-size error norm. Off is cheaper, but then the
+    /// sensitivities' accuracy is only whatever the state's steps give them.
+    pub sens_error_control: bool,
+    /// Zeno guard: `zeno_events` events inside a window of `zeno_window * max(|t_end - t_start|,
+    /// 1)` model time stop the run as Zeno.
+    pub zeno_events: usize,
+    pub zeno_window: f64,
+    /// Optional cap on the step size (infinite by default).
+    pub h_max: f64,
+    pub trajectory: TrajectoryRequest,
+}
+
+impl Default for SimOptions {
+    fn default() -> Self {
+        SimOptions {
+            t_start: 0.0,
+            t_end: 1.0,
+            rtol: 1e-6,
+            atol: 1e-9,
+            method: Method::Auto,
+            max_events: 10_000,
+            max_steps: 1_000_000,
+            graze_tol: 1e-3,
+            sens_error_control: true,
+            zeno_events: 10,
+            zeno_window: 1e-7,
+            h_max: f64::INFINITY,
+            trajectory: TrajectoryRequest::None,
+        }
+    }
+}
