@@ -1,0 +1,395 @@
+//! Stage 5 (sim): event detection inside one accepted step and root finding on the dense output.
+//! Knows the `HybridSystem` guard functions and the interpolant; knows nothing of resets,
+//! sensitivities' jumps or the step loop.
+//!
+//! Detection for every event of the current mode, given guard values `g0`, `g1` and guard speeds
+//! `g' = g_x f + g_t` at the step ends:
+//! - if `g'` changes sign, the guard has an extremum inside; it is located as the root of the
+//!   guard's derivative along the interpolant (`g_x P'(t) + g_t`), so a guard that crosses and
+//!   comes back within one step (a short hop) is still seen;
+//! - the points `t0 [, t_ext], t1` are scanned in order for the first pair that goes from the
+//!   pre-crossing side (strictly: `g > 0` for falling, `g < 0` for rising) to the crossed side
+//!   (`g <= 0`, resp. `g >= 0`). Requiring the strict pre-crossing side is what stops an event
+//!   from re-firing at the instant it fired (its guard sits at zero, or just past it) and from
+//!   firing at the start when the state starts on the guard;
+//! - an extremum that stops within round-off of zero on the pre-crossing side counts as touching:
+//!   the event is placed at the extremum (the caller will flag it grazing);
+//! - the crossing is then located by the Illinois variant of regula falsi (with a bisection
+//!   safeguard) to adjacent floating-point numbers, returning the end of the final bracket that
+//!   is on the crossed side.
+
+use super::dense::Dense;
+use super::system::{Direction, HybridSystem, SystemInfo};
+
+const EPS: f64 = f64::EPSILON;
+
+/// A crossing located in the current step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Crossing {
+    pub t: f64,
+    /// +1 when the guard came from positive values, -1 from negative ones.
+    pub sigma: f64,
+    /// Located at an extremum that only touches zero within round-off.
+    pub touch: bool,
+}
+
+pub(crate) struct Detector {
+    pub g0: Vec<f64>,
+    pub dg0: Vec<f64>,
+    pub g1: Vec<f64>,
+    pub dg1: Vec<f64>,
+    /// Per position in the mode's event list.
+    pub found: Vec<Option<Crossing>>,
+    gtmp: Vec<f64>,
+    gx: Vec<f64>,
+    gp: Vec<f64>,
+    x: Vec<f64>,
+    dx: Vec<f64>,
+    /// Events (id and crossing) that fire together at `t_fire`, in declaration order.
+    pub group: Vec<(usize, Crossing)>,
+}
+
+/// Whether the guard went from its pre-crossing side at `ga` to the crossed side at `gb`;
+/// returns the pre-crossing sign.
+fn crossing_sign(dir: Direction, ga: f64, gb: f64) -> Option<f64> {
+    let falling = ga > 0.0 && gb <= 0.0;
+    let rising = ga < 0.0 && gb >= 0.0;
+    match dir {
+        Direction::Falling if falling => Some(1.0),
+        Direction::Rising if rising => Some(-1.0),
+        Direction::Either if falling => Some(1.0),
+        Direction::Either if rising => Some(-1.0),
+        _ => None,
+    }
+}
+
+/// Whether values of sign `sigma` are on the pre-crossing side for `dir`.
+fn allows(dir: Direction, sigma: f64) -> bool {
+    match dir {
+        Direction::Falling => sigma > 0.0,
+        Direction::Rising => sigma < 0.0,
+        Direction::Either => true,
+    }
+}
+
+/// Illinois regula falsi on `[a, b]` with `sigma * fa > 0 >= sigma * fb`; returns the smallest
+/// point found on the crossed side once the bracket is as narrow as the floating-point numbers
+/// allow.
+pub(crate) fn illinois<F: FnMut(f64) -> f64>(
+    mut a: f64,
+    mut fa: f64,
+    mut b: f64,
+    mut fb: f64,
+    sigma: f64,
+    mut f: F,
+) -> f64 {
+    let mut side = 0i8;
+    let mut width = b - a;
+    for it in 0..200 {
+        if b - a <= 2.0 * EPS * a.abs().max(b.abs()) || b - a <= f64::MIN_POSITIVE {
+            break;
+        }
+        let mut c = if fb != fa {
+            b - fb * (b - a) / (fb - fa)
+        } else {
+            0.5 * (a + b)
+        };
+        // Safeguard: bisect when the secant leaves the open bracket or every fourth iteration
+        // when the bracket has not at least halved, so the iteration count stays bounded.
+        if !(c > a && c < b) || (it % 4 == 3 && b - a > 0.5 * width) {
+            c = 0.5 * (a + b);
+            if it % 4 == 3 {
+                width = b - a;
+            }
+        }
+        if !(c > a && c < b) {
+            break;
+        }
+        let fc = f(c);
+        if sigma * fc <= 0.0 || fc.is_nan() {
+            b = c;
+            fb = fc;
+            if side == -1 {
+                fa *= 0.5;
+            }
+            side = -1;
+        } else {
+            a = c;
+            fa = fc;
+            if side == 1 {
+                fb *= 0.5;
+            }
+            side = 1;
+        }
+    }
+    b
+}
+
+impl Detector {
+    pub fn new(info: &SystemInfo, nx: usize, m: usize) -> Detector {
+        let ne = info.modes.iter().map(|md| md.events.len()).max().unwrap_or(0);
+        Detector {
+            g0: vec![0.0; ne],
+            dg0: vec![0.0; ne],
+            g1: vec![0.0; ne],
+            dg1: vec![0.0; ne],
+            found: vec![None; ne],
+            gtmp: vec![0.0; ne],
+            gx: vec![0.0; nx],
+            gp: vec![0.0; m],
+            x: vec![0.0; nx],
+            dx: vec![0.0; nx],
+            group: Vec::with_capacity(ne),
+        }
+    }
+
+    /// Guard values and speeds at a step end `(t, x)` with flow `f` into `g0`/`dg0` (`end`
+    /// false) or `g1`/`dg1` (`end` true).
+    #[allow(clippy::too_many_arguments)]
+    pub fn eval_point<S: HybridSystem + ?Sized>(
+        &mut self,
+        sys: &S,
+        info: &SystemInfo,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        f: &[f64],
+        p: &[f64],
+        end: bool,
+    ) {
+        let evs = &info.modes[mode].events;
+        let ne = evs.len();
+        let (g, dg) = if end {
+            (&mut self.g1, &mut self.dg1)
+        } else {
+            (&mut self.g0, &mut self.dg0)
+        };
+        sys.guards(mode, t, x, p, &mut g[..ne]);
+        for (pos, &ev) in evs.iter().enumerate() {
+            let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
+            dg[pos] = dot(&self.gx, f) + gt;
+        }
+    }
+
+    /// After a step without events the end values become the next step's start values.
+    pub fn advance(&mut self) {
+        std::mem::swap(&mut self.g0, &mut self.g1);
+        std::mem::swap(&mut self.dg0, &mut self.dg1);
+    }
+
+    /// Whether any event of the mode may cross in the step (then the dense output is needed).
+    pub fn may_cross(&self, info: &SystemInfo, mode: usize) -> bool {
+        info.modes[mode].events.iter().enumerate().any(|(pos, &ev)| {
+            let dir = info.events[ev].direction;
+            crossing_sign(dir, self.g0[pos], self.g1[pos]).is_some()
+                || self.dg0[pos] * self.dg1[pos] < 0.0
+        })
+    }
+
+    /// One guard of `mode` at an explicit state.
+    pub fn guard_now<S: HybridSystem + ?Sized>(
+        &mut self,
+        sys: &S,
+        mode: usize,
+        pos: usize,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+    ) -> f64 {
+        let ne = sys.info().modes[mode].events.len();
+        sys.guards(mode, t, x, p, &mut self.gtmp[..ne]);
+        self.gtmp[pos]
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn guard_on_dense<S: HybridSystem + ?Sized>(
+        &mut self,
+        sys: &S,
+        mode: usize,
+        ne: usize,
+        pos: usize,
+        t: f64,
+        dense: &Dense,
+        p: &[f64],
+    ) -> f64 {
+        dense.eval(t, &mut self.x);
+        sys.guards(mode, t, &self.x, p, &mut self.gtmp[..ne]);
+        self.gtmp[pos]
+    }
+
+    /// Guard speed along the interpolant, and the round-off size of the guard value there.
+    fn speed_on_dense<S: HybridSystem + ?Sized>(
+        &mut self,
+        sys: &S,
+        ev: usize,
+        t: f64,
+        dense: &Dense,
+        p: &[f64],
+    ) -> (f64, f64) {
+        dense.eval(t, &mut self.x);
+        dense.eval_deriv(t, &mut self.dx);
+        let gt = sys.guard_grad(ev, t, &self.x, p, &mut self.gx, &mut self.gp);
+        let noise = 16.0 * EPS * (norm(&self.gx) * norm(&self.x) + gt.abs() * t.abs());
+        (dot(&self.gx, &self.dx) + gt, noise)
+    }
+
+    /// Locates the first crossing of every event of `mode` in the step `[t0, t1]` described by
+    /// `dense`, into `found`.
+    pub fn locate<S: HybridSystem + ?Sized>(
+        &mut self,
+        sys: &S,
+        info: &SystemInfo,
+        mode: usize,
+        dense: &Dense,
+        p: &[f64],
+    ) {
+        let evs = &info.modes[mode].events;
+        let ne = evs.len();
+        let (t0, t1) = (dense.t0, dense.t0 + dense.h);
+        for (pos, &ev) in evs.iter().enumerate() {
+            self.found[pos] = None;
+            let dir = info.events[ev].direction;
+            let (g0, g1) = (self.g0[pos], self.g1[pos]);
+            // The extremum, when the guard speed changes sign.
+            let mut ext = None;
+            if self.dg0[pos] * self.dg1[pos] < 0.0 {
+                let s0 = self.dg0[pos].signum();
+                let te = illinois(t0, self.dg0[pos], t1, self.dg1[pos], s0, |t| {
+                    self.speed_on_dense(sys, ev, t, dense, p).0
+                });
+                if te > t0 && te < t1 {
+                    let ge = self.guard_on_dense(sys, mode, ne, pos, te, dense, p);
+                    let (_, noise) = self.speed_on_dense(sys, ev, te, dense, p);
+                    ext = Some((te, ge, noise));
+                }
+            }
+            let mut bracket = None;
+            match ext {
+                Some((te, ge, noise)) => {
+                    if let Some(sigma) = crossing_sign(dir, g0, ge) {
+                        bracket = Some((t0, g0, te, ge, sigma));
+                    } else if allows(dir, g0.signum())
+                        && g0 != 0.0
+                        && ge.abs() <= noise
+                        && self.dg0[pos] * g0 < 0.0
+                    {
+                        // Moving towards zero and stopping within round-off of it: a touch.
+                        self.found[pos] = Some(Crossing {
+                            t: te,
+                            sigma: g0.signum(),
+                            touch: true,
+                        });
+                        continue;
+                    } else if let Some(sigma) = crossing_sign(dir, ge, g1) {
+                        bracket = Some((te, ge, t1, g1, sigma));
+                    }
+                }
+                None => {
+                    if let Some(sigma) = crossing_sign(dir, g0, g1) {
+                        bracket = Some((t0, g0, t1, g1, sigma));
+                    }
+                }
+            }
+            if let Some((a, ga, b, gb, sigma)) = bracket {
+                let t = illinois(a, ga, b, gb, sigma, |t| {
+                    self.guard_on_dense(sys, mode, ne, pos, t, dense, p)
+                });
+                self.found[pos] = Some(Crossing {
+                    t,
+                    sigma,
+                    touch: false,
+                });
+            }
+        }
+    }
+
+    /// Chooses the events that fire next: the earliest located crossing whose condition holds on
+    /// the interpolated state there, together with every other such crossing within a few
+    /// round-offs of it. Fills `group` (declaration order) and returns the firing time, the
+    /// latest of the group's times so that every guard in it has crossed.
+    pub fn select<S: HybridSystem + ?Sized>(
+        &mut self,
+        sys: &S,
+        info: &SystemInfo,
+        mode: usize,
+        dense: &Dense,
+        p: &[f64],
+    ) -> Option<f64> {
+        let evs = &info.modes[mode].events;
+        let mut t_min = f64::INFINITY;
+        for (pos, &ev) in evs.iter().enumerate() {
+            if let Some(c) = self.found[pos] {
+                dense.eval(c.t, &mut self.x);
+                if sys.condition(ev, c.t, &self.x, p) {
+                    t_min = t_min.min(c.t);
+                } else {
+                    self.found[pos] = None;
+                }
+            }
+        }
+        if !t_min.is_finite() {
+            return None;
+        }
+        let tol = 64.0 * EPS * (t_min.abs() + dense.h.abs());
+        self.group.clear();
+        let mut t_fire = t_min;
+        for (pos, &ev) in evs.iter().enumerate() {
+            if let Some(c) = self.found[pos] {
+                if c.t <= t_min + tol {
+                    self.group.push((ev, c));
+                    t_fire = t_fire.max(c.t);
+                } else {
+                    self.found[pos] = None;
+                }
+            }
+        }
+        Some(t_fire)
+    }
+}
+
+pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+pub(crate) fn norm(a: &[f64]) -> f64 {
+    dot(a, a).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn illinois_finds_root_to_adjacent_floats() {
+        // cos has a root at pi/2, falling.
+        let t = illinois(1.0, 1f64.cos(), 2.0, 2f64.cos(), 1.0, f64::cos);
+        assert!((t - std::f64::consts::FRAC_PI_2).abs() <= 4.0 * EPS * 2.0, "{t}");
+        assert!(t.cos() <= 0.0);
+    }
+
+    #[test]
+    fn illinois_returns_crossed_side_for_rising() {
+        let f = |t: f64| t * t * t - 0.3;
+        let t = illinois(0.0, f(0.0), 1.0, f(1.0), -1.0, f);
+        assert!(f(t) >= 0.0);
+        assert!((t - 0.3f64.cbrt()).abs() < 1e-15, "{t}");
+    }
+
+    #[test]
+    fn illinois_handles_exact_zero_at_right_end() {
+        // Root exactly at 0.5, bracket end exactly on it: must still narrow to 0.5.
+        let f = |t: f64| 0.5 - t;
+        let t = illinois(0.0, 0.5, 1.0, -0.5, 1.0, f);
+        assert_eq!(t, 0.5);
+    }
+
+    #[test]
+    fn crossing_signs_follow_direction() {
+        assert_eq!(crossing_sign(Direction::Falling, 1.0, 0.0), Some(1.0));
+        assert_eq!(crossing_sign(Direction::Falling, 0.0, -1.0), None);
+        assert_eq!(crossing_sign(Direction::Rising, -1.0, 0.0), Some(-1.0));
+        assert_eq!(crossing_sign(Direction::Rising, 1.0, -1.0), None);
+        assert_eq!(crossing_sign(Direction::Either, 1.0, -1.0), Some(1.0));
+        assert_eq!(crossing_sign(Direction::Either, -1.0, 2.0), Some(-1.0));
+    }
+}

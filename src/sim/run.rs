@@ -1,0 +1,565 @@
+//! Stage 5 (sim): the driver. Integrates `[x, S]` with the chosen Runge-Kutta pair, looks for
+//! events after every accepted step, moves to the earliest firing time on the dense output,
+//! applies the events, watches for Zeno behaviour and faults, and assembles the result. Generic
+//! over `S: HybridSystem + ?Sized` (monomorphised; `&dyn HybridSystem` works too); after setup
+//! the step loop allocates nothing unless a trajectory or events are recorded.
+//!
+//! Knows nothing of Cranelift, expressions or the model's text.
+
+use super::dense::Dense;
+use super::events::{Crossing, Detector};
+use super::jump::Jump;
+use super::options::{Method, SimOptions, TrajectoryRequest};
+use super::result::{
+    EventRecord, FinalState, SimError, SimResult, SimStats, SimWarning, StopReason,
+    TrajectoryRow,
+};
+use super::rk::Rk;
+use super::system::{HybridSystem, SystemInfo};
+use super::tableau::{DOP853, DOPRI5};
+
+const EPS: f64 = f64::EPSILON;
+/// Rejections in a row with a non-finite trial state before the run gives up on shrinking.
+const MAX_NONFINITE_REJECTS: usize = 30;
+
+/// Simulates `sys` with parameters `p` (all of them, `n_params` long) from `opts.t_start` to
+/// `opts.t_end`. Bad input (parameter length, an inconsistent model shape, invalid options) is an
+/// error; runtime faults, Zeno behaviour and stop events end the run with everything computed so
+/// far and say why in [`SimResult::stopped_by`].
+pub fn run<S: HybridSystem + ?Sized>(
+    sys: &S,
+    p: &[f64],
+    opts: &SimOptions,
+) -> Result<SimResult, SimError> {
+    let info = sys.info();
+    validate(info, p, opts)?;
+    Ok(Driver::new(sys, info, p, opts).run())
+}
+
+fn validate(info: &SystemInfo, p: &[f64], opts: &SimOptions) -> Result<(), SimError> {
+    if p.len() != info.n_params() {
+        return Err(SimError::ParamLength {
+            expected: info.n_params(),
+            got: p.len(),
+        });
+    }
+    let bad_index = |what, index: usize, count: usize| {
+        if index < count {
+            Ok(())
+        } else {
+            Err(SimError::BadIndex { what, index, count })
+        }
+    };
+    bad_index("initial mode", info.initial_mode, info.modes.len())?;
+    for mode in &info.modes {
+        for &ev in &mode.events {
+            bad_index("event", ev, info.events.len())?;
+        }
+    }
+    for ev in &info.events {
+        if let Some(target) = ev.target_mode {
+            bad_index("target mode", target, info.modes.len())?;
+        }
+    }
+    for &gp in &info.grad_params {
+        bad_index("grad parameter", gp, info.n_params())?;
+    }
+    let checks: [(&'static str, f64, bool); 7] = [
+        ("t_start", opts.t_start, opts.t_start.is_finite()),
+        (
+            "t_end",
+            opts.t_end,
+            opts.t_end.is_finite() && opts.t_end >= opts.t_start,
+        ),
+        ("rtol", opts.rtol, opts.rtol.is_finite() && opts.rtol > 0.0),
+        ("atol", opts.atol, opts.atol.is_finite() && opts.atol >= 0.0),
+        ("graze_tol", opts.graze_tol, opts.graze_tol >= 0.0),
+        ("zeno_window", opts.zeno_window, opts.zeno_window >= 0.0),
+        ("h_max", opts.h_max, opts.h_max > 0.0),
+    ];
+    for (name, value, ok) in checks {
+        if !ok {
+            return Err(SimError::InvalidOption { name, value });
+        }
+    }
+    if let TrajectoryRequest::Sample(dt) = opts.trajectory {
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(SimError::InvalidOption {
+                name: "trajectory sample interval",
+                value: dt,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The flow of `mode` with its sensitivities as one right-hand side over `z = [x, S]`.
+fn rhs_for<'a, S: HybridSystem + ?Sized>(
+    sys: &'a S,
+    p: &'a [f64],
+    n: usize,
+    mode: usize,
+) -> impl FnMut(f64, &[f64], &mut [f64]) + 'a {
+    move |t, z, dz| {
+        let (x, s) = z.split_at(n);
+        let (dx, ds) = dz.split_at_mut(n);
+        sys.flow_sens(mode, t, x, s, p, dx, ds);
+    }
+}
+
+struct Driver<'a, S: HybridSystem + ?Sized> {
+    sys: &'a S,
+    info: &'a SystemInfo,
+    p: &'a [f64],
+    opts: &'a SimOptions,
+    n: usize,
+    m: usize,
+    mode: usize,
+    rk: Rk,
+    dense: Dense,
+    det: Detector,
+    jump: Jump,
+    events: Vec<EventRecord>,
+    warnings: Vec<SimWarning>,
+    /// False once a grazing event has made the sensitivities meaningless.
+    sens_valid: bool,
+    stats: SimStats,
+    trajectory: Option<Vec<TrajectoryRow>>,
+    next_sample: usize,
+    /// Total derivative of the final state and `dt/dp` of a stop event.
+    stop_total: Option<(Vec<f64>, Vec<f64>)>,
+}
+
+impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
+    fn new(sys: &'a S, info: &'a SystemInfo, p: &'a [f64], opts: &'a SimOptions) -> Self {
+        let (n, m) = (info.n_states(), info.n_grad());
+        let nz = n * (1 + m);
+        let tab = if opts.method.resolve(opts.rtol) == Method::Dop853 {
+            &DOP853
+        } else {
+            &DOPRI5
+        };
+        let n_err = if opts.sens_error_control { nz } else { n };
+        let mut rk = Rk::new(tab, nz, n_err, opts.rtol, opts.atol);
+        rk.t = opts.t_start;
+        sys.initial_state(p, &mut rk.y[..n]);
+        sys.initial_sens(p, &mut rk.y[n..]);
+        Driver {
+            sys,
+            info,
+            p,
+            opts,
+            n,
+            m,
+            mode: info.initial_mode,
+            rk,
+            dense: Dense::new(nz),
+            det: Detector::new(info, n, m),
+            jump: Jump::new(n, m),
+            events: Vec::new(),
+            warnings: Vec::new(),
+            sens_valid: true,
+            stats: SimStats::default(),
+            trajectory: match opts.trajectory {
+                TrajectoryRequest::None => None,
+                _ => Some(Vec::new()),
+            },
+            next_sample: 0,
+            stop_total: None,
+        }
+    }
+
+    fn fault_state(&self) -> Vec<f64> {
+        self.rk.y[..self.n].to_vec()
+    }
+
+    /// New start point (beginning, after events): derivative, guards and a fresh step estimate.
+    fn restart(&mut self) -> f64 {
+        let mut rhs = rhs_for(self.sys, self.p, self.n, self.mode);
+        self.rk.restart(&mut rhs);
+        let n = self.n;
+        self.det.eval_point(
+            self.sys,
+            self.info,
+            self.mode,
+            self.rk.t,
+            &self.rk.y[..n],
+            &self.rk.k[..n],
+            self.p,
+            false,
+        );
+        self.rk.initial_step(self.opts.h_max, &mut rhs)
+    }
+
+    fn run(mut self) -> SimResult {
+        let stop = self.integrate();
+        self.finish(stop)
+    }
+
+    fn integrate(&mut self) -> StopReason {
+        let t_end = self.opts.t_end;
+        if self.rk.y.iter().any(|v| !v.is_finite()) {
+            return self.fault_nonfinite();
+        }
+        let mut h = self.restart();
+        self.push_step_row();
+        if let TrajectoryRequest::Sample(_) = self.opts.trajectory {
+            self.push_row(self.rk.t, &self.rk.y.clone());
+            self.next_sample = 1;
+        }
+        let mut attempts = 0usize;
+        let mut nonfinite_rejects = 0usize;
+        loop {
+            if self.rk.t >= t_end {
+                return StopReason::TEnd;
+            }
+            if attempts >= self.opts.max_steps {
+                return StopReason::Fault {
+                    error: SimError::TooManySteps {
+                        t: self.rk.t,
+                        max_steps: self.opts.max_steps,
+                        mode: self.mode,
+                        state: self.fault_state(),
+                    },
+                };
+            }
+            let t0 = self.rk.t;
+            let mut h_try = h.min(self.opts.h_max);
+            let hit_end = t0 + 1.01 * h_try >= t_end;
+            if hit_end {
+                h_try = t_end - t0;
+            }
+            if !(h_try > 8.0 * EPS * t0.abs()) || h_try <= 0.0 {
+                return StopReason::Fault {
+                    error: SimError::StepTooSmall {
+                        t: t0,
+                        h: h_try,
+                        mode: self.mode,
+                        state: self.fault_state(),
+                    },
+                };
+            }
+            attempts += 1;
+            let mut rhs = rhs_for(self.sys, self.p, self.n, self.mode);
+            let err = self.rk.attempt(h_try, &mut rhs);
+            if !(err <= 1.0) {
+                self.stats.rejected += 1;
+                if err.is_finite() {
+                    nonfinite_rejects = 0;
+                } else {
+                    nonfinite_rejects += 1;
+                    if nonfinite_rejects > MAX_NONFINITE_REJECTS {
+                        return self.fault_nonfinite();
+                    }
+                }
+                h = self.rk.shrink(err);
+                continue;
+            }
+            nonfinite_rejects = 0;
+            let h_next = self.rk.grow(err);
+            self.stats.steps += 1;
+            let t1 = if hit_end { t_end } else { t0 + h_try };
+            let n = self.n;
+            self.det.eval_point(
+                self.sys,
+                self.info,
+                self.mode,
+                t1,
+                &self.rk.y_new[..n],
+                &self.rk.f_new()[..n],
+                self.p,
+                true,
+            );
+            let may_cross = self.det.may_cross(self.info, self.mode);
+            let sample_due = self.sample_due(t1);
+            if may_cross || sample_due {
+                self.dense.build(&mut self.rk, &mut rhs);
+            }
+            let fire = if may_cross {
+                self.det
+                    .locate(self.sys, self.info, self.mode, &self.dense, self.p);
+                self.det
+                    .select(self.sys, self.info, self.mode, &self.dense, self.p)
+            } else {
+                None
+            };
+            match fire {
+                None => {
+                    if sample_due {
+                        self.push_samples(t1);
+                    }
+                    self.rk.accept();
+                    self.rk.t = t1;
+                    self.det.advance();
+                    self.push_step_row();
+                    h = h_next;
+                }
+                Some(t_fire) => {
+                    if sample_due || self.sample_due(t_fire) {
+                        self.push_samples(t_fire);
+                    }
+                    self.dense.eval(t_fire, &mut self.rk.y);
+                    self.rk.t = t_fire;
+                    self.push_step_row();
+                    if let Some(stop) = self.fire_group() {
+                        return stop;
+                    }
+                    self.push_step_row();
+                    if let Some(stop) = self.check_zeno() {
+                        return stop;
+                    }
+                    if self.rk.y.iter().any(|v| !v.is_finite()) {
+                        return self.fault_nonfinite();
+                    }
+                    h = self.restart();
+                }
+            }
+        }
+    }
+
+    fn fault_nonfinite(&self) -> StopReason {
+        StopReason::Fault {
+            error: SimError::NonFinite {
+                t: self.rk.t,
+                mode: self.mode,
+                state: self.fault_state(),
+            },
+        }
+    }
+
+    /// Fires the selected events at the current point in declaration order, each seeing the
+    /// state the previous one left. Returns a stop reason for a stop event.
+    fn fire_group(&mut self) -> Option<StopReason> {
+        let (n, t) = (self.n, self.rk.t);
+        let group_len = self.det.group.len();
+        for gi in 0..group_len {
+            let (ev, crossing): (usize, Crossing) = self.det.group[gi];
+            let Some(pos) = self.info.modes[self.mode]
+                .events
+                .iter()
+                .position(|&e| e == ev)
+            else {
+                // An earlier event of the group switched to a mode without this event.
+                continue;
+            };
+            let (x, s) = self.rk.y.split_at_mut(n);
+            if !crossing.touch {
+                let g = self
+                    .det
+                    .guard_now(self.sys, self.mode, pos, t, x, self.p);
+                if crossing.sigma * g > 0.0 {
+                    // An earlier reset moved the state back before this guard.
+                    continue;
+                }
+            }
+            if !self.sys.condition(ev, t, x, self.p) {
+                continue;
+            }
+            let einfo = &self.info.events[ev];
+            let mode_before = self.mode;
+            let mode_after = einfo.target_mode.unwrap_or(mode_before);
+            let out = self.jump.apply(
+                self.sys,
+                ev,
+                mode_before,
+                mode_after,
+                t,
+                x,
+                s,
+                self.p,
+                self.opts.graze_tol,
+                einfo.is_stop,
+            );
+            if out.grazing {
+                self.sens_valid = false;
+                self.warnings.push(SimWarning::Grazing {
+                    event: ev,
+                    name: einfo.name.clone(),
+                    time: t,
+                    denominator: out.denominator,
+                    scale: out.scale,
+                });
+            }
+            self.events.push(EventRecord {
+                index: self.events.len(),
+                event: ev,
+                name: einfo.name.clone(),
+                time: t,
+                mode_before,
+                mode_after,
+                dtime: self.sens_valid.then(|| self.jump.dte.clone()),
+                grazing: out.grazing,
+                denominator: out.denominator,
+            });
+            self.stats.events += 1;
+            self.mode = mode_after;
+            if einfo.is_stop {
+                if self.sens_valid {
+                    self.stop_total = Some((self.jump.total.clone(), self.jump.dte.clone()));
+                }
+                return Some(StopReason::Event {
+                    event: ev,
+                    name: einfo.name.clone(),
+                });
+            }
+        }
+        None
+    }
+
+    /// Zeno: `max_events` in total, or `zeno_events` events inside the window.
+    fn check_zeno(&self) -> Option<StopReason> {
+        let count = self.events.len();
+        let last = self.events.last()?;
+        let span = (self.opts.t_end - self.opts.t_start).abs().max(1.0);
+        let window = self.opts.zeno_window * span;
+        let in_window = self
+            .events
+            .iter()
+            .rev()
+            .take_while(|e| e.time >= last.time - window)
+            .count();
+        let too_many = count >= self.opts.max_events;
+        let crowded = self.opts.zeno_events > 0 && in_window >= self.opts.zeno_events;
+        if !(too_many || crowded) {
+            return None;
+        }
+        Some(StopReason::Zeno {
+            time: last.time,
+            event: last.event,
+            count,
+            accumulation: self.accumulation(),
+        })
+    }
+
+    /// Geometric extrapolation of the last two inter-event intervals: with ratio
+    /// `r = d2 / d1 < 1` the remaining intervals sum to `d2 r / (1 - r)`.
+    fn accumulation(&self) -> Option<f64> {
+        let k = self.events.len();
+        if k < 3 {
+            return None;
+        }
+        let (ta, tb, tc) = (
+            self.events[k - 3].time,
+            self.events[k - 2].time,
+            self.events[k - 1].time,
+        );
+        let (d1, d2) = (tb - ta, tc - tb);
+        if d1 <= 0.0 || d2 <= 0.0 {
+            return Some(tc);
+        }
+        let r = d2 / d1;
+        (r < 1.0).then(|| tc + d2 * r / (1.0 - r))
+    }
+
+    fn sample_due(&self, t_seg_end: f64) -> bool {
+        match self.opts.trajectory {
+            TrajectoryRequest::Sample(dt) => {
+                self.opts.t_start + self.next_sample as f64 * dt <= t_seg_end
+            }
+            _ => false,
+        }
+    }
+
+    /// Sample rows in `(t0, t_seg_end]` from the dense output of the current step.
+    fn push_samples(&mut self, t_seg_end: f64) {
+        let TrajectoryRequest::Sample(dt) = self.opts.trajectory else {
+            return;
+        };
+        let mut z = vec![0.0; self.rk.nz];
+        loop {
+            let ts = self.opts.t_start + self.next_sample as f64 * dt;
+            if ts > t_seg_end {
+                break;
+            }
+            self.dense.eval(ts, &mut z);
+            self.push_row(ts, &z);
+            self.next_sample += 1;
+        }
+    }
+
+    fn push_step_row(&mut self) {
+        if self.opts.trajectory == TrajectoryRequest::Steps {
+            let z = self.rk.y.clone();
+            self.push_row(self.rk.t, &z);
+        }
+    }
+
+    fn push_row(&mut self, t: f64, z: &[f64]) {
+        let n = self.n;
+        let mut outputs = vec![0.0; self.info.n_outputs()];
+        self.sys.outputs(t, &z[..n], self.p, &mut outputs);
+        if let Some(rows) = self.trajectory.as_mut() {
+            rows.push(TrajectoryRow {
+                t,
+                mode: self.mode,
+                x: z[..n].to_vec(),
+                s: z[n..].to_vec(),
+                outputs,
+            });
+        }
+    }
+
+    fn finish(mut self, stopped_by: StopReason) -> SimResult {
+        let (n, m, k) = (self.n, self.m, self.info.n_outputs());
+        let t = self.rk.t;
+        let x = &self.rk.y[..n];
+        let s = &self.rk.y[n..];
+        let mut outputs = vec![0.0; k];
+        self.sys.outputs(t, x, self.p, &mut outputs);
+        let mut yx = vec![0.0; k * n];
+        let mut yp = vec![0.0; k * m];
+        let mut yt = vec![0.0; k];
+        self.sys
+            .output_jac(t, x, self.p, &mut yx, &mut yp, &mut yt);
+        // y_x S_j + y_p_j (+ y_t dt_j for totals), column per parameter.
+        let chain = |sens: &[f64], dte: Option<&[f64]>| {
+            let mut out = vec![0.0; k * m];
+            for j in 0..m {
+                for i in 0..k {
+                    let row = &yx[i * n..(i + 1) * n];
+                    let mut v = yp[j * k + i];
+                    v += row
+                        .iter()
+                        .zip(&sens[j * n..(j + 1) * n])
+                        .map(|(a, b)| a * b)
+                        .sum::<f64>();
+                    if let Some(d) = dte {
+                        v += yt[i] * d[j];
+                    }
+                    out[j * k + i] = v;
+                }
+            }
+            out
+        };
+        let (dstate, doutputs) = if self.sens_valid {
+            (Some(s.to_vec()), Some(chain(s, None)))
+        } else {
+            (None, None)
+        };
+        let (dstate_total, doutputs_total) = match self.stop_total.take() {
+            Some((total, dte)) => {
+                let dy = chain(&total, Some(&dte));
+                (Some(total), Some(dy))
+            }
+            None => (None, None),
+        };
+        self.stats.rhs_calls = self.rk.rhs_calls;
+        SimResult {
+            events: self.events,
+            final_state: FinalState {
+                time: t,
+                mode: self.mode,
+                state: x.to_vec(),
+                dstate,
+                outputs,
+                doutputs,
+                dstate_total,
+                doutputs_total,
+            },
+            stopped_by,
+            warnings: self.warnings,
+            stats: self.stats,
+            trajectory: self.trajectory,
+        }
+    }
+}

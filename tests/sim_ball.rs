@@ -1,0 +1,273 @@
+//! Integrator tests on the bouncing ball against the closed forms of
+//! /work/shared/reference/closed-forms.md (bounce times, event-time gradients, energy and its
+//! gradient, state sensitivities after a bounce, Zeno accumulation point, stop events).
+
+mod sim_support;
+
+use hybc::sim::{run, Method, SimError, SimOptions, StopReason, TrajectoryRequest};
+use sim_support::{close, Ball};
+
+const G: f64 = 9.81;
+const E: f64 = 0.8;
+
+fn opts(t_end: f64, method: Method, sens_error_control: bool) -> SimOptions {
+    SimOptions {
+        t_end,
+        rtol: 1e-10,
+        atol: 1e-12,
+        method,
+        sens_error_control,
+        ..SimOptions::default()
+    }
+}
+
+/// k-th bounce time (k >= 1): `t_k = tau (1 + 2 sum_{i<k} e^i)` with `tau = sqrt(2 h0 / g)`.
+fn bounce_time(g: f64, e: f64, h0: f64, k: i32) -> f64 {
+    let tau = (2.0 * h0 / g).sqrt();
+    tau * (1.0 + 2.0 * (1..k).map(|i| e.powi(i)).sum::<f64>())
+}
+
+/// `[dt_k/dg, dt_k/de, dt_k/dh0]` of the closed form above, differentiated by hand.
+fn bounce_time_grad(g: f64, e: f64, h0: f64, k: i32) -> [f64; 3] {
+    let tau = (2.0 * h0 / g).sqrt();
+    let t = bounce_time(g, e, h0, k);
+    let de = 2.0 * tau * (1..k).map(|i| i as f64 * e.powi(i - 1)).sum::<f64>();
+    [-t / (2.0 * g), de, t / (2.0 * h0)]
+}
+
+fn check_first_point(method: Method, sens_error_control: bool) {
+    let ball = Ball::new();
+    let r = run(&ball, &[G, E, 1.0], &opts(2.5, method, sens_error_control)).expect("valid run");
+    let tag = format!("{method:?} sens_error_control={sens_error_control}");
+    assert_eq!(r.stopped_by, StopReason::TEnd, "{tag}");
+    assert_eq!(r.events.len(), 4, "{tag}");
+    let published = [0.4515236410, 1.1739614666, 1.7519117270, 2.2142719354];
+    for (k, ev) in r.events.iter().enumerate() {
+        let kk = k as i32 + 1;
+        let t = bounce_time(G, E, 1.0, kk);
+        assert!(close(ev.time, t, 1e-9), "{tag} bounce {kk}: {} vs {t}", ev.time);
+        assert!(close(ev.time, published[k], 1e-9), "{tag} bounce {kk} vs published");
+        let dt = ev.dtime.as_ref().expect("non-grazing bounce has a gradient");
+        let want = bounce_time_grad(G, E, 1.0, kk);
+        for j in 0..3 {
+            assert!(
+                close(dt[j], want[j], 1e-9),
+                "{tag} bounce {kk} dt/dp{j}: {} vs {}",
+                dt[j],
+                want[j]
+            );
+        }
+        assert!(!ev.grazing);
+    }
+    let dt1_dh0 = r.events[0].dtime.as_ref().unwrap()[2];
+    assert!(close(dt1_dh0, 1.0 / (2.0 * G).sqrt(), 1e-9), "{tag}");
+    assert!(close(dt1_dh0, 0.2257618205, 1e-9), "{tag}");
+    // E(T) = g h0 e^8 after four bounces, and its gradient in (g, e, h0).
+    let f = &r.final_state;
+    assert!(close(f.outputs[0], G * E.powi(8), 1e-9), "{tag} E {}", f.outputs[0]);
+    assert!(close(f.outputs[0], 1.6458448896, 1e-9), "{tag}");
+    let de = f.doutputs.as_ref().expect("gradients valid");
+    let want = [E.powi(8), 8.0 * G * E.powi(7), G * E.powi(8)];
+    for j in 0..3 {
+        assert!(close(de[j], want[j], 1e-9), "{tag} dE/dp{j}: {} vs {}", de[j], want[j]);
+    }
+    assert!(r.warnings.is_empty());
+}
+
+#[test]
+fn ball_bounces_match_closed_form_dopri5() {
+    check_first_point(Method::Dopri5, true);
+    check_first_point(Method::Dopri5, false);
+}
+
+#[test]
+fn ball_bounces_match_closed_form_dop853() {
+    check_first_point(Method::Dop853, true);
+    check_first_point(Method::Dop853, false);
+}
+
+#[test]
+fn ball_state_sensitivities_after_one_bounce() {
+    for method in [Method::Dopri5, Method::Dop853] {
+        let r = run(&Ball::new(), &[G, E, 10.0], &opts(2.0, method, true)).expect("valid run");
+        assert_eq!(r.events.len(), 1);
+        let ev = &r.events[0];
+        assert!(close(ev.time, 1.42784312293, 1e-10));
+        // Saltation denominator is the pre-impact speed g_x f = v-.
+        assert!(close(ev.denominator, -14.0071410359, 1e-10));
+        let dt = ev.dtime.as_ref().unwrap();
+        let want = [-0.0727748788444, 0.0, 0.0713921561464];
+        for j in 0..3 {
+            assert!(close(dt[j], want[j], 1e-9), "dt1/dp{j} {} vs {}", dt[j], want[j]);
+        }
+        let f = &r.final_state;
+        assert!(close(f.state[0], 4.80570772929, 1e-10), "{:?}", f.state);
+        assert!(close(f.state[1], 5.59285386465, 1e-10), "{:?}", f.state);
+        let s = f.dstate.as_ref().unwrap();
+        // Columns g, e, h0; rows y, v.
+        let want = [
+            [0.570117621269, -0.714941189366],
+            [8.01428207183, 14.0071410359],
+            [-0.0787146135354, 1.26064269323],
+        ];
+        for j in 0..3 {
+            for i in 0..2 {
+                assert!(
+                    close(s[j * 2 + i], want[j][i], 1e-9),
+                    "{method:?} dx{i}/dp{j}: {} vs {}",
+                    s[j * 2 + i],
+                    want[j][i]
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn ball_stops_as_zeno_near_the_accumulation_point() {
+    let r = run(&Ball::new(), &[G, E, 1.0], &opts(10.0, Method::Auto, true)).expect("valid run");
+    let v1 = (2.0 * G).sqrt();
+    let t_star = (2.0 / G).sqrt() + 2.0 * E * v1 / (G * (1.0 - E));
+    assert!((t_star - 4.0637127689).abs() < 1e-9);
+    match r.stopped_by {
+        StopReason::Zeno {
+            time,
+            count,
+            accumulation,
+            ..
+        } => {
+            let acc = accumulation.expect("shrinking intervals give an estimate");
+            assert!((acc - t_star).abs() < 1e-8, "accumulation {acc} vs {t_star}");
+            assert!(time < t_star && t_star - time < 1e-4, "stopped at {time}");
+            assert_eq!(count, r.events.len());
+        }
+        other => panic!("expected a Zeno stop, got {other:?}"),
+    }
+    // Stopped early and cheaply, keeping what was computed.
+    assert!(r.events.len() < 200, "{} events", r.events.len());
+    assert!(r.stats.steps < 2000, "{} steps", r.stats.steps);
+    assert!(r.final_state.time < 4.07);
+    // Each bounce time still matches the closed form (checked on the first 20).
+    for (k, ev) in r.events.iter().take(20).enumerate() {
+        assert!(close(ev.time, bounce_time(G, E, 1.0, k as i32 + 1), 1e-9));
+    }
+}
+
+#[test]
+fn stop_event_total_derivative() {
+    let h0 = 1.0;
+    let r = run(&Ball::stopping(), &[G, E, h0], &opts(5.0, Method::Auto, true)).expect("valid");
+    assert_eq!(
+        r.stopped_by,
+        StopReason::Event {
+            event: 0,
+            name: "floor".into()
+        }
+    );
+    let v1 = (2.0 * G * h0).sqrt();
+    let f = &r.final_state;
+    assert!(close(f.time, (2.0 * h0 / G).sqrt(), 1e-12));
+    assert!(f.state[0].abs() < 1e-12);
+    assert!(close(f.state[1], E * v1, 1e-12));
+    // Final state R(t1, x(t1), p) = [0, e v1] as a function of (g, e, h0).
+    let total = f.dstate_total.as_ref().expect("stop event has a total derivative");
+    let want_v = [E * h0 / v1, v1, E * G / v1];
+    for j in 0..3 {
+        assert!(total[2 * j].abs() < 1e-10, "dy/dp{j} = {}", total[2 * j]);
+        assert!(close(total[2 * j + 1], want_v[j], 1e-10), "dv/dp{j}");
+    }
+    // Final energy e^2 g h0 (the ball sits on the floor).
+    let dy = f.doutputs_total.as_ref().unwrap();
+    let want_e = [E * E * h0, 2.0 * E * G * h0, E * E * G];
+    for j in 0..3 {
+        assert!(close(dy[j], want_e[j], 1e-10), "dE/dp{j}: {} vs {}", dy[j], want_e[j]);
+    }
+}
+
+#[test]
+fn sampled_trajectory_follows_the_parabolas() {
+    let o = SimOptions {
+        trajectory: TrajectoryRequest::Sample(0.1),
+        ..opts(2.5, Method::Dopri5, true)
+    };
+    let r = run(&Ball::new(), &[G, E, 1.0], &o).expect("valid");
+    let rows = r.trajectory.expect("trajectory requested");
+    assert_eq!(rows.len(), 26);
+    for row in &rows {
+        // Closed-form height: the flight after bounce k starts at t_k with speed e^k v1.
+        let k = (1..=4)
+            .filter(|&k| bounce_time(G, E, 1.0, k) <= row.t)
+            .count() as i32;
+        let y = if k == 0 {
+            1.0 - 0.5 * G * row.t * row.t
+        } else {
+            let dt = row.t - bounce_time(G, E, 1.0, k);
+            E.powi(k) * (2.0 * G).sqrt() * dt - 0.5 * G * dt * dt
+        };
+        assert!((row.x[0] - y).abs() < 1e-9, "t = {}: {} vs {y}", row.t, row.x[0]);
+    }
+}
+
+#[test]
+fn bad_input_is_an_error_not_a_panic() {
+    let ball = Ball::new();
+    assert_eq!(
+        run(&ball, &[G, E], &SimOptions::default()).unwrap_err(),
+        SimError::ParamLength {
+            expected: 3,
+            got: 2
+        }
+    );
+    let bad = SimOptions {
+        rtol: -1.0,
+        ..SimOptions::default()
+    };
+    assert!(matches!(
+        run(&ball, &[G, E, 1.0], &bad),
+        Err(SimError::InvalidOption { name: "rtol", .. })
+    ));
+    let bad = SimOptions {
+        t_end: f64::NAN,
+        ..SimOptions::default()
+    };
+    assert!(run(&ball, &[G, E, 1.0], &bad).is_err());
+}
+
+#[test]
+fn a_nan_parameter_ends_in_a_fault_not_a_hang() {
+    let r = run(&Ball::new(), &[f64::NAN, E, 1.0], &opts(1.0, Method::Auto, true)).expect("ran");
+    match r.stopped_by {
+        StopReason::Fault { error } => {
+            let msg = error.to_string();
+            assert!(msg.contains("mode 0"), "{msg}");
+        }
+        other => panic!("expected a fault, got {other:?}"),
+    }
+}
+
+#[test]
+fn too_many_steps_is_a_fault_with_partial_result() {
+    let o = SimOptions {
+        max_steps: 5,
+        ..opts(2.5, Method::Dopri5, true)
+    };
+    let r = run(&Ball::new(), &[G, E, 1.0], &o).expect("valid");
+    assert!(matches!(
+        r.stopped_by,
+        StopReason::Fault {
+            error: SimError::TooManySteps { max_steps: 5, .. }
+        }
+    ));
+    assert!(r.final_state.time > 0.0 && r.final_state.time < 2.5);
+}
+
+#[test]
+fn works_through_dyn_and_serialises() {
+    let ball = Ball::new();
+    let sys: &dyn hybc::sim::HybridSystem = &ball;
+    let r = run(sys, &[G, E, 1.0], &opts(1.0, Method::Auto, true)).expect("valid");
+    assert_eq!(r.events.len(), 1);
+    let json = serde_json::to_string(&r).expect("serialisable");
+    assert!(json.contains("\"final\""), "{json}");
+    assert!(json.contains("\"floor\""));
+}
