@@ -1,0 +1,197 @@
+//! Integrator event-handling tests: a guard crossed and re-crossed within one step, grazing,
+//! mode switching against a closed form (thermostat), simultaneous events in declaration order,
+//! no re-firing at the same instant and no firing when starting on a guard.
+
+mod sim_support;
+
+use hybc::sim::{run, Method, SimOptions, SimWarning, StopReason, TrajectoryRequest};
+use sim_support::{close, Ball, Counter, Thermostat};
+
+#[test]
+fn short_hop_through_a_ceiling_within_one_step_is_caught() {
+    // Thrown up from the floor at 5 m/s; the ceiling sits 1 mm below the apex, so the guard is
+    // negative only for about 28 ms around the apex.
+    let (g, v0) = (9.81f64, 5.0f64);
+    let apex = v0 * v0 / (2.0 * g);
+    let c = apex - 1e-3;
+    let root = (v0 * v0 - 2.0 * g * c).sqrt();
+    let (t_in, t_out) = ((v0 - root) / g, (v0 + root) / g);
+    let o = SimOptions {
+        t_end: 0.8,
+        rtol: 1e-8,
+        atol: 1e-10,
+        method: Method::Dopri5,
+        trajectory: TrajectoryRequest::Steps,
+        ..SimOptions::default()
+    };
+    // With the event disabled the stepping is the same up to the crossing: no step ends inside
+    // the window, so only the extremum search can have found the crossing.
+    let off = run(&Ball::with_ceiling(v0, c, false), &[g, 0.8, 0.0], &o).expect("valid");
+    assert!(off.events.is_empty());
+    let rows = off.trajectory.expect("steps requested");
+    assert!(
+        rows.iter().all(|r| r.t <= t_in || r.t >= t_out),
+        "a step ended inside the window; the test would not exercise the short hop"
+    );
+
+    let on = run(&Ball::with_ceiling(v0, c, true), &[g, 0.8, 0.0], &o).expect("valid");
+    let ev = on.events.first().expect("the ceiling event fires");
+    assert_eq!(ev.name, "ceiling");
+    assert!(close(ev.time, t_in, 1e-12), "{} vs {t_in}", ev.time);
+    assert!(!ev.grazing);
+    // t_c solves h0 + v0 t - g t^2 / 2 = c: dt/dg = (t^2/2) / (v0 - g t), dt/dh0 = -1/(v0 - g t).
+    let vel = v0 - g * t_in;
+    let dt = ev.dtime.as_ref().unwrap();
+    assert!(close(dt[0], 0.5 * t_in * t_in / vel, 1e-8), "{dt:?}");
+    assert!(dt[1].abs() < 1e-12);
+    assert!(close(dt[2], -1.0 / vel, 1e-8), "{dt:?}");
+}
+
+fn grazing_run(ceiling: f64) -> hybc::sim::SimResult {
+    // g = 8, v0 = 4: apex exactly at y = 1, t = 0.5 (all exact in binary).
+    let o = SimOptions {
+        t_end: 1.2,
+        rtol: 1e-10,
+        atol: 1e-12,
+        ..SimOptions::default()
+    };
+    run(&Ball::with_ceiling(4.0, ceiling, true), &[8.0, 0.8, 0.0], &o).expect("valid")
+}
+
+#[test]
+fn apex_exactly_touching_the_ceiling_is_flagged_grazing() {
+    for ceiling in [1.0, 1.0 - 1e-9] {
+        let r = grazing_run(ceiling);
+        // The floor guard starts at zero (y0 = 0): it must not fire at t = 0.
+        let ev = r.events.first().expect("the touch is an event");
+        assert_eq!(ev.name, "ceiling", "ceiling {ceiling}");
+        assert!((ev.time - 0.5).abs() < 1e-4, "{}", ev.time);
+        assert!(ev.grazing);
+        assert!(ev.dtime.is_none());
+        assert!(ev.denominator.is_finite() && ev.denominator.abs() < 1e-2);
+        assert!(matches!(r.warnings[0], SimWarning::Grazing { event: 1, .. }));
+        assert!(r.warnings[0].to_string().contains("grazes"));
+        // The ball comes back to the floor at t = 1; that event's gradient is gone too.
+        assert_eq!(r.events.len(), 2);
+        assert!((r.events[1].time - 1.0).abs() < 1e-4, "{}", r.events[1].time);
+        assert!(r.events[1].dtime.is_none());
+        let f = &r.final_state;
+        assert!(f.dstate.is_none() && f.doutputs.is_none());
+        assert!(f.state.iter().chain(&f.outputs).all(|v| v.is_finite()));
+        assert_eq!(r.stopped_by, StopReason::TEnd);
+        let json = serde_json::to_string(&r).expect("serialisable");
+        assert!(!json.contains("NaN") && !json.contains("inf"), "{json}");
+    }
+}
+
+/// Closed form of the thermostat: switching times up to `t_end` and the final temperature.
+/// Between switches `T` relaxes exponentially to `T_out + P` (heating, rate k) or `T_out`.
+fn thermostat_closed(p: &[f64], t0: f64, t_end: f64) -> (Vec<f64>, f64) {
+    let (k, t_out, pw, lo, hi) = (p[0], p[1], p[2], p[3], p[4]);
+    let (mut t, mut temp, mut heating) = (0.0, t0, true);
+    let mut times = Vec::new();
+    loop {
+        let (eq, target) = if heating {
+            (t_out + pw / k, hi)
+        } else {
+            (t_out, lo)
+        };
+        let tau = ((temp - eq) / (target - eq)).ln() / k;
+        if t + tau > t_end {
+            return (times, eq + (temp - eq) * (-k * (t_end - t)).exp());
+        }
+        t += tau;
+        temp = target;
+        heating = !heating;
+        times.push(t);
+    }
+}
+
+#[test]
+fn thermostat_switching_times_and_gradients_match_closed_form() {
+    let p = [0.1, 10.0, 2.0, 19.0, 21.0];
+    let (t0, t_end) = (18.0, 12.0);
+    let (times, temp) = thermostat_closed(&p, t0, t_end);
+    assert_eq!(times.len(), 5);
+    for method in [Method::Dopri5, Method::Dop853] {
+        let o = SimOptions {
+            t_end,
+            rtol: 1e-10,
+            atol: 1e-12,
+            method,
+            ..SimOptions::default()
+        };
+        let r = run(&Thermostat::new(t0), &p, &o).expect("valid");
+        assert_eq!(r.events.len(), times.len(), "{method:?}");
+        for (ev, t) in r.events.iter().zip(&times) {
+            assert!(close(ev.time, *t, 1e-9), "{method:?}: {} vs {t}", ev.time);
+        }
+        assert_eq!(r.events[0].name, "off");
+        assert_eq!((r.events[0].mode_before, r.events[0].mode_after), (0, 1));
+        assert_eq!((r.events[1].mode_before, r.events[1].mode_after), (1, 0));
+        assert_eq!(r.final_state.mode, 1);
+        assert!(close(r.final_state.state[0], temp, 1e-9));
+        // Gradients against central differences of the closed form (step 1e-6 relative; the
+        // difference quotient is good to about 1e-8 here).
+        let s = r.final_state.dstate.as_ref().unwrap();
+        for j in 0..5 {
+            let hj = 1e-6 * p[j].abs();
+            let (mut pp, mut pm) = (p, p);
+            pp[j] += hj;
+            pm[j] -= hj;
+            let (tp, xp) = thermostat_closed(&pp, t0, t_end);
+            let (tm, xm) = thermostat_closed(&pm, t0, t_end);
+            for (i, ev) in r.events.iter().enumerate() {
+                let fd = (tp[i] - tm[i]) / (2.0 * hj);
+                let got = ev.dtime.as_ref().unwrap()[j];
+                assert!(
+                    (got - fd).abs() <= 1e-6 * fd.abs().max(1.0),
+                    "{method:?} event {i} dt/dp{j}: {got} vs {fd}"
+                );
+            }
+            let fd = (xp - xm) / (2.0 * hj);
+            assert!(
+                (s[j] - fd).abs() <= 1e-6 * fd.abs().max(1.0),
+                "{method:?} dT/dp{j}: {} vs {fd}",
+                s[j]
+            );
+        }
+    }
+}
+
+#[test]
+fn simultaneous_events_fire_in_declaration_order_once() {
+    let o = SimOptions {
+        t_end: 2.0,
+        rtol: 1e-10,
+        atol: 1e-12,
+        ..SimOptions::default()
+    };
+    let r = run(&Counter::new(1.0), &[1.0], &o).expect("valid");
+    // A (x := 0, c += 1) then B (c *= 10) at t = 1, and neither again although x sits on the
+    // guard right after A.
+    let names: Vec<&str> = r.events.iter().map(|e| e.name.as_str()).collect();
+    assert_eq!(names, ["A", "B"]);
+    assert!(r.events.iter().all(|e| close(e.time, 1.0, 1e-12)));
+    assert_eq!(r.final_state.state[1], 10.0);
+    assert!(close(r.final_state.state[0], -1.0, 1e-10));
+    // t_e = x0 / a, so dt_e/da = -1 for both; x(2) = 1 - 2a after the reset, dx/da = -2.
+    for ev in &r.events {
+        assert!(close(ev.dtime.as_ref().unwrap()[0], -1.0, 1e-10));
+    }
+    let s = r.final_state.dstate.as_ref().unwrap();
+    assert!(close(s[0], -2.0, 1e-10), "{s:?}");
+}
+
+#[test]
+fn starting_on_a_guard_does_not_fire() {
+    let o = SimOptions {
+        t_end: 1.0,
+        ..SimOptions::default()
+    };
+    // x starts exactly at zero and moves to the crossed side: the guard was never strictly
+    // positive, so nothing fires.
+    let r = run(&Counter::new(0.0), &[1.0], &o).expect("valid");
+    assert!(r.events.is_empty());
+    assert_eq!(r.final_state.state[1], 0.0);
+}
