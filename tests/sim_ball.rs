@@ -11,14 +11,7 @@ const G: f64 = 9.81;
 const E: f64 = 0.8;
 
 fn opts(t_end: f64, method: Method, sens_error_control: bool) -> SimOptions {
-    SimOptions {
-        t_end,
-        rtol: 1e-10,
-        atol: 1e-12,
-        method,
-        sens_error_control,
-        ..SimOptions::default()
-    }
+    SimOptions { t_end, rtol: 1e-10, atol: 1e-12, method, sens_error_control, ..SimOptions::default() }
 }
 
 /// k-th bounce time (k >= 1): `t_k = tau (1 + 2 sum_{i<k} e^i)` with `tau = sqrt(2 h0 / g)`.
@@ -50,12 +43,7 @@ fn check_first_point(method: Method, sens_error_control: bool) {
         let dt = ev.dtime.as_ref().expect("non-grazing bounce has a gradient");
         let want = bounce_time_grad(G, E, 1.0, kk);
         for j in 0..3 {
-            assert!(
-                close(dt[j], want[j], 1e-9),
-                "{tag} bounce {kk} dt/dp{j}: {} vs {}",
-                dt[j],
-                want[j]
-            );
+            assert!(close(dt[j], want[j], 1e-9), "{tag} bounce {kk} dt/dp{j}: {} vs {}", dt[j], want[j]);
         }
         assert!(!ev.grazing);
     }
@@ -130,12 +118,7 @@ fn ball_stops_as_zeno_near_the_accumulation_point() {
     let t_star = (2.0 / G).sqrt() + 2.0 * E * v1 / (G * (1.0 - E));
     assert!((t_star - 4.0637127689).abs() < 1e-9);
     match r.stopped_by {
-        StopReason::Zeno {
-            time,
-            count,
-            accumulation,
-            ..
-        } => {
+        StopReason::Zeno { time, count, accumulation, .. } => {
             let acc = accumulation.expect("shrinking intervals give an estimate");
             assert!((acc - t_star).abs() < 1e-8, "accumulation {acc} vs {t_star}");
             assert!(time < t_star && t_star - time < 1e-4, "stopped at {time}");
@@ -157,13 +140,7 @@ fn ball_stops_as_zeno_near_the_accumulation_point() {
 fn stop_event_total_derivative() {
     let h0 = 1.0;
     let r = run(&Ball::stopping(), &[G, E, h0], &opts(5.0, Method::Auto, true)).expect("valid");
-    assert_eq!(
-        r.stopped_by,
-        StopReason::Event {
-            event: 0,
-            name: "floor".into()
-        }
-    );
+    assert_eq!(r.stopped_by, StopReason::Event { event: 0, name: "floor".into() });
     let v1 = (2.0 * G * h0).sqrt();
     let f = &r.final_state;
     assert!(close(f.time, (2.0 * h0 / G).sqrt(), 1e-12));
@@ -186,18 +163,13 @@ fn stop_event_total_derivative() {
 
 #[test]
 fn sampled_trajectory_follows_the_parabolas() {
-    let o = SimOptions {
-        trajectory: TrajectoryRequest::Sample(0.1),
-        ..opts(2.5, Method::Dopri5, true)
-    };
+    let o = SimOptions { trajectory: TrajectoryRequest::Sample(0.1), ..opts(2.5, Method::Dopri5, true) };
     let r = run(&Ball::new(), &[G, E, 1.0], &o).expect("valid");
     let rows = r.trajectory.expect("trajectory requested");
     assert_eq!(rows.len(), 26);
     for row in &rows {
         // Closed-form height: the flight after bounce k starts at t_k with speed e^k v1.
-        let k = (1..=4)
-            .filter(|&k| bounce_time(G, E, 1.0, k) <= row.t)
-            .count() as i32;
+        let k = (1..=4).filter(|&k| bounce_time(G, E, 1.0, k) <= row.t).count() as i32;
         let y = if k == 0 {
             1.0 - 0.5 * G * row.t * row.t
         } else {
@@ -213,23 +185,11 @@ fn bad_input_is_an_error_not_a_panic() {
     let ball = Ball::new();
     assert_eq!(
         run(&ball, &[G, E], &SimOptions::default()).unwrap_err(),
-        SimError::ParamLength {
-            expected: 3,
-            got: 2
-        }
+        SimError::ParamLength { expected: 3, got: 2 }
     );
-    let bad = SimOptions {
-        rtol: -1.0,
-        ..SimOptions::default()
-    };
-    assert!(matches!(
-        run(&ball, &[G, E, 1.0], &bad),
-        Err(SimError::InvalidOption { name: "rtol", .. })
-    ));
-    let bad = SimOptions {
-        t_end: f64::NAN,
-        ..SimOptions::default()
-    };
+    let bad = SimOptions { rtol: -1.0, ..SimOptions::default() };
+    assert!(matches!(run(&ball, &[G, E, 1.0], &bad), Err(SimError::InvalidOption { name: "rtol", .. })));
+    let bad = SimOptions { t_end: f64::NAN, ..SimOptions::default() };
     assert!(run(&ball, &[G, E, 1.0], &bad).is_err());
 }
 
@@ -247,17 +207,9 @@ fn a_nan_parameter_ends_in_a_fault_not_a_hang() {
 
 #[test]
 fn too_many_steps_is_a_fault_with_partial_result() {
-    let o = SimOptions {
-        max_steps: 5,
-        ..opts(2.5, Method::Dopri5, true)
-    };
+    let o = SimOptions { max_steps: 5, ..opts(2.5, Method::Dopri5, true) };
     let r = run(&Ball::new(), &[G, E, 1.0], &o).expect("valid");
-    assert!(matches!(
-        r.stopped_by,
-        StopReason::Fault {
-            error: SimError::TooManySteps { max_steps: 5, .. }
-        }
-    ));
+    assert!(matches!(r.stopped_by, StopReason::Fault { error: SimError::TooManySteps { max_steps: 5, .. } }));
     assert!(r.final_state.time > 0.0 && r.final_state.time < 2.5);
 }
 

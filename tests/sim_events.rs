@@ -49,12 +49,7 @@ fn short_hop_through_a_ceiling_within_one_step_is_caught() {
 
 fn grazing_run(ceiling: f64) -> hybc::sim::SimResult {
     // g = 8, v0 = 4: apex exactly at y = 1, t = 0.5 (all exact in binary).
-    let o = SimOptions {
-        t_end: 1.2,
-        rtol: 1e-10,
-        atol: 1e-12,
-        ..SimOptions::default()
-    };
+    let o = SimOptions { t_end: 1.2, rtol: 1e-10, atol: 1e-12, ..SimOptions::default() };
     run(&Ball::with_ceiling(4.0, ceiling, true), &[8.0, 0.8, 0.0], &o).expect("valid")
 }
 
@@ -91,11 +86,7 @@ fn thermostat_closed(p: &[f64], t0: f64, t_end: f64) -> (Vec<f64>, f64) {
     let (mut t, mut temp, mut heating) = (0.0, t0, true);
     let mut times = Vec::new();
     loop {
-        let (eq, target) = if heating {
-            (t_out + pw / k, hi)
-        } else {
-            (t_out, lo)
-        };
+        let (eq, target) = if heating { (t_out + pw / k, hi) } else { (t_out, lo) };
         let tau = ((temp - eq) / (target - eq)).ln() / k;
         if t + tau > t_end {
             return (times, eq + (temp - eq) * (-k * (t_end - t)).exp());
@@ -114,13 +105,7 @@ fn thermostat_switching_times_and_gradients_match_closed_form() {
     let (times, temp) = thermostat_closed(&p, t0, t_end);
     assert_eq!(times.len(), 5);
     for method in [Method::Dopri5, Method::Dop853] {
-        let o = SimOptions {
-            t_end,
-            rtol: 1e-10,
-            atol: 1e-12,
-            method,
-            ..SimOptions::default()
-        };
+        let o = SimOptions { t_end, rtol: 1e-10, atol: 1e-12, method, ..SimOptions::default() };
         let r = run(&Thermostat::new(t0), &p, &o).expect("valid");
         assert_eq!(r.events.len(), times.len(), "{method:?}");
         for (ev, t) in r.events.iter().zip(&times) {
@@ -150,23 +135,14 @@ fn thermostat_switching_times_and_gradients_match_closed_form() {
                 );
             }
             let fd = (xp - xm) / (2.0 * hj);
-            assert!(
-                (s[j] - fd).abs() <= 1e-6 * fd.abs().max(1.0),
-                "{method:?} dT/dp{j}: {} vs {fd}",
-                s[j]
-            );
+            assert!((s[j] - fd).abs() <= 1e-6 * fd.abs().max(1.0), "{method:?} dT/dp{j}: {} vs {fd}", s[j]);
         }
     }
 }
 
 #[test]
 fn simultaneous_events_fire_in_declaration_order_once() {
-    let o = SimOptions {
-        t_end: 2.0,
-        rtol: 1e-10,
-        atol: 1e-12,
-        ..SimOptions::default()
-    };
+    let o = SimOptions { t_end: 2.0, rtol: 1e-10, atol: 1e-12, ..SimOptions::default() };
     let r = run(&Counter::new(1.0), &[1.0], &o).expect("valid");
     // A (x := 0, c += 1) then B (c *= 10) at t = 1, and neither again although x sits on the
     // guard right after A.
@@ -185,10 +161,7 @@ fn simultaneous_events_fire_in_declaration_order_once() {
 
 #[test]
 fn starting_on_a_guard_does_not_fire() {
-    let o = SimOptions {
-        t_end: 1.0,
-        ..SimOptions::default()
-    };
+    let o = SimOptions { t_end: 1.0, ..SimOptions::default() };
     // x starts exactly at zero and moves to the crossed side: the guard was never strictly
     // positive, so nothing fires.
     let r = run(&Counter::new(0.0), &[1.0], &o).expect("valid");

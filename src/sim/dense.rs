@@ -24,13 +24,7 @@ pub(crate) struct Dense {
 impl Dense {
     pub fn new(nz: usize) -> Dense {
         // Room for DOP853's 8 vectors; Dopri5 uses 5.
-        Dense {
-            t0: 0.0,
-            h: 0.0,
-            nz,
-            n_coef: 0,
-            r: vec![0.0; 8 * nz],
-        }
+        Dense { t0: 0.0, h: 0.0, nz, n_coef: 0, r: vec![0.0; 8 * nz] }
     }
 
     /// Builds the interpolant of the last attempt of `rk` (before `rk.accept()`: `rk.y` is the
@@ -77,11 +71,7 @@ impl Dense {
 
     /// Interpolated values of the first `out.len()` components at time `t`.
     pub fn eval(&self, t: f64, out: &mut [f64]) {
-        let s = if self.h != 0.0 {
-            (t - self.t0) / self.h
-        } else {
-            0.0
-        };
+        let s = if self.h != 0.0 { (t - self.t0) / self.h } else { 0.0 };
         let s1 = 1.0 - s;
         let nz = self.nz;
         for (i, o) in out.iter_mut().enumerate() {
@@ -97,11 +87,7 @@ impl Dense {
 
     /// Interpolated time derivatives of the first `out.len()` components at time `t`.
     pub fn eval_deriv(&self, t: f64, out: &mut [f64]) {
-        let s = if self.h != 0.0 {
-            (t - self.t0) / self.h
-        } else {
-            0.0
-        };
+        let s = if self.h != 0.0 { (t - self.t0) / self.h } else { 0.0 };
         let s1 = 1.0 - s;
         let nz = self.nz;
         for (i, o) in out.iter_mut().enumerate() {

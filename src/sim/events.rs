@@ -89,11 +89,7 @@ pub(crate) fn illinois<F: FnMut(f64) -> f64>(
         if b - a <= 2.0 * EPS * a.abs().max(b.abs()) || b - a <= f64::MIN_POSITIVE {
             break;
         }
-        let mut c = if fb != fa {
-            b - fb * (b - a) / (fb - fa)
-        } else {
-            0.5 * (a + b)
-        };
+        let mut c = if fb != fa { b - fb * (b - a) / (fb - fa) } else { 0.5 * (a + b) };
         // Safeguard: bisect when the secant leaves the open bracket or every fourth iteration
         // when the bracket has not at least halved, so the iteration count stays bounded.
         if !(c > a && c < b) || (it % 4 == 3 && b - a > 0.5 * width) {
@@ -159,11 +155,7 @@ impl Detector {
     ) {
         let evs = &info.modes[mode].events;
         let ne = evs.len();
-        let (g, dg) = if end {
-            (&mut self.g1, &mut self.dg1)
-        } else {
-            (&mut self.g0, &mut self.dg0)
-        };
+        let (g, dg) = if end { (&mut self.g1, &mut self.dg1) } else { (&mut self.g0, &mut self.dg0) };
         sys.guards(mode, t, x, p, &mut g[..ne]);
         for (pos, &ev) in evs.iter().enumerate() {
             let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
@@ -181,8 +173,7 @@ impl Detector {
     pub fn may_cross(&self, info: &SystemInfo, mode: usize) -> bool {
         info.modes[mode].events.iter().enumerate().any(|(pos, &ev)| {
             let dir = info.events[ev].direction;
-            crossing_sign(dir, self.g0[pos], self.g1[pos]).is_some()
-                || self.dg0[pos] * self.dg1[pos] < 0.0
+            crossing_sign(dir, self.g0[pos], self.g1[pos]).is_some() || self.dg0[pos] * self.dg1[pos] < 0.0
         })
     }
 
@@ -274,11 +265,7 @@ impl Detector {
                         && self.dg0[pos] * g0 < 0.0
                     {
                         // Moving towards zero and stopping within round-off of it: a touch.
-                        self.found[pos] = Some(Crossing {
-                            t: te,
-                            sigma: g0.signum(),
-                            touch: true,
-                        });
+                        self.found[pos] = Some(Crossing { t: te, sigma: g0.signum(), touch: true });
                         continue;
                     } else if let Some(sigma) = crossing_sign(dir, ge, g1) {
                         bracket = Some((te, ge, t1, g1, sigma));
@@ -291,14 +278,9 @@ impl Detector {
                 }
             }
             if let Some((a, ga, b, gb, sigma)) = bracket {
-                let t = illinois(a, ga, b, gb, sigma, |t| {
-                    self.guard_on_dense(sys, mode, ne, pos, t, dense, p)
-                });
-                self.found[pos] = Some(Crossing {
-                    t,
-                    sigma,
-                    touch: false,
-                });
+                let t =
+                    illinois(a, ga, b, gb, sigma, |t| self.guard_on_dense(sys, mode, ne, pos, t, dense, p));
+                self.found[pos] = Some(Crossing { t, sigma, touch: false });
             }
         }
     }

@@ -83,8 +83,9 @@ impl Jump {
         let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
         let d = dot(&self.gx, &self.f_minus) + gt;
         let scale = norm(&self.gx) * norm(&self.f_minus) + gt.abs();
-        // Written so that a NaN speed also counts as grazing.
-        let grazing = !(d.abs() > graze_tol * scale);
+        // A NaN speed also counts as grazing (the comparison is false for NaN).
+        let crossing_fast_enough = d.abs() > graze_tol * scale;
+        let grazing = !crossing_fast_enough;
         for j in 0..m {
             self.dte[j] = if grazing {
                 // No time correction: S is carried on as if the event time were fixed, the
@@ -111,17 +112,12 @@ impl Jump {
                 self.s_plus[j * n + i] = rs + self.rp[j * n + i] + self.v[i] * self.dte[j];
                 if want_total {
                     let rf = dot(row, &self.f_minus);
-                    self.total[j * n + i] =
-                        rs + self.rp[j * n + i] + (rf + self.rt[i]) * self.dte[j];
+                    self.total[j * n + i] = rs + self.rp[j * n + i] + (rf + self.rt[i]) * self.dte[j];
                 }
             }
         }
         x.copy_from_slice(&self.x_plus);
         s.copy_from_slice(&self.s_plus);
-        JumpOutcome {
-            denominator: d,
-            scale,
-            grazing,
-        }
+        JumpOutcome { denominator: d, scale, grazing }
     }
 }

@@ -12,8 +12,8 @@ mod options;
 mod result;
 mod rk;
 mod run;
-mod tableau;
 pub mod system;
+mod tableau;
 
 pub use options::*;
 pub use result::*;

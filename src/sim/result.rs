@@ -18,31 +18,13 @@ pub enum SimError {
     #[error("option `{name}` has invalid value {value}")]
     InvalidOption { name: &'static str, value: f64 },
     #[error("model shape is inconsistent: {what} index {index} out of range (count {count})")]
-    BadIndex {
-        what: &'static str,
-        index: usize,
-        count: usize,
-    },
+    BadIndex { what: &'static str, index: usize, count: usize },
     #[error("step size underflow at t = {t} (h = {h}) in mode {mode}, state {state:?}")]
-    StepTooSmall {
-        t: f64,
-        h: f64,
-        mode: usize,
-        state: Vec<f64>,
-    },
+    StepTooSmall { t: f64, h: f64, mode: usize, state: Vec<f64> },
     #[error("more than {max_steps} steps at t = {t} in mode {mode}, state {state:?}")]
-    TooManySteps {
-        t: f64,
-        max_steps: usize,
-        mode: usize,
-        state: Vec<f64>,
-    },
+    TooManySteps { t: f64, max_steps: usize, mode: usize, state: Vec<f64> },
     #[error("non-finite state at t = {t} in mode {mode}: {state:?}")]
-    NonFinite {
-        t: f64,
-        mode: usize,
-        state: Vec<f64>,
-    },
+    NonFinite { t: f64, mode: usize, state: Vec<f64> },
 }
 
 /// Non-fatal findings.
@@ -50,25 +32,13 @@ pub enum SimError {
 pub enum SimWarning {
     /// The guard was crossed (or touched) at a speed too small for its time gradient to exist;
     /// this event's and all later gradients are `None`.
-    Grazing {
-        event: usize,
-        name: String,
-        time: f64,
-        denominator: f64,
-        scale: f64,
-    },
+    Grazing { event: usize, name: String, time: f64, denominator: f64, scale: f64 },
 }
 
 impl fmt::Display for SimWarning {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            SimWarning::Grazing {
-                name,
-                time,
-                denominator,
-                scale,
-                ..
-            } => write!(
+            SimWarning::Grazing { name, time, denominator, scale, .. } => write!(
                 f,
                 "event `{name}` grazes its guard at t = {time} (crossing speed {denominator:e}, \
                  scale {scale:e}): gradients from here on are not meaningful"
@@ -119,7 +89,10 @@ pub enum StopReason {
     /// Reached `t_end`.
     TEnd,
     /// A stop event fired.
-    Event { event: usize, name: String },
+    Event {
+        event: usize,
+        name: String,
+    },
     /// Too many events in a short window, or `max_events`.
     Zeno {
         time: f64,
@@ -128,7 +101,9 @@ pub enum StopReason {
         /// Geometric extrapolation of the last inter-event intervals, when they shrink.
         accumulation: Option<f64>,
     },
-    Fault { error: SimError },
+    Fault {
+        error: SimError,
+    },
 }
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]

@@ -172,11 +172,7 @@ impl Rk {
     /// Smaller step size after a rejected step with error `err` (infinite: shrink by 5).
     pub fn shrink(&self, err: f64) -> f64 {
         let q = self.tab.order as f64;
-        let fac = if err.is_finite() {
-            SAFETY * err.powf(-1.0 / q)
-        } else {
-            FAC_MIN
-        };
+        let fac = if err.is_finite() { SAFETY * err.powf(-1.0 / q) } else { FAC_MIN };
         self.h * fac.clamp(FAC_MIN, 1.0)
     }
 
@@ -197,11 +193,7 @@ impl Rk {
 
     /// Hairer's initial step estimate from `(t, y)` with `k[0] = f(t, y)`, capped by `h_max`.
     /// Uses stage block 1 and `ytmp` as scratch.
-    pub fn initial_step<F: FnMut(f64, &[f64], &mut [f64])>(
-        &mut self,
-        h_max: f64,
-        rhs: &mut F,
-    ) -> f64 {
+    pub fn initial_step<F: FnMut(f64, &[f64], &mut [f64])>(&mut self, h_max: f64, rhs: &mut F) -> f64 {
         let nz = self.nz;
         let mut d0 = 0.0;
         let mut d1 = 0.0;
@@ -212,11 +204,7 @@ impl Rk {
         }
         let n = self.n_err.max(1) as f64;
         let (d0, d1) = ((d0 / n).sqrt(), (d1 / n).sqrt());
-        let mut h0 = if d0 < 1e-5 || d1 < 1e-5 {
-            1e-6
-        } else {
-            0.01 * d0 / d1
-        };
+        let mut h0 = if d0 < 1e-5 || d1 < 1e-5 { 1e-6 } else { 0.01 * d0 / d1 };
         h0 = h0.min(h_max);
         for i in 0..nz {
             self.ytmp[i] = self.y[i] + h0 * self.k[i];

@@ -11,8 +11,7 @@ use super::events::{Crossing, Detector};
 use super::jump::Jump;
 use super::options::{Method, SimOptions, TrajectoryRequest};
 use super::result::{
-    EventRecord, FinalState, SimError, SimResult, SimStats, SimWarning, StopReason,
-    TrajectoryRow,
+    EventRecord, FinalState, SimError, SimResult, SimStats, SimWarning, StopReason, TrajectoryRow,
 };
 use super::rk::Rk;
 use super::system::{HybridSystem, SystemInfo};
@@ -26,11 +25,7 @@ const MAX_NONFINITE_REJECTS: usize = 30;
 /// `opts.t_end`. Bad input (parameter length, an inconsistent model shape, invalid options) is an
 /// error; runtime faults, Zeno behaviour and stop events end the run with everything computed so
 /// far and say why in [`SimResult::stopped_by`].
-pub fn run<S: HybridSystem + ?Sized>(
-    sys: &S,
-    p: &[f64],
-    opts: &SimOptions,
-) -> Result<SimResult, SimError> {
+pub fn run<S: HybridSystem + ?Sized>(sys: &S, p: &[f64], opts: &SimOptions) -> Result<SimResult, SimError> {
     let info = sys.info();
     validate(info, p, opts)?;
     Ok(Driver::new(sys, info, p, opts).run())
@@ -38,10 +33,7 @@ pub fn run<S: HybridSystem + ?Sized>(
 
 fn validate(info: &SystemInfo, p: &[f64], opts: &SimOptions) -> Result<(), SimError> {
     if p.len() != info.n_params() {
-        return Err(SimError::ParamLength {
-            expected: info.n_params(),
-            got: p.len(),
-        });
+        return Err(SimError::ParamLength { expected: info.n_params(), got: p.len() });
     }
     let bad_index = |what, index: usize, count: usize| {
         if index < count {
@@ -66,11 +58,7 @@ fn validate(info: &SystemInfo, p: &[f64], opts: &SimOptions) -> Result<(), SimEr
     }
     let checks: [(&'static str, f64, bool); 7] = [
         ("t_start", opts.t_start, opts.t_start.is_finite()),
-        (
-            "t_end",
-            opts.t_end,
-            opts.t_end.is_finite() && opts.t_end >= opts.t_start,
-        ),
+        ("t_end", opts.t_end, opts.t_end.is_finite() && opts.t_end >= opts.t_start),
         ("rtol", opts.rtol, opts.rtol.is_finite() && opts.rtol > 0.0),
         ("atol", opts.atol, opts.atol.is_finite() && opts.atol >= 0.0),
         ("graze_tol", opts.graze_tol, opts.graze_tol >= 0.0),
@@ -84,10 +72,7 @@ fn validate(info: &SystemInfo, p: &[f64], opts: &SimOptions) -> Result<(), SimEr
     }
     if let TrajectoryRequest::Sample(dt) = opts.trajectory {
         if !(dt.is_finite() && dt > 0.0) {
-            return Err(SimError::InvalidOption {
-                name: "trajectory sample interval",
-                value: dt,
-            });
+            return Err(SimError::InvalidOption { name: "trajectory sample interval", value: dt });
         }
     }
     Ok(())
@@ -134,11 +119,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
     fn new(sys: &'a S, info: &'a SystemInfo, p: &'a [f64], opts: &'a SimOptions) -> Self {
         let (n, m) = (info.n_states(), info.n_grad());
         let nz = n * (1 + m);
-        let tab = if opts.method.resolve(opts.rtol) == Method::Dop853 {
-            &DOP853
-        } else {
-            &DOPRI5
-        };
+        let tab = if opts.method.resolve(opts.rtol) == Method::Dop853 { &DOP853 } else { &DOPRI5 };
         let n_err = if opts.sens_error_control { nz } else { n };
         let mut rk = Rk::new(tab, nz, n_err, opts.rtol, opts.atol);
         rk.t = opts.t_start;
@@ -229,7 +210,8 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
             if hit_end {
                 h_try = t_end - t0;
             }
-            if !(h_try > 8.0 * EPS * t0.abs()) || h_try <= 0.0 {
+            let h_resolvable = h_try > 8.0 * EPS * t0.abs() && h_try > 0.0;
+            if !h_resolvable {
                 return StopReason::Fault {
                     error: SimError::StepTooSmall {
                         t: t0,
@@ -242,7 +224,8 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
             attempts += 1;
             let mut rhs = rhs_for(self.sys, self.p, self.n, self.mode);
             let err = self.rk.attempt(h_try, &mut rhs);
-            if !(err <= 1.0) {
+            let accepted = err <= 1.0;
+            if !accepted {
                 self.stats.rejected += 1;
                 if err.is_finite() {
                     nonfinite_rejects = 0;
@@ -276,10 +259,8 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
                 self.dense.build(&mut self.rk, &mut rhs);
             }
             let fire = if may_cross {
-                self.det
-                    .locate(self.sys, self.info, self.mode, &self.dense, self.p);
-                self.det
-                    .select(self.sys, self.info, self.mode, &self.dense, self.p)
+                self.det.locate(self.sys, self.info, self.mode, &self.dense, self.p);
+                self.det.select(self.sys, self.info, self.mode, &self.dense, self.p)
             } else {
                 None
             };
@@ -319,11 +300,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
 
     fn fault_nonfinite(&self) -> StopReason {
         StopReason::Fault {
-            error: SimError::NonFinite {
-                t: self.rk.t,
-                mode: self.mode,
-                state: self.fault_state(),
-            },
+            error: SimError::NonFinite { t: self.rk.t, mode: self.mode, state: self.fault_state() },
         }
     }
 
@@ -334,19 +311,13 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
         let group_len = self.det.group.len();
         for gi in 0..group_len {
             let (ev, crossing): (usize, Crossing) = self.det.group[gi];
-            let Some(pos) = self.info.modes[self.mode]
-                .events
-                .iter()
-                .position(|&e| e == ev)
-            else {
+            let Some(pos) = self.info.modes[self.mode].events.iter().position(|&e| e == ev) else {
                 // An earlier event of the group switched to a mode without this event.
                 continue;
             };
             let (x, s) = self.rk.y.split_at_mut(n);
             if !crossing.touch {
-                let g = self
-                    .det
-                    .guard_now(self.sys, self.mode, pos, t, x, self.p);
+                let g = self.det.guard_now(self.sys, self.mode, pos, t, x, self.p);
                 if crossing.sigma * g > 0.0 {
                     // An earlier reset moved the state back before this guard.
                     continue;
@@ -397,10 +368,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
                 if self.sens_valid {
                     self.stop_total = Some((self.jump.total.clone(), self.jump.dte.clone()));
                 }
-                return Some(StopReason::Event {
-                    event: ev,
-                    name: einfo.name.clone(),
-                });
+                return Some(StopReason::Event { event: ev, name: einfo.name.clone() });
             }
         }
         None
@@ -412,12 +380,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
         let last = self.events.last()?;
         let span = (self.opts.t_end - self.opts.t_start).abs().max(1.0);
         let window = self.opts.zeno_window * span;
-        let in_window = self
-            .events
-            .iter()
-            .rev()
-            .take_while(|e| e.time >= last.time - window)
-            .count();
+        let in_window = self.events.iter().rev().take_while(|e| e.time >= last.time - window).count();
         let too_many = count >= self.opts.max_events;
         let crowded = self.opts.zeno_events > 0 && in_window >= self.opts.zeno_events;
         if !(too_many || crowded) {
@@ -438,11 +401,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
         if k < 3 {
             return None;
         }
-        let (ta, tb, tc) = (
-            self.events[k - 3].time,
-            self.events[k - 2].time,
-            self.events[k - 1].time,
-        );
+        let (ta, tb, tc) = (self.events[k - 3].time, self.events[k - 2].time, self.events[k - 1].time);
         let (d1, d2) = (tb - ta, tc - tb);
         if d1 <= 0.0 || d2 <= 0.0 {
             return Some(tc);
@@ -453,9 +412,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
 
     fn sample_due(&self, t_seg_end: f64) -> bool {
         match self.opts.trajectory {
-            TrajectoryRequest::Sample(dt) => {
-                self.opts.t_start + self.next_sample as f64 * dt <= t_seg_end
-            }
+            TrajectoryRequest::Sample(dt) => self.opts.t_start + self.next_sample as f64 * dt <= t_seg_end,
             _ => false,
         }
     }
@@ -489,13 +446,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
         let mut outputs = vec![0.0; self.info.n_outputs()];
         self.sys.outputs(t, &z[..n], self.p, &mut outputs);
         if let Some(rows) = self.trajectory.as_mut() {
-            rows.push(TrajectoryRow {
-                t,
-                mode: self.mode,
-                x: z[..n].to_vec(),
-                s: z[n..].to_vec(),
-                outputs,
-            });
+            rows.push(TrajectoryRow { t, mode: self.mode, x: z[..n].to_vec(), s: z[n..].to_vec(), outputs });
         }
     }
 
@@ -509,8 +460,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
         let mut yx = vec![0.0; k * n];
         let mut yp = vec![0.0; k * m];
         let mut yt = vec![0.0; k];
-        self.sys
-            .output_jac(t, x, self.p, &mut yx, &mut yp, &mut yt);
+        self.sys.output_jac(t, x, self.p, &mut yx, &mut yp, &mut yt);
         // y_x S_j + y_p_j (+ y_t dt_j for totals), column per parameter.
         let chain = |sens: &[f64], dte: Option<&[f64]>| {
             let mut out = vec![0.0; k * m];
@@ -518,11 +468,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
                 for i in 0..k {
                     let row = &yx[i * n..(i + 1) * n];
                     let mut v = yp[j * k + i];
-                    v += row
-                        .iter()
-                        .zip(&sens[j * n..(j + 1) * n])
-                        .map(|(a, b)| a * b)
-                        .sum::<f64>();
+                    v += row.iter().zip(&sens[j * n..(j + 1) * n]).map(|(a, b)| a * b).sum::<f64>();
                     if let Some(d) = dte {
                         v += yt[i] * d[j];
                     }
@@ -531,11 +477,8 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
             }
             out
         };
-        let (dstate, doutputs) = if self.sens_valid {
-            (Some(s.to_vec()), Some(chain(s, None)))
-        } else {
-            (None, None)
-        };
+        let (dstate, doutputs) =
+            if self.sens_valid { (Some(s.to_vec()), Some(chain(s, None))) } else { (None, None) };
         let (dstate_total, doutputs_total) = match self.stop_total.take() {
             Some((total, dte)) => {
                 let dy = chain(&total, Some(&dte));

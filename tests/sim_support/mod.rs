@@ -58,10 +58,7 @@ impl Ball {
                 output_names: names(&["E"]),
                 param_names: names(&["g", "e", "h0"]),
                 grad_params: vec![0, 1, 2],
-                modes: vec![ModeInfo {
-                    name: "fly".into(),
-                    events: mode_events,
-                }],
+                modes: vec![ModeInfo { name: "fly".into(), events: mode_events }],
                 events,
                 initial_mode: 0,
             },
@@ -157,15 +154,7 @@ impl HybridSystem for Ball {
     fn outputs(&self, _t: f64, x: &[f64], p: &[f64], y: &mut [f64]) {
         y[0] = 0.5 * x[1] * x[1] + p[0] * x[0];
     }
-    fn output_jac(
-        &self,
-        _t: f64,
-        x: &[f64],
-        p: &[f64],
-        yx: &mut [f64],
-        yp: &mut [f64],
-        yt: &mut [f64],
-    ) {
+    fn output_jac(&self, _t: f64, x: &[f64], p: &[f64], yx: &mut [f64], yp: &mut [f64], yt: &mut [f64]) {
         yx.copy_from_slice(&[p[0], x[1]]);
         yp.copy_from_slice(&[x[0], 0.0, 0.0]);
         yt[0] = 0.0;
@@ -197,19 +186,10 @@ impl Thermostat {
                 param_names: names(&["k", "T_out", "P", "T_lo", "T_hi"]),
                 grad_params: vec![0, 1, 2, 3, 4],
                 modes: vec![
-                    ModeInfo {
-                        name: "heating".into(),
-                        events: vec![0],
-                    },
-                    ModeInfo {
-                        name: "cooling".into(),
-                        events: vec![1],
-                    },
+                    ModeInfo { name: "heating".into(), events: vec![0] },
+                    ModeInfo { name: "cooling".into(), events: vec![1] },
                 ],
-                events: vec![
-                    ev("off", Direction::Rising, 1),
-                    ev("on", Direction::Falling, 0),
-                ],
+                events: vec![ev("off", Direction::Rising, 1), ev("on", Direction::Falling, 0)],
                 initial_mode: 0,
             },
             t0,
@@ -242,13 +222,7 @@ impl HybridSystem for Thermostat {
         ds: &mut [f64],
     ) {
         self.flow(mode, t, x, p, dx);
-        let fp = [
-            -(x[0] - p[1]),
-            p[0],
-            if mode == 0 { 1.0 } else { 0.0 },
-            0.0,
-            0.0,
-        ];
+        let fp = [-(x[0] - p[1]), p[0], if mode == 0 { 1.0 } else { 0.0 }, 0.0, 0.0];
         for j in 0..5 {
             ds[j] = -p[0] * s[j] + fp[j];
         }
@@ -291,15 +265,7 @@ impl HybridSystem for Thermostat {
         rt.fill(0.0);
     }
     fn outputs(&self, _t: f64, _x: &[f64], _p: &[f64], _y: &mut [f64]) {}
-    fn output_jac(
-        &self,
-        _t: f64,
-        _x: &[f64],
-        _p: &[f64],
-        _yx: &mut [f64],
-        _yp: &mut [f64],
-        _yt: &mut [f64],
-    ) {
+    fn output_jac(&self, _t: f64, _x: &[f64], _p: &[f64], _yx: &mut [f64], _yp: &mut [f64], _yt: &mut [f64]) {
     }
 }
 
@@ -326,10 +292,7 @@ impl Counter {
                 output_names: names(&[]),
                 param_names: names(&["a"]),
                 grad_params: vec![0],
-                modes: vec![ModeInfo {
-                    name: "only".into(),
-                    events: vec![0, 1],
-                }],
+                modes: vec![ModeInfo { name: "only".into(), events: vec![0, 1] }],
                 events: vec![ev("A"), ev("B")],
                 initial_mode: 0,
             },
@@ -413,15 +376,7 @@ impl HybridSystem for Counter {
         rt.fill(0.0);
     }
     fn outputs(&self, _t: f64, _x: &[f64], _p: &[f64], _y: &mut [f64]) {}
-    fn output_jac(
-        &self,
-        _t: f64,
-        _x: &[f64],
-        _p: &[f64],
-        _yx: &mut [f64],
-        _yp: &mut [f64],
-        _yt: &mut [f64],
-    ) {
+    fn output_jac(&self, _t: f64, _x: &[f64], _p: &[f64], _yx: &mut [f64], _yp: &mut [f64], _yt: &mut [f64]) {
     }
 }
 
