@@ -5,7 +5,7 @@
 mod sim_support;
 
 use hybc::sim::{run, Method, SimOptions, SimWarning, StopReason, TrajectoryRequest};
-use sim_support::{close, Ball, Counter, Thermostat};
+use sim_support::{close, Ball, Counter, Oscillator, Thermostat};
 
 #[test]
 fn short_hop_through_a_ceiling_within_one_step_is_caught() {
@@ -167,4 +167,43 @@ fn starting_on_a_guard_does_not_fire() {
     let r = run(&Counter::new(0.0), &[1.0], &o).expect("valid");
     assert!(r.events.is_empty());
     assert_eq!(r.final_state.state[1], 0.0);
+}
+
+#[test]
+fn either_direction_fires_both_ways_with_identity_saltation() {
+    // x = cos(w t): zeros at (pi/2 + k pi) / w, alternately falling and rising; dt_k/dw = -t_k / w.
+    let w = 2.0;
+    for method in [Method::Dopri5, Method::Dop853] {
+        let o = SimOptions { t_end: 10.0, rtol: 1e-10, atol: 1e-12, method, ..SimOptions::default() };
+        let r = run(&Oscillator::new(), &[w], &o).expect("valid");
+        let want: Vec<f64> = (0..)
+            .map(|k| (std::f64::consts::FRAC_PI_2 + k as f64 * std::f64::consts::PI) / w)
+            .take_while(|t| *t <= 10.0)
+            .collect();
+        assert_eq!(r.events.len(), want.len(), "{method:?}");
+        for (ev, t) in r.events.iter().zip(&want) {
+            assert!(close(ev.time, *t, 1e-9), "{method:?}: {} vs {t}", ev.time);
+            let dt = ev.dtime.as_ref().unwrap()[0];
+            assert!(close(dt, -t / w, 1e-7), "{method:?}: dt/dw {dt} vs {}", -t / w);
+        }
+        // Identity reset with an unchanged flow: the saltation is the identity, so the final
+        // sensitivity is the smooth one, dx/dw = -t sin(w t).
+        let s = r.final_state.dstate.as_ref().unwrap();
+        assert!(close(s[0], -10.0 * (w * 10.0).sin(), 1e-7), "{method:?}: {}", s[0]);
+    }
+}
+
+#[test]
+fn sensitivity_error_control_can_be_switched_off() {
+    let p = [0.1, 10.0, 2.0, 19.0, 21.0];
+    let base = SimOptions { t_end: 12.0, rtol: 1e-8, atol: 1e-10, ..SimOptions::default() };
+    let on = run(&Thermostat::new(18.0), &p, &base).expect("valid");
+    let off =
+        run(&Thermostat::new(18.0), &p, &SimOptions { sens_error_control: false, ..base }).expect("valid");
+    // Fewer constraints on the step size never need more steps; the events are the same.
+    assert!(off.stats.steps <= on.stats.steps, "{} vs {}", off.stats.steps, on.stats.steps);
+    assert_eq!(on.events.len(), off.events.len());
+    for (a, b) in on.events.iter().zip(&off.events) {
+        assert!(close(a.time, b.time, 1e-7));
+    }
 }

@@ -24,7 +24,8 @@ pub(crate) struct Dense {
 impl Dense {
     pub fn new(nz: usize) -> Dense {
         // Room for DOP853's 8 vectors; Dopri5 uses 5.
-        Dense { t0: 0.0, h: 0.0, nz, n_coef: 0, r: vec![0.0; 8 * nz] }
+        // Until the first build the interpolant is the zero constant, never an out-of-range read.
+        Dense { t0: 0.0, h: 0.0, nz, n_coef: 1, r: vec![0.0; 8 * nz] }
     }
 
     /// Builds the interpolant of the last attempt of `rk` (before `rk.accept()`: `rk.y` is the

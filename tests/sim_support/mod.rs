@@ -384,3 +384,107 @@ impl HybridSystem for Counter {
 pub fn close(a: f64, b: f64, rel: f64) -> bool {
     (a - b).abs() <= rel * b.abs().max(1e-3)
 }
+
+/// Harmonic oscillator `der(x) = v, der(v) = -w^2 x` from `[1, 0]`, parameter `[w]`; one event
+/// `zero` on the guard `x` in either direction with an identity reset. Crossings at
+/// `t_k = (pi/2 + k pi) / w`.
+pub struct Oscillator {
+    info: SystemInfo,
+}
+
+impl Oscillator {
+    pub fn new() -> Oscillator {
+        Oscillator {
+            info: SystemInfo {
+                state_names: names(&["x", "v"]),
+                output_names: names(&[]),
+                param_names: names(&["w"]),
+                grad_params: vec![0],
+                modes: vec![ModeInfo { name: "only".into(), events: vec![0] }],
+                events: vec![EventInfo {
+                    name: "zero".into(),
+                    direction: Direction::Either,
+                    target_mode: None,
+                    is_stop: false,
+                    has_condition: false,
+                }],
+                initial_mode: 0,
+            },
+        }
+    }
+}
+
+impl Default for Oscillator {
+    fn default() -> Self {
+        Oscillator::new()
+    }
+}
+
+impl HybridSystem for Oscillator {
+    fn info(&self) -> &SystemInfo {
+        &self.info
+    }
+    fn initial_state(&self, _p: &[f64], x0: &mut [f64]) {
+        x0.copy_from_slice(&[1.0, 0.0]);
+    }
+    fn initial_sens(&self, _p: &[f64], s0: &mut [f64]) {
+        s0.fill(0.0);
+    }
+    fn flow(&self, _mode: usize, _t: f64, x: &[f64], p: &[f64], dx: &mut [f64]) {
+        dx[0] = x[1];
+        dx[1] = -p[0] * p[0] * x[0];
+    }
+    fn flow_sens(
+        &self,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        s: &[f64],
+        p: &[f64],
+        dx: &mut [f64],
+        ds: &mut [f64],
+    ) {
+        self.flow(mode, t, x, p, dx);
+        ds[0] = s[1];
+        ds[1] = -p[0] * p[0] * s[0] - 2.0 * p[0] * x[0];
+    }
+    fn guards(&self, _mode: usize, _t: f64, x: &[f64], _p: &[f64], g: &mut [f64]) {
+        g[0] = x[0];
+    }
+    fn guard_grad(
+        &self,
+        _event: usize,
+        _t: f64,
+        _x: &[f64],
+        _p: &[f64],
+        gx: &mut [f64],
+        gp: &mut [f64],
+    ) -> f64 {
+        gx.copy_from_slice(&[1.0, 0.0]);
+        gp.fill(0.0);
+        0.0
+    }
+    fn condition(&self, _event: usize, _t: f64, _x: &[f64], _p: &[f64]) -> bool {
+        true
+    }
+    fn reset(&self, _event: usize, _t: f64, x: &[f64], _p: &[f64], r: &mut [f64]) {
+        r.copy_from_slice(x);
+    }
+    fn reset_jac(
+        &self,
+        _event: usize,
+        _t: f64,
+        _x: &[f64],
+        _p: &[f64],
+        rx: &mut [f64],
+        rp: &mut [f64],
+        rt: &mut [f64],
+    ) {
+        rx.copy_from_slice(&[1.0, 0.0, 0.0, 1.0]);
+        rp.fill(0.0);
+        rt.fill(0.0);
+    }
+    fn outputs(&self, _t: f64, _x: &[f64], _p: &[f64], _y: &mut [f64]) {}
+    fn output_jac(&self, _t: f64, _x: &[f64], _p: &[f64], _yx: &mut [f64], _yp: &mut [f64], _yt: &mut [f64]) {
+    }
+}
