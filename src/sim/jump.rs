@@ -10,11 +10,15 @@
 //! - for a stop event the total derivative of the final state `R(t_e, x(t_e), p)` is
 //!   `R_x (S- + f- dt_e/dp) + R_p + R_t dt_e/dp`.
 //!
-//! Grazing: when `|d| <= graze_tol (|g_x| |f-| + |g_t|)` (Euclidean norms) the crossing is
-//! tangential, `dt_e/dp` does not exist and dividing by `d` would produce huge or NaN numbers.
+//! Grazing: when `|d| <= graze_tol (|g_x| |f-| + |g_t|)` (Euclidean norms; the factor never below
+//! 1e-8) the crossing is tangential, `dt_e/dp` does not exist and dividing by `d` would produce
+//! huge or NaN numbers.
 
 use super::events::{dot, norm};
 use super::system::HybridSystem;
+
+/// Relative crossing speed below which an event always counts as grazing.
+const MIN_RELATIVE_SPEED: f64 = 1e-8;
 
 pub(crate) struct Jump {
     n: usize,
@@ -83,8 +87,10 @@ impl Jump {
         let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
         let d = dot(&self.gx, &self.f_minus) + gt;
         let scale = norm(&self.gx) * norm(&self.f_minus) + gt.abs();
-        // A NaN speed also counts as grazing (the comparison is false for NaN).
-        let crossing_fast_enough = d.abs() > graze_tol * scale;
+        // A NaN speed also counts as grazing (the comparison is false for NaN). Below a relative
+        // speed of about sqrt(eps) the located time itself is unreliable (its error is the
+        // guard's round-off divided by d), so even `graze_tol = 0` does not go below that.
+        let crossing_fast_enough = d.abs() > graze_tol.max(MIN_RELATIVE_SPEED) * scale;
         let grazing = !crossing_fast_enough;
         for j in 0..m {
             self.dte[j] = if grazing {

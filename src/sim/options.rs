@@ -54,7 +54,8 @@ pub struct SimOptions {
     /// Largest number of attempted steps (accepted + rejected) before the run stops with a fault.
     pub max_steps: usize,
     /// An event whose crossing speed `|g_x f + g_t|` is at most `graze_tol` times its scale
-    /// `|g_x| |f| + |g_t|` is grazing: its time gradient does not exist.
+    /// `|g_x| |f| + |g_t|` is grazing: its time gradient does not exist. Values below 1e-8 act
+    /// as 1e-8 (slower crossings cannot be located accurately in time).
     pub graze_tol: f64,
     /// Whether sensitivities take part in the step-size error norm. Off is cheaper, but then the
     /// sensitivities' accuracy is only whatever the state's steps give them.
