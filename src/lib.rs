@@ -9,6 +9,7 @@ pub mod codegen;
 pub mod diag;
 pub mod expr;
 pub mod lower;
+pub mod report;
 pub mod sema;
 pub mod sim;
 pub mod syntax;

@@ -3,6 +3,7 @@
 
 mod check;
 mod derive;
+mod run;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -25,11 +26,15 @@ enum Command {
     Check(check::CheckArgs),
     /// Print the symbolic derivatives of every model function.
     Derive(derive::DeriveArgs),
+    /// Simulate a model; report events, final state, outputs and their gradients.
+    Run(run::RunArgs),
 }
 
 /// Exit codes, as documented in the README.
 pub const EXIT_MODEL_ERROR: u8 = 1;
 pub const EXIT_USAGE_ERROR: u8 = 2;
+/// The simulation stopped early (Zeno behaviour or a runtime fault); what it computed is printed.
+pub const EXIT_SIM_STOPPED: u8 = 3;
 
 pub fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -43,6 +48,7 @@ pub fn main() -> ExitCode {
     match cli.command {
         Command::Check(args) => check::run(&args),
         Command::Derive(args) => derive::run(&args),
+        Command::Run(args) => run::run(&args),
     }
 }
 

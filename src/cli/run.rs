@@ -1,0 +1,225 @@
+//! `hybc run FILE`: compile a model, simulate it with sensitivities and report events, final state,
+//! outputs and their gradients.
+
+use std::io::Write as _;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use clap::ValueEnum;
+
+use super::{load_model, parse_param_list, unknown_param, usage_error, ModelArg, EXIT_SIM_STOPPED};
+use crate::codegen::{self, CompileOptions};
+use crate::lower::{lower, system_info};
+use crate::report::{num, RunReport};
+use crate::sema::Model;
+use crate::sim::{self, Method, SimOptions, TrajectoryRequest};
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum MethodArg {
+    /// DOP853 when rtol < 1e-7, else Dormand-Prince 5(4).
+    Auto,
+    Dopri5,
+    Dop853,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum Format {
+    Table,
+    Json,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct RunArgs {
+    #[command(flatten)]
+    model: ModelArg,
+    /// Parameters to differentiate with respect to: `P1,P2,...` or `all`.
+    #[arg(long, value_name = "P1,P2|all")]
+    grad: Option<String>,
+    /// Set a parameter for this run (repeatable); checked against its declared range.
+    #[arg(long = "set", value_name = "P=VALUE")]
+    set: Vec<String>,
+    /// End time (default: the model's `simulate t_end`, else 10).
+    #[arg(long, value_name = "T")]
+    t_end: Option<f64>,
+    /// Relative tolerance (default: the model's, else 1e-8).
+    #[arg(long)]
+    rtol: Option<f64>,
+    /// Absolute tolerance (default: the model's, else 1e-10).
+    #[arg(long)]
+    atol: Option<f64>,
+    /// Integration method.
+    #[arg(long, value_enum, default_value = "auto")]
+    method: MethodArg,
+    /// Stop (as Zeno behaviour) after this many events.
+    #[arg(long, default_value_t = 10_000)]
+    max_events: usize,
+    /// A crossing slower than this fraction of its scale is flagged as grazing.
+    #[arg(long, default_value_t = 1e-3)]
+    graze_tol: f64,
+    /// Leave the sensitivities out of the step-size error control (faster, gradients less
+    /// accurate).
+    #[arg(long)]
+    no_sens_error_control: bool,
+    /// Output format.
+    #[arg(long, value_enum, default_value = "table")]
+    format: Format,
+    /// Write the trajectory to this CSV file (every step, or a uniform grid with --sample).
+    #[arg(long, value_name = "FILE.csv")]
+    trajectory: Option<PathBuf>,
+    /// Sample the trajectory every DT using the dense output.
+    #[arg(long, value_name = "DT", requires = "trajectory")]
+    sample: Option<f64>,
+    /// Print nothing but errors; the exit code tells the outcome.
+    #[arg(long)]
+    quiet: bool,
+}
+
+pub fn run(args: &RunArgs) -> ExitCode {
+    let (model, _) = match load_model(&args.model.file) {
+        Ok(loaded) => loaded,
+        Err(code) => return code,
+    };
+    match run_model(&model, args) {
+        Ok(code) => code,
+        Err(message) => usage_error(&message),
+    }
+}
+
+/// Parameter values: the defaults with every `--set P=VALUE` applied and range-checked.
+pub(crate) fn parameter_values(model: &Model, sets: &[String]) -> Result<Vec<f64>, String> {
+    let mut p: Vec<f64> = model.params.iter().map(|p| p.default).collect();
+    for s in sets {
+        let Some((name, value)) = s.split_once('=') else {
+            return Err(format!("--set: expected P=VALUE, found `{s}`"));
+        };
+        let name = name.trim();
+        let Some(idx) = model.param_index(name) else {
+            return Err(unknown_param(model, name, "--set"));
+        };
+        let value: f64 = value
+            .trim()
+            .parse()
+            .ok()
+            .filter(|v: &f64| v.is_finite())
+            .ok_or_else(|| format!("--set: `{}` is not a finite number", value.trim()))?;
+        let param = &model.params[idx.0 as usize];
+        if let Some((lo, hi)) = param.range {
+            if !(lo..=hi).contains(&value) {
+                return Err(format!("--set: {name} = {value} is outside its range [{lo}, {hi}]"));
+            }
+        }
+        p[idx.0 as usize] = value;
+    }
+    Ok(p)
+}
+
+fn positive(name: &str, v: f64) -> Result<f64, String> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("{name}: expected a positive number, found {v}"))
+    }
+}
+
+/// Simulation options from the flags, falling back on the model's `simulate` defaults.
+fn sim_options(model: &Model, args: &RunArgs) -> Result<SimOptions, String> {
+    let rtol = positive("--rtol", args.rtol.or(model.simulate.rtol).unwrap_or(1e-8))?;
+    if rtol >= 1.0 {
+        return Err(format!("--rtol: expected a number below 1, found {rtol}"));
+    }
+    Ok(SimOptions {
+        t_end: positive("--t-end", args.t_end.or(model.simulate.t_end).unwrap_or(10.0))?,
+        rtol,
+        atol: positive("--atol", args.atol.or(model.simulate.atol).unwrap_or(1e-10))?,
+        method: match args.method {
+            MethodArg::Auto => Method::Auto,
+            MethodArg::Dopri5 => Method::Dopri5,
+            MethodArg::Dop853 => Method::Dop853,
+        },
+        max_events: args.max_events,
+        graze_tol: positive("--graze-tol", args.graze_tol)?,
+        sens_error_control: !args.no_sens_error_control,
+        trajectory: match (&args.trajectory, args.sample) {
+            (None, _) => TrajectoryRequest::None,
+            (Some(_), None) => TrajectoryRequest::Steps,
+            (Some(_), Some(dt)) => TrajectoryRequest::Sample(positive("--sample", dt)?),
+        },
+        ..SimOptions::default()
+    })
+}
+
+fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
+    let grad = match &args.grad {
+        Some(list) => parse_param_list(model, list, "--grad")?,
+        None => Vec::new(),
+    };
+    let p = parameter_values(model, &args.set)?;
+    let opts = sim_options(model, args)?;
+
+    let started = Instant::now();
+    let funcs = lower(model);
+    let info = system_info(model, &grad);
+    let compiled = match codegen::compile(&funcs, info.clone(), &CompileOptions::default()) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("error: could not compile `{}`: {e}", model.name);
+            return Ok(ExitCode::from(super::EXIT_MODEL_ERROR));
+        }
+    };
+    let compile_seconds = started.elapsed().as_secs_f64();
+    let started = Instant::now();
+    let result = sim::run(&compiled, &p, &opts).map_err(|e| e.to_string())?;
+    let run_seconds = started.elapsed().as_secs_f64();
+
+    let report = RunReport {
+        model: model.name.clone(),
+        t_end: opts.t_end,
+        info,
+        params: p,
+        result,
+        compile_seconds,
+        run_seconds,
+    };
+    if let Some(path) = &args.trajectory {
+        if let Err(e) = write_trajectory(path, &report) {
+            return Err(format!("--trajectory: cannot write `{}`: {e}", path.display()));
+        }
+    }
+    for w in &report.result.warnings {
+        eprintln!("warning: {w}");
+    }
+    if !args.quiet {
+        match args.format {
+            Format::Table => print!("{}", report.to_table()),
+            Format::Json => println!("{}", report.to_json()),
+        }
+    }
+    Ok(match report.failure() {
+        None => ExitCode::SUCCESS,
+        Some(message) => {
+            eprintln!("error: {message}");
+            ExitCode::from(EXIT_SIM_STOPPED)
+        }
+    })
+}
+
+/// CSV columns: t, mode, the states, the outputs, then with gradients `d<state>/d<param>`.
+fn write_trajectory(path: &PathBuf, report: &RunReport) -> std::io::Result<()> {
+    let info = &report.info;
+    let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let mut header: Vec<String> = vec!["t".into(), "mode".into()];
+    header.extend(info.state_names.iter().cloned());
+    header.extend(info.output_names.iter().cloned());
+    for &j in &info.grad_params {
+        header.extend(info.state_names.iter().map(|s| format!("d{s}/d{}", info.param_names[j])));
+    }
+    writeln!(out, "{}", header.join(","))?;
+    for row in report.result.trajectory.iter().flatten() {
+        let mode = info.modes.get(row.mode).map(|m| m.name.as_str()).unwrap_or("?");
+        let mut cells: Vec<String> = vec![num(row.t), mode.to_string()];
+        cells.extend(row.x.iter().chain(&row.outputs).chain(&row.s).map(|v| format!("{v:e}")));
+        writeln!(out, "{}", cells.join(","))?;
+    }
+    out.flush()
+}

@@ -1,0 +1,214 @@
+//! A finished run with names attached: the library's result of `hybc run`, printed by the CLI as
+//! a table or as the JSON object whose field names are a documented contract (README).
+//! Knows `sim`'s results and shapes; no IO.
+
+use std::fmt::Write as _;
+
+use serde_json::{json, Map, Value};
+
+use crate::sim::{SimResult, StopReason, SystemInfo};
+
+/// The result of one run, with the names needed to report it.
+#[derive(Clone, Debug)]
+pub struct RunReport {
+    pub model: String,
+    pub t_end: f64,
+    pub info: SystemInfo,
+    /// All parameter values used, in declaration order.
+    pub params: Vec<f64>,
+    pub result: SimResult,
+    pub compile_seconds: f64,
+    pub run_seconds: f64,
+}
+
+impl RunReport {
+    /// Whether the run ended as asked (at `t_end` or a `stop` event) rather than early.
+    pub fn is_complete(&self) -> bool {
+        matches!(self.result.stopped_by, StopReason::TEnd | StopReason::Event { .. })
+    }
+
+    fn grad_names(&self) -> Vec<&str> {
+        self.info.grad_params.iter().map(|&j| self.info.param_names[j].as_str()).collect()
+    }
+
+    fn mode_name(&self, mode: usize) -> &str {
+        self.info.modes.get(mode).map(|m| m.name.as_str()).unwrap_or("?")
+    }
+
+    /// `{param: value}` for one row of a column-per-parameter array (`a[j * rows + i]`).
+    fn by_param(&self, a: &[f64], rows: usize, i: usize) -> Value {
+        let mut m = Map::new();
+        for (j, name) in self.grad_names().into_iter().enumerate() {
+            m.insert(name.to_string(), json!(a[j * rows + i]));
+        }
+        Value::Object(m)
+    }
+
+    fn named_rows(&self, names: &[String], a: &Option<Vec<f64>>) -> Value {
+        match a {
+            None => Value::Null,
+            Some(a) => Value::Object(
+                names.iter().enumerate().map(|(i, n)| (n.clone(), self.by_param(a, names.len(), i))).collect(),
+            ),
+        }
+    }
+
+    /// A message for a run that stopped early (Zeno or a fault).
+    pub fn failure(&self) -> Option<String> {
+        let f = &self.result.final_state;
+        let state: Vec<String> =
+            self.info.state_names.iter().zip(&f.state).map(|(n, v)| format!("{n} = {v}")).collect();
+        match &self.result.stopped_by {
+            StopReason::TEnd | StopReason::Event { .. } => None,
+            StopReason::Zeno { time, event, count, accumulation } => Some(format!(
+                "Zeno behaviour: event `{}` fired {count} times, the last at t = {time}; events \
+                 accumulate{} (mode {}, state {})",
+                self.info.events.get(*event).map(|e| e.name.as_str()).unwrap_or("?"),
+                accumulation.map(|a| format!(" near t = {a:.10}")).unwrap_or_default(),
+                self.mode_name(f.mode),
+                state.join(", "),
+            )),
+            StopReason::Fault { error } => Some(format!("simulation failed: {error}")),
+        }
+    }
+
+    /// The JSON object documented in the README.
+    pub fn to_json(&self) -> Value {
+        let r = &self.result;
+        let f = &r.final_state;
+        let grad = self.grad_names();
+        let params: Map<String, Value> =
+            self.info.param_names.iter().zip(&self.params).map(|(n, v)| (n.clone(), json!(v))).collect();
+        let events: Vec<Value> = r
+            .events
+            .iter()
+            .map(|e| {
+                json!({
+                    "index": e.index,
+                    "name": e.name,
+                    "time": e.time,
+                    "mode_before": self.mode_name(e.mode_before),
+                    "mode_after": self.mode_name(e.mode_after),
+                    "dtime": e.dtime.as_ref().map(|d| self.by_param(d, 1, 0)),
+                    "grazing": e.grazing,
+                    "denominator": e.denominator,
+                })
+            })
+            .collect();
+        let named = |names: &[String], v: &[f64]| -> Value {
+            Value::Object(names.iter().zip(v).map(|(n, x)| (n.clone(), json!(x))).collect())
+        };
+        let mut fin = json!({
+            "time": f.time,
+            "mode": self.mode_name(f.mode),
+            "state": named(&self.info.state_names, &f.state),
+            "dstate": self.named_rows(&self.info.state_names, &f.dstate),
+            "outputs": named(&self.info.output_names, &f.outputs),
+            "doutputs": self.named_rows(&self.info.output_names, &f.doutputs),
+        });
+        if let StopReason::Event { .. } = r.stopped_by {
+            fin["dstate_total"] = self.named_rows(&self.info.state_names, &f.dstate_total);
+            fin["doutputs_total"] = self.named_rows(&self.info.output_names, &f.doutputs_total);
+        }
+        let stopped_by = match &r.stopped_by {
+            StopReason::TEnd => json!("t_end"),
+            StopReason::Event { name, .. } => json!(name),
+            StopReason::Zeno { .. } => json!("zeno"),
+            StopReason::Fault { .. } => json!("fault"),
+        };
+        let mut warnings: Vec<String> = r.warnings.iter().map(|w| w.to_string()).collect();
+        warnings.extend(self.failure());
+        json!({
+            "model": self.model,
+            "t_end": self.t_end,
+            "params": params,
+            "grad": grad,
+            "events": events,
+            "final": fin,
+            "stopped_by": stopped_by,
+            "warnings": warnings,
+            "stats": {
+                "steps": r.stats.steps,
+                "rejected": r.stats.rejected,
+                "rhs_calls": r.stats.rhs_calls,
+                "events": r.stats.events,
+                "compile_seconds": self.compile_seconds,
+                "run_seconds": self.run_seconds,
+            },
+        })
+    }
+
+    /// The human-readable table `hybc run` prints by default.
+    pub fn to_table(&self) -> String {
+        let r = &self.result;
+        let f = &r.final_state;
+        let grad = self.grad_names();
+        let mut out = String::new();
+        let params: Vec<String> =
+            self.info.param_names.iter().zip(&self.params).map(|(n, v)| format!("{n} = {}", num(*v))).collect();
+        let _ = writeln!(out, "model {}   t_end = {}   {}", self.model, num(self.t_end), params.join(", "));
+        let dcols: String = grad.iter().map(|p| format!("  {:>18}", format!("dt/d{p}"))).collect();
+        let _ = writeln!(out, "\nevents: {}", r.events.len());
+        if !r.events.is_empty() {
+            let _ = writeln!(out, "  {:>4}  {:>18}  {:<14}  {:<22}{dcols}", "#", "time", "event", "mode");
+        }
+        for e in &r.events {
+            let (before, after) = (self.mode_name(e.mode_before), self.mode_name(e.mode_after));
+            let mode = if before == after { before.to_string() } else { format!("{before} -> {after}") };
+            let d: String = match &e.dtime {
+                Some(d) => d.iter().map(|v| format!("  {:>18}", num(*v))).collect(),
+                None => grad.iter().map(|_| format!("  {:>18}", "-")).collect(),
+            };
+            let flag = if e.grazing { format!("  GRAZING (d = {:e})", e.denominator) } else { String::new() };
+            let _ = writeln!(out, "  {:>4}  {:>18}  {:<14}  {:<22}{d}{flag}", e.index, num(e.time), e.name, mode);
+        }
+        let dcols: String = grad.iter().map(|p| format!("  {:>18}", format!("d/d{p}"))).collect();
+        let _ = writeln!(out, "\nfinal: t = {}, mode {}", num(f.time), self.mode_name(f.mode));
+        let _ = writeln!(out, "  {:<14}  {:>18}{dcols}", "", "value");
+        let rows = |out: &mut String, names: &[String], v: &[f64], d: &Option<Vec<f64>>| {
+            for (i, (n, x)) in names.iter().zip(v).enumerate() {
+                let ds: String = match d {
+                    Some(d) => (0..grad.len()).map(|j| format!("  {:>18}", num(d[j * names.len() + i]))).collect(),
+                    None => grad.iter().map(|_| format!("  {:>18}", "-")).collect(),
+                };
+                let _ = writeln!(out, "  {n:<14}  {:>18}{ds}", num(*x));
+            }
+        };
+        rows(&mut out, &self.info.state_names, &f.state, &f.dstate);
+        rows(&mut out, &self.info.output_names, &f.outputs, &f.doutputs);
+        if let StopReason::Event { name, .. } = &r.stopped_by {
+            let _ = writeln!(out, "\nstopped by event {name}; total derivatives at the stopping instant:");
+            rows(&mut out, &self.info.state_names, &f.state, &f.dstate_total);
+            rows(&mut out, &self.info.output_names, &f.outputs, &f.doutputs_total);
+        }
+        let _ = writeln!(
+            out,
+            "\n{} steps ({} rejected), {} kernel calls, compile {:.2} ms, run {:.1} us",
+            r.stats.steps,
+            r.stats.rejected,
+            r.stats.rhs_calls,
+            self.compile_seconds * 1e3,
+            self.run_seconds * 1e6
+        );
+        out
+    }
+}
+
+/// A number with ten significant digits, without trailing zeros.
+pub fn num(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let a = v.abs();
+    if (1e-4..1e7).contains(&a) {
+        let decimals = (9 - a.log10().floor() as i32).max(0) as usize;
+        let s = format!("{v:.decimals$}");
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
+    } else {
+        format!("{v:.9e}")
+    }
+}
