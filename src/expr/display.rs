@@ -183,6 +183,10 @@ impl<'a> Printer<'a> {
         }
     }
 
+    fn is_constant_factor(&self, id: ExprId) -> bool {
+        self.store.const_value(id).is_some() && !self.bound.contains_key(&id)
+    }
+
     fn render(&self, id: ExprId) -> (String, u8) {
         match *self.store.node(id) {
             Node::Const(bits) => {
@@ -240,6 +244,11 @@ impl<'a> Printer<'a> {
                 } else {
                     infix("+", P_SUM, P_SUM, P_PRODUCT)
                 }
+            }
+            BinaryOp::Mul if self.is_constant_factor(b) && !self.is_constant_factor(a) => {
+                // Coefficients read first (`2 * x`); multiplication commutes exactly.
+                let text = format!("{} * {}", self.wrap(b, P_PRODUCT), self.wrap(a, P_NEG));
+                (text, P_PRODUCT)
             }
             BinaryOp::Mul => infix("*", P_PRODUCT, P_PRODUCT, P_NEG),
             BinaryOp::Div => infix("/", P_PRODUCT, P_PRODUCT, P_NEG),

@@ -60,7 +60,7 @@ pub fn derive_report(
         .filter(|&e| model.events[e].owner.is_none())
         .collect();
     if !top.is_empty() {
-        out.push_str("\ntop-level\n");
+        out.push_str("\ntop-level");
         for e in top {
             r.event(&mut out, e, "  ");
         }
@@ -211,9 +211,9 @@ impl Reporter<'_> {
         let direction = match event.direction {
             sema::Direction::Falling => "falling",
             sema::Direction::Rising => "rising",
-            sema::Direction::Either => "either way",
+            sema::Direction::Either => "either",
         };
-        let mut block = Block::new(&format!("event {} (g crosses 0 {direction})", event.name));
+        let mut block = Block::new(&format!("event {} ({direction})", event.name));
         block.scalar("g", Some(fns.guard));
         if let Some(c) = fns.condition {
             block.scalar("condition", Some(c));

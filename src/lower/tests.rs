@@ -200,6 +200,7 @@ fn ball_report_shows_the_event_derivatives() {
     let model = ball();
     let f = lower(&model);
     let text = derive_report(&model, &f, &[ParamIdx(1), ParamIdx(2)], None);
+    println!("{text}");
     for line in [
         "g_x = [1, 0]",
         "R_x = [[1, 0], [0, -e]]",
