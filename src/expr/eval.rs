@@ -189,12 +189,15 @@ pub fn eval_one(store: &ExprStore, root: ExprId, t: f64, x: &[f64], p: &[f64]) -
 }
 
 /// Every node reachable from `roots`, ascending by id.
+///
+/// Costs time proportional to the number of reachable nodes, not to the size of the store, so
+/// differentiating many small expressions in a large store stays cheap.
 pub fn reachable(store: &ExprStore, roots: &[ExprId]) -> Vec<ExprId> {
-    let mut seen = vec![false; store.len()];
+    let mut seen = std::collections::HashSet::new();
     let mut stack: Vec<ExprId> = roots.to_vec();
     let mut out = Vec::new();
     while let Some(id) = stack.pop() {
-        if std::mem::replace(&mut seen[id.index()], true) {
+        if !seen.insert(id) {
             continue;
         }
         out.push(id);

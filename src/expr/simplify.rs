@@ -224,7 +224,7 @@ impl ExprStore {
             BinaryOp::Mul => {
                 for (c, other) in [(ca, b), (cb, a)] {
                     match c {
-                        Some(v) if v == 0.0 => return self.zero(),
+                        Some(0.0) => return self.zero(),
                         Some(1.0) => return other,
                         Some(-1.0) => return self.neg(other),
                         _ => {}

@@ -12,9 +12,10 @@ mod report;
 pub use interp::Interpreter;
 pub use report::derive_report;
 
+use crate::expr::eval::reachable;
 use crate::expr::{
     BinaryOp, Differentiator, EventFunctions, ExprId, ExprStore, ModeFunctions, ModelFunctions,
-    SparseMat, SparseVec, UnaryOp, Var,
+    Node, SparseMat, SparseVec, UnaryOp, Var,
 };
 use crate::sema::{self, BinOp, CmpOp, Cond, Expr, Func, Model};
 use crate::sim::{self, SystemInfo};
@@ -151,12 +152,23 @@ impl Lowerer {
         }
     }
 
-    /// Structurally non-zero `d rows[i] / d var_k`, ascending by row then column.
+    /// Structurally non-zero `d rows[i] / d var_k`, ascending by row then column. Only the
+    /// variables a row mentions are tried, so the cost follows the number of non-zeros rather
+    /// than rows x columns.
     fn jacobian(&mut self, rows: &[ExprId], jac: Jac) -> SparseMat {
         let (n_cols, var) = self.vars(jac);
         let mut entries = Vec::new();
         for (i, &row) in rows.iter().enumerate() {
-            for k in 0..n_cols {
+            let mut mentioned: Vec<u32> = reachable(&self.store, &[row])
+                .into_iter()
+                .filter_map(|id| match (*self.store.node(id), jac) {
+                    (Node::State(k), Jac::States) | (Node::Param(k), Jac::Params) => Some(k),
+                    _ => None,
+                })
+                .filter(|&k| k < n_cols)
+                .collect();
+            mentioned.sort_unstable();
+            for k in mentioned {
                 let d = self.diff.diff(&mut self.store, row, var(k));
                 if !self.store.is_zero(d) {
                     entries.push((i as u32, k, d));
