@@ -12,6 +12,8 @@ use hybc::expr::{
 };
 use proptest::prelude::*;
 
+mod common;
+
 #[derive(Clone, Debug)]
 enum Tree {
     State(u32),
@@ -143,60 +145,6 @@ fn point() -> impl Strategy<Value = Point> {
         .prop_map(|(t, x, p)| Point { t, x, p })
 }
 
-/// Values of every node of an unsimplified store at a point.
-fn all_values(s: &ExprStore, at: Point) -> Vec<f64> {
-    let all: Vec<ExprId> = (0..s.len() as u32).map(ExprId).collect();
-    Tape::new(s, &all).eval(at.t, &at.x, &at.p)
-}
-
-/// Whether the point is safely inside one smooth piece of every node of the raw (unsimplified)
-/// tree: values moderate, arguments away from kinks, domain edges and poles.
-fn is_smooth_point(s: &ExprStore, v: &[f64]) -> bool {
-    const KINK: f64 = 1e-3;
-    const POLE: f64 = 0.05;
-    let is_bool = |id: ExprId| {
-        matches!(s.node(id), Node::Unary(UnaryOp::Not, _))
-            || matches!(
-                s.node(id),
-                Node::Binary(
-                    BinaryOp::Lt | BinaryOp::Le | BinaryOp::And | BinaryOp::Or,
-                    _,
-                    _
-                )
-            )
-    };
-    let truthy_safe = |id: ExprId| is_bool(id) || v[id.index()].abs() > KINK;
-    (0..s.len()).all(|i| {
-        let val = v[i];
-        if !(val.is_finite() && val.abs() < 1e4) {
-            return false;
-        }
-        let a = |id: ExprId| v[id.index()];
-        match *s.node(ExprId(i as u32)) {
-            Node::Unary(op, x) => match op {
-                UnaryOp::Abs | UnaryOp::Sign => a(x).abs() > KINK,
-                UnaryOp::Not => truthy_safe(x),
-                UnaryOp::Log | UnaryOp::Sqrt => a(x) > POLE,
-                UnaryOp::Asin | UnaryOp::Acos => a(x).abs() < 1.0 - POLE,
-                UnaryOp::Tan => a(x).cos().abs() > POLE,
-                _ => true,
-            },
-            Node::Binary(op, x, y) => match op {
-                BinaryOp::Div => a(y).abs() > POLE,
-                BinaryOp::Pow => a(x).abs() > POLE,
-                BinaryOp::Atan2 | BinaryOp::Hypot => a(x).hypot(a(y)) > POLE,
-                BinaryOp::Min | BinaryOp::Max | BinaryOp::Lt | BinaryOp::Le => {
-                    (a(x) - a(y)).abs() > KINK
-                }
-                BinaryOp::And | BinaryOp::Or => truthy_safe(x) && truthy_safe(y),
-                _ => true,
-            },
-            Node::Select(c, _, _) => truthy_safe(c),
-            _ => true,
-        }
-    })
-}
-
 fn shifted(at: Point, wrt: Var, d: f64) -> Point {
     let mut q = at;
     match wrt {
@@ -221,9 +169,8 @@ proptest! {
     #[test]
     fn derivative_matches_central_difference(t in tree(), at in point(), wrt in var()) {
         let mut raw = ExprStore::new();
-        build_raw(&mut raw, &t);
-        let v = all_values(&raw, at);
-        prop_assume!(is_smooth_point(&raw, &v));
+        let r = build_raw(&mut raw, &t);
+        prop_assume!(common::is_smooth_at(&raw, r, at.t, &at.x, &at.p, 1e4));
 
         let mut s = ExprStore::new();
         let e = build(&mut s, &t);
@@ -244,7 +191,9 @@ proptest! {
     fn simplification_keeps_values(t in tree(), at in point()) {
         let mut raw = ExprStore::new();
         let r = build_raw(&mut raw, &t);
-        let v = all_values(&raw, at);
+        // Every node's value, to apply the NaN policy: compare where all are finite.
+        let all: Vec<ExprId> = (0..raw.len() as u32).map(ExprId).collect();
+        let v = Tape::new(&raw, &all).eval(at.t, &at.x, &at.p);
         prop_assume!(v.iter().all(|x| x.is_finite()));
         let mut s = ExprStore::new();
         let e = build(&mut s, &t);

@@ -94,3 +94,67 @@ pub fn binary_op(name: &str) -> Option<BinaryOp> {
         _ => None,
     }
 }
+
+/// Whether `(t, x, p)` lies safely inside one smooth piece of every node under `root`: every
+/// value finite and below `max_abs`, arguments away from kinks (abs, sign, min, max,
+/// comparisons, select conditions), domain edges (log, sqrt, asin, acos, pow bases) and poles
+/// (division, tan, atan2 and hypot at the origin). It looks only at the expression's own
+/// values at the point, never at a derivative, so it filters inputs, not results.
+pub fn is_smooth_at(
+    s: &ExprStore,
+    root: ExprId,
+    t: f64,
+    x: &[f64],
+    p: &[f64],
+    max_abs: f64,
+) -> bool {
+    use hybc::expr::eval::reachable;
+    use hybc::expr::{Node, Tape};
+    use std::collections::HashMap;
+    const KINK: f64 = 1e-3;
+    const POLE: f64 = 0.05;
+    let nodes = reachable(s, &[root]);
+    let values = Tape::new(s, &nodes).eval(t, x, p);
+    let v: HashMap<ExprId, f64> = nodes.iter().copied().zip(values).collect();
+    let a = |id: ExprId| v[&id];
+    let is_bool = |id: ExprId| {
+        matches!(s.node(id), Node::Unary(UnaryOp::Not, _))
+            || matches!(
+                s.node(id),
+                Node::Binary(
+                    BinaryOp::Lt | BinaryOp::Le | BinaryOp::And | BinaryOp::Or,
+                    _,
+                    _
+                )
+            )
+    };
+    let truthy_safe = |id: ExprId| is_bool(id) || a(id).abs() > KINK;
+    nodes.iter().all(|&id| {
+        let val = a(id);
+        if !(val.is_finite() && val.abs() < max_abs) {
+            return false;
+        }
+        match *s.node(id) {
+            Node::Unary(op, x) => match op {
+                UnaryOp::Abs | UnaryOp::Sign => a(x).abs() > KINK,
+                UnaryOp::Not => truthy_safe(x),
+                UnaryOp::Log | UnaryOp::Sqrt => a(x) > POLE,
+                UnaryOp::Asin | UnaryOp::Acos => a(x).abs() < 1.0 - POLE,
+                UnaryOp::Tan => a(x).cos().abs() > POLE,
+                _ => true,
+            },
+            Node::Binary(op, x, y) => match op {
+                BinaryOp::Div => a(y).abs() > POLE,
+                BinaryOp::Pow => a(x).abs() > POLE,
+                BinaryOp::Atan2 | BinaryOp::Hypot => a(x).hypot(a(y)) > POLE,
+                BinaryOp::Min | BinaryOp::Max | BinaryOp::Lt | BinaryOp::Le => {
+                    (a(x) - a(y)).abs() > KINK * (1.0 + a(x).abs())
+                }
+                BinaryOp::And | BinaryOp::Or => truthy_safe(x) && truthy_safe(y),
+                _ => true,
+            },
+            Node::Select(c, _, _) => truthy_safe(c),
+            _ => true,
+        }
+    })
+}
