@@ -32,11 +32,7 @@ fn models() -> &'static [(String, Model, ModelFunctions)] {
             .into_iter()
             .map(|path| {
                 let source = std::fs::read_to_string(&path).expect("readable model");
-                let name = path
-                    .file_stem()
-                    .and_then(|s| s.to_str())
-                    .unwrap_or("?")
-                    .to_string();
+                let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("?").to_string();
                 let model = hybc::check_source(&source)
                     .unwrap_or_else(|e| panic!("{name}: {}", e.render(&name, &source)));
                 let funcs = lower(&model);
@@ -58,22 +54,11 @@ fn every_model_has_a_derive_snapshot() {
 
 #[test]
 fn ball_report_has_the_event_derivatives() {
-    let (_, model, funcs) = models()
-        .iter()
-        .find(|(n, ..)| n == "ball")
-        .expect("ball.hyb");
+    let (_, model, funcs) = models().iter().find(|(n, ..)| n == "ball").expect("ball.hyb");
     let wrt = ["e", "h0"].map(|n| model.param_index(n).expect("parameter"));
     let report = derive_report(model, funcs, &wrt, None);
-    for line in [
-        "g_x = [1, 0]",
-        "R_x = [[1, 0], [0, -e]]",
-        "R_e = [0, -v]",
-        "x0_h0 = [1, 0]",
-    ] {
-        assert!(
-            report.lines().any(|l| l.trim() == line),
-            "missing `{line}` in:\n{report}"
-        );
+    for line in ["g_x = [1, 0]", "R_x = [[1, 0], [0, -e]]", "R_e = [0, -v]", "x0_h0 = [1, 0]"] {
+        assert!(report.lines().any(|l| l.trim() == line), "missing `{line}` in:\n{report}");
     }
 }
 
@@ -85,10 +70,7 @@ struct Rows {
 
 impl Rows {
     fn new(rows: Vec<ExprId>) -> Rows {
-        Rows {
-            rows,
-            entries: HashMap::new(),
-        }
+        Rows { rows, entries: HashMap::new() }
     }
     fn mat(mut self, m: &SparseMat, var: fn(u32) -> Var) -> Rows {
         for &(i, k, e) in &m.entries {
@@ -108,10 +90,7 @@ fn all_rows(f: &ModelFunctions) -> Vec<Rows> {
     let mut out = vec![Rows::new(f.init.clone()).mat(&f.init_p, Var::Param)];
     for m in &f.modes {
         out.push(
-            Rows::new(m.flow.clone())
-                .mat(&m.flow_x, Var::State)
-                .mat(&m.flow_p, Var::Param)
-                .time(&m.flow_t),
+            Rows::new(m.flow.clone()).mat(&m.flow_x, Var::State).mat(&m.flow_p, Var::Param).time(&m.flow_t),
         );
     }
     for e in &f.events {

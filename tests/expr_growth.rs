@@ -17,52 +17,24 @@ fn chain() -> Model {
     let span = Span::default();
     let x = |i: u32| Expr::State(StateIdx(i));
     let flow = |i: u32| {
-        let decay = Expr::Neg(Box::new(Expr::Binary(
-            BinOp::Mul,
-            Box::new(Expr::Param(ParamIdx(i))),
-            Box::new(x(i)),
-        )));
+        let decay =
+            Expr::Neg(Box::new(Expr::Binary(BinOp::Mul, Box::new(Expr::Param(ParamIdx(i))), Box::new(x(i)))));
         if i == 0 || i + 1 == N {
             return decay;
         }
-        let coupling = Expr::Binary(
-            BinOp::Mul,
-            Box::new(Expr::Call(Func::Sin, vec![x(i - 1)])),
-            Box::new(x(i + 1)),
-        );
+        let coupling =
+            Expr::Binary(BinOp::Mul, Box::new(Expr::Call(Func::Sin, vec![x(i - 1)])), Box::new(x(i + 1)));
         Expr::Binary(BinOp::Add, Box::new(decay), Box::new(coupling))
     };
     Model {
         name: "chain".into(),
-        params: (0..N)
-            .map(|i| Param {
-                name: format!("k{i}"),
-                default: 1.0,
-                range: None,
-                span,
-            })
-            .collect(),
-        states: (0..N)
-            .map(|i| State {
-                name: format!("x{i}"),
-                init: Expr::Num(1.0),
-                span,
-            })
-            .collect(),
-        modes: vec![Mode {
-            name: "main".into(),
-            flows: (0..N).map(flow).collect(),
-            events: vec![],
-            span,
-        }],
+        params: (0..N).map(|i| Param { name: format!("k{i}"), default: 1.0, range: None, span }).collect(),
+        states: (0..N).map(|i| State { name: format!("x{i}"), init: Expr::Num(1.0), span }).collect(),
+        modes: vec![Mode { name: "main".into(), flows: (0..N).map(flow).collect(), events: vec![], span }],
         initial_mode: ModeId(0),
         events: vec![],
         outputs: vec![],
-        simulate: SimulateDefaults {
-            t_end: None,
-            rtol: None,
-            atol: None,
-        },
+        simulate: SimulateDefaults { t_end: None, rtol: None, atol: None },
     }
 }
 

@@ -71,11 +71,7 @@ fn tree() -> impl Strategy<Value = Tree> {
         prop_oneof![
             (prop::sample::select(UNARY.to_vec()), inner.clone())
                 .prop_map(|(op, a)| Tree::Unary(op, Box::new(a))),
-            (
-                prop::sample::select(BINARY.to_vec()),
-                inner.clone(),
-                inner.clone()
-            )
+            (prop::sample::select(BINARY.to_vec()), inner.clone(), inner.clone())
                 .prop_map(|(op, a, b)| Tree::Binary(op, Box::new(a), Box::new(b))),
             (inner.clone(), inner.clone(), inner).prop_map(|(c, a, b)| Tree::Select(
                 Box::new(c),
@@ -137,12 +133,11 @@ struct Point {
 }
 
 fn point() -> impl Strategy<Value = Point> {
-    (
-        -2.0f64..2.0,
-        [-2.0f64..2.0, -2.0f64..2.0],
-        [-2.0f64..2.0, -2.0f64..2.0],
-    )
-        .prop_map(|(t, x, p)| Point { t, x, p })
+    (-2.0f64..2.0, [-2.0f64..2.0, -2.0f64..2.0], [-2.0f64..2.0, -2.0f64..2.0]).prop_map(|(t, x, p)| Point {
+        t,
+        x,
+        p,
+    })
 }
 
 fn shifted(at: Point, wrt: Var, d: f64) -> Point {
@@ -156,11 +151,7 @@ fn shifted(at: Point, wrt: Var, d: f64) -> Point {
 }
 
 fn var() -> impl Strategy<Value = Var> {
-    prop_oneof![
-        (0u32..2).prop_map(Var::State),
-        (0u32..2).prop_map(Var::Param),
-        Just(Var::Time)
-    ]
+    prop_oneof![(0u32..2).prop_map(Var::State), (0u32..2).prop_map(Var::Param), Just(Var::Time)]
 }
 
 proptest! {

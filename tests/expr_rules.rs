@@ -6,9 +6,7 @@
 mod common;
 
 use common::{params, read, states};
-use hybc::expr::{
-    apply_binary, apply_unary, diff, eval_one, to_infix, BinaryOp, ExprStore, UnaryOp, Var,
-};
+use hybc::expr::{apply_binary, apply_unary, diff, eval_one, to_infix, BinaryOp, ExprStore, UnaryOp, Var};
 
 const X: [f64; 2] = [0.3, 0.7];
 const P: [f64; 2] = [1.3, 0.4];
@@ -89,15 +87,9 @@ fn derivative_rules() {
         let e = read(&mut store, src);
         let d = diff(&mut store, e, wrt);
         if show(&store, d) != expected {
-            failures.push(format!(
-                "d/d{wrt:?} {src}: got `{}`, expected `{expected}`",
-                show(&store, d)
-            ));
+            failures.push(format!("d/d{wrt:?} {src}: got `{}`, expected `{expected}`", show(&store, d)));
         }
-        let (symbolic, numeric) = (
-            eval_one(&store, d, T, &X, &P),
-            central_difference(&store, e, wrt),
-        );
+        let (symbolic, numeric) = (eval_one(&store, d, T, &X, &P), central_difference(&store, e, wrt));
         assert!(
             (symbolic - numeric).abs() <= 1e-7 * (1.0 + numeric.abs()),
             "d/d{wrt:?} {src}: {symbolic} vs {numeric}"
@@ -202,10 +194,7 @@ fn evaluator_semantics_at_edge_cases() {
     assert_eq!(apply_binary(BinaryOp::Lt, f64::NAN, 1.0), 0.0);
     assert_eq!(apply_binary(BinaryOp::Le, 1.0, 1.0), 1.0);
     assert_eq!(apply_binary(BinaryOp::Min, f64::NAN, 1.0), 1.0);
-    assert_eq!(
-        apply_binary(BinaryOp::Pow, -8.0, 1.0 / 3.0).to_bits(),
-        (-8.0f64).powf(1.0 / 3.0).to_bits()
-    );
+    assert_eq!(apply_binary(BinaryOp::Pow, -8.0, 1.0 / 3.0).to_bits(), (-8.0f64).powf(1.0 / 3.0).to_bits());
     assert_eq!(apply_binary(BinaryOp::Atan2, 1.0, -1.0), 1.0f64.atan2(-1.0));
     assert_eq!(apply_binary(BinaryOp::And, 2.0, -1.0), 1.0);
     assert_eq!(apply_binary(BinaryOp::Or, 0.0, 0.0), 0.0);

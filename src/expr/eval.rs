@@ -154,14 +154,10 @@ impl Tape {
                 Inst::Param(i) => p[i as usize],
                 Inst::Time => t,
                 Inst::Unary(op, a) => apply_unary(op, scratch[a as usize]),
-                Inst::Binary(op, a, b) => {
-                    apply_binary(op, scratch[a as usize], scratch[b as usize])
+                Inst::Binary(op, a, b) => apply_binary(op, scratch[a as usize], scratch[b as usize]),
+                Inst::Select(c, a, b) => {
+                    apply_select(scratch[c as usize], scratch[a as usize], scratch[b as usize])
                 }
-                Inst::Select(c, a, b) => apply_select(
-                    scratch[c as usize],
-                    scratch[a as usize],
-                    scratch[b as usize],
-                ),
             };
             scratch.push(v);
         }

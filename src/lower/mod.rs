@@ -16,8 +16,8 @@ pub use single::show_expr;
 
 use crate::expr::eval::reachable;
 use crate::expr::{
-    BinaryOp, Differentiator, EventFunctions, ExprId, ExprStore, ModeFunctions, ModelFunctions,
-    Node, SparseMat, SparseVec, UnaryOp, Var,
+    BinaryOp, Differentiator, EventFunctions, ExprId, ExprStore, ModeFunctions, ModelFunctions, Node,
+    SparseMat, SparseVec, UnaryOp, Var,
 };
 use crate::sema::{self, BinOp, CmpOp, Cond, Expr, Func, Model};
 use crate::sim::{self, SystemInfo};
@@ -26,12 +26,7 @@ use crate::sim::{self, SystemInfo};
 pub fn lower(model: &Model) -> ModelFunctions {
     let n_states = model.n_states() as u32;
     let n_params = model.n_params() as u32;
-    let mut cx = Lowerer {
-        store: ExprStore::new(),
-        diff: Differentiator::new(),
-        n_states,
-        n_params,
-    };
+    let mut cx = Lowerer { store: ExprStore::new(), diff: Differentiator::new(), n_states, n_params };
 
     let init: Vec<ExprId> = model.states.iter().map(|s| cx.expr(&s.init)).collect();
     let init_p = cx.jacobian(&init, Jac::Params);
@@ -177,18 +172,12 @@ impl Lowerer {
                 }
             }
         }
-        SparseMat {
-            n_rows: rows.len() as u32,
-            n_cols,
-            entries,
-        }
+        SparseMat { n_rows: rows.len() as u32, n_cols, entries }
     }
 
     fn gradient(&mut self, f: ExprId, jac: Jac) -> SparseVec {
         let m = self.jacobian(&[f], jac);
-        SparseVec {
-            entries: m.entries.into_iter().map(|(_, k, d)| (k, d)).collect(),
-        }
+        SparseVec { entries: m.entries.into_iter().map(|(_, k, d)| (k, d)).collect() }
     }
 
     fn time_derivative(&mut self, rows: &[ExprId]) -> SparseVec {

@@ -15,12 +15,8 @@ pub fn params() -> Vec<String> {
 }
 
 pub fn read(store: &mut ExprStore, src: &str) -> ExprId {
-    let tokens: Vec<String> = src
-        .replace('(', " ( ")
-        .replace(')', " ) ")
-        .split_whitespace()
-        .map(String::from)
-        .collect();
+    let tokens: Vec<String> =
+        src.replace('(', " ( ").replace(')', " ) ").split_whitespace().map(String::from).collect();
     let mut pos = 0;
     let id = parse(store, &tokens, &mut pos);
     assert_eq!(pos, tokens.len(), "trailing tokens in `{src}`");
@@ -77,11 +73,9 @@ fn parse(s: &mut ExprStore, tokens: &[String], pos: &mut usize) -> ExprId {
 
 pub fn unary_op(name: &str) -> Option<UnaryOp> {
     use UnaryOp::*;
-    [
-        Sin, Cos, Tan, Asin, Acos, Atan, Sinh, Cosh, Tanh, Exp, Log, Sqrt, Abs, Sign,
-    ]
-    .into_iter()
-    .find(|&op| hybc::expr::display::unary_name(op) == name)
+    [Sin, Cos, Tan, Asin, Acos, Atan, Sinh, Cosh, Tanh, Exp, Log, Sqrt, Abs, Sign]
+        .into_iter()
+        .find(|&op| hybc::expr::display::unary_name(op) == name)
 }
 
 pub fn binary_op(name: &str) -> Option<BinaryOp> {
@@ -100,14 +94,7 @@ pub fn binary_op(name: &str) -> Option<BinaryOp> {
 /// comparisons, select conditions), domain edges (log, sqrt, asin, acos, pow bases) and poles
 /// (division, tan, atan2 and hypot at the origin). It looks only at the expression's own
 /// values at the point, never at a derivative, so it filters inputs, not results.
-pub fn is_smooth_at(
-    s: &ExprStore,
-    root: ExprId,
-    t: f64,
-    x: &[f64],
-    p: &[f64],
-    max_abs: f64,
-) -> bool {
+pub fn is_smooth_at(s: &ExprStore, root: ExprId, t: f64, x: &[f64], p: &[f64], max_abs: f64) -> bool {
     use hybc::expr::eval::reachable;
     use hybc::expr::{Node, Tape};
     use std::collections::HashMap;
@@ -121,11 +108,7 @@ pub fn is_smooth_at(
         matches!(s.node(id), Node::Unary(UnaryOp::Not, _))
             || matches!(
                 s.node(id),
-                Node::Binary(
-                    BinaryOp::Lt | BinaryOp::Le | BinaryOp::And | BinaryOp::Or,
-                    _,
-                    _
-                )
+                Node::Binary(BinaryOp::Lt | BinaryOp::Le | BinaryOp::And | BinaryOp::Or, _, _)
             )
     };
     let truthy_safe = |id: ExprId| is_bool(id) || a(id).abs() > KINK;
