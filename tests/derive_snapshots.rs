@@ -171,3 +171,25 @@ proptest! {
         }
     }
 }
+
+/// Above six states vectors and matrices list only their non-zero entries, one a line.
+#[test]
+fn large_models_list_sparse_entries() {
+    let mut src = String::from("model big\nparam k = 2\n");
+    for i in 0..7 {
+        src.push_str(&format!("state x{i} = {i}\n"));
+    }
+    for i in 0..7 {
+        let prev = if i == 0 { 6 } else { i - 1 };
+        src.push_str(&format!("der(x{i}) = -k * x{i} + x{prev}\n"));
+    }
+    let model = hybc::check_source(&src).expect("valid model");
+    let report = derive_report(&model, &lower(&model), &[ParamIdx(0)], None);
+    let lines: Vec<&str> = report.lines().map(str::trim).collect();
+    for expected in ["f_x:", "(0, 0) x0/x0: -k", "(0, 6) x0/x6: 1", "(6, 5) x6/x5: 1", "f_k:", "(3) x3: -x3"]
+    {
+        assert!(lines.contains(&expected), "missing `{expected}` in:\n{report}");
+    }
+    // 7 diagonal and 7 coupling entries, nothing for the zeros.
+    assert_eq!(lines.iter().filter(|l| l.contains("/x")).count(), 14, "{report}");
+}
