@@ -65,10 +65,7 @@ pub fn to_infix_group(
     p.taken.extend(taken.iter().cloned());
     p.build(roots, true);
     let roots = roots.iter().map(|&r| p.wrap(r, P_SELECT)).collect();
-    Group {
-        lets: p.lets,
-        roots,
-    }
+    Group { lets: p.lets, roots }
 }
 
 /// Formats a constant: integers without a fraction, others in Rust's shortest round-trip form.
@@ -183,6 +180,10 @@ impl<'a> Printer<'a> {
         }
     }
 
+    fn is_constant_factor(&self, id: ExprId) -> bool {
+        self.store.const_value(id).is_some() && !self.bound.contains_key(&id)
+    }
+
     fn render(&self, id: ExprId) -> (String, u8) {
         match *self.store.node(id) {
             Node::Const(bits) => {
@@ -196,11 +197,7 @@ impl<'a> Printer<'a> {
             Node::Unary(UnaryOp::Neg, a) => {
                 // `-a * b` stays a product; anything looser than a product gets parentheses.
                 let (_, pa) = self.text(a);
-                let (min, mut p) = if pa == P_PRODUCT {
-                    (P_PRODUCT, P_PRODUCT)
-                } else {
-                    (P_NEG, P_NEG)
-                };
+                let (min, mut p) = if pa == P_PRODUCT { (P_PRODUCT, P_PRODUCT) } else { (P_NEG, P_NEG) };
                 let mut inner = self.wrap(a, min);
                 if inner.starts_with('-') {
                     inner = format!("({inner})");
@@ -212,12 +209,7 @@ impl<'a> Printer<'a> {
             Node::Unary(op, a) => (format!("{}({})", unary_name(op), self.wrap(a, 0)), P_ATOM),
             Node::Binary(op, a, b) => self.render_binary(op, a, b),
             Node::Select(c, a, b) => (
-                format!(
-                    "if {} then {} else {}",
-                    self.wrap(c, 0),
-                    self.wrap(a, 0),
-                    self.wrap(b, 0)
-                ),
+                format!("if {} then {} else {}", self.wrap(c, 0), self.wrap(a, 0), self.wrap(b, 0)),
                 P_SELECT,
             ),
         }
@@ -225,10 +217,7 @@ impl<'a> Printer<'a> {
 
     fn render_binary(&self, op: BinaryOp, a: ExprId, b: ExprId) -> (String, u8) {
         let infix = |sym: &str, p: u8, left: u8, right: u8| {
-            (
-                format!("{} {sym} {}", self.wrap(a, left), self.wrap(b, right)),
-                p,
-            )
+            (format!("{} {sym} {}", self.wrap(a, left), self.wrap(b, right)), p)
         };
         match op {
             BinaryOp::Add => {
@@ -241,12 +230,14 @@ impl<'a> Printer<'a> {
                     infix("+", P_SUM, P_SUM, P_PRODUCT)
                 }
             }
+            BinaryOp::Mul if self.is_constant_factor(b) && !self.is_constant_factor(a) => {
+                // Coefficients read first (`2 * x`); multiplication commutes exactly.
+                let text = format!("{} * {}", self.wrap(b, P_PRODUCT), self.wrap(a, P_NEG));
+                (text, P_PRODUCT)
+            }
             BinaryOp::Mul => infix("*", P_PRODUCT, P_PRODUCT, P_NEG),
             BinaryOp::Div => infix("/", P_PRODUCT, P_PRODUCT, P_NEG),
-            BinaryOp::Pow => (
-                format!("{}^{}", self.wrap(a, P_ATOM), self.wrap(b, P_POW)),
-                P_POW,
-            ),
+            BinaryOp::Pow => (format!("{}^{}", self.wrap(a, P_ATOM), self.wrap(b, P_POW)), P_POW),
             BinaryOp::Lt => infix("<", P_CMP, P_SUM, P_SUM),
             BinaryOp::Le => infix("<=", P_CMP, P_SUM, P_SUM),
             BinaryOp::And => infix("and", P_AND, P_AND, P_NOT),
@@ -258,20 +249,14 @@ impl<'a> Printer<'a> {
                     BinaryOp::Min => "min",
                     _ => "max",
                 };
-                (
-                    format!("{name}({}, {})", self.wrap(a, 0), self.wrap(b, 0)),
-                    P_ATOM,
-                )
+                (format!("{name}({}, {})", self.wrap(a, 0), self.wrap(b, 0)), P_ATOM)
             }
         }
     }
 }
 
 fn name_or(names: &[String], i: u32, prefix: &str) -> String {
-    names
-        .get(i as usize)
-        .cloned()
-        .unwrap_or_else(|| format!("{prefix}{i}"))
+    names.get(i as usize).cloned().unwrap_or_else(|| format!("{prefix}{i}"))
 }
 
 /// The `.hyb` function name of a unary op (`Neg` and `Not` print as operators).

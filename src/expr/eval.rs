@@ -154,14 +154,10 @@ impl Tape {
                 Inst::Param(i) => p[i as usize],
                 Inst::Time => t,
                 Inst::Unary(op, a) => apply_unary(op, scratch[a as usize]),
-                Inst::Binary(op, a, b) => {
-                    apply_binary(op, scratch[a as usize], scratch[b as usize])
+                Inst::Binary(op, a, b) => apply_binary(op, scratch[a as usize], scratch[b as usize]),
+                Inst::Select(c, a, b) => {
+                    apply_select(scratch[c as usize], scratch[a as usize], scratch[b as usize])
                 }
-                Inst::Select(c, a, b) => apply_select(
-                    scratch[c as usize],
-                    scratch[a as usize],
-                    scratch[b as usize],
-                ),
             };
             scratch.push(v);
         }
@@ -189,12 +185,15 @@ pub fn eval_one(store: &ExprStore, root: ExprId, t: f64, x: &[f64], p: &[f64]) -
 }
 
 /// Every node reachable from `roots`, ascending by id.
+///
+/// Costs time proportional to the number of reachable nodes, not to the size of the store, so
+/// differentiating many small expressions in a large store stays cheap.
 pub fn reachable(store: &ExprStore, roots: &[ExprId]) -> Vec<ExprId> {
-    let mut seen = vec![false; store.len()];
+    let mut seen = std::collections::HashSet::new();
     let mut stack: Vec<ExprId> = roots.to_vec();
     let mut out = Vec::new();
     while let Some(id) = stack.pop() {
-        if std::mem::replace(&mut seen[id.index()], true) {
+        if !seen.insert(id) {
             continue;
         }
         out.push(id);

@@ -72,10 +72,7 @@ impl ExprStore {
             Node::Const(bits) => matches!(f64::from_bits(bits), v if v == 0.0 || v == 1.0),
             Node::Unary(UnaryOp::Not, _) => true,
             Node::Binary(op, _, _) => {
-                matches!(
-                    op,
-                    BinaryOp::Lt | BinaryOp::Le | BinaryOp::And | BinaryOp::Or
-                )
+                matches!(op, BinaryOp::Lt | BinaryOp::Le | BinaryOp::And | BinaryOp::Or)
             }
             _ => false,
         }
@@ -199,11 +196,7 @@ impl ExprStore {
         }
         // Canonical operand order: the rules below then only need to look at one side for
         // commutative ops, and `a + b`, `b + a` intern to the same node.
-        let (a, b) = if op.is_commutative() && b < a {
-            (b, a)
-        } else {
-            (a, b)
-        };
+        let (a, b) = if op.is_commutative() && b < a { (b, a) } else { (a, b) };
         let (ca, cb) = (self.const_value(a), self.const_value(b));
         match op {
             BinaryOp::Add => {
@@ -224,7 +217,7 @@ impl ExprStore {
             BinaryOp::Mul => {
                 for (c, other) in [(ca, b), (cb, a)] {
                     match c {
-                        Some(v) if v == 0.0 => return self.zero(),
+                        Some(0.0) => return self.zero(),
                         Some(1.0) => return other,
                         Some(-1.0) => return self.neg(other),
                         _ => {}

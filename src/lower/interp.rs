@@ -22,10 +22,7 @@ impl Kernel {
     fn new(store: &crate::expr::ExprStore, parts: Vec<(usize, usize, ExprId)>) -> Kernel {
         let roots: Vec<ExprId> = parts.iter().map(|&(_, _, r)| r).collect();
         let dests = parts.into_iter().map(|(a, o, _)| (a, o)).collect();
-        Kernel {
-            tape: Tape::new(store, &roots),
-            dests,
-        }
+        Kernel { tape: Tape::new(store, &roots), dests }
     }
 
     /// Zeroes every output array, then writes the structurally non-zero entries.
@@ -103,16 +100,10 @@ impl Interpreter {
         };
         let x_parts = |array: usize, m: &SparseMat| -> Vec<(usize, usize, ExprId)> {
             let cols = m.n_cols as usize;
-            m.entries
-                .iter()
-                .map(|&(i, k, e)| (array, i as usize * cols + k as usize, e))
-                .collect()
+            m.entries.iter().map(|&(i, k, e)| (array, i as usize * cols + k as usize, e)).collect()
         };
         let v_parts = |array: usize, v: &SparseVec| -> Vec<(usize, usize, ExprId)> {
-            v.entries
-                .iter()
-                .map(|&(i, e)| (array, i as usize, e))
-                .collect()
+            v.entries.iter().map(|&(i, e)| (array, i as usize, e)).collect()
         };
 
         let modes = funcs
@@ -136,12 +127,7 @@ impl Interpreter {
                 let guard_roots: Vec<ExprId> = info
                     .modes
                     .get(mode_idx)
-                    .map(|m| {
-                        m.events
-                            .iter()
-                            .filter_map(|&e| funcs.events.get(e))
-                            .map(|e| e.guard)
-                    })
+                    .map(|m| m.events.iter().filter_map(|&e| funcs.events.get(e)).map(|e| e.guard))
                     .into_iter()
                     .flatten()
                     .collect();
@@ -159,18 +145,9 @@ impl Interpreter {
             .events
             .iter()
             .map(|ev| {
-                let mut gparts: Vec<_> = ev
-                    .guard_x
-                    .entries
-                    .iter()
-                    .map(|&(k, e)| (0, k as usize, e))
-                    .collect();
-                gparts.extend(
-                    ev.guard_p
-                        .entries
-                        .iter()
-                        .filter_map(|&(k, e)| col(k).map(|j| (1, j, e))),
-                );
+                let mut gparts: Vec<_> =
+                    ev.guard_x.entries.iter().map(|&(k, e)| (0, k as usize, e)).collect();
+                gparts.extend(ev.guard_p.entries.iter().filter_map(|&(k, e)| col(k).map(|j| (1, j, e))));
                 gparts.push((2, 0, ev.guard_t));
                 let mut rparts = x_parts(0, &ev.reset_x);
                 rparts.extend(p_parts(1, &ev.reset_p, n));
@@ -257,15 +234,7 @@ impl HybridSystem for Interpreter {
         }
     }
 
-    fn guard_grad(
-        &self,
-        event: usize,
-        t: f64,
-        x: &[f64],
-        p: &[f64],
-        gx: &mut [f64],
-        gp: &mut [f64],
-    ) -> f64 {
+    fn guard_grad(&self, event: usize, t: f64, x: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) -> f64 {
         let mut gt = [0.0];
         if let Some(e) = self.events.get(event) {
             e.guard_grad.run(t, x, p, &mut [gx, gp, &mut gt]);
@@ -309,15 +278,7 @@ impl HybridSystem for Interpreter {
         self.outputs.eval_into(t, x, p, &mut Vec::new(), y);
     }
 
-    fn output_jac(
-        &self,
-        t: f64,
-        x: &[f64],
-        p: &[f64],
-        yx: &mut [f64],
-        yp: &mut [f64],
-        yt: &mut [f64],
-    ) {
+    fn output_jac(&self, t: f64, x: &[f64], p: &[f64], yx: &mut [f64], yp: &mut [f64], yt: &mut [f64]) {
         self.output_jac.run(t, x, p, &mut [yx, yp, yt]);
     }
 }

@@ -14,8 +14,9 @@ pub use interp::Interpreter;
 pub use report::derive_report;
 pub use single::show_expr;
 
+use crate::expr::eval::reachable;
 use crate::expr::{
-    BinaryOp, Differentiator, EventFunctions, ExprId, ExprStore, ModeFunctions, ModelFunctions,
+    BinaryOp, Differentiator, EventFunctions, ExprId, ExprStore, ModeFunctions, ModelFunctions, Node,
     SparseMat, SparseVec, UnaryOp, Var,
 };
 use crate::sema::{self, BinOp, CmpOp, Cond, Expr, Func, Model};
@@ -25,12 +26,7 @@ use crate::sim::{self, SystemInfo};
 pub fn lower(model: &Model) -> ModelFunctions {
     let n_states = model.n_states() as u32;
     let n_params = model.n_params() as u32;
-    let mut cx = Lowerer {
-        store: ExprStore::new(),
-        diff: Differentiator::new(),
-        n_states,
-        n_params,
-    };
+    let mut cx = Lowerer { store: ExprStore::new(), diff: Differentiator::new(), n_states, n_params };
 
     let init: Vec<ExprId> = model.states.iter().map(|s| cx.expr(&s.init)).collect();
     let init_p = cx.jacobian(&init, Jac::Params);
@@ -153,30 +149,35 @@ impl Lowerer {
         }
     }
 
-    /// Structurally non-zero `d rows[i] / d var_k`, ascending by row then column.
+    /// Structurally non-zero `d rows[i] / d var_k`, ascending by row then column. Only the
+    /// variables a row mentions are tried, so the cost follows the number of non-zeros rather
+    /// than rows x columns.
     fn jacobian(&mut self, rows: &[ExprId], jac: Jac) -> SparseMat {
         let (n_cols, var) = self.vars(jac);
         let mut entries = Vec::new();
         for (i, &row) in rows.iter().enumerate() {
-            for k in 0..n_cols {
+            let mut mentioned: Vec<u32> = reachable(&self.store, &[row])
+                .into_iter()
+                .filter_map(|id| match (*self.store.node(id), jac) {
+                    (Node::State(k), Jac::States) | (Node::Param(k), Jac::Params) => Some(k),
+                    _ => None,
+                })
+                .filter(|&k| k < n_cols)
+                .collect();
+            mentioned.sort_unstable();
+            for k in mentioned {
                 let d = self.diff.diff(&mut self.store, row, var(k));
                 if !self.store.is_zero(d) {
                     entries.push((i as u32, k, d));
                 }
             }
         }
-        SparseMat {
-            n_rows: rows.len() as u32,
-            n_cols,
-            entries,
-        }
+        SparseMat { n_rows: rows.len() as u32, n_cols, entries }
     }
 
     fn gradient(&mut self, f: ExprId, jac: Jac) -> SparseVec {
         let m = self.jacobian(&[f], jac);
-        SparseVec {
-            entries: m.entries.into_iter().map(|(_, k, d)| (k, d)).collect(),
-        }
+        SparseVec { entries: m.entries.into_iter().map(|(_, k, d)| (k, d)).collect() }
     }
 
     fn time_derivative(&mut self, rows: &[ExprId]) -> SparseVec {

@@ -56,11 +56,9 @@ pub fn derive_report(
         }
     }
 
-    let top: Vec<usize> = (0..model.events.len())
-        .filter(|&e| model.events[e].owner.is_none())
-        .collect();
+    let top: Vec<usize> = (0..model.events.len()).filter(|&e| model.events[e].owner.is_none()).collect();
     if !top.is_empty() {
-        out.push_str("\ntop-level\n");
+        out.push_str("\ntop-level");
         for e in top {
             r.event(&mut out, e, "  ");
         }
@@ -74,18 +72,10 @@ pub fn derive_report(
         block.scalar("h", Some(h));
         block.vector("h_x", row(&funcs.output_x, k as u32, funcs.n_states));
         for &p in wrt {
-            let entry = row(&funcs.output_p, k as u32, funcs.n_params)
-                .get(p.0 as usize)
-                .copied()
-                .flatten();
+            let entry = row(&funcs.output_p, k as u32, funcs.n_params).get(p.0 as usize).copied().flatten();
             block.scalar(&format!("h_{}", r.param_name(p)), entry);
         }
-        if let Some(&(_, t)) = funcs
-            .output_t
-            .entries
-            .iter()
-            .find(|&&(i, _)| i as usize == k)
-        {
+        if let Some(&(_, t)) = funcs.output_t.entries.iter().find(|&&(i, _)| i as usize == k) {
             block.scalar("h_t", Some(t));
         }
         r.emit(&mut out, block, "");
@@ -153,10 +143,7 @@ struct Block {
 
 impl Block {
     fn new(title: &str) -> Block {
-        Block {
-            title: title.to_string(),
-            lines: Vec::new(),
-        }
+        Block { title: title.to_string(), lines: Vec::new() }
     }
     fn scalar(&mut self, label: &str, e: Option<ExprId>) {
         self.lines.push((label.to_string(), Shape::Scalar(e)));
@@ -189,10 +176,7 @@ struct Reporter<'a> {
 
 impl Reporter<'_> {
     fn param_name(&self, p: ParamIdx) -> &str {
-        self.model
-            .params
-            .get(p.0 as usize)
-            .map_or("?", |x| x.name.as_str())
+        self.model.params.get(p.0 as usize).map_or("?", |x| x.name.as_str())
     }
 
     /// One `<prefix>_<p>` vector line per differentiated parameter.
@@ -211,21 +195,16 @@ impl Reporter<'_> {
         let direction = match event.direction {
             sema::Direction::Falling => "falling",
             sema::Direction::Rising => "rising",
-            sema::Direction::Either => "either way",
+            sema::Direction::Either => "either",
         };
-        let mut block = Block::new(&format!("event {} (g crosses 0 {direction})", event.name));
+        let mut block = Block::new(&format!("event {} ({direction})", event.name));
         block.scalar("g", Some(fns.guard));
         if let Some(c) = fns.condition {
             block.scalar("condition", Some(c));
         }
         block.vector("g_x", dense(&fns.guard_x, n));
         for &p in self.wrt {
-            let entry = fns
-                .guard_p
-                .entries
-                .iter()
-                .find(|&&(k, _)| k == p.0)
-                .map(|&(_, d)| d);
+            let entry = fns.guard_p.entries.iter().find(|&&(k, _)| k == p.0).map(|&(_, d)| d);
             block.scalar(&format!("g_{}", self.param_name(p)), entry);
         }
         if !self.funcs.store.is_zero(fns.guard_t) {
@@ -269,12 +248,7 @@ impl Reporter<'_> {
                 Shape::Matrix(m) if dense_ok => {
                     let rows: Vec<String> = m
                         .iter()
-                        .map(|r| {
-                            format!(
-                                "[{}]",
-                                r.iter().map(&mut next).collect::<Vec<_>>().join(", ")
-                            )
-                        })
+                        .map(|r| format!("[{}]", r.iter().map(&mut next).collect::<Vec<_>>().join(", ")))
                         .collect();
                     let _ = writeln!(out, "{inner}{label} = [{}]", rows.join(", "));
                 }
@@ -282,11 +256,7 @@ impl Reporter<'_> {
                     let _ = writeln!(
                         out,
                         "{inner}{label}:{}",
-                        if v.iter().all(Option::is_none) {
-                            " 0"
-                        } else {
-                            ""
-                        }
+                        if v.iter().all(Option::is_none) { " 0" } else { "" }
                     );
                     for (i, e) in v.iter().enumerate().filter(|(_, e)| e.is_some()) {
                         let _ = writeln!(

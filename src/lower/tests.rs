@@ -4,8 +4,7 @@
 use super::*;
 use crate::expr::{eval_one, ExprId};
 use crate::sema::{
-    Direction, Event, EventIdx, Mode, ModeId, Output, Param, ParamIdx, SimulateDefaults, State,
-    StateIdx,
+    Direction, Event, EventIdx, Mode, ModeId, Output, Param, ParamIdx, SimulateDefaults, State, StateIdx,
 };
 use crate::sim::HybridSystem;
 use crate::syntax::Span;
@@ -18,32 +17,15 @@ fn b(e: Expr) -> Box<Expr> {
 /// output energy = 0.5 * v^2 + g * y. Parameters g, e, h0; states y, v.
 fn ball() -> Model {
     let span = Span::default();
-    let param = |name: &str, default: f64| Param {
-        name: name.into(),
-        default,
-        range: None,
-        span,
-    };
-    let (g, e, h0) = (
-        Expr::Param(ParamIdx(0)),
-        Expr::Param(ParamIdx(1)),
-        Expr::Param(ParamIdx(2)),
-    );
+    let param = |name: &str, default: f64| Param { name: name.into(), default, range: None, span };
+    let (g, e, h0) = (Expr::Param(ParamIdx(0)), Expr::Param(ParamIdx(1)), Expr::Param(ParamIdx(2)));
     let (y, v) = (Expr::State(StateIdx(0)), Expr::State(StateIdx(1)));
     Model {
         name: "ball".into(),
         params: vec![param("g", 9.81), param("e", 0.8), param("h0", 1.0)],
         states: vec![
-            State {
-                name: "y".into(),
-                init: h0,
-                span,
-            },
-            State {
-                name: "v".into(),
-                init: Expr::Num(0.0),
-                span,
-            },
+            State { name: "y".into(), init: h0, span },
+            State { name: "v".into(), init: Expr::Num(0.0), span },
         ],
         modes: vec![Mode {
             name: "main".into(),
@@ -57,10 +39,7 @@ fn ball() -> Model {
             guard: Expr::Binary(BinOp::Sub, b(y.clone()), b(Expr::Num(0.0))),
             direction: Direction::Falling,
             condition: None,
-            resets: vec![(
-                StateIdx(1),
-                Expr::Binary(BinOp::Mul, b(Expr::Neg(b(e))), b(v.clone())),
-            )],
+            resets: vec![(StateIdx(1), Expr::Binary(BinOp::Mul, b(Expr::Neg(b(e))), b(v.clone())))],
             target: None,
             is_stop: false,
             owner: None,
@@ -79,11 +58,7 @@ fn ball() -> Model {
             ),
             span,
         }],
-        simulate: SimulateDefaults {
-            t_end: None,
-            rtol: None,
-            atol: None,
-        },
+        simulate: SimulateDefaults { t_end: None, rtol: None, atol: None },
     }
 }
 
@@ -100,29 +75,14 @@ fn ball_event_derivatives_have_the_closed_form_values() {
     let ev = &f.events[0];
     assert_eq!(at(&f, ev.guard), X[0]);
     // g = y: g_x = [1, 0], no parameter or time dependence.
-    let gx: Vec<(u32, f64)> = ev
-        .guard_x
-        .entries
-        .iter()
-        .map(|&(k, d)| (k, at(&f, d)))
-        .collect();
+    let gx: Vec<(u32, f64)> = ev.guard_x.entries.iter().map(|&(k, d)| (k, at(&f, d))).collect();
     assert_eq!(gx, vec![(0, 1.0)]);
     assert!(ev.guard_p.entries.is_empty());
     assert!(f.store.is_zero(ev.guard_t));
     // R = [y, -e v]: R_x = [[1, 0], [0, -e]], R_e = [0, -v].
-    let rx: Vec<(u32, u32, f64)> = ev
-        .reset_x
-        .entries
-        .iter()
-        .map(|&(i, k, d)| (i, k, at(&f, d)))
-        .collect();
+    let rx: Vec<(u32, u32, f64)> = ev.reset_x.entries.iter().map(|&(i, k, d)| (i, k, at(&f, d))).collect();
     assert_eq!(rx, vec![(0, 0, 1.0), (1, 1, -P[1])]);
-    let rp: Vec<(u32, u32, f64)> = ev
-        .reset_p
-        .entries
-        .iter()
-        .map(|&(i, k, d)| (i, k, at(&f, d)))
-        .collect();
+    let rp: Vec<(u32, u32, f64)> = ev.reset_p.entries.iter().map(|&(i, k, d)| (i, k, at(&f, d))).collect();
     assert_eq!(rp, vec![(1, 1, -X[1])]);
     assert!(ev.reset_t.entries.is_empty());
 }
@@ -137,19 +97,9 @@ fn ball_flow_init_and_output_derivatives_have_the_closed_form_values() {
     assert_eq!(f.init_p.entries.len(), 1);
     assert_eq!((f.init_p.entries[0].0, f.init_p.entries[0].1), (0, 2));
     // energy = v^2/2 + g y: h_x = [g, v], h_g = y.
-    let hx: Vec<f64> = f
-        .output_x
-        .entries
-        .iter()
-        .map(|&(_, _, d)| at(&f, d))
-        .collect();
+    let hx: Vec<f64> = f.output_x.entries.iter().map(|&(_, _, d)| at(&f, d)).collect();
     assert_eq!(hx, vec![P[0], X[1]]);
-    let hp: Vec<(u32, f64)> = f
-        .output_p
-        .entries
-        .iter()
-        .map(|&(_, k, d)| (k, at(&f, d)))
-        .collect();
+    let hp: Vec<(u32, f64)> = f.output_p.entries.iter().map(|&(_, k, d)| (k, at(&f, d))).collect();
     assert_eq!(hp, vec![(0, X[0])]);
 }
 
@@ -200,21 +150,11 @@ fn ball_report_shows_the_event_derivatives() {
     let model = ball();
     let f = lower(&model);
     let text = derive_report(&model, &f, &[ParamIdx(1), ParamIdx(2)], None);
-    for line in [
-        "g_x = [1, 0]",
-        "R_x = [[1, 0], [0, -e]]",
-        "R_e = [0, -v]",
-        "x0_h0 = [1, 0]",
-    ] {
-        assert!(
-            text.lines().any(|l| l.trim() == line),
-            "missing `{line}` in:\n{text}"
-        );
+    println!("{text}");
+    for line in ["g_x = [1, 0]", "R_x = [[1, 0], [0, -e]]", "R_e = [0, -v]", "x0_h0 = [1, 0]"] {
+        assert!(text.lines().any(|l| l.trim() == line), "missing `{line}` in:\n{text}");
     }
-    assert!(
-        text.lines().any(|l| l.trim() == "h = 0.5 * v^2 + g * y"),
-        "{text}"
-    );
+    assert!(text.lines().any(|l| l.trim() == "h = 0.5 * v^2 + g * y"), "{text}");
     assert!(text.lines().any(|l| l.trim() == "h_x = [g, v]"), "{text}");
 }
 
