@@ -1,1 +1,5 @@
-fn main() {}
+//! The `hybc` command: a thin layer over the library (`hybc::cli`).
+
+fn main() -> std::process::ExitCode {
+    hybc::cli::main()
+}

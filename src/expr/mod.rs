@@ -1,10 +1,17 @@
 //! Stage 3: the hash-consed expression DAG, simplification, differentiation, the reference
 //! evaluator and infix display. Knows no spans, no IO and no Cranelift.
 
+pub mod diff;
+pub mod display;
+pub mod eval;
 pub mod functions;
 pub mod node;
+pub mod simplify;
 pub mod store;
 
+pub use diff::{diff, Differentiator, Var};
+pub use display::{to_infix, to_infix_group, Group};
+pub use eval::{apply_binary, apply_select, apply_unary, eval, eval_one, Tape};
 pub use functions::*;
 pub use node::*;
 pub use store::*;

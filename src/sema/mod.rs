@@ -1,5 +1,10 @@
 //! Stage 2: AST -> checked [`Model`]: name resolution and every semantic check.
 
+mod check;
+mod error;
 pub mod model;
+mod names;
 
+pub use check::check;
+pub use error::CheckError;
 pub use model::*;

@@ -96,8 +96,15 @@ pub trait HybridSystem: Sync {
     /// Guards of every event active in `mode`, in the order of `ModeInfo::events`.
     fn guards(&self, mode: usize, t: f64, x: &[f64], p: &[f64], g: &mut [f64]);
     /// Partial derivatives of one guard: `gx` (n), `gp` (m), returns `g_t`.
-    fn guard_grad(&self, event: usize, t: f64, x: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64])
-        -> f64;
+    fn guard_grad(
+        &self,
+        event: usize,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+        gx: &mut [f64],
+        gp: &mut [f64],
+    ) -> f64;
     /// Whether the enabling condition holds (true for events without one).
     fn condition(&self, event: usize, t: f64, x: &[f64], p: &[f64]) -> bool;
 

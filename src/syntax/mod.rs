@@ -1,5 +1,10 @@
 //! Stage 1: source text -> AST with spans. The only module that knows pest.
 
+pub mod ast;
+mod parser;
+
+pub use parser::parse;
+
 /// A byte range in the source file. Every AST node has one.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
 pub struct Span {
@@ -11,4 +16,15 @@ impl Span {
     pub fn new(start: usize, end: usize) -> Self {
         Span { start, end }
     }
+}
+
+/// A syntax error: where, what was found, what was expected.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{message}, expected {expected}")]
+pub struct ParseError {
+    pub span: Span,
+    /// What was found, e.g. "unexpected `)`".
+    pub message: String,
+    /// What the grammar would have accepted there, in words.
+    pub expected: String,
 }

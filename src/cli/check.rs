@@ -1,0 +1,86 @@
+//! `hybc check FILE`: validate a model and summarise it.
+
+use std::fmt::Write;
+use std::process::ExitCode;
+
+use super::{load_model, ModelArg};
+use crate::sema::{Direction, Model};
+
+#[derive(Debug, clap::Args)]
+pub struct CheckArgs {
+    #[command(flatten)]
+    model: ModelArg,
+}
+
+pub fn run(args: &CheckArgs) -> ExitCode {
+    match load_model(&args.model.file) {
+        Ok((model, _)) => {
+            print!("{}", summary(&model));
+            ExitCode::SUCCESS
+        }
+        Err(code) => code,
+    }
+}
+
+/// The text `hybc check` prints for a valid model.
+pub fn summary(model: &Model) -> String {
+    let mut out = String::new();
+    let plural = |n: usize, word: &str| format!("{n} {word}{}", if n == 1 { "" } else { "s" });
+    let _ = writeln!(
+        out,
+        "model {}: {}, {}, {}, {}, {}",
+        model.name,
+        plural(model.states.len(), "state"),
+        plural(model.params.len(), "parameter"),
+        plural(model.modes.len(), "mode"),
+        plural(model.events.len(), "event"),
+        plural(model.outputs.len(), "output"),
+    );
+    let _ = writeln!(out, "parameters");
+    for p in &model.params {
+        let range = p.range.map(|(lo, hi)| format!("  in [{lo}, {hi}]")).unwrap_or_default();
+        let _ = writeln!(out, "  {} = {}{range}", p.name, p.default);
+    }
+    let _ = writeln!(out, "states");
+    for s in &model.states {
+        let _ = writeln!(out, "  {} = {}", s.name, super::show_expr(model, &s.init));
+    }
+    let _ = writeln!(out, "modes");
+    for (k, m) in model.modes.iter().enumerate() {
+        let initial = if k == model.initial_mode.0 as usize { " (initial)" } else { "" };
+        let _ = writeln!(out, "  {}{initial}", m.name);
+        for (s, f) in model.states.iter().zip(&m.flows) {
+            let _ = writeln!(out, "    der({}) = {}", s.name, super::show_expr(model, f));
+        }
+    }
+    let _ = writeln!(out, "events");
+    for ev in &model.events {
+        let dir = match ev.direction {
+            Direction::Falling => "falls to 0 from above",
+            Direction::Rising => "rises to 0 from below",
+            Direction::Either => "crosses 0 either way",
+        };
+        let scope = match ev.owner {
+            Some(m) => format!("in mode {}", model.modes[m.0 as usize].name),
+            None => "in every mode".to_string(),
+        };
+        let _ = writeln!(out, "  {} ({scope}): fires when g = {} {dir}", ev.name, super::show_expr(model, &ev.guard));
+        if ev.condition.is_some() {
+            let _ = writeln!(out, "    only if its condition holds");
+        }
+        for (s, e) in &ev.resets {
+            let _ = writeln!(out, "    {} := {}", model.states[s.0 as usize].name, super::show_expr(model, e));
+        }
+        if let Some(t) = ev.target {
+            let _ = writeln!(out, "    -> {}", model.modes[t.0 as usize].name);
+        }
+        if ev.is_stop {
+            let _ = writeln!(out, "    stop");
+        }
+    }
+    let _ = writeln!(out, "outputs");
+    for o in &model.outputs {
+        let _ = writeln!(out, "  {} = {}", o.name, super::show_expr(model, &o.expr));
+    }
+    out
+}

@@ -1,0 +1,67 @@
+//! The command line: arguments, files and printing. Every failure becomes a message on stderr and
+//! an exit code (0 success, 1 model or run errors, 2 usage errors); nothing here panics on input.
+
+mod check;
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+use crate::sema::Model;
+
+/// hybc: a compiler for hybrid dynamical models with exact gradients through events.
+#[derive(Debug, Parser)]
+#[command(name = "hybc", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Check a model and print a summary of it.
+    Check(check::CheckArgs),
+}
+
+/// Exit codes, as documented in the README.
+pub const EXIT_MODEL_ERROR: u8 = 1;
+pub const EXIT_USAGE_ERROR: u8 = 2;
+
+pub fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            // clap prints help/version to stdout (exit 0) and usage errors to stderr (exit 2).
+            let _ = e.print();
+            return ExitCode::from(if e.use_stderr() { EXIT_USAGE_ERROR } else { 0 });
+        }
+    };
+    match cli.command {
+        Command::Check(args) => check::run(&args),
+    }
+}
+
+/// A model file read and checked, or the exit code after its errors were printed.
+pub(crate) fn load_model(path: &Path) -> Result<(Model, String), ExitCode> {
+    let source = match std::fs::read(path) {
+        Ok(bytes) => String::from_utf8_lossy(&bytes).into_owned(),
+        Err(e) => {
+            eprintln!("error: cannot read `{}`: {e}", path.display());
+            return Err(ExitCode::from(EXIT_USAGE_ERROR));
+        }
+    };
+    match crate::check_source(&source) {
+        Ok(model) => Ok((model, source)),
+        Err(e) => {
+            eprint!("{}", e.render(&path.display().to_string(), &source));
+            Err(ExitCode::from(EXIT_MODEL_ERROR))
+        }
+    }
+}
+
+#[derive(Debug, Clone, clap::Args)]
+pub(crate) struct ModelArg {
+    /// The model file (.hyb).
+    pub file: PathBuf,
+}

@@ -1,0 +1,273 @@
+//! Stage 3: symbolic differentiation on the expression DAG. Knows no spans, no IO and no
+//! Cranelift.
+//!
+//! Derivatives are built with the simplifying constructors, so a derivative that is structurally
+//! zero comes out as the constant 0 node, and a [`Differentiator`] caches `(node, variable)`
+//! pairs so the entries of a Jacobian share their common parts (and reuse the primal nodes:
+//! `d exp(u) = exp(u) * du` points at the existing `exp(u)`).
+//!
+//! Kinks and pieces. The derivative of a piecewise expression is the derivative of the piece
+//! that is taken at the point, with ties broken towards one side:
+//! - `abs(u)' = sign(u) * u'`, so 0 at `u == 0` (a subgradient);
+//! - `min(a, b)' = select(a <= b, a', b')` and `max(a, b)' = select(b <= a, a', b')`: at a tie
+//!   the first operand's derivative;
+//! - `select(c, a, b)' = select(c, a', b')`: the jump where `c` switches is not a derivative
+//!   (events, not flows, are where hybc handles jumps);
+//! - `sign`, comparisons and boolean ops have derivative 0.
+//!
+//! Other points where the derivative does not exist give what the formula gives there: `sqrt(u)'`
+//! is `u' / (2 sqrt(u))` (infinite at 0), `asin`, `acos` divide by `sqrt(1 - u^2)`. For powers,
+//! `u ^ c` with a constant exponent uses `c * u^(c-1) * u'` (valid for negative `u`); only a
+//! variable exponent brings in `ln(u)`, whose derivative is NaN for `u <= 0`.
+//!
+//! Derivatives are new expressions, so the constant factors of a product are merged here
+//! (`0.5 * (2 * v)` becomes `v`), a reassociation that the store itself never does because it
+//! must not change the rounding of the user's expressions.
+
+use std::collections::HashMap;
+
+use super::eval::reachable;
+use super::node::{BinaryOp, ExprId, Node, UnaryOp};
+use super::store::ExprStore;
+
+/// A variable to differentiate with respect to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Var {
+    State(u32),
+    Param(u32),
+    Time,
+}
+
+/// Memoised differentiation: keep one per store while building all of a model's Jacobians.
+#[derive(Clone, Debug, Default)]
+pub struct Differentiator {
+    cache: HashMap<(ExprId, Var), ExprId>,
+}
+
+/// The derivative of `id` with respect to `wrt`, without sharing a cache between calls.
+pub fn diff(store: &mut ExprStore, id: ExprId, wrt: Var) -> ExprId {
+    Differentiator::new().diff(store, id, wrt)
+}
+
+impl Differentiator {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The derivative of `id` with respect to `wrt`.
+    ///
+    /// Works bottom-up over the nodes under `id` in ascending id order (children first), so deep
+    /// expressions need no recursion.
+    pub fn diff(&mut self, store: &mut ExprStore, id: ExprId, wrt: Var) -> ExprId {
+        if let Some(&d) = self.cache.get(&(id, wrt)) {
+            return d;
+        }
+        for node_id in reachable(store, &[id]) {
+            if self.cache.contains_key(&(node_id, wrt)) {
+                continue;
+            }
+            let d = self.diff_node(store, node_id, wrt);
+            self.cache.insert((node_id, wrt), d);
+        }
+        self.cache[&(id, wrt)]
+    }
+
+    /// The derivative of one node whose children's derivatives are cached.
+    fn diff_node(&self, s: &mut ExprStore, id: ExprId, wrt: Var) -> ExprId {
+        let d = |c: ExprId| self.cache[&(c, wrt)];
+        let node = *s.node(id);
+        // A node none of whose operands depend on `wrt` is constant: skip the rule.
+        if node.children().count() > 0 && node.children().all(|c| s.is_zero(d(c))) {
+            return s.zero();
+        }
+        match node {
+            Node::Const(_) => s.zero(),
+            Node::State(i) => leaf(s, wrt == Var::State(i)),
+            Node::Param(i) => leaf(s, wrt == Var::Param(i)),
+            Node::Time => leaf(s, wrt == Var::Time),
+            Node::Unary(op, a) => diff_unary(s, op, id, a, d(a)),
+            Node::Binary(op, a, b) => diff_binary(s, op, id, a, b, d(a), d(b)),
+            Node::Select(c, a, b) => {
+                let (da, db) = (d(a), d(b));
+                s.select(c, da, db)
+            }
+        }
+    }
+}
+
+fn leaf(s: &mut ExprStore, is_var: bool) -> ExprId {
+    if is_var {
+        s.one()
+    } else {
+        s.zero()
+    }
+}
+
+/// `k * e`, merging `k` into a constant factor or a negation of `e`.
+fn scale(s: &mut ExprStore, k: f64, e: ExprId) -> ExprId {
+    match *s.node(e) {
+        Node::Unary(UnaryOp::Neg, inner) => return scale(s, -k, inner),
+        Node::Binary(BinaryOp::Mul, x, y) => {
+            let merged = match (s.const_value(x), s.const_value(y)) {
+                (Some(c), _) => Some((c, y)),
+                (_, Some(c)) => Some((c, x)),
+                _ => None,
+            };
+            if let Some((c, rest)) = merged {
+                if (k * c).is_finite() {
+                    return scale(s, k * c, rest);
+                }
+            }
+        }
+        _ => {}
+    }
+    let k = s.constant(k);
+    s.mul(k, e)
+}
+
+/// A product in a derivative: constant factors are merged through [`scale`].
+fn prod(s: &mut ExprStore, a: ExprId, b: ExprId) -> ExprId {
+    if let Some(k) = s.const_value(a) {
+        return scale(s, k, b);
+    }
+    if let Some(k) = s.const_value(b) {
+        return scale(s, k, a);
+    }
+    s.mul(a, b)
+}
+
+/// `d op(a)` given `da`; `id` is the node `op(a)` itself, reused where the rule contains it.
+fn diff_unary(s: &mut ExprStore, op: UnaryOp, id: ExprId, a: ExprId, da: ExprId) -> ExprId {
+    match op {
+        UnaryOp::Neg => s.neg(da),
+        UnaryOp::Sin => {
+            let c = s.unary(UnaryOp::Cos, a);
+            prod(s, c, da)
+        }
+        UnaryOp::Cos => {
+            let sn = s.unary(UnaryOp::Sin, a);
+            let m = prod(s, sn, da);
+            s.neg(m)
+        }
+        UnaryOp::Tan => {
+            let c = s.unary(UnaryOp::Cos, a);
+            let c2 = s.powi(c, 2.0);
+            s.div(da, c2)
+        }
+        UnaryOp::Asin | UnaryOp::Acos => {
+            let one = s.one();
+            let a2 = s.powi(a, 2.0);
+            let r = s.sub(one, a2);
+            let root = s.unary(UnaryOp::Sqrt, r);
+            let q = s.div(da, root);
+            if op == UnaryOp::Acos {
+                s.neg(q)
+            } else {
+                q
+            }
+        }
+        UnaryOp::Atan => {
+            let one = s.one();
+            let a2 = s.powi(a, 2.0);
+            let den = s.add(one, a2);
+            s.div(da, den)
+        }
+        UnaryOp::Sinh => {
+            let c = s.unary(UnaryOp::Cosh, a);
+            prod(s, c, da)
+        }
+        UnaryOp::Cosh => {
+            let sn = s.unary(UnaryOp::Sinh, a);
+            prod(s, sn, da)
+        }
+        UnaryOp::Tanh => {
+            let one = s.one();
+            let t2 = s.powi(id, 2.0);
+            let f = s.sub(one, t2);
+            prod(s, f, da)
+        }
+        UnaryOp::Exp => prod(s, id, da),
+        UnaryOp::Log => s.div(da, a),
+        UnaryOp::Sqrt => {
+            let den = scale(s, 2.0, id);
+            s.div(da, den)
+        }
+        UnaryOp::Abs => {
+            let sg = s.unary(UnaryOp::Sign, a);
+            prod(s, sg, da)
+        }
+        UnaryOp::Sign | UnaryOp::Not => s.zero(),
+    }
+}
+
+/// `d op(a, b)` given `da`, `db`; `id` is the node `op(a, b)` itself.
+fn diff_binary(
+    s: &mut ExprStore,
+    op: BinaryOp,
+    id: ExprId,
+    a: ExprId,
+    b: ExprId,
+    da: ExprId,
+    db: ExprId,
+) -> ExprId {
+    match op {
+        BinaryOp::Add => s.add(da, db),
+        BinaryOp::Mul => {
+            let l = prod(s, da, b);
+            let r = prod(s, a, db);
+            s.add(l, r)
+        }
+        BinaryOp::Div => {
+            // (a/b)' = (a' - (a/b) b') / b reuses the quotient node.
+            let qdb = prod(s, id, db);
+            let num = s.sub(da, qdb);
+            s.div(num, b)
+        }
+        BinaryOp::Pow => match (s.const_value(a), s.const_value(b)) {
+            (_, Some(c)) => {
+                let p = s.powi(a, c - 1.0);
+                let f = scale(s, c, p);
+                prod(s, f, da)
+            }
+            (Some(_), None) => {
+                let ln = s.unary(UnaryOp::Log, a);
+                let f = prod(s, id, ln);
+                prod(s, f, db)
+            }
+            (None, None) => {
+                // (a^b)' = a^b (b' ln a + b a' / a); each term vanishes with its derivative.
+                let ln = s.unary(UnaryOp::Log, a);
+                let t1 = prod(s, db, ln);
+                let q = s.div(da, a);
+                let t2 = prod(s, b, q);
+                let sum = s.add(t1, t2);
+                prod(s, id, sum)
+            }
+        },
+        BinaryOp::Atan2 => {
+            // atan2(y, x)' = (x y' - y x') / (x^2 + y^2), with y = a, x = b.
+            let l = prod(s, b, da);
+            let r = prod(s, a, db);
+            let num = s.sub(l, r);
+            let a2 = s.powi(a, 2.0);
+            let b2 = s.powi(b, 2.0);
+            let den = s.add(b2, a2);
+            s.div(num, den)
+        }
+        BinaryOp::Hypot => {
+            let l = prod(s, a, da);
+            let r = prod(s, b, db);
+            let num = s.add(l, r);
+            s.div(num, id)
+        }
+        BinaryOp::Min => {
+            let c = s.le(a, b);
+            s.select(c, da, db)
+        }
+        BinaryOp::Max => {
+            let c = s.le(b, a);
+            s.select(c, da, db)
+        }
+        BinaryOp::Lt | BinaryOp::Le | BinaryOp::And | BinaryOp::Or => s.zero(),
+    }
+}

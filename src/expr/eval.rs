@@ -1,0 +1,208 @@
+//! Stage 3: the reference evaluator of the expression DAG. Knows no spans, no IO and no
+//! Cranelift.
+//!
+//! The meaning of every operation is written once, in [`apply_unary`], [`apply_binary`] and
+//! [`apply_select`]: the simplifier folds constants with them and the JIT's libm wrappers call
+//! them, so the JIT can be checked against this interpreter bit for bit. Each op is the Rust
+//! `f64` method of the same name (`Pow` is `f64::powf`, `Log` is `f64::ln`), except:
+//! - `Sign`: 1.0 for x > 0, -1.0 for x < 0, 0.0 for x == 0 (either zero), NaN for NaN
+//!   (`f64::signum` would give 1.0 at +0.0);
+//! - comparisons `Lt`, `Le` give 1.0 / 0.0 (false when either side is NaN);
+//! - `Not`, `And`, `Or` treat any value other than 0.0 as true (so NaN is true) and give 1.0 / 0.0;
+//! - `Select(c, a, b)` is `a` where `c != 0.0` (so a NaN condition takes `a`), else `b`.
+
+use super::node::{BinaryOp, ExprId, Node, UnaryOp};
+use super::store::ExprStore;
+
+/// The value of a one-argument operation.
+pub fn apply_unary(op: UnaryOp, x: f64) -> f64 {
+    match op {
+        UnaryOp::Neg => -x,
+        UnaryOp::Sin => x.sin(),
+        UnaryOp::Cos => x.cos(),
+        UnaryOp::Tan => x.tan(),
+        UnaryOp::Asin => x.asin(),
+        UnaryOp::Acos => x.acos(),
+        UnaryOp::Atan => x.atan(),
+        UnaryOp::Sinh => x.sinh(),
+        UnaryOp::Cosh => x.cosh(),
+        UnaryOp::Tanh => x.tanh(),
+        UnaryOp::Exp => x.exp(),
+        UnaryOp::Log => x.ln(),
+        UnaryOp::Sqrt => x.sqrt(),
+        UnaryOp::Abs => x.abs(),
+        UnaryOp::Sign => sign(x),
+        UnaryOp::Not => bool_value(x == 0.0),
+    }
+}
+
+/// The value of a two-argument operation.
+pub fn apply_binary(op: BinaryOp, a: f64, b: f64) -> f64 {
+    match op {
+        BinaryOp::Add => a + b,
+        BinaryOp::Mul => a * b,
+        BinaryOp::Div => a / b,
+        BinaryOp::Pow => a.powf(b),
+        BinaryOp::Atan2 => a.atan2(b),
+        BinaryOp::Hypot => a.hypot(b),
+        BinaryOp::Min => a.min(b),
+        BinaryOp::Max => a.max(b),
+        BinaryOp::Lt => bool_value(a < b),
+        BinaryOp::Le => bool_value(a <= b),
+        BinaryOp::And => bool_value(a != 0.0 && b != 0.0),
+        BinaryOp::Or => bool_value(a != 0.0 || b != 0.0),
+    }
+}
+
+/// The value of `Select(c, a, b)`.
+pub fn apply_select(c: f64, a: f64, b: f64) -> f64 {
+    if c != 0.0 {
+        a
+    } else {
+        b
+    }
+}
+
+fn sign(x: f64) -> f64 {
+    if x > 0.0 {
+        1.0
+    } else if x < 0.0 {
+        -1.0
+    } else if x == 0.0 {
+        0.0
+    } else {
+        x
+    }
+}
+
+fn bool_value(b: bool) -> f64 {
+    if b {
+        1.0
+    } else {
+        0.0
+    }
+}
+
+/// One instruction of a [`Tape`]; operands are slots of earlier instructions.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Inst {
+    Const(f64),
+    State(u32),
+    Param(u32),
+    Time,
+    Unary(UnaryOp, u32),
+    Binary(BinaryOp, u32, u32),
+    Select(u32, u32, u32),
+}
+
+/// The nodes needed by a set of roots, flattened into straight-line code in ascending id order
+/// (children have smaller ids, so that order is a valid schedule). Built once per function group
+/// and evaluated many times; it does not borrow the store.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tape {
+    insts: Vec<Inst>,
+    roots: Vec<u32>,
+}
+
+impl Tape {
+    pub fn new(store: &ExprStore, roots: &[ExprId]) -> Tape {
+        let needed = reachable(store, roots);
+        // slot[id] = position of node `id` in `insts`; only set for needed nodes.
+        let mut slot = vec![u32::MAX; needed.last().map_or(0, |id| id.index() + 1)];
+        let mut insts = Vec::with_capacity(needed.len());
+        for id in needed {
+            let s = |c: ExprId| slot[c.index()];
+            let inst = match *store.node(id) {
+                Node::Const(bits) => Inst::Const(f64::from_bits(bits)),
+                Node::State(i) => Inst::State(i),
+                Node::Param(i) => Inst::Param(i),
+                Node::Time => Inst::Time,
+                Node::Unary(op, a) => Inst::Unary(op, s(a)),
+                Node::Binary(op, a, b) => Inst::Binary(op, s(a), s(b)),
+                Node::Select(c, a, b) => Inst::Select(s(c), s(a), s(b)),
+            };
+            slot[id.index()] = insts.len() as u32;
+            insts.push(inst);
+        }
+        let roots = roots.iter().map(|r| slot[r.index()]).collect();
+        Tape { insts, roots }
+    }
+
+    /// Number of root values `eval` writes.
+    pub fn n_roots(&self) -> usize {
+        self.roots.len()
+    }
+
+    /// Number of instructions (distinct nodes evaluated).
+    pub fn len(&self) -> usize {
+        self.insts.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.insts.is_empty()
+    }
+
+    /// Evaluates every root at `(t, x, p)` into `out` (length `n_roots`), using `scratch` for
+    /// intermediate values. State and parameter indices must be in range for `x` and `p`.
+    pub fn eval_into(&self, t: f64, x: &[f64], p: &[f64], scratch: &mut Vec<f64>, out: &mut [f64]) {
+        scratch.clear();
+        scratch.reserve(self.insts.len());
+        for inst in &self.insts {
+            let v = match *inst {
+                Inst::Const(c) => c,
+                Inst::State(i) => x[i as usize],
+                Inst::Param(i) => p[i as usize],
+                Inst::Time => t,
+                Inst::Unary(op, a) => apply_unary(op, scratch[a as usize]),
+                Inst::Binary(op, a, b) => {
+                    apply_binary(op, scratch[a as usize], scratch[b as usize])
+                }
+                Inst::Select(c, a, b) => apply_select(
+                    scratch[c as usize],
+                    scratch[a as usize],
+                    scratch[b as usize],
+                ),
+            };
+            scratch.push(v);
+        }
+        for (o, &r) in out.iter_mut().zip(&self.roots) {
+            *o = scratch[r as usize];
+        }
+    }
+
+    /// Evaluates every root at `(t, x, p)`.
+    pub fn eval(&self, t: f64, x: &[f64], p: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; self.roots.len()];
+        self.eval_into(t, x, p, &mut Vec::new(), &mut out);
+        out
+    }
+}
+
+/// Evaluates `roots` at `(t, x, p)` in one pass (convenience for tests and one-off use).
+pub fn eval(store: &ExprStore, roots: &[ExprId], t: f64, x: &[f64], p: &[f64]) -> Vec<f64> {
+    Tape::new(store, roots).eval(t, x, p)
+}
+
+/// Evaluates one expression at `(t, x, p)`.
+pub fn eval_one(store: &ExprStore, root: ExprId, t: f64, x: &[f64], p: &[f64]) -> f64 {
+    eval(store, &[root], t, x, p)[0]
+}
+
+/// Every node reachable from `roots`, ascending by id.
+///
+/// Costs time proportional to the number of reachable nodes, not to the size of the store, so
+/// differentiating many small expressions in a large store stays cheap.
+pub fn reachable(store: &ExprStore, roots: &[ExprId]) -> Vec<ExprId> {
+    let mut seen = std::collections::HashSet::new();
+    let mut stack: Vec<ExprId> = roots.to_vec();
+    let mut out = Vec::new();
+    while let Some(id) = stack.pop() {
+        if !seen.insert(id) {
+            continue;
+        }
+        out.push(id);
+        stack.extend(store.node(id).children());
+    }
+    out.sort_unstable();
+    out
+}

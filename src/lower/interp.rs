@@ -1,0 +1,323 @@
+//! Stage 3b: [`Interpreter`], a `HybridSystem` that runs [`ModelFunctions`] with the reference
+//! evaluator. It is the oracle the JIT is checked against and a JIT-free way to run a model.
+//! Knows `expr` and the `sim` trait; no Cranelift, no IO.
+//!
+//! Each function group becomes one [`Tape`] (shared subexpressions evaluated once) plus a list of
+//! where each root's value goes in the caller's arrays, following the layouts in
+//! `src/sim/system.rs`. Array lengths are the caller's responsibility, as the trait states; a mode
+//! or event index out of range leaves the outputs untouched instead of panicking.
+
+use crate::expr::{ExprId, ModelFunctions, SparseMat, SparseVec, Tape};
+use crate::sim::{HybridSystem, SystemInfo};
+
+/// Roots evaluated together and scattered into up to three output arrays.
+#[derive(Clone, Debug)]
+struct Kernel {
+    tape: Tape,
+    /// `(array, offset)` of each root.
+    dests: Vec<(usize, usize)>,
+}
+
+impl Kernel {
+    fn new(store: &crate::expr::ExprStore, parts: Vec<(usize, usize, ExprId)>) -> Kernel {
+        let roots: Vec<ExprId> = parts.iter().map(|&(_, _, r)| r).collect();
+        let dests = parts.into_iter().map(|(a, o, _)| (a, o)).collect();
+        Kernel {
+            tape: Tape::new(store, &roots),
+            dests,
+        }
+    }
+
+    /// Zeroes every output array, then writes the structurally non-zero entries.
+    fn run(&self, t: f64, x: &[f64], p: &[f64], outs: &mut [&mut [f64]]) {
+        for out in outs.iter_mut() {
+            out.fill(0.0);
+        }
+        let mut values = vec![0.0; self.tape.n_roots()];
+        self.tape.eval_into(t, x, p, &mut Vec::new(), &mut values);
+        for (&(array, offset), v) in self.dests.iter().zip(values) {
+            if let Some(slot) = outs.get_mut(array).and_then(|o| o.get_mut(offset)) {
+                *slot = v;
+            }
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+struct ModeKernels {
+    flow: Tape,
+    /// Roots: the flow, then `f_x` entries, then `f_p` entries of the differentiated params.
+    flow_sens: Tape,
+    /// `(row, column)` of each `f_x` entry in `flow_sens`.
+    fx: Vec<(usize, usize)>,
+    /// `(row, sensitivity column)` of each `f_p` entry in `flow_sens`.
+    fp: Vec<(usize, usize)>,
+    guards: Tape,
+}
+
+#[derive(Clone, Debug)]
+struct EventKernels {
+    /// Arrays: gx, gp, [g_t].
+    guard_grad: Kernel,
+    condition: Option<Tape>,
+    reset: Tape,
+    /// Arrays: rx, rp, rt.
+    reset_jac: Kernel,
+}
+
+/// Runs a model's functions with the reference evaluator.
+#[derive(Clone, Debug)]
+pub struct Interpreter {
+    info: SystemInfo,
+    init: Tape,
+    init_sens: Kernel,
+    modes: Vec<ModeKernels>,
+    events: Vec<EventKernels>,
+    outputs: Tape,
+    /// Arrays: yx, yp, yt.
+    output_jac: Kernel,
+}
+
+impl Interpreter {
+    /// Prepares the tapes of every function. `info` must describe the same model as `funcs`;
+    /// its `grad_params` select and order the `_p` columns (entries of other parameters are
+    /// dropped).
+    pub fn new(funcs: ModelFunctions, info: SystemInfo) -> Interpreter {
+        let store = &funcs.store;
+        let n = funcs.n_states as usize;
+        let n_out = funcs.outputs.len();
+        // Sensitivity column of each parameter, if it is differentiated.
+        let mut column = vec![None; funcs.n_params as usize];
+        for (j, &p) in info.grad_params.iter().enumerate() {
+            if let Some(c) = column.get_mut(p) {
+                *c = Some(j);
+            }
+        }
+        let col = |k: u32| column.get(k as usize).copied().flatten();
+        // Entries of a `_p` matrix with `rows` rows, as (array, offset, root) in column layout.
+        let p_parts = |array: usize, m: &SparseMat, rows: usize| -> Vec<(usize, usize, ExprId)> {
+            m.entries
+                .iter()
+                .filter_map(|&(i, k, e)| col(k).map(|j| (array, j * rows + i as usize, e)))
+                .collect()
+        };
+        let x_parts = |array: usize, m: &SparseMat| -> Vec<(usize, usize, ExprId)> {
+            let cols = m.n_cols as usize;
+            m.entries
+                .iter()
+                .map(|&(i, k, e)| (array, i as usize * cols + k as usize, e))
+                .collect()
+        };
+        let v_parts = |array: usize, v: &SparseVec| -> Vec<(usize, usize, ExprId)> {
+            v.entries
+                .iter()
+                .map(|&(i, e)| (array, i as usize, e))
+                .collect()
+        };
+
+        let modes = funcs
+            .modes
+            .iter()
+            .enumerate()
+            .map(|(mode_idx, mode)| {
+                let mut roots = mode.flow.clone();
+                let mut fx = Vec::new();
+                for &(i, k, e) in &mode.flow_x.entries {
+                    fx.push((i as usize, k as usize));
+                    roots.push(e);
+                }
+                let mut fp = Vec::new();
+                for &(i, k, e) in &mode.flow_p.entries {
+                    if let Some(j) = col(k) {
+                        fp.push((i as usize, j));
+                        roots.push(e);
+                    }
+                }
+                let guard_roots: Vec<ExprId> = info
+                    .modes
+                    .get(mode_idx)
+                    .map(|m| {
+                        m.events
+                            .iter()
+                            .filter_map(|&e| funcs.events.get(e))
+                            .map(|e| e.guard)
+                    })
+                    .into_iter()
+                    .flatten()
+                    .collect();
+                ModeKernels {
+                    flow: Tape::new(store, &mode.flow),
+                    flow_sens: Tape::new(store, &roots),
+                    fx,
+                    fp,
+                    guards: Tape::new(store, &guard_roots),
+                }
+            })
+            .collect();
+
+        let events = funcs
+            .events
+            .iter()
+            .map(|ev| {
+                let mut gparts: Vec<_> = ev
+                    .guard_x
+                    .entries
+                    .iter()
+                    .map(|&(k, e)| (0, k as usize, e))
+                    .collect();
+                gparts.extend(
+                    ev.guard_p
+                        .entries
+                        .iter()
+                        .filter_map(|&(k, e)| col(k).map(|j| (1, j, e))),
+                );
+                gparts.push((2, 0, ev.guard_t));
+                let mut rparts = x_parts(0, &ev.reset_x);
+                rparts.extend(p_parts(1, &ev.reset_p, n));
+                rparts.extend(v_parts(2, &ev.reset_t));
+                EventKernels {
+                    guard_grad: Kernel::new(store, gparts),
+                    condition: ev.condition.map(|c| Tape::new(store, &[c])),
+                    reset: Tape::new(store, &ev.reset),
+                    reset_jac: Kernel::new(store, rparts),
+                }
+            })
+            .collect();
+
+        let mut yparts = x_parts(0, &funcs.output_x);
+        yparts.extend(p_parts(1, &funcs.output_p, n_out));
+        yparts.extend(v_parts(2, &funcs.output_t));
+
+        Interpreter {
+            init: Tape::new(store, &funcs.init),
+            init_sens: Kernel::new(store, p_parts(0, &funcs.init_p, n)),
+            modes,
+            events,
+            outputs: Tape::new(store, &funcs.outputs),
+            output_jac: Kernel::new(store, yparts),
+            info,
+        }
+    }
+}
+
+impl HybridSystem for Interpreter {
+    fn info(&self) -> &SystemInfo {
+        &self.info
+    }
+
+    fn initial_state(&self, p: &[f64], x0: &mut [f64]) {
+        // x0 depends on parameters only; the state slots are never read.
+        self.init.eval_into(0.0, &[], p, &mut Vec::new(), x0);
+    }
+
+    fn initial_sens(&self, p: &[f64], s0: &mut [f64]) {
+        self.init_sens.run(0.0, &[], p, &mut [s0]);
+    }
+
+    fn flow(&self, mode: usize, t: f64, x: &[f64], p: &[f64], dx: &mut [f64]) {
+        if let Some(m) = self.modes.get(mode) {
+            m.flow.eval_into(t, x, p, &mut Vec::new(), dx);
+        }
+    }
+
+    fn flow_sens(
+        &self,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        s: &[f64],
+        p: &[f64],
+        dx: &mut [f64],
+        ds: &mut [f64],
+    ) {
+        let Some(m) = self.modes.get(mode) else {
+            return;
+        };
+        let n = self.info.n_states();
+        let mut values = vec![0.0; m.flow_sens.n_roots()];
+        m.flow_sens.eval_into(t, x, p, &mut Vec::new(), &mut values);
+        let (flow, rest) = values.split_at(n.min(values.len()));
+        let (fx, fp) = rest.split_at(m.fx.len().min(rest.len()));
+        dx[..flow.len()].copy_from_slice(flow);
+        // ds_j = f_x s_j + f_p[:, j] for every sensitivity column j.
+        ds.fill(0.0);
+        for j in 0..self.info.n_grad() {
+            for (&(i, k), v) in m.fx.iter().zip(fx) {
+                ds[j * n + i] += v * s[j * n + k];
+            }
+        }
+        for (&(i, j), v) in m.fp.iter().zip(fp) {
+            ds[j * n + i] += v;
+        }
+    }
+
+    fn guards(&self, mode: usize, t: f64, x: &[f64], p: &[f64], g: &mut [f64]) {
+        if let Some(m) = self.modes.get(mode) {
+            m.guards.eval_into(t, x, p, &mut Vec::new(), g);
+        }
+    }
+
+    fn guard_grad(
+        &self,
+        event: usize,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+        gx: &mut [f64],
+        gp: &mut [f64],
+    ) -> f64 {
+        let mut gt = [0.0];
+        if let Some(e) = self.events.get(event) {
+            e.guard_grad.run(t, x, p, &mut [gx, gp, &mut gt]);
+        }
+        gt[0]
+    }
+
+    fn condition(&self, event: usize, t: f64, x: &[f64], p: &[f64]) -> bool {
+        match self.events.get(event).and_then(|e| e.condition.as_ref()) {
+            Some(tape) => {
+                let mut v = [0.0];
+                tape.eval_into(t, x, p, &mut Vec::new(), &mut v);
+                v[0] != 0.0
+            }
+            None => true,
+        }
+    }
+
+    fn reset(&self, event: usize, t: f64, x: &[f64], p: &[f64], r: &mut [f64]) {
+        if let Some(e) = self.events.get(event) {
+            e.reset.eval_into(t, x, p, &mut Vec::new(), r);
+        }
+    }
+
+    fn reset_jac(
+        &self,
+        event: usize,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+        rx: &mut [f64],
+        rp: &mut [f64],
+        rt: &mut [f64],
+    ) {
+        if let Some(e) = self.events.get(event) {
+            e.reset_jac.run(t, x, p, &mut [rx, rp, rt]);
+        }
+    }
+
+    fn outputs(&self, t: f64, x: &[f64], p: &[f64], y: &mut [f64]) {
+        self.outputs.eval_into(t, x, p, &mut Vec::new(), y);
+    }
+
+    fn output_jac(
+        &self,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+        yx: &mut [f64],
+        yp: &mut [f64],
+        yt: &mut [f64],
+    ) {
+        self.output_jac.run(t, x, p, &mut [yx, yp, yt]);
+    }
+}

@@ -1,0 +1,300 @@
+//! Stage 3b: checked model -> [`ModelFunctions`]: every model function as a DAG root with all its
+//! symbolic derivatives. Knows `sema::Model` and `expr`; knows no spans (beyond ignoring them),
+//! no IO and no Cranelift.
+//!
+//! Derivatives are taken with respect to every state, every parameter and `t`, and only entries
+//! that do not simplify to the constant 0 are stored. One [`Differentiator`] is shared by the
+//! whole model so Jacobian entries share structure with each other and with the functions.
+
+mod interp;
+mod report;
+
+pub use interp::Interpreter;
+pub use report::derive_report;
+
+use crate::expr::eval::reachable;
+use crate::expr::{
+    BinaryOp, Differentiator, EventFunctions, ExprId, ExprStore, ModeFunctions, ModelFunctions,
+    Node, SparseMat, SparseVec, UnaryOp, Var,
+};
+use crate::sema::{self, BinOp, CmpOp, Cond, Expr, Func, Model};
+use crate::sim::{self, SystemInfo};
+
+/// Lowers every function of `model` and all their derivatives into one store.
+pub fn lower(model: &Model) -> ModelFunctions {
+    let n_states = model.n_states() as u32;
+    let n_params = model.n_params() as u32;
+    let mut cx = Lowerer {
+        store: ExprStore::new(),
+        diff: Differentiator::new(),
+        n_states,
+        n_params,
+    };
+
+    let init: Vec<ExprId> = model.states.iter().map(|s| cx.expr(&s.init)).collect();
+    let init_p = cx.jacobian(&init, Jac::Params);
+
+    let modes = model
+        .modes
+        .iter()
+        .map(|mode| {
+            let flow: Vec<ExprId> = mode.flows.iter().map(|f| cx.expr(f)).collect();
+            ModeFunctions {
+                flow_x: cx.jacobian(&flow, Jac::States),
+                flow_p: cx.jacobian(&flow, Jac::Params),
+                flow_t: cx.time_derivative(&flow),
+                flow,
+            }
+        })
+        .collect();
+
+    let events = model
+        .events
+        .iter()
+        .map(|event| {
+            let guard = cx.expr(&event.guard);
+            let condition = event.condition.as_ref().map(|c| cx.cond(c));
+            let mut reset: Vec<ExprId> = (0..n_states).map(|i| cx.store.state(i)).collect();
+            for (state, e) in &event.resets {
+                let value = cx.expr(e);
+                if let Some(slot) = reset.get_mut(state.0 as usize) {
+                    *slot = value;
+                }
+            }
+            EventFunctions {
+                guard_x: cx.gradient(guard, Jac::States),
+                guard_p: cx.gradient(guard, Jac::Params),
+                guard_t: cx.diff.diff(&mut cx.store, guard, Var::Time),
+                guard,
+                condition,
+                reset_x: cx.jacobian(&reset, Jac::States),
+                reset_p: cx.jacobian(&reset, Jac::Params),
+                reset_t: cx.time_derivative(&reset),
+                reset,
+            }
+        })
+        .collect();
+
+    let outputs: Vec<ExprId> = model.outputs.iter().map(|o| cx.expr(&o.expr)).collect();
+    let output_x = cx.jacobian(&outputs, Jac::States);
+    let output_p = cx.jacobian(&outputs, Jac::Params);
+    let output_t = cx.time_derivative(&outputs);
+
+    ModelFunctions {
+        store: cx.store,
+        n_states,
+        n_params,
+        modes,
+        events,
+        init,
+        init_p,
+        outputs,
+        output_x,
+        output_p,
+        output_t,
+    }
+}
+
+/// The shape of `model` as the integrator sees it, differentiating `grad_params` (sensitivity
+/// columns in the order given).
+pub fn system_info(model: &Model, grad_params: &[sema::ParamIdx]) -> SystemInfo {
+    SystemInfo {
+        state_names: model.states.iter().map(|s| s.name.clone()).collect(),
+        output_names: model.outputs.iter().map(|o| o.name.clone()).collect(),
+        param_names: model.params.iter().map(|p| p.name.clone()).collect(),
+        grad_params: grad_params.iter().map(|p| p.0 as usize).collect(),
+        modes: model
+            .modes
+            .iter()
+            .map(|m| sim::ModeInfo {
+                name: m.name.clone(),
+                events: m.events.iter().map(|e| e.0 as usize).collect(),
+            })
+            .collect(),
+        events: model
+            .events
+            .iter()
+            .map(|e| sim::EventInfo {
+                name: e.name.clone(),
+                direction: match e.direction {
+                    sema::Direction::Falling => sim::Direction::Falling,
+                    sema::Direction::Rising => sim::Direction::Rising,
+                    sema::Direction::Either => sim::Direction::Either,
+                },
+                target_mode: e.target.map(|m| m.0 as usize),
+                is_stop: e.is_stop,
+                has_condition: e.condition.is_some(),
+            })
+            .collect(),
+        initial_mode: model.initial_mode.0 as usize,
+    }
+}
+
+/// Which variables a Jacobian's columns are.
+#[derive(Clone, Copy)]
+enum Jac {
+    States,
+    Params,
+}
+
+struct Lowerer {
+    store: ExprStore,
+    diff: Differentiator,
+    n_states: u32,
+    n_params: u32,
+}
+
+impl Lowerer {
+    fn vars(&self, jac: Jac) -> (u32, fn(u32) -> Var) {
+        match jac {
+            Jac::States => (self.n_states, Var::State),
+            Jac::Params => (self.n_params, Var::Param),
+        }
+    }
+
+    /// Structurally non-zero `d rows[i] / d var_k`, ascending by row then column. Only the
+    /// variables a row mentions are tried, so the cost follows the number of non-zeros rather
+    /// than rows x columns.
+    fn jacobian(&mut self, rows: &[ExprId], jac: Jac) -> SparseMat {
+        let (n_cols, var) = self.vars(jac);
+        let mut entries = Vec::new();
+        for (i, &row) in rows.iter().enumerate() {
+            let mut mentioned: Vec<u32> = reachable(&self.store, &[row])
+                .into_iter()
+                .filter_map(|id| match (*self.store.node(id), jac) {
+                    (Node::State(k), Jac::States) | (Node::Param(k), Jac::Params) => Some(k),
+                    _ => None,
+                })
+                .filter(|&k| k < n_cols)
+                .collect();
+            mentioned.sort_unstable();
+            for k in mentioned {
+                let d = self.diff.diff(&mut self.store, row, var(k));
+                if !self.store.is_zero(d) {
+                    entries.push((i as u32, k, d));
+                }
+            }
+        }
+        SparseMat {
+            n_rows: rows.len() as u32,
+            n_cols,
+            entries,
+        }
+    }
+
+    fn gradient(&mut self, f: ExprId, jac: Jac) -> SparseVec {
+        let m = self.jacobian(&[f], jac);
+        SparseVec {
+            entries: m.entries.into_iter().map(|(_, k, d)| (k, d)).collect(),
+        }
+    }
+
+    fn time_derivative(&mut self, rows: &[ExprId]) -> SparseVec {
+        let mut entries = Vec::new();
+        for (i, &row) in rows.iter().enumerate() {
+            let d = self.diff.diff(&mut self.store, row, Var::Time);
+            if !self.store.is_zero(d) {
+                entries.push((i as u32, d));
+            }
+        }
+        SparseVec { entries }
+    }
+
+    fn expr(&mut self, e: &Expr) -> ExprId {
+        match e {
+            Expr::Num(v) => self.store.constant(*v),
+            Expr::State(i) => self.store.state(i.0),
+            Expr::Param(i) => self.store.param(i.0),
+            Expr::Time => self.store.time(),
+            Expr::Neg(a) => {
+                let a = self.expr(a);
+                self.store.neg(a)
+            }
+            Expr::Binary(op, a, b) => {
+                let (a, b) = (self.expr(a), self.expr(b));
+                match op {
+                    BinOp::Add => self.store.add(a, b),
+                    BinOp::Sub => self.store.sub(a, b),
+                    BinOp::Mul => self.store.mul(a, b),
+                    BinOp::Div => self.store.div(a, b),
+                    BinOp::Pow => self.store.pow(a, b),
+                }
+            }
+            Expr::Call(func, args) => self.call(*func, args),
+            Expr::If(c, a, b) => {
+                let c = self.cond(c);
+                let (a, b) = (self.expr(a), self.expr(b));
+                self.store.select(c, a, b)
+            }
+        }
+    }
+
+    /// A function call. `sema` checks arities; a missing argument (never produced by `sema`)
+    /// reads as 0 rather than panicking.
+    fn call(&mut self, func: Func, args: &[Expr]) -> ExprId {
+        let arg = |cx: &mut Self, k: usize| match args.get(k) {
+            Some(e) => cx.expr(e),
+            None => cx.store.zero(),
+        };
+        let unary = match func {
+            Func::Sin => Some(UnaryOp::Sin),
+            Func::Cos => Some(UnaryOp::Cos),
+            Func::Tan => Some(UnaryOp::Tan),
+            Func::Asin => Some(UnaryOp::Asin),
+            Func::Acos => Some(UnaryOp::Acos),
+            Func::Atan => Some(UnaryOp::Atan),
+            Func::Sinh => Some(UnaryOp::Sinh),
+            Func::Cosh => Some(UnaryOp::Cosh),
+            Func::Tanh => Some(UnaryOp::Tanh),
+            Func::Exp => Some(UnaryOp::Exp),
+            Func::Log => Some(UnaryOp::Log),
+            Func::Sqrt => Some(UnaryOp::Sqrt),
+            Func::Abs => Some(UnaryOp::Abs),
+            Func::Sign => Some(UnaryOp::Sign),
+            Func::Atan2 | Func::Min | Func::Max | Func::Pow | Func::Hypot => None,
+        };
+        if let Some(op) = unary {
+            let a = arg(self, 0);
+            return self.store.unary(op, a);
+        }
+        let op = match func {
+            Func::Atan2 => BinaryOp::Atan2,
+            Func::Min => BinaryOp::Min,
+            Func::Max => BinaryOp::Max,
+            Func::Hypot => BinaryOp::Hypot,
+            _ => BinaryOp::Pow,
+        };
+        let a = arg(self, 0);
+        let b = arg(self, 1);
+        self.store.binary(op, a, b)
+    }
+
+    fn cond(&mut self, c: &Cond) -> ExprId {
+        match c {
+            Cond::Cmp(op, a, b) => {
+                let (a, b) = (self.expr(a), self.expr(b));
+                match op {
+                    CmpOp::Lt => self.store.lt(a, b),
+                    CmpOp::Le => self.store.le(a, b),
+                    CmpOp::Gt => self.store.gt(a, b),
+                    CmpOp::Ge => self.store.ge(a, b),
+                }
+            }
+            Cond::And(a, b) => {
+                let (a, b) = (self.cond(a), self.cond(b));
+                self.store.and(a, b)
+            }
+            Cond::Or(a, b) => {
+                let (a, b) = (self.cond(a), self.cond(b));
+                self.store.or(a, b)
+            }
+            Cond::Not(a) => {
+                let a = self.cond(a);
+                self.store.not(a)
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,318 @@
+//! Stage 3b: the text `hybc derive` prints: every model function and its derivatives in infix
+//! form. Knows `sema::Model` (for names) and `expr`; no IO.
+//!
+//! Layout, in a stable order: a header, `init`, each mode with its flow and its own events, the
+//! top-level events, each output. Vectors and matrices over at most [`DENSE_MAX`] states print
+//! densely (`[1, 0]`, `[[1, 0], [0, -e]]`); larger ones list their non-zero entries, one a line.
+//! Within each block, subexpressions used more than once are hoisted into `let` lines when that
+//! makes the block shorter. `_t` lines are printed only when non-zero.
+
+use std::fmt::Write as _;
+
+use crate::expr::{to_infix_group, ExprId, ModelFunctions, SparseMat, SparseVec};
+use crate::sema::{self, ModeId, Model, ParamIdx};
+
+/// Largest state count printed as dense vectors and matrices.
+pub const DENSE_MAX: usize = 6;
+
+/// The derivative report of `funcs` (lowered from `model`), with parameter derivatives for
+/// `wrt`; `mode` restricts the modes shown (top-level events are always shown).
+pub fn derive_report(
+    model: &Model,
+    funcs: &ModelFunctions,
+    wrt: &[ParamIdx],
+    mode: Option<ModeId>,
+) -> String {
+    let r = Reporter { model, funcs, wrt };
+    let states: Vec<&str> = model.states.iter().map(|s| s.name.as_str()).collect();
+    let wrt_names: Vec<&str> = wrt.iter().map(|&p| r.param_name(p)).collect();
+    let mut out = String::new();
+    let _ = writeln!(out, "model {}", model.name);
+    let _ = writeln!(out, "states: {}", states.join(", "));
+    let _ = writeln!(out, "differentiated: {}", list_or_none(&wrt_names));
+
+    let mut init = Block::new("init");
+    init.vector("x0", funcs.init.iter().map(|&e| Some(e)).collect());
+    r.param_columns(&mut init, "x0", &funcs.init_p);
+    r.emit(&mut out, init, "");
+
+    for (m, mode_fns) in funcs.modes.iter().enumerate() {
+        if mode.is_some_and(|only| only.0 as usize != m) {
+            continue;
+        }
+        let name = model.modes.get(m).map_or("?", |x| x.name.as_str());
+        let mut block = Block::new(&format!("mode {name}"));
+        block.vector("f", mode_fns.flow.iter().map(|&e| Some(e)).collect());
+        block.matrix("f_x", &mode_fns.flow_x);
+        r.param_columns(&mut block, "f", &mode_fns.flow_p);
+        if !mode_fns.flow_t.entries.is_empty() {
+            block.vector("f_t", dense(&mode_fns.flow_t, funcs.n_states));
+        }
+        r.emit(&mut out, block, "");
+        for (e, event) in model.events.iter().enumerate() {
+            if event.owner == Some(ModeId(m as u16)) {
+                r.event(&mut out, e, "  ");
+            }
+        }
+    }
+
+    let top: Vec<usize> = (0..model.events.len())
+        .filter(|&e| model.events[e].owner.is_none())
+        .collect();
+    if !top.is_empty() {
+        out.push_str("\ntop-level");
+        for e in top {
+            r.event(&mut out, e, "  ");
+        }
+    }
+
+    for (k, output) in model.outputs.iter().enumerate() {
+        let Some(&h) = funcs.outputs.get(k) else {
+            continue;
+        };
+        let mut block = Block::new(&format!("output {}", output.name));
+        block.scalar("h", Some(h));
+        block.vector("h_x", row(&funcs.output_x, k as u32, funcs.n_states));
+        for &p in wrt {
+            let entry = row(&funcs.output_p, k as u32, funcs.n_params)
+                .get(p.0 as usize)
+                .copied()
+                .flatten();
+            block.scalar(&format!("h_{}", r.param_name(p)), entry);
+        }
+        if let Some(&(_, t)) = funcs
+            .output_t
+            .entries
+            .iter()
+            .find(|&&(i, _)| i as usize == k)
+        {
+            block.scalar("h_t", Some(t));
+        }
+        r.emit(&mut out, block, "");
+    }
+    out
+}
+
+fn list_or_none(names: &[&str]) -> String {
+    if names.is_empty() {
+        "(none)".to_string()
+    } else {
+        names.join(", ")
+    }
+}
+
+/// A sparse vector as `n` optional entries.
+fn dense(v: &SparseVec, n: u32) -> Vec<Option<ExprId>> {
+    let mut out = vec![None; n as usize];
+    for &(i, e) in &v.entries {
+        if let Some(slot) = out.get_mut(i as usize) {
+            *slot = Some(e);
+        }
+    }
+    out
+}
+
+/// Row `i` of a sparse matrix with `n_cols` columns.
+fn row(m: &SparseMat, i: u32, n_cols: u32) -> Vec<Option<ExprId>> {
+    let mut out = vec![None; n_cols as usize];
+    for &(r, k, e) in &m.entries {
+        if r == i {
+            if let Some(slot) = out.get_mut(k as usize) {
+                *slot = Some(e);
+            }
+        }
+    }
+    out
+}
+
+/// Column `j` of a sparse matrix with `n_rows` rows.
+fn column(m: &SparseMat, j: u32, n_rows: u32) -> Vec<Option<ExprId>> {
+    let mut out = vec![None; n_rows as usize];
+    for &(i, k, e) in &m.entries {
+        if k == j {
+            if let Some(slot) = out.get_mut(i as usize) {
+                *slot = Some(e);
+            }
+        }
+    }
+    out
+}
+
+/// What one report line shows; `None` entries are structural zeros.
+enum Shape {
+    Scalar(Option<ExprId>),
+    Vector(Vec<Option<ExprId>>),
+    Matrix(Vec<Vec<Option<ExprId>>>),
+}
+
+/// A titled group of lines that shares one set of `let`s.
+struct Block {
+    title: String,
+    lines: Vec<(String, Shape)>,
+}
+
+impl Block {
+    fn new(title: &str) -> Block {
+        Block {
+            title: title.to_string(),
+            lines: Vec::new(),
+        }
+    }
+    fn scalar(&mut self, label: &str, e: Option<ExprId>) {
+        self.lines.push((label.to_string(), Shape::Scalar(e)));
+    }
+    fn vector(&mut self, label: &str, v: Vec<Option<ExprId>>) {
+        self.lines.push((label.to_string(), Shape::Vector(v)));
+    }
+    fn matrix(&mut self, label: &str, m: &SparseMat) {
+        let rows = (0..m.n_rows).map(|i| row(m, i, m.n_cols)).collect();
+        self.lines.push((label.to_string(), Shape::Matrix(rows)));
+    }
+    fn roots(&self) -> Vec<ExprId> {
+        let mut roots = Vec::new();
+        for (_, shape) in &self.lines {
+            match shape {
+                Shape::Scalar(e) => roots.extend(e),
+                Shape::Vector(v) => roots.extend(v.iter().flatten()),
+                Shape::Matrix(m) => roots.extend(m.iter().flatten().flatten()),
+            }
+        }
+        roots
+    }
+}
+
+struct Reporter<'a> {
+    model: &'a Model,
+    funcs: &'a ModelFunctions,
+    wrt: &'a [ParamIdx],
+}
+
+impl Reporter<'_> {
+    fn param_name(&self, p: ParamIdx) -> &str {
+        self.model
+            .params
+            .get(p.0 as usize)
+            .map_or("?", |x| x.name.as_str())
+    }
+
+    /// One `<prefix>_<p>` vector line per differentiated parameter.
+    fn param_columns(&self, block: &mut Block, prefix: &str, m: &SparseMat) {
+        for &p in self.wrt {
+            let label = format!("{prefix}_{}", self.param_name(p));
+            block.vector(&label, column(m, p.0, m.n_rows));
+        }
+    }
+
+    fn event(&self, out: &mut String, e: usize, indent: &str) {
+        let (Some(event), Some(fns)) = (self.model.events.get(e), self.funcs.events.get(e)) else {
+            return;
+        };
+        let n = self.funcs.n_states;
+        let direction = match event.direction {
+            sema::Direction::Falling => "falling",
+            sema::Direction::Rising => "rising",
+            sema::Direction::Either => "either",
+        };
+        let mut block = Block::new(&format!("event {} ({direction})", event.name));
+        block.scalar("g", Some(fns.guard));
+        if let Some(c) = fns.condition {
+            block.scalar("condition", Some(c));
+        }
+        block.vector("g_x", dense(&fns.guard_x, n));
+        for &p in self.wrt {
+            let entry = fns
+                .guard_p
+                .entries
+                .iter()
+                .find(|&&(k, _)| k == p.0)
+                .map(|&(_, d)| d);
+            block.scalar(&format!("g_{}", self.param_name(p)), entry);
+        }
+        if !self.funcs.store.is_zero(fns.guard_t) {
+            block.scalar("g_t", Some(fns.guard_t));
+        }
+        block.vector("R", fns.reset.iter().map(|&r| Some(r)).collect());
+        block.matrix("R_x", &fns.reset_x);
+        self.param_columns(&mut block, "R", &fns.reset_p);
+        if !fns.reset_t.entries.is_empty() {
+            block.vector("R_t", dense(&fns.reset_t, n));
+        }
+        self.emit(out, block, indent);
+    }
+
+    /// Prints a block: title, `let`s, then its lines.
+    fn emit(&self, out: &mut String, block: Block, indent: &str) {
+        let states: Vec<String> = self.model.states.iter().map(|s| s.name.clone()).collect();
+        let params: Vec<String> = self.model.params.iter().map(|p| p.name.clone()).collect();
+        let roots = block.roots();
+        let group = to_infix_group(&self.funcs.store, &roots, &states, &params, &[]);
+        let mut texts = group.roots.iter();
+        let mut next = |e: &Option<ExprId>| match e {
+            Some(_) => texts.next().cloned().unwrap_or_default(),
+            None => "0".to_string(),
+        };
+        let _ = writeln!(out, "\n{indent}{}", block.title);
+        let inner = format!("{indent}  ");
+        for line in group.let_lines() {
+            let _ = writeln!(out, "{inner}{line}");
+        }
+        let dense_ok = states.len() <= DENSE_MAX;
+        for (label, shape) in &block.lines {
+            match shape {
+                Shape::Scalar(e) => {
+                    let _ = writeln!(out, "{inner}{label} = {}", next(e));
+                }
+                Shape::Vector(v) if dense_ok => {
+                    let cells: Vec<String> = v.iter().map(&mut next).collect();
+                    let _ = writeln!(out, "{inner}{label} = [{}]", cells.join(", "));
+                }
+                Shape::Matrix(m) if dense_ok => {
+                    let rows: Vec<String> = m
+                        .iter()
+                        .map(|r| {
+                            format!(
+                                "[{}]",
+                                r.iter().map(&mut next).collect::<Vec<_>>().join(", ")
+                            )
+                        })
+                        .collect();
+                    let _ = writeln!(out, "{inner}{label} = [{}]", rows.join(", "));
+                }
+                Shape::Vector(v) => {
+                    let _ = writeln!(
+                        out,
+                        "{inner}{label}:{}",
+                        if v.iter().all(Option::is_none) {
+                            " 0"
+                        } else {
+                            ""
+                        }
+                    );
+                    for (i, e) in v.iter().enumerate().filter(|(_, e)| e.is_some()) {
+                        let _ = writeln!(
+                            out,
+                            "{inner}  ({i}) {}: {}",
+                            states.get(i).map_or("?", |s| s.as_str()),
+                            next(e)
+                        );
+                    }
+                }
+                Shape::Matrix(m) => {
+                    let empty = m.iter().flatten().all(Option::is_none);
+                    let _ = writeln!(out, "{inner}{label}:{}", if empty { " 0" } else { "" });
+                    for (i, r) in m.iter().enumerate() {
+                        for (k, e) in r.iter().enumerate().filter(|(_, e)| e.is_some()) {
+                            let row_name = states.get(i).map_or("?", |s| s.as_str());
+                            let _ = writeln!(
+                                out,
+                                "{inner}  ({i}, {k}) {row_name}/{}: {}",
+                                states.get(k).map_or("?", |s| s.as_str()),
+                                next(e)
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,133 @@
+//! Semantic errors. Each carries the span it is about; `to_diagnostic` words it for the user.
+
+use crate::diag::Diagnostic;
+use crate::syntax::Span;
+
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum CheckError {
+    #[error("unknown name `{name}`")]
+    UnknownName { name: String, span: Span, suggestion: Option<String> },
+    #[error("unknown function `{name}`")]
+    UnknownFunction { name: String, span: Span, suggestion: Option<String> },
+    #[error("unknown mode `{name}`")]
+    UnknownMode { name: String, span: Span, suggestion: Option<String> },
+    #[error("`{name}` is declared twice")]
+    Duplicate { name: String, what: &'static str, span: Span, first: Span },
+    #[error("`{name}` is a built-in name and cannot be declared")]
+    Reserved { name: String, span: Span },
+    #[error("`{name}` is a {found}, expected a {expected}")]
+    WrongKind { name: String, found: &'static str, expected: &'static str, span: Span },
+    #[error("state `{state}` has no flow equation in mode `{mode}`")]
+    MissingFlow { state: String, mode: String, span: Span },
+    #[error("state `{state}` has two flow equations in mode `{mode}`")]
+    DuplicateFlow { state: String, mode: String, span: Span, first: Span },
+    #[error("state `{state}` is reset twice in event `{event}`")]
+    DoubleReset { state: String, event: String, span: Span, first: Span },
+    #[error("the model has modes but none is marked `initial`")]
+    NoInitialMode { span: Span },
+    #[error("more than one mode is marked `initial`")]
+    SecondInitialMode { name: String, span: Span, first: Span },
+    #[error("`let {name}` depends on itself")]
+    LetCycle { name: String, path: String, span: Span },
+    #[error("`{func}` takes {expected} argument{}, found {found}", if *expected == 1 { "" } else { "s" })]
+    Arity { func: String, expected: usize, found: usize, span: Span },
+    #[error("the range of `{name}` excludes its default {default}")]
+    RangeExcludesDefault { name: String, default: f64, lo: f64, hi: f64, span: Span },
+    #[error("empty range [{lo}, {hi}]")]
+    EmptyRange { lo: f64, hi: f64, span: Span },
+    #[error("initial value of `{state}` depends on {what}")]
+    InitNotConstant { state: String, what: String, span: Span },
+    #[error("model `{name}` has no states")]
+    EmptyModel { name: String, span: Span },
+    #[error("unknown simulate setting `{name}`")]
+    UnknownSetting { name: String, span: Span },
+    #[error("`{name} = {value}` is out of range")]
+    BadSetting { name: String, value: f64, expected: &'static str, span: Span },
+}
+
+impl CheckError {
+    pub fn span(&self) -> Span {
+        use CheckError::*;
+        match self {
+            UnknownName { span, .. }
+            | UnknownFunction { span, .. }
+            | UnknownMode { span, .. }
+            | Duplicate { span, .. }
+            | Reserved { span, .. }
+            | WrongKind { span, .. }
+            | MissingFlow { span, .. }
+            | DuplicateFlow { span, .. }
+            | DoubleReset { span, .. }
+            | NoInitialMode { span }
+            | SecondInitialMode { span, .. }
+            | LetCycle { span, .. }
+            | Arity { span, .. }
+            | RangeExcludesDefault { span, .. }
+            | EmptyRange { span, .. }
+            | InitNotConstant { span, .. }
+            | EmptyModel { span, .. }
+            | UnknownSetting { span, .. }
+            | BadSetting { span, .. } => *span,
+        }
+    }
+
+    /// The error with what was expected under the caret and any helpful notes.
+    pub fn to_diagnostic(&self, source: &str) -> Diagnostic {
+        use CheckError::*;
+        let line_of = |s: Span| source[..s.start.min(source.len())].matches('\n').count() + 1;
+        let did_you_mean = |s: &Option<String>| {
+            s.as_ref().map(|s| format!("did you mean `{s}`?")).into_iter().collect::<Vec<_>>()
+        };
+        let (label, notes) = match self {
+            UnknownName { suggestion, .. } => {
+                ("expected a parameter, state, `let`, `t` or `pi`".to_string(), did_you_mean(suggestion))
+            }
+            UnknownFunction { suggestion, .. } => {
+                ("expected a built-in function".to_string(), did_you_mean(suggestion))
+            }
+            UnknownMode { suggestion, .. } => {
+                ("expected the name of a declared mode".to_string(), did_you_mean(suggestion))
+            }
+            Duplicate { what, first, .. } => (
+                format!("expected a new name; the {what} was first declared on line {}", line_of(*first)),
+                vec![],
+            ),
+            Reserved { .. } => ("expected a name other than `t`, `pi` or a function name".into(), vec![]),
+            WrongKind { expected, .. } => (format!("expected a {expected} here"), vec![]),
+            MissingFlow { state, .. } => (format!("expected `der({state}) = ...` in this mode"), vec![]),
+            DuplicateFlow { first, .. } => (
+                format!("expected one flow equation per state; the first is on line {}", line_of(*first)),
+                vec![],
+            ),
+            DoubleReset { first, .. } => (
+                format!("expected at most one `:=` per state; the first is on line {}", line_of(*first)),
+                vec![],
+            ),
+            NoInitialMode { .. } => (
+                "expected one mode declared as `initial mode NAME { ... }`".to_string(),
+                vec![],
+            ),
+            SecondInitialMode { first, .. } => (
+                format!("expected exactly one initial mode; the first is on line {}", line_of(*first)),
+                vec![],
+            ),
+            LetCycle { path, .. } => (
+                "expected a definition that does not refer back to itself".to_string(),
+                vec![format!("cycle: {path}")],
+            ),
+            Arity { expected, .. } => (format!("expected {expected} argument(s)"), vec![]),
+            RangeExcludesDefault { lo, hi, .. } => {
+                (format!("expected a default inside [{lo}, {hi}]"), vec![])
+            }
+            EmptyRange { .. } => ("expected LO <= HI".to_string(), vec![]),
+            InitNotConstant { .. } => (
+                "expected an expression of parameters only (no `t`, no states)".to_string(),
+                vec![],
+            ),
+            EmptyModel { .. } => ("expected at least one `state NAME = ...`".to_string(), vec![]),
+            UnknownSetting { .. } => ("expected `t_end`, `rtol` or `atol`".to_string(), vec![]),
+            BadSetting { expected, .. } => (format!("expected {expected}"), vec![]),
+        };
+        Diagnostic { message: self.to_string(), span: self.span(), label, notes }
+    }
+}

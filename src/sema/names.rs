@@ -1,0 +1,301 @@
+//! Scopes, name lookup, `let` inlining with cycle detection, and "did you mean" suggestions.
+//!
+//! Scope tree: the model scope, one scope per mode (child of the model scope) and one per event
+//! block (child of its mode's or the model's scope). A name declared in an inner scope may not
+//! shadow an outer one: shadowing in a model file is far more often a mistake than an intent.
+
+use std::collections::HashMap;
+
+use super::error::CheckError;
+use super::model::*;
+use crate::syntax::ast;
+use crate::syntax::Span;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ScopeId(pub u32);
+
+impl ScopeId {
+    pub const GLOBAL: ScopeId = ScopeId(0);
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LetId(pub u32);
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Binding {
+    Param(ParamIdx),
+    State(StateIdx),
+    Let(LetId),
+}
+
+impl Binding {
+    pub fn kind_name(self) -> &'static str {
+        match self {
+            Binding::Param(_) => "parameter",
+            Binding::State(_) => "state",
+            Binding::Let(_) => "let",
+        }
+    }
+}
+
+struct ScopeData {
+    parent: Option<ScopeId>,
+    names: HashMap<String, (Binding, Span, &'static str)>,
+}
+
+enum LetState {
+    Unresolved,
+    InProgress,
+    Done(Expr),
+}
+
+struct LetData<'a> {
+    decl: &'a ast::LetDecl,
+    scope: ScopeId,
+    state: LetState,
+}
+
+pub struct Scopes<'a> {
+    scopes: Vec<ScopeData>,
+    lets: Vec<LetData<'a>>,
+    state_names: Vec<String>,
+    /// Lets being resolved, innermost last: the path reported for a cycle.
+    let_stack: Vec<LetId>,
+}
+
+impl Default for Scopes<'_> {
+    fn default() -> Self {
+        Scopes {
+            scopes: vec![ScopeData { parent: None, names: HashMap::new() }],
+            lets: Vec::new(),
+            state_names: Vec::new(),
+            let_stack: Vec::new(),
+        }
+    }
+}
+
+impl<'a> Scopes<'a> {
+    pub fn child(&mut self, parent: ScopeId) -> ScopeId {
+        self.scopes.push(ScopeData { parent: Some(parent), names: HashMap::new() });
+        ScopeId(self.scopes.len() as u32 - 1)
+    }
+
+    pub fn insert(&mut self, scope: ScopeId, name: &ast::Ident, binding: Binding, what: &'static str) {
+        if let Binding::State(i) = binding {
+            debug_assert_eq!(i.0 as usize, self.state_names.len());
+            self.state_names.push(name.name.clone());
+        }
+        self.scopes[scope.0 as usize].names.insert(name.name.clone(), (binding, name.span, what));
+    }
+
+    pub fn add_let(&mut self, decl: &'a ast::LetDecl, scope: ScopeId) -> LetId {
+        self.lets.push(LetData { decl, scope, state: LetState::Unresolved });
+        LetId(self.lets.len() as u32 - 1)
+    }
+
+    pub fn n_lets(&self) -> usize {
+        self.lets.len()
+    }
+
+    fn find(&self, scope: ScopeId, name: &str) -> Option<&(Binding, Span, &'static str)> {
+        let mut s = Some(scope);
+        while let Some(id) = s {
+            let data = &self.scopes[id.0 as usize];
+            if let Some(found) = data.names.get(name) {
+                return Some(found);
+            }
+            s = data.parent;
+        }
+        None
+    }
+
+    pub fn lookup(&self, scope: ScopeId, name: &str) -> Option<Binding> {
+        self.find(scope, name).map(|f| f.0)
+    }
+
+    /// Where `name` is already declared (in `scope` or an enclosing one), and as what.
+    pub fn lookup_decl(&self, scope: ScopeId, name: &str) -> Option<(Span, &'static str)> {
+        self.find(scope, name).map(|f| (f.1, f.2))
+    }
+
+    pub fn state_name(&self, i: usize) -> &str {
+        self.state_names.get(i).map(String::as_str).unwrap_or("?")
+    }
+
+    pub fn suggest_state(&self, name: &str) -> Option<String> {
+        closest(name, self.state_names.iter().map(String::as_str))
+    }
+
+    /// The visible name closest to `name`, for "did you mean".
+    fn suggest(&self, scope: ScopeId, name: &str) -> Option<String> {
+        let mut candidates: Vec<&str> = vec!["t", "pi"];
+        let mut s = Some(scope);
+        while let Some(id) = s {
+            let data = &self.scopes[id.0 as usize];
+            candidates.extend(data.names.keys().map(String::as_str));
+            s = data.parent;
+        }
+        closest(name, candidates.into_iter())
+    }
+}
+
+/// The candidate within a small edit distance of `name` (about a third of its length), if any.
+pub fn closest<'s>(name: &str, candidates: impl Iterator<Item = &'s str>) -> Option<String> {
+    let limit = (name.chars().count() / 3).max(1);
+    candidates
+        .filter(|c| *c != name)
+        .map(|c| (edit_distance(name, c), c))
+        .filter(|(d, _)| *d <= limit)
+        .min()
+        .map(|(_, c)| c.to_string())
+}
+
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut diag = row[0];
+        row[0] = i + 1;
+        for (j, cb) in b.iter().enumerate() {
+            let next = (diag + usize::from(ca != *cb)).min(row[j] + 1).min(row[j + 1] + 1);
+            diag = row[j + 1];
+            row[j + 1] = next;
+        }
+    }
+    row[b.len()]
+}
+
+/// Resolves every `let` once, so that errors inside unused `let`s are reported too.
+pub fn resolve_all_lets(scopes: &mut Scopes, errors: &mut Vec<CheckError>) {
+    for k in 0..scopes.n_lets() {
+        resolve_let(scopes, errors, LetId(k as u32), None);
+    }
+}
+
+/// The resolved definition of a `let`, resolving it on first use. `use_span` is where it was
+/// referenced (None when resolving for its own sake).
+fn resolve_let(scopes: &mut Scopes, errors: &mut Vec<CheckError>, id: LetId, use_span: Option<Span>) -> Expr {
+    let k = id.0 as usize;
+    match &scopes.lets[k].state {
+        LetState::Done(e) => return e.clone(),
+        LetState::InProgress => {
+            let start = scopes.let_stack.iter().position(|l| *l == id).unwrap_or(0);
+            let mut path: Vec<&str> =
+                scopes.let_stack[start..].iter().map(|l| scopes.lets[l.0 as usize].decl.name.name.as_str()).collect();
+            path.push(scopes.lets[k].decl.name.name.as_str());
+            errors.push(CheckError::LetCycle {
+                name: scopes.lets[k].decl.name.name.clone(),
+                path: path.join(" -> "),
+                span: use_span.unwrap_or(scopes.lets[k].decl.name.span),
+            });
+            return Expr::Num(0.0);
+        }
+        LetState::Unresolved => {}
+    }
+    scopes.lets[k].state = LetState::InProgress;
+    scopes.let_stack.push(id);
+    let (decl, scope) = (scopes.lets[k].decl, scopes.lets[k].scope);
+    let e = resolve_names(scopes, errors, &decl.value, scope);
+    scopes.let_stack.pop();
+    scopes.lets[k].state = LetState::Done(e.clone());
+    e
+}
+
+/// Resolves the names of an AST expression in `scope`, inlining `let`s.
+pub fn resolve_names(scopes: &mut Scopes, errors: &mut Vec<CheckError>, e: &ast::Expr, scope: ScopeId) -> Expr {
+    match &e.kind {
+        ast::ExprKind::Num(v) => Expr::Num(*v),
+        ast::ExprKind::Name(name) => match scopes.lookup(scope, name) {
+            Some(Binding::Param(i)) => Expr::Param(i),
+            Some(Binding::State(i)) => Expr::State(i),
+            Some(Binding::Let(id)) => resolve_let(scopes, errors, id, Some(e.span)),
+            None if name == "t" => Expr::Time,
+            None if name == "pi" => Expr::Num(std::f64::consts::PI),
+            None if Func::from_name(name).is_some() => {
+                errors.push(CheckError::WrongKind {
+                    name: name.clone(),
+                    found: "function",
+                    expected: "value (call it as `name(...)`)",
+                    span: e.span,
+                });
+                Expr::Num(0.0)
+            }
+            None => {
+                let suggestion = scopes.suggest(scope, name);
+                errors.push(CheckError::UnknownName { name: name.clone(), span: e.span, suggestion });
+                Expr::Num(0.0)
+            }
+        },
+        ast::ExprKind::Neg(a) => Expr::Neg(Box::new(resolve_names(scopes, errors, a, scope))),
+        ast::ExprKind::Binary(op, a, b) => {
+            let op = match op {
+                ast::BinOp::Add => BinOp::Add,
+                ast::BinOp::Sub => BinOp::Sub,
+                ast::BinOp::Mul => BinOp::Mul,
+                ast::BinOp::Div => BinOp::Div,
+                ast::BinOp::Pow => BinOp::Pow,
+            };
+            let a = resolve_names(scopes, errors, a, scope);
+            let b = resolve_names(scopes, errors, b, scope);
+            Expr::Binary(op, Box::new(a), Box::new(b))
+        }
+        ast::ExprKind::Call(name, args) => {
+            let args: Vec<Expr> = args.iter().map(|a| resolve_names(scopes, errors, a, scope)).collect();
+            let Some(func) = Func::from_name(&name.name) else {
+                if let Some(b) = scopes.lookup(scope, &name.name) {
+                    errors.push(CheckError::WrongKind {
+                        name: name.name.clone(),
+                        found: b.kind_name(),
+                        expected: "function",
+                        span: name.span,
+                    });
+                } else {
+                    let suggestion = closest(&name.name, Func::ALL.iter().map(|f| f.name()));
+                    errors.push(CheckError::UnknownFunction { name: name.name.clone(), span: name.span, suggestion });
+                }
+                return Expr::Num(0.0);
+            };
+            if args.len() != func.arity() {
+                errors.push(CheckError::Arity {
+                    func: name.name.clone(),
+                    expected: func.arity(),
+                    found: args.len(),
+                    span: e.span,
+                });
+                return Expr::Num(0.0);
+            }
+            Expr::Call(func, args)
+        }
+        ast::ExprKind::If(c, a, b) => {
+            let c = resolve_cond(scopes, errors, c, scope);
+            let a = resolve_names(scopes, errors, a, scope);
+            let b = resolve_names(scopes, errors, b, scope);
+            Expr::If(Box::new(c), Box::new(a), Box::new(b))
+        }
+    }
+}
+
+pub fn resolve_cond(scopes: &mut Scopes, errors: &mut Vec<CheckError>, c: &ast::Cond, scope: ScopeId) -> Cond {
+    match &c.kind {
+        ast::CondKind::Cmp(op, a, b) => {
+            let op = match op {
+                ast::CmpOp::Lt => CmpOp::Lt,
+                ast::CmpOp::Le => CmpOp::Le,
+                ast::CmpOp::Gt => CmpOp::Gt,
+                ast::CmpOp::Ge => CmpOp::Ge,
+            };
+            let a = resolve_names(scopes, errors, a, scope);
+            let b = resolve_names(scopes, errors, b, scope);
+            Cond::Cmp(op, a, b)
+        }
+        ast::CondKind::And(a, b) => Cond::And(
+            Box::new(resolve_cond(scopes, errors, a, scope)),
+            Box::new(resolve_cond(scopes, errors, b, scope)),
+        ),
+        ast::CondKind::Or(a, b) => Cond::Or(
+            Box::new(resolve_cond(scopes, errors, a, scope)),
+            Box::new(resolve_cond(scopes, errors, b, scope)),
+        ),
+        ast::CondKind::Not(a) => Cond::Not(Box::new(resolve_cond(scopes, errors, a, scope))),
+    }
+}

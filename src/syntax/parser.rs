@@ -1,0 +1,404 @@
+//! pest parse tree -> AST. The grammar is `grammar/hyb.pest`; this file is the only one that sees
+//! pest's `Pair`s. Operator precedence is applied here with pest's Pratt parser.
+
+use std::sync::OnceLock;
+
+use pest::error::{ErrorVariant, InputLocation};
+use pest::iterators::{Pair, Pairs};
+use pest::pratt_parser::{Assoc, Op, PrattParser};
+use pest::Parser;
+
+use super::ast::*;
+use super::{ParseError, Span};
+
+#[derive(pest_derive::Parser)]
+#[grammar = "grammar/hyb.pest"]
+struct HybParser;
+
+/// Parses a whole `.hyb` source text.
+pub fn parse(source: &str) -> Result<File, ParseError> {
+    let mut pairs = HybParser::parse(Rule::file, source).map_err(|e| convert_error(source, e))?;
+    let file = pairs.next().expect("the file rule always yields one pair");
+    build_file(file)
+}
+
+fn span_of(pair: &Pair<Rule>) -> Span {
+    let s = pair.as_span();
+    Span::new(s.start(), s.end())
+}
+
+fn ident(pair: Pair<Rule>) -> Ident {
+    debug_assert_eq!(pair.as_rule(), Rule::ident);
+    Ident { name: pair.as_str().to_string(), span: span_of(&pair) }
+}
+
+fn number(pair: Pair<Rule>) -> Result<Number, ParseError> {
+    let span = span_of(&pair);
+    let value: f64 = pair.as_str().parse().map_err(|_| ParseError {
+        span,
+        message: format!("`{}` is not a number", pair.as_str()),
+        expected: String::new(),
+    })?;
+    if !value.is_finite() {
+        return Err(ParseError {
+            span,
+            message: format!("number `{}` is too large", pair.as_str()),
+            expected: "a finite number".to_string(),
+        });
+    }
+    Ok(Number { value, span })
+}
+
+fn build_file(pair: Pair<Rule>) -> Result<File, ParseError> {
+    let mut inner = pair.into_inner();
+    let model_decl = inner.next().expect("grammar: model_decl first");
+    let model = ident(model_decl.into_inner().nth(1).expect("grammar: model name"));
+    let mut items = Vec::new();
+    for p in inner {
+        if p.as_rule() == Rule::EOI {
+            break;
+        }
+        items.push(build_item(p)?);
+    }
+    Ok(File { model, items })
+}
+
+fn build_item(pair: Pair<Rule>) -> Result<Item, ParseError> {
+    let span = span_of(&pair);
+    Ok(match pair.as_rule() {
+        Rule::param_decl => {
+            let mut it = pair.into_inner().skip(1);
+            let name = ident(it.next().expect("grammar: param name"));
+            let default = number(it.next().expect("grammar: param default"))?;
+            let range = match it.next() {
+                Some(r) => {
+                    let rspan = span_of(&r);
+                    let mut ri = r.into_inner().skip(1);
+                    let lo = number(ri.next().expect("grammar: range lo"))?;
+                    let hi = number(ri.next().expect("grammar: range hi"))?;
+                    Some(Range { lo, hi, span: rspan })
+                }
+                None => None,
+            };
+            Item::Param(ParamDecl { name, default, range, span })
+        }
+        Rule::state_decl => {
+            let mut it = pair.into_inner().skip(1);
+            let name = ident(it.next().expect("grammar: state name"));
+            let init = build_expr(it.next().expect("grammar: state init"))?;
+            Item::State(StateDecl { name, init, span })
+        }
+        Rule::der_eq => Item::Der(build_der(pair)?),
+        Rule::let_decl => Item::Let(build_let(pair)?),
+        Rule::output_decl => {
+            let mut it = pair.into_inner().skip(1);
+            let name = ident(it.next().expect("grammar: output name"));
+            let value = build_expr(it.next().expect("grammar: output value"))?;
+            Item::Output(OutputDecl { name, value, span })
+        }
+        Rule::simulate_decl => {
+            let mut settings = Vec::new();
+            for s in pair.into_inner().skip(1) {
+                let sspan = span_of(&s);
+                let mut si = s.into_inner();
+                let name = ident(si.next().expect("grammar: setting name"));
+                let value = number(si.next().expect("grammar: setting value"))?;
+                settings.push(Setting { name, value, span: sspan });
+            }
+            Item::Simulate(SimulateDecl { settings, span })
+        }
+        Rule::event_decl => Item::Event(build_event(pair)?),
+        Rule::mode_decl => Item::Mode(build_mode(pair)?),
+        other => unreachable!("grammar: unexpected item {other:?}"),
+    })
+}
+
+fn build_der(pair: Pair<Rule>) -> Result<DerEq, ParseError> {
+    let span = span_of(&pair);
+    let mut it = pair.into_inner().skip(1);
+    let state = ident(it.next().expect("grammar: der state"));
+    let rhs = build_expr(it.next().expect("grammar: der rhs"))?;
+    Ok(DerEq { state, rhs, span })
+}
+
+fn build_let(pair: Pair<Rule>) -> Result<LetDecl, ParseError> {
+    let span = span_of(&pair);
+    let mut it = pair.into_inner().skip(1);
+    let name = ident(it.next().expect("grammar: let name"));
+    let value = build_expr(it.next().expect("grammar: let value"))?;
+    Ok(LetDecl { name, value, span })
+}
+
+fn build_event(pair: Pair<Rule>) -> Result<EventDecl, ParseError> {
+    let span = span_of(&pair);
+    let mut it = pair.into_inner();
+    it.next(); // kw_event
+    let name = ident(it.next().expect("grammar: event name"));
+    it.next(); // kw_when
+    let lhs = build_expr(it.next().expect("grammar: guard lhs"))?;
+    let op = match it.next().expect("grammar: guard op").as_str() {
+        "<=" => GuardOp::Le,
+        "<" => GuardOp::Lt,
+        ">=" => GuardOp::Ge,
+        ">" => GuardOp::Gt,
+        _ => GuardOp::Crosses,
+    };
+    let rhs = build_expr(it.next().expect("grammar: guard rhs"))?;
+    let mut event =
+        EventDecl { name, lhs, op, rhs, condition: None, target: None, body: Vec::new(), span };
+    for p in it {
+        match p.as_rule() {
+            Rule::enable => {
+                let c = p.into_inner().nth(1).expect("grammar: enable cond");
+                event.condition = Some(build_cond(c)?);
+            }
+            Rule::target => {
+                event.target = Some(ident(p.into_inner().next().expect("grammar: target")));
+            }
+            Rule::event_block => {
+                for s in p.into_inner() {
+                    let sspan = span_of(&s);
+                    event.body.push(match s.as_rule() {
+                        Rule::reset => {
+                            let mut si = s.into_inner();
+                            let state = ident(si.next().expect("grammar: reset state"));
+                            let value = build_expr(si.next().expect("grammar: reset value"))?;
+                            EventStmt::Reset { state, value, span: sspan }
+                        }
+                        Rule::let_decl => EventStmt::Let(build_let(s)?),
+                        Rule::stop => EventStmt::Stop { span: sspan },
+                        other => unreachable!("grammar: unexpected event statement {other:?}"),
+                    });
+                }
+            }
+            other => unreachable!("grammar: unexpected event part {other:?}"),
+        }
+    }
+    Ok(event)
+}
+
+fn build_mode(pair: Pair<Rule>) -> Result<ModeDecl, ParseError> {
+    let span = span_of(&pair);
+    let mut is_initial = false;
+    let mut name = None;
+    let mut items = Vec::new();
+    for p in pair.into_inner() {
+        match p.as_rule() {
+            Rule::initial => is_initial = true,
+            Rule::kw_mode => {}
+            Rule::ident => name = Some(ident(p)),
+            Rule::der_eq => items.push(ModeItem::Der(build_der(p)?)),
+            Rule::let_decl => items.push(ModeItem::Let(build_let(p)?)),
+            Rule::event_decl => items.push(ModeItem::Event(build_event(p)?)),
+            other => unreachable!("grammar: unexpected mode part {other:?}"),
+        }
+    }
+    let name = name.expect("grammar: mode name");
+    Ok(ModeDecl { name, is_initial, items, span })
+}
+
+fn expr_parser() -> &'static PrattParser<Rule> {
+    static PARSER: OnceLock<PrattParser<Rule>> = OnceLock::new();
+    PARSER.get_or_init(|| {
+        // Lowest precedence first. Unary minus sits below `^`, so `-x^2` is `-(x^2)`.
+        PrattParser::new()
+            .op(Op::infix(Rule::add, Assoc::Left) | Op::infix(Rule::sub, Assoc::Left))
+            .op(Op::infix(Rule::mul, Assoc::Left) | Op::infix(Rule::div, Assoc::Left))
+            .op(Op::prefix(Rule::neg))
+            .op(Op::infix(Rule::pow, Assoc::Right))
+    })
+}
+
+fn cond_parser() -> &'static PrattParser<Rule> {
+    static PARSER: OnceLock<PrattParser<Rule>> = OnceLock::new();
+    PARSER.get_or_init(|| {
+        PrattParser::new()
+            .op(Op::infix(Rule::or_op, Assoc::Left))
+            .op(Op::infix(Rule::and_op, Assoc::Left))
+            .op(Op::prefix(Rule::not_op))
+    })
+}
+
+fn join(a: Span, b: Span) -> Span {
+    Span::new(a.start.min(b.start), a.end.max(b.end))
+}
+
+fn build_expr(pair: Pair<Rule>) -> Result<Expr, ParseError> {
+    debug_assert_eq!(pair.as_rule(), Rule::expr);
+    climb_expr(pair.into_inner())
+}
+
+fn climb_expr(pairs: Pairs<Rule>) -> Result<Expr, ParseError> {
+    expr_parser()
+        .map_primary(build_primary)
+        .map_prefix(|op, rhs| {
+            let rhs = rhs?;
+            let span = join(span_of(&op), rhs.span);
+            Ok(Expr { kind: ExprKind::Neg(Box::new(rhs)), span })
+        })
+        .map_infix(|lhs, op, rhs| {
+            let (lhs, rhs) = (lhs?, rhs?);
+            let bin = match op.as_rule() {
+                Rule::add => BinOp::Add,
+                Rule::sub => BinOp::Sub,
+                Rule::mul => BinOp::Mul,
+                Rule::div => BinOp::Div,
+                _ => BinOp::Pow,
+            };
+            let span = join(lhs.span, rhs.span);
+            Ok(Expr { kind: ExprKind::Binary(bin, Box::new(lhs), Box::new(rhs)), span })
+        })
+        .parse(pairs)
+}
+
+fn build_primary(pair: Pair<Rule>) -> Result<Expr, ParseError> {
+    let span = span_of(&pair);
+    let kind = match pair.as_rule() {
+        Rule::number => ExprKind::Num(number(pair)?.value),
+        Rule::ident => ExprKind::Name(pair.as_str().to_string()),
+        Rule::expr => return build_expr(pair),
+        Rule::call => {
+            let mut it = pair.into_inner();
+            let name = ident(it.next().expect("grammar: call name"));
+            let args = it.map(build_expr).collect::<Result<Vec<_>, _>>()?;
+            ExprKind::Call(name, args)
+        }
+        Rule::if_expr => {
+            let mut it = pair.into_inner().filter(|p| {
+                !matches!(p.as_rule(), Rule::kw_if | Rule::kw_then | Rule::kw_else)
+            });
+            let c = build_cond(it.next().expect("grammar: if cond"))?;
+            let a = build_expr(it.next().expect("grammar: then"))?;
+            let b = build_expr(it.next().expect("grammar: else"))?;
+            ExprKind::If(Box::new(c), Box::new(a), Box::new(b))
+        }
+        other => unreachable!("grammar: unexpected primary {other:?}"),
+    };
+    Ok(Expr { kind, span })
+}
+
+fn build_cond(pair: Pair<Rule>) -> Result<Cond, ParseError> {
+    debug_assert_eq!(pair.as_rule(), Rule::cond);
+    cond_parser()
+        .map_primary(|p| match p.as_rule() {
+            Rule::compare => {
+                let span = span_of(&p);
+                let mut it = p.into_inner();
+                let a = build_expr(it.next().expect("grammar: compare lhs"))?;
+                let op = match it.next().expect("grammar: compare op").as_str() {
+                    "<=" => CmpOp::Le,
+                    "<" => CmpOp::Lt,
+                    ">=" => CmpOp::Ge,
+                    _ => CmpOp::Gt,
+                };
+                let b = build_expr(it.next().expect("grammar: compare rhs"))?;
+                Ok(Cond { kind: CondKind::Cmp(op, a, b), span })
+            }
+            Rule::cond => build_cond(p),
+            other => unreachable!("grammar: unexpected condition {other:?}"),
+        })
+        .map_prefix(|op, rhs| {
+            let rhs = rhs?;
+            let span = join(span_of(&op), rhs.span);
+            Ok(Cond { kind: CondKind::Not(Box::new(rhs)), span })
+        })
+        .map_infix(|lhs, op, rhs| {
+            let (lhs, rhs) = (lhs?, rhs?);
+            let span = join(lhs.span, rhs.span);
+            let kind = match op.as_rule() {
+                Rule::and_op => CondKind::And(Box::new(lhs), Box::new(rhs)),
+                _ => CondKind::Or(Box::new(lhs), Box::new(rhs)),
+            };
+            Ok(Cond { kind, span })
+        })
+        .parse(pair.into_inner())
+}
+
+/// Human names for what the parser expected, in the words of the language reference.
+fn describe(rule: Rule) -> Option<&'static str> {
+    Some(match rule {
+        Rule::model_decl | Rule::kw_model => "`model NAME`",
+        Rule::ident => "a name",
+        Rule::number | Rule::signed_number => "a number",
+        Rule::expr | Rule::neg => "an expression",
+        Rule::cond | Rule::compare => "a condition",
+        Rule::cmp_op => "a comparison (`<`, `<=`, `>`, `>=`)",
+        Rule::guard_op => "a guard operator (`<=`, `<`, `>=`, `>`, `crosses`)",
+        Rule::add | Rule::sub | Rule::mul | Rule::div | Rule::pow => "an operator",
+        Rule::and_op | Rule::or_op => "`and` / `or`",
+        Rule::not_op => "`not`",
+        Rule::param_decl | Rule::kw_param => "a statement",
+        Rule::state_decl | Rule::kw_state => "a statement",
+        Rule::der_eq | Rule::kw_der => "a statement",
+        Rule::let_decl | Rule::kw_let => "a statement",
+        Rule::event_decl | Rule::kw_event => "a statement",
+        Rule::mode_decl | Rule::kw_mode | Rule::initial | Rule::kw_initial => "a statement",
+        Rule::output_decl | Rule::kw_output => "a statement",
+        Rule::simulate_decl | Rule::kw_simulate => "a statement",
+        Rule::reset => "a reset `x := ...`",
+        Rule::stop | Rule::kw_stop => "`stop`",
+        Rule::range | Rule::kw_in => "`in [LO, HI]`",
+        Rule::enable | Rule::kw_if => "`if`",
+        Rule::kw_then => "`then`",
+        Rule::kw_else => "`else`",
+        Rule::kw_when => "`when`",
+        Rule::target => "`-> MODE`",
+        Rule::event_block => "`{`",
+        Rule::setting => "a setting `name = value`",
+        Rule::call => "a function call",
+        Rule::if_expr => "an expression",
+        Rule::EOI => "the end of the file",
+        _ => return None,
+    })
+}
+
+fn convert_error(source: &str, err: pest::error::Error<Rule>) -> ParseError {
+    let pos = match err.location {
+        InputLocation::Pos(p) => p,
+        InputLocation::Span((s, _)) => s,
+    };
+    let mut expected: Vec<&str> = Vec::new();
+    if let ErrorVariant::ParsingError { positives, .. } = &err.variant {
+        for &rule in positives {
+            if let Some(d) = describe(rule) {
+                if !expected.contains(&d) {
+                    expected.push(d);
+                }
+            }
+        }
+    }
+    // Newlines are significant: "the end of the line" is what any statement-level rule that
+    // stopped early really wanted.
+    let expected = match expected.len() {
+        0 => "something else".to_string(),
+        1 => expected[0].to_string(),
+        n => format!("{} or {}", expected[..n - 1].join(", "), expected[n - 1]),
+    };
+    let found = found_at(source, pos);
+    let end = (pos + found.1).min(source.len());
+    ParseError {
+        span: Span::new(pos, end.max(pos)),
+        message: format!("unexpected {}", found.0),
+        expected,
+    }
+}
+
+/// What stands at `pos`, in words, and how many bytes of it to underline.
+fn found_at(source: &str, pos: usize) -> (String, usize) {
+    let rest = source.get(pos..).unwrap_or("");
+    let Some(c) = rest.chars().next() else {
+        return ("end of file".to_string(), 0);
+    };
+    if c == '\n' || c == '\r' {
+        return ("end of line".to_string(), 0);
+    }
+    let word: String = rest
+        .chars()
+        .take_while(|ch| ch.is_alphanumeric() || *ch == '_' || *ch == '.')
+        .collect();
+    if word.is_empty() {
+        (format!("`{c}`"), c.len_utf8())
+    } else {
+        (format!("`{word}`"), word.len())
+    }
+}
