@@ -4,6 +4,7 @@
 //! and their symbolic derivatives as a DAG) -> `codegen` (DAG -> native kernels) -> `sim`
 //! (event-locating integrator with sensitivities).
 
+pub mod cli;
 pub mod codegen;
 pub mod diag;
 pub mod expr;

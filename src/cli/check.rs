@@ -43,33 +43,43 @@ pub fn summary(model: &Model) -> String {
     }
     let _ = writeln!(out, "states");
     for s in &model.states {
-        let _ = writeln!(out, "  {} = {}", s.name, super::show_expr(model, &s.init));
+        let _ = writeln!(out, "  {} = {}", s.name, crate::lower::show_expr(model, &s.init));
     }
     let _ = writeln!(out, "modes");
     for (k, m) in model.modes.iter().enumerate() {
         let initial = if k == model.initial_mode.0 as usize { " (initial)" } else { "" };
         let _ = writeln!(out, "  {}{initial}", m.name);
         for (s, f) in model.states.iter().zip(&m.flows) {
-            let _ = writeln!(out, "    der({}) = {}", s.name, super::show_expr(model, f));
+            let _ = writeln!(out, "    der({}) = {}", s.name, crate::lower::show_expr(model, f));
         }
     }
     let _ = writeln!(out, "events");
     for ev in &model.events {
         let dir = match ev.direction {
-            Direction::Falling => "falls to 0 from above",
-            Direction::Rising => "rises to 0 from below",
-            Direction::Either => "crosses 0 either way",
+            Direction::Falling => "falling (from > 0 to <= 0)",
+            Direction::Rising => "rising (from < 0 to >= 0)",
+            Direction::Either => "either way",
         };
         let scope = match ev.owner {
             Some(m) => format!("in mode {}", model.modes[m.0 as usize].name),
             None => "in every mode".to_string(),
         };
-        let _ = writeln!(out, "  {} ({scope}): fires when g = {} {dir}", ev.name, super::show_expr(model, &ev.guard));
+        let _ = writeln!(
+            out,
+            "  {} ({scope}): guard {}, fires {dir}",
+            ev.name,
+            crate::lower::show_expr(model, &ev.guard)
+        );
         if ev.condition.is_some() {
             let _ = writeln!(out, "    only if its condition holds");
         }
         for (s, e) in &ev.resets {
-            let _ = writeln!(out, "    {} := {}", model.states[s.0 as usize].name, super::show_expr(model, e));
+            let _ = writeln!(
+                out,
+                "    {} := {}",
+                model.states[s.0 as usize].name,
+                crate::lower::show_expr(model, e)
+            );
         }
         if let Some(t) = ev.target {
             let _ = writeln!(out, "    -> {}", model.modes[t.0 as usize].name);
@@ -80,7 +90,7 @@ pub fn summary(model: &Model) -> String {
     }
     let _ = writeln!(out, "outputs");
     for o in &model.outputs {
-        let _ = writeln!(out, "  {} = {}", o.name, super::show_expr(model, &o.expr));
+        let _ = writeln!(out, "  {} = {}", o.name, crate::lower::show_expr(model, &o.expr));
     }
     out
 }

@@ -2,13 +2,14 @@
 //! an exit code (0 success, 1 model or run errors, 2 usage errors); nothing here panics on input.
 
 mod check;
+mod derive;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-use crate::sema::Model;
+use crate::sema::{Model, ParamIdx};
 
 /// hybc: a compiler for hybrid dynamical models with exact gradients through events.
 #[derive(Debug, Parser)]
@@ -22,6 +23,8 @@ struct Cli {
 enum Command {
     /// Check a model and print a summary of it.
     Check(check::CheckArgs),
+    /// Print the symbolic derivatives of every model function.
+    Derive(derive::DeriveArgs),
 }
 
 /// Exit codes, as documented in the README.
@@ -39,6 +42,7 @@ pub fn main() -> ExitCode {
     };
     match cli.command {
         Command::Check(args) => check::run(&args),
+        Command::Derive(args) => derive::run(&args),
     }
 }
 
@@ -64,4 +68,35 @@ pub(crate) fn load_model(path: &Path) -> Result<(Model, String), ExitCode> {
 pub(crate) struct ModelArg {
     /// The model file (.hyb).
     pub file: PathBuf,
+}
+
+/// Prints a usage error (a bad flag value) and returns its exit code.
+pub(crate) fn usage_error(message: &str) -> ExitCode {
+    eprintln!("error: {message}");
+    ExitCode::from(EXIT_USAGE_ERROR)
+}
+
+/// Parses a comma-separated list of parameter names, or `all`, for the flag `flag`.
+pub(crate) fn parse_param_list(model: &Model, list: &str, flag: &str) -> Result<Vec<ParamIdx>, String> {
+    if list.trim() == "all" {
+        return Ok((0..model.params.len()).map(|i| ParamIdx(i as u32)).collect());
+    }
+    let mut out: Vec<ParamIdx> = Vec::new();
+    for name in list.split(',').map(str::trim).filter(|n| !n.is_empty()) {
+        match model.param_index(name) {
+            Some(p) if out.contains(&p) => return Err(format!("{flag}: `{name}` is named twice")),
+            Some(p) => out.push(p),
+            None => return Err(unknown_param(model, name, flag)),
+        }
+    }
+    Ok(out)
+}
+
+/// "unknown parameter" with the model's parameters listed, for any flag that names one.
+pub(crate) fn unknown_param(model: &Model, name: &str, flag: &str) -> String {
+    let names: Vec<&str> = model.params.iter().map(|p| p.name.as_str()).collect();
+    let hint = crate::sema::closest_name(name, names.iter().copied())
+        .map(|s| format!(" (did you mean `{s}`?)"))
+        .unwrap_or_default();
+    format!("{flag}: model `{}` has no parameter `{name}`{hint}; its parameters are {}", model.name, names.join(", "))
 }

@@ -8,9 +8,11 @@
 
 mod interp;
 mod report;
+mod single;
 
 pub use interp::Interpreter;
 pub use report::derive_report;
+pub use single::show_expr;
 
 use crate::expr::eval::reachable;
 use crate::expr::{

@@ -58,6 +58,7 @@ impl<'a> Checker<'a> {
                 }
                 ast::Item::State(s) => {
                     let idx = StateIdx(states.len() as u32);
+                    self.scopes.push_state_name(&s.name.name);
                     self.declare(global, &s.name, Binding::State(idx), "state");
                     states.push((s, idx));
                 }
@@ -149,19 +150,11 @@ impl<'a> Checker<'a> {
 
         let states = states
             .iter()
-            .map(|(s, _)| State {
-                name: s.name.name.clone(),
-                init: self.resolve_init(s),
-                span: s.span,
-            })
+            .map(|(s, _)| State { name: s.name.name.clone(), init: self.resolve_init(s), span: s.span })
             .collect();
         let outputs = outputs
             .iter()
-            .map(|o| Output {
-                name: o.name.name.clone(),
-                expr: self.resolve(&o.value, global),
-                span: o.span,
-            })
+            .map(|o| Output { name: o.name.name.clone(), expr: self.resolve(&o.value, global), span: o.span })
             .collect();
 
         Model {
@@ -232,7 +225,10 @@ impl<'a> Checker<'a> {
                 "rtol" => &mut out.rtol,
                 "atol" => &mut out.atol,
                 other => {
-                    self.errors.push(CheckError::UnknownSetting { name: other.to_string(), span: setting.name.span });
+                    self.errors.push(CheckError::UnknownSetting {
+                        name: other.to_string(),
+                        span: setting.name.span,
+                    });
                     continue;
                 }
             };
@@ -240,7 +236,11 @@ impl<'a> Checker<'a> {
                 self.errors.push(CheckError::BadSetting {
                     name: setting.name.name.clone(),
                     value: v,
-                    expected: if setting.name.name == "rtol" { "a number in (0, 1)" } else { "a positive number" },
+                    expected: if setting.name.name == "rtol" {
+                        "a number in (0, 1)"
+                    } else {
+                        "a positive number"
+                    },
                     span: setting.value.span,
                 });
             }
@@ -359,7 +359,11 @@ impl<'a> Checker<'a> {
             }
             None => {
                 let suggestion = self.scopes.suggest_state(&name.name);
-                self.errors.push(CheckError::UnknownName { name: name.name.clone(), span: name.span, suggestion });
+                self.errors.push(CheckError::UnknownName {
+                    name: name.name.clone(),
+                    span: name.span,
+                    suggestion,
+                });
                 None
             }
         }
@@ -441,7 +445,11 @@ impl<'a> Checker<'a> {
     fn resolve_init(&mut self, s: &ast::StateDecl) -> Expr {
         let expr = self.resolve(&s.init, ScopeId::GLOBAL);
         if let Some(what) = first_non_constant(&expr, &self.scopes) {
-            self.errors.push(CheckError::InitNotConstant { state: s.name.name.clone(), what, span: s.init.span });
+            self.errors.push(CheckError::InitNotConstant {
+                state: s.name.name.clone(),
+                what,
+                span: s.init.span,
+            });
         }
         expr
     }

@@ -103,10 +103,9 @@ impl CheckError {
                 format!("expected at most one `:=` per state; the first is on line {}", line_of(*first)),
                 vec![],
             ),
-            NoInitialMode { .. } => (
-                "expected one mode declared as `initial mode NAME { ... }`".to_string(),
-                vec![],
-            ),
+            NoInitialMode { .. } => {
+                ("expected one mode declared as `initial mode NAME { ... }`".to_string(), vec![])
+            }
             SecondInitialMode { first, .. } => (
                 format!("expected exactly one initial mode; the first is on line {}", line_of(*first)),
                 vec![],
@@ -120,10 +119,9 @@ impl CheckError {
                 (format!("expected a default inside [{lo}, {hi}]"), vec![])
             }
             EmptyRange { .. } => ("expected LO <= HI".to_string(), vec![]),
-            InitNotConstant { .. } => (
-                "expected an expression of parameters only (no `t`, no states)".to_string(),
-                vec![],
-            ),
+            InitNotConstant { .. } => {
+                ("expected an expression of parameters only (no `t`, no states)".to_string(), vec![])
+            }
             EmptyModel { .. } => ("expected at least one `state NAME = ...`".to_string(), vec![]),
             UnknownSetting { .. } => ("expected `t_end`, `rtol` or `atol`".to_string(), vec![]),
             BadSetting { expected, .. } => (format!("expected {expected}"), vec![]),

@@ -8,3 +8,4 @@ mod names;
 pub use check::check;
 pub use error::CheckError;
 pub use model::*;
+pub use names::closest as closest_name;

@@ -237,15 +237,9 @@ impl Model {
         self.params.len()
     }
     pub fn param_index(&self, name: &str) -> Option<ParamIdx> {
-        self.params
-            .iter()
-            .position(|p| p.name == name)
-            .map(|i| ParamIdx(i as u32))
+        self.params.iter().position(|p| p.name == name).map(|i| ParamIdx(i as u32))
     }
     pub fn mode_index(&self, name: &str) -> Option<ModeId> {
-        self.modes
-            .iter()
-            .position(|m| m.name == name)
-            .map(|i| ModeId(i as u16))
+        self.modes.iter().position(|m| m.name == name).map(|i| ModeId(i as u16))
     }
 }

@@ -81,11 +81,13 @@ impl<'a> Scopes<'a> {
     }
 
     pub fn insert(&mut self, scope: ScopeId, name: &ast::Ident, binding: Binding, what: &'static str) {
-        if let Binding::State(i) = binding {
-            debug_assert_eq!(i.0 as usize, self.state_names.len());
-            self.state_names.push(name.name.clone());
-        }
         self.scopes[scope.0 as usize].names.insert(name.name.clone(), (binding, name.span, what));
+    }
+
+    /// Records the name of the next state, whether or not its declaration was valid, so that
+    /// state indices and names stay aligned.
+    pub fn push_state_name(&mut self, name: &str) {
+        self.state_names.push(name.to_string());
     }
 
     pub fn add_let(&mut self, decl: &'a ast::LetDecl, scope: ScopeId) -> LetId {
@@ -140,12 +142,15 @@ impl<'a> Scopes<'a> {
 }
 
 /// The candidate within a small edit distance of `name` (about a third of its length), if any.
+/// A candidate that shares no letter position with `name` is no suggestion (`q` is not a typo
+/// of `k`).
 pub fn closest<'s>(name: &str, candidates: impl Iterator<Item = &'s str>) -> Option<String> {
-    let limit = (name.chars().count() / 3).max(1);
+    let len = name.chars().count();
+    let limit = (len / 3).max(1);
     candidates
         .filter(|c| *c != name)
         .map(|c| (edit_distance(name, c), c))
-        .filter(|(d, _)| *d <= limit)
+        .filter(|(d, _)| *d <= limit && *d < len)
         .min()
         .map(|(_, c)| c.to_string())
 }
@@ -180,8 +185,10 @@ fn resolve_let(scopes: &mut Scopes, errors: &mut Vec<CheckError>, id: LetId, use
         LetState::Done(e) => return e.clone(),
         LetState::InProgress => {
             let start = scopes.let_stack.iter().position(|l| *l == id).unwrap_or(0);
-            let mut path: Vec<&str> =
-                scopes.let_stack[start..].iter().map(|l| scopes.lets[l.0 as usize].decl.name.name.as_str()).collect();
+            let mut path: Vec<&str> = scopes.let_stack[start..]
+                .iter()
+                .map(|l| scopes.lets[l.0 as usize].decl.name.name.as_str())
+                .collect();
             path.push(scopes.lets[k].decl.name.name.as_str());
             errors.push(CheckError::LetCycle {
                 name: scopes.lets[k].decl.name.name.clone(),
@@ -202,7 +209,12 @@ fn resolve_let(scopes: &mut Scopes, errors: &mut Vec<CheckError>, id: LetId, use
 }
 
 /// Resolves the names of an AST expression in `scope`, inlining `let`s.
-pub fn resolve_names(scopes: &mut Scopes, errors: &mut Vec<CheckError>, e: &ast::Expr, scope: ScopeId) -> Expr {
+pub fn resolve_names(
+    scopes: &mut Scopes,
+    errors: &mut Vec<CheckError>,
+    e: &ast::Expr,
+    scope: ScopeId,
+) -> Expr {
     match &e.kind {
         ast::ExprKind::Num(v) => Expr::Num(*v),
         ast::ExprKind::Name(name) => match scopes.lookup(scope, name) {
@@ -251,7 +263,11 @@ pub fn resolve_names(scopes: &mut Scopes, errors: &mut Vec<CheckError>, e: &ast:
                     });
                 } else {
                     let suggestion = closest(&name.name, Func::ALL.iter().map(|f| f.name()));
-                    errors.push(CheckError::UnknownFunction { name: name.name.clone(), span: name.span, suggestion });
+                    errors.push(CheckError::UnknownFunction {
+                        name: name.name.clone(),
+                        span: name.span,
+                        suggestion,
+                    });
                 }
                 return Expr::Num(0.0);
             };
@@ -275,7 +291,12 @@ pub fn resolve_names(scopes: &mut Scopes, errors: &mut Vec<CheckError>, e: &ast:
     }
 }
 
-pub fn resolve_cond(scopes: &mut Scopes, errors: &mut Vec<CheckError>, c: &ast::Cond, scope: ScopeId) -> Cond {
+pub fn resolve_cond(
+    scopes: &mut Scopes,
+    errors: &mut Vec<CheckError>,
+    c: &ast::Cond,
+    scope: ScopeId,
+) -> Cond {
     match &c.kind {
         ast::CondKind::Cmp(op, a, b) => {
             let op = match op {

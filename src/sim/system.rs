@@ -83,6 +83,8 @@ pub trait HybridSystem: Sync {
     /// Flow of `mode`: `dx = f(t, x, p)`.
     fn flow(&self, mode: usize, t: f64, x: &[f64], p: &[f64], dx: &mut [f64]);
     /// Flow and sensitivity right-hand side in one call: `dx = f`, `ds = f_x s + f_p`.
+    // The argument list mirrors the native kernel's ABI; a struct would only add a copy.
+    #[allow(clippy::too_many_arguments)]
     fn flow_sens(
         &self,
         mode: usize,
@@ -111,6 +113,7 @@ pub trait HybridSystem: Sync {
     /// Reset map: the post-event state `r = R(t, x, p)`.
     fn reset(&self, event: usize, t: f64, x: &[f64], p: &[f64], r: &mut [f64]);
     /// Reset Jacobians `rx` (n * n, row-major), `rp` (n * m), `rt` (n).
+    #[allow(clippy::too_many_arguments)]
     fn reset_jac(
         &self,
         event: usize,

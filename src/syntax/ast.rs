@@ -27,8 +27,8 @@ pub enum Item {
     State(StateDecl),
     Der(DerEq),
     Let(LetDecl),
-    Event(EventDecl),
-    Mode(ModeDecl),
+    Event(Box<EventDecl>),
+    Mode(Box<ModeDecl>),
     Output(OutputDecl),
     Simulate(SimulateDecl),
 }
@@ -129,7 +129,7 @@ pub struct ModeDecl {
 pub enum ModeItem {
     Der(DerEq),
     Let(LetDecl),
-    Event(EventDecl),
+    Event(Box<EventDecl>),
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -17,9 +17,50 @@ struct HybParser;
 
 /// Parses a whole `.hyb` source text.
 pub fn parse(source: &str) -> Result<File, ParseError> {
+    // Track the literal tokens tried at the furthest position, for "expected `,`" messages.
+    pest::set_error_detail(true);
+    check_limits(source)?;
     let mut pairs = HybParser::parse(Rule::file, source).map_err(|e| convert_error(source, e))?;
     let file = pairs.next().expect("the file rule always yields one pair");
     build_file(file)
+}
+
+/// Longest line accepted. Statements end at the line end, so this bounds every expression and
+/// with it the recursion depth of every later stage.
+const MAX_LINE_LEN: usize = 4096;
+/// Deepest parenthesis nesting accepted (the parser recurses on each level).
+const MAX_NESTING: usize = 64;
+
+/// Rejects inputs whose shape would exhaust the stack of a recursive stage.
+fn check_limits(source: &str) -> Result<(), ParseError> {
+    let mut line_start = 0;
+    let mut depth = 0usize;
+    for (i, c) in source.char_indices() {
+        match c {
+            '\n' => {
+                line_start = i + 1;
+                continue;
+            }
+            '(' => depth += 1,
+            ')' => depth = depth.saturating_sub(1),
+            _ => {}
+        }
+        if depth > MAX_NESTING {
+            return Err(ParseError {
+                span: Span::new(i, i + 1),
+                message: format!("parentheses nested more than {MAX_NESTING} deep"),
+                expected: "a flatter expression (use `let`)".to_string(),
+            });
+        }
+        if i - line_start >= MAX_LINE_LEN {
+            return Err(ParseError {
+                span: Span::new(i, i + c.len_utf8()),
+                message: format!("line longer than {MAX_LINE_LEN} characters"),
+                expected: "a shorter line (split the expression with `let`)".to_string(),
+            });
+        }
+    }
+    Ok(())
 }
 
 fn span_of(pair: &Pair<Rule>) -> Span {
@@ -50,7 +91,8 @@ fn number(pair: Pair<Rule>) -> Result<Number, ParseError> {
 }
 
 fn build_file(pair: Pair<Rule>) -> Result<File, ParseError> {
-    let mut inner = pair.into_inner();
+    // Line ends are significant in the grammar but carry nothing for the AST.
+    let mut inner = pair.into_inner().filter(|p| p.as_rule() != Rule::nl);
     let model_decl = inner.next().expect("grammar: model_decl first");
     let model = ident(model_decl.into_inner().nth(1).expect("grammar: model name"));
     let mut items = Vec::new();
@@ -107,8 +149,8 @@ fn build_item(pair: Pair<Rule>) -> Result<Item, ParseError> {
             }
             Item::Simulate(SimulateDecl { settings, span })
         }
-        Rule::event_decl => Item::Event(build_event(pair)?),
-        Rule::mode_decl => Item::Mode(build_mode(pair)?),
+        Rule::event_decl => Item::Event(Box::new(build_event(pair)?)),
+        Rule::mode_decl => Item::Mode(Box::new(build_mode(pair)?)),
         other => unreachable!("grammar: unexpected item {other:?}"),
     })
 }
@@ -144,8 +186,7 @@ fn build_event(pair: Pair<Rule>) -> Result<EventDecl, ParseError> {
         _ => GuardOp::Crosses,
     };
     let rhs = build_expr(it.next().expect("grammar: guard rhs"))?;
-    let mut event =
-        EventDecl { name, lhs, op, rhs, condition: None, target: None, body: Vec::new(), span };
+    let mut event = EventDecl { name, lhs, op, rhs, condition: None, target: None, body: Vec::new(), span };
     for p in it {
         match p.as_rule() {
             Rule::enable => {
@@ -156,7 +197,7 @@ fn build_event(pair: Pair<Rule>) -> Result<EventDecl, ParseError> {
                 event.target = Some(ident(p.into_inner().next().expect("grammar: target")));
             }
             Rule::event_block => {
-                for s in p.into_inner() {
+                for s in p.into_inner().filter(|s| s.as_rule() != Rule::nl) {
                     let sspan = span_of(&s);
                     event.body.push(match s.as_rule() {
                         Rule::reset => {
@@ -185,11 +226,11 @@ fn build_mode(pair: Pair<Rule>) -> Result<ModeDecl, ParseError> {
     for p in pair.into_inner() {
         match p.as_rule() {
             Rule::initial => is_initial = true,
-            Rule::kw_mode => {}
+            Rule::kw_mode | Rule::nl => {}
             Rule::ident => name = Some(ident(p)),
             Rule::der_eq => items.push(ModeItem::Der(build_der(p)?)),
             Rule::let_decl => items.push(ModeItem::Let(build_let(p)?)),
-            Rule::event_decl => items.push(ModeItem::Event(build_event(p)?)),
+            Rule::event_decl => items.push(ModeItem::Event(Box::new(build_event(p)?))),
             other => unreachable!("grammar: unexpected mode part {other:?}"),
         }
     }
@@ -264,9 +305,9 @@ fn build_primary(pair: Pair<Rule>) -> Result<Expr, ParseError> {
             ExprKind::Call(name, args)
         }
         Rule::if_expr => {
-            let mut it = pair.into_inner().filter(|p| {
-                !matches!(p.as_rule(), Rule::kw_if | Rule::kw_then | Rule::kw_else)
-            });
+            let mut it = pair
+                .into_inner()
+                .filter(|p| !matches!(p.as_rule(), Rule::kw_if | Rule::kw_then | Rule::kw_else));
             let c = build_cond(it.next().expect("grammar: if cond"))?;
             let a = build_expr(it.next().expect("grammar: then"))?;
             let b = build_expr(it.next().expect("grammar: else"))?;
@@ -314,6 +355,9 @@ fn build_cond(pair: Pair<Rule>) -> Result<Cond, ParseError> {
         .parse(pair.into_inner())
 }
 
+const LINE_END: &str = "the end of the line";
+const FILE_END: &str = "the end of the file";
+
 /// Human names for what the parser expected, in the words of the language reference.
 fn describe(rule: Rule) -> Option<&'static str> {
     Some(match rule {
@@ -347,28 +391,37 @@ fn describe(rule: Rule) -> Option<&'static str> {
         Rule::setting => "a setting `name = value`",
         Rule::call => "a function call",
         Rule::if_expr => "an expression",
-        Rule::EOI => "the end of the file",
+        Rule::EOI => FILE_END,
+        Rule::nl => LINE_END,
         _ => return None,
     })
 }
 
 fn convert_error(source: &str, err: pest::error::Error<Rule>) -> ParseError {
-    let pos = match err.location {
+    let mut pos = match err.location {
         InputLocation::Pos(p) => p,
         InputLocation::Span((s, _)) => s,
     };
-    let mut expected: Vec<&str> = Vec::new();
-    if let ErrorVariant::ParsingError { positives, .. } = &err.variant {
+    let mut expected: Vec<String> = Vec::new();
+    let mut push = |d: String| {
+        if !expected.contains(&d) {
+            expected.push(d);
+        }
+    };
+    if let Some((at, found)) = furthest_attempt(source, &err, pos) {
+        pos = at;
+        found.into_iter().for_each(&mut push);
+    } else if let ErrorVariant::ParsingError { positives, .. } = &err.variant {
         for &rule in positives {
             if let Some(d) = describe(rule) {
-                if !expected.contains(&d) {
-                    expected.push(d);
-                }
+                push(d.to_string());
             }
         }
     }
-    // Newlines are significant: "the end of the line" is what any statement-level rule that
-    // stopped early really wanted.
+    // Where a line could end, "the end of the file" is only the special case of the last line.
+    if expected.iter().any(|e| e == LINE_END) {
+        expected.retain(|e| e != FILE_END);
+    }
     let expected = match expected.len() {
         0 => "something else".to_string(),
         1 => expected[0].to_string(),
@@ -376,11 +429,49 @@ fn convert_error(source: &str, err: pest::error::Error<Rule>) -> ParseError {
     };
     let found = found_at(source, pos);
     let end = (pos + found.1).min(source.len());
-    ParseError {
-        span: Span::new(pos, end.max(pos)),
-        message: format!("unexpected {}", found.0),
-        expected,
+    ParseError { span: Span::new(pos, end.max(pos)), message: format!("unexpected {}", found.0), expected }
+}
+
+/// The furthest position the parser reached and what it wanted there, when that says more than
+/// pest's rule-level error: it knows the punctuation that was missing (`,`, `]`, `:=`).
+fn furthest_attempt(
+    source: &str,
+    err: &pest::error::Error<Rule>,
+    pos: usize,
+) -> Option<(usize, Vec<String>)> {
+    let attempts = err.parse_attempts()?;
+    let at = attempts.max_position;
+    // Past a keyword's last letter the attempt stands on blank space; the rule-level error is
+    // clearer there.
+    if at < pos || source[at..].starts_with([' ', '\t']) {
+        return None;
     }
+    let mut found: Vec<String> = Vec::new();
+    for stack in attempts.call_stacks() {
+        if let Some(d) = stack.deepest.get_rule().and_then(|r| describe(*r)) {
+            found.push(d.to_string());
+        }
+    }
+    let mut has_operator = false;
+    for token in attempts.expected_tokens() {
+        let token = token.to_string();
+        match token.as_str() {
+            // A comment, or the continuation of a name or number: never what the user missed.
+            "#" | "_" | "." | "" => {}
+            "+" | "-" | "*" | "/" | "^" => has_operator = true,
+            "(" if found.iter().any(|f| f == "an expression") => {}
+            t if t.chars().all(|c| c.is_ascii_punctuation()) => found.push(format!("`{t}`")),
+            _ => {}
+        }
+    }
+    if has_operator {
+        found.push("an operator".to_string());
+    }
+    found.dedup();
+    if found.is_empty() {
+        return None;
+    }
+    Some((at, found))
 }
 
 /// What stands at `pos`, in words, and how many bytes of it to underline.
@@ -392,10 +483,8 @@ fn found_at(source: &str, pos: usize) -> (String, usize) {
     if c == '\n' || c == '\r' {
         return ("end of line".to_string(), 0);
     }
-    let word: String = rest
-        .chars()
-        .take_while(|ch| ch.is_alphanumeric() || *ch == '_' || *ch == '.')
-        .collect();
+    let word: String =
+        rest.chars().take_while(|ch| ch.is_alphanumeric() || *ch == '_' || *ch == '.').collect();
     if word.is_empty() {
         (format!("`{c}`"), c.len_utf8())
     } else {

@@ -1,0 +1,46 @@
+//! `hybc derive FILE [--wrt P,...] [--mode M]`: print every symbolic derivative of a model.
+
+use std::process::ExitCode;
+
+use super::{load_model, parse_param_list, usage_error, ModelArg};
+use crate::lower::{derive_report, lower};
+
+#[derive(Debug, clap::Args)]
+pub struct DeriveArgs {
+    #[command(flatten)]
+    model: ModelArg,
+    /// Parameters to differentiate with respect to: `P1,P2,...` or `all` (the default).
+    #[arg(long, value_name = "P1,P2|all", default_value = "all")]
+    wrt: String,
+    /// Show only this mode (top-level events are always shown).
+    #[arg(long, value_name = "MODE")]
+    mode: Option<String>,
+}
+
+pub fn run(args: &DeriveArgs) -> ExitCode {
+    let (model, _) = match load_model(&args.model.file) {
+        Ok(loaded) => loaded,
+        Err(code) => return code,
+    };
+    let wrt = match parse_param_list(&model, &args.wrt, "--wrt") {
+        Ok(wrt) => wrt,
+        Err(message) => return usage_error(&message),
+    };
+    let mode = match &args.mode {
+        None => None,
+        Some(name) => match model.mode_index(name) {
+            Some(m) => Some(m),
+            None => {
+                let names: Vec<&str> = model.modes.iter().map(|m| m.name.as_str()).collect();
+                return usage_error(&format!(
+                    "--mode: model `{}` has no mode `{name}`; its modes are {}",
+                    model.name,
+                    names.join(", ")
+                ));
+            }
+        },
+    };
+    let funcs = lower(&model);
+    print!("{}", derive_report(&model, &funcs, &wrt, mode));
+    ExitCode::SUCCESS
+}
