@@ -2,10 +2,10 @@
 //! has no instruction for. Knows nothing of the DAG's structure or of kernels; it only names each
 //! callee and points at an `extern "C"` wrapper.
 //!
-//! Every wrapper computes exactly what the reference evaluator computes for the same operation,
-//! so JIT and evaluator results agree bit for bit.
+//! Every wrapper calls the reference evaluator's `apply_unary`/`apply_binary`, the one place each
+//! operation's meaning is written, so JIT and evaluator results agree bit for bit.
 
-use crate::expr::{BinaryOp, UnaryOp};
+use crate::expr::{apply_binary, apply_unary, BinaryOp, UnaryOp};
 
 /// A host function reachable from generated code.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -117,56 +117,6 @@ fn binary_wrapper(op: BinaryOp) -> Option<BinaryFn> {
         | BinaryOp::Or => return None,
     };
     Some(f)
-}
-
-/// Stand-ins for the evaluator's `apply_unary`/`apply_binary` until `expr::eval` lands: the same
-/// meaning per operation, written once.
-fn apply_unary(op: UnaryOp, a: f64) -> f64 {
-    match op {
-        UnaryOp::Sin => a.sin(),
-        UnaryOp::Cos => a.cos(),
-        UnaryOp::Tan => a.tan(),
-        UnaryOp::Asin => a.asin(),
-        UnaryOp::Acos => a.acos(),
-        UnaryOp::Atan => a.atan(),
-        UnaryOp::Sinh => a.sinh(),
-        UnaryOp::Cosh => a.cosh(),
-        UnaryOp::Tanh => a.tanh(),
-        UnaryOp::Exp => a.exp(),
-        UnaryOp::Log => a.ln(),
-        UnaryOp::Neg => -a,
-        UnaryOp::Sqrt => a.sqrt(),
-        UnaryOp::Abs => a.abs(),
-        UnaryOp::Sign => {
-            if a > 0.0 {
-                1.0
-            } else if a < 0.0 {
-                -1.0
-            } else if a == 0.0 {
-                0.0
-            } else {
-                a
-            }
-        }
-        UnaryOp::Not => f64::from(a == 0.0),
-    }
-}
-
-fn apply_binary(op: BinaryOp, a: f64, b: f64) -> f64 {
-    match op {
-        BinaryOp::Pow => a.powf(b),
-        BinaryOp::Atan2 => a.atan2(b),
-        BinaryOp::Hypot => a.hypot(b),
-        BinaryOp::Min => a.min(b),
-        BinaryOp::Max => a.max(b),
-        BinaryOp::Add => a + b,
-        BinaryOp::Mul => a * b,
-        BinaryOp::Div => a / b,
-        BinaryOp::Lt => f64::from(a < b),
-        BinaryOp::Le => f64::from(a <= b),
-        BinaryOp::And => f64::from(a != 0.0 && b != 0.0),
-        BinaryOp::Or => f64::from(a != 0.0 || b != 0.0),
-    }
 }
 
 macro_rules! unary_wrappers {
