@@ -101,8 +101,12 @@ pub(crate) fn define_kernel(
             imported: HashMap::new(),
         };
         let r = tr.translate_plan(plan);
-        let target = tr.module.target_config();
-        tr.b.finalize(target);
+        // A half-built function cannot be finalized (its block has no terminator); on error it
+        // is simply dropped and the context cleared below.
+        if r.is_ok() {
+            let target = tr.module.target_config();
+            tr.b.finalize(target);
+        }
         r
     };
     if let Err(e) = result {
