@@ -1,0 +1,358 @@
+//! Stage 4 (codegen): the safe face of the JIT. Owns the Cranelift module and the native kernels,
+//! checks every slice length before entering native code, and implements `sim::HybridSystem`.
+//! Knows nothing of how kernels are generated beyond the plans' declared lengths.
+
+use std::sync::Mutex;
+
+use cranelift_codegen::settings::{self, Configurable};
+use cranelift_frontend::FunctionBuilderContext;
+use cranelift_jit::{JITBuilder, JITModule};
+use cranelift_module::{default_libcall_names, Module};
+
+use super::lower::{declare_callees, define_kernel};
+use super::plan::{plan_model, KernelPlan, Lens, ModelKernels, N_OUTS};
+use super::runtime::Callee;
+use super::{CodegenError, CompileOptions, OptLevel, RegAlloc};
+use crate::expr::ModelFunctions;
+use crate::sim::{HybridSystem, SystemInfo};
+
+/// The native signature shared by every kernel (see `lower`).
+type KernelFn = unsafe extern "C" fn(
+    f64,
+    *const f64,
+    *const f64,
+    *const f64,
+    *mut f64,
+    *mut f64,
+    *mut f64,
+) -> f64;
+
+/// A finalized kernel with the exact slice lengths it was generated for.
+#[derive(Clone, Copy)]
+struct Kernel {
+    f: KernelFn,
+    lens: Lens,
+    prefill: [bool; N_OUTS],
+}
+
+impl Kernel {
+    /// Calls the kernel if every slice has the length it was generated for. Otherwise nothing
+    /// native runs, the outputs are filled with NaN (so a caller's bug shows up in its results
+    /// rather than as memory corruption) and `None` is returned.
+    fn call(
+        &self,
+        t: f64,
+        x: &[f64],
+        s: &[f64],
+        p: &[f64],
+        outs: [&mut [f64]; N_OUTS],
+    ) -> Option<f64> {
+        let fits = x.len() == self.lens.x
+            && s.len() == self.lens.s
+            && p.len() == self.lens.p
+            && outs.iter().zip(self.lens.out).all(|(o, len)| o.len() == len);
+        if !fits {
+            for o in outs {
+                o.fill(f64::NAN);
+            }
+            return None;
+        }
+        let [o0, o1, o2] = outs;
+        for (o, prefill) in [&mut *o0, &mut *o1, &mut *o2].into_iter().zip(self.prefill) {
+            if prefill {
+                o.fill(0.0);
+            }
+        }
+        // SAFETY: `f` was finalized by the module this model owns and is freed only in `Drop`,
+        // which cannot run while `&self` is borrowed. The plan of this kernel was checked to read
+        // `x`, `s`, `p` and write `out*` only below `self.lens` (`KernelPlan::check` and
+        // `Translator::translate_load`), and the lengths were just compared exactly. Outputs are
+        // `&mut` borrows, so they alias neither each other nor the inputs, as the kernel's cached
+        // loads assume. The kernel touches no other memory: its only calls are the pure
+        // wrappers in `runtime`.
+        let r = unsafe {
+            (self.f)(
+                t,
+                x.as_ptr(),
+                s.as_ptr(),
+                p.as_ptr(),
+                o0.as_mut_ptr(),
+                o1.as_mut_ptr(),
+                o2.as_mut_ptr(),
+            )
+        };
+        Some(r)
+    }
+}
+
+/// A model compiled to native code.
+///
+/// `Send + Sync` without any `unsafe impl`: the kernels are plain function pointers, and the
+/// `JITModule` (which is `Send` but not `Sync`) sits behind a `Mutex` that is only ever locked
+/// in `Drop`; sharing `&CompiledModel` between threads only shares the pure kernels.
+pub struct CompiledModel {
+    info: SystemInfo,
+    kernels: ModelKernels<Kernel>,
+    n_kernels: usize,
+    module: Mutex<Option<JITModule>>,
+}
+
+impl std::fmt::Debug for CompiledModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CompiledModel")
+            .field("info", &self.info)
+            .field("n_kernels", &self.n_kernels)
+            .finish_non_exhaustive()
+    }
+}
+
+impl CompiledModel {
+    /// Checks `funcs` against `info`, generates every kernel and finalizes them. Derivatives are
+    /// compiled for `info.grad_params` only; all parameter values stay run-time inputs.
+    pub fn compile(
+        funcs: &ModelFunctions,
+        info: SystemInfo,
+        opts: &CompileOptions,
+    ) -> Result<CompiledModel, CodegenError> {
+        let plan = plan_model(funcs, &info)?;
+        let mut module = new_module(opts)?;
+        match build_kernels(&mut module, funcs, &plan) {
+            Ok(kernels) => Ok(CompiledModel {
+                info,
+                n_kernels: plan.iter().count(),
+                kernels,
+                module: Mutex::new(Some(module)),
+            }),
+            Err(e) => {
+                // SAFETY: no pointer into the module's memory was handed out: `build_kernels`
+                // failed before returning any kernel.
+                unsafe { module.free_memory() };
+                Err(e)
+            }
+        }
+    }
+
+    /// Number of native functions generated.
+    pub fn n_kernels(&self) -> usize {
+        self.n_kernels
+    }
+}
+
+impl Drop for CompiledModel {
+    fn drop(&mut self) {
+        let slot = match self.module.get_mut() {
+            Ok(slot) => slot,
+            // Nothing ever panics while holding the lock (only `Drop` locks it), but a poisoned
+            // lock still owns the module, and the code must be freed either way.
+            Err(poisoned) => poisoned.into_inner(),
+        };
+        if let Some(module) = slot.take() {
+            // SAFETY: `&mut self` proves no kernel is running, and the pointers in
+            // `self.kernels` are never used after this: they are private and die with `self`.
+            unsafe { module.free_memory() };
+        }
+    }
+}
+
+/// A JIT module with the chosen flags and every host wrapper registered, so no import can stay
+/// unresolved (which would panic inside `finalize_definitions`).
+fn new_module(opts: &CompileOptions) -> Result<JITModule, CodegenError> {
+    let mut flags = settings::builder();
+    let opt_level = match opts.opt_level {
+        OptLevel::None => "none",
+        OptLevel::Speed => "speed",
+        OptLevel::SpeedAndSize => "speed_and_size",
+    };
+    let regalloc = match opts.regalloc {
+        RegAlloc::Backtracking => "backtracking",
+        RegAlloc::SinglePass => "single_pass",
+    };
+    let verifier = if opts.verifier { "true" } else { "false" };
+    for (name, value) in [
+        ("opt_level", opt_level),
+        ("regalloc_algorithm", regalloc),
+        ("enable_verifier", verifier),
+        // JITModule::new asserts non-PIC code; colocated libcalls could be out of range.
+        ("is_pic", "false"),
+        ("use_colocated_libcalls", "false"),
+    ] {
+        flags.set(name, value).map_err(CodegenError::Setting)?;
+    }
+    let isa = cranelift_native::builder()
+        .map_err(|reason| CodegenError::UnsupportedHost { reason })?
+        .finish(settings::Flags::new(flags))
+        .map_err(CodegenError::Target)?;
+    let mut builder = JITBuilder::with_isa(isa, default_libcall_names());
+    for callee in Callee::all() {
+        let address = callee.address().ok_or(CodegenError::Internal {
+            reason: "host wrapper without an address",
+        })?;
+        builder.symbol(callee.symbol(), address);
+    }
+    Ok(JITModule::new(builder))
+}
+
+/// Defines every planned kernel, finalizes the module and fetches the function pointers.
+fn build_kernels(
+    module: &mut JITModule,
+    funcs: &ModelFunctions,
+    plan: &ModelKernels<KernelPlan>,
+) -> Result<ModelKernels<Kernel>, CodegenError> {
+    let callees = declare_callees(module)?;
+    let mut ctx = module.make_context();
+    let mut fn_ctx = FunctionBuilderContext::new();
+    let ids = plan.try_map(|k| {
+        let id = define_kernel(module, &mut ctx, &mut fn_ctx, &callees, &funcs.store, k)?;
+        Ok::<_, CodegenError>((id, k.lens, k.prefill))
+    })?;
+    module
+        .finalize_definitions()
+        .map_err(|source| CodegenError::Module {
+            kernel: "finalize".into(),
+            source: Box::new(source),
+        })?;
+    ids.try_map(|&(id, lens, prefill)| {
+        let code = module.get_finalized_function(id);
+        // SAFETY: `code` is the finalized entry of a function defined with `kernel_signature`,
+        // which is exactly `KernelFn` under the host's default (C) calling convention.
+        let f = unsafe { std::mem::transmute::<*const u8, KernelFn>(code) };
+        Ok(Kernel { f, lens, prefill })
+    })
+}
+
+/// Fills every output with NaN when a mode or event index is out of range: the trait has no
+/// error channel, and NaN makes the caller's bug visible.
+fn poison(outs: [&mut [f64]; N_OUTS]) {
+    for o in outs {
+        o.fill(f64::NAN);
+    }
+}
+
+impl HybridSystem for CompiledModel {
+    fn info(&self) -> &SystemInfo {
+        &self.info
+    }
+
+    fn initial_state(&self, p: &[f64], x0: &mut [f64]) {
+        // Initial values depend on parameters only; `t` is never read.
+        self.kernels
+            .init
+            .call(0.0, &[], &[], p, [x0, &mut [], &mut []]);
+    }
+
+    fn initial_sens(&self, p: &[f64], s0: &mut [f64]) {
+        self.kernels
+            .init_sens
+            .call(0.0, &[], &[], p, [s0, &mut [], &mut []]);
+    }
+
+    fn flow(&self, mode: usize, t: f64, x: &[f64], p: &[f64], dx: &mut [f64]) {
+        match self.kernels.flow.get(mode) {
+            Some(k) => {
+                k.call(t, x, &[], p, [dx, &mut [], &mut []]);
+            }
+            None => poison([dx, &mut [], &mut []]),
+        }
+    }
+
+    fn flow_sens(
+        &self,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        s: &[f64],
+        p: &[f64],
+        dx: &mut [f64],
+        ds: &mut [f64],
+    ) {
+        match self.kernels.flow_sens.get(mode) {
+            Some(k) => {
+                k.call(t, x, s, p, [dx, ds, &mut []]);
+            }
+            None => poison([dx, ds, &mut []]),
+        }
+    }
+
+    fn guards(&self, mode: usize, t: f64, x: &[f64], p: &[f64], g: &mut [f64]) {
+        match self.kernels.guards.get(mode) {
+            Some(k) => {
+                k.call(t, x, &[], p, [g, &mut [], &mut []]);
+            }
+            None => poison([g, &mut [], &mut []]),
+        }
+    }
+
+    fn guard_grad(
+        &self,
+        event: usize,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+        gx: &mut [f64],
+        gp: &mut [f64],
+    ) -> f64 {
+        match self.kernels.guard_grad.get(event) {
+            Some(k) => k.call(t, x, &[], p, [gx, gp, &mut []]).unwrap_or(f64::NAN),
+            None => {
+                poison([gx, gp, &mut []]);
+                f64::NAN
+            }
+        }
+    }
+
+    fn condition(&self, event: usize, t: f64, x: &[f64], p: &[f64]) -> bool {
+        match self.kernels.condition.get(event) {
+            // Same rule as `Select`: any value other than 0.0 (NaN included) is true.
+            Some(Some(k)) => k
+                .call(t, x, &[], p, [&mut [], &mut [], &mut []])
+                .is_some_and(|c| c != 0.0),
+            Some(None) => true,
+            None => false,
+        }
+    }
+
+    fn reset(&self, event: usize, t: f64, x: &[f64], p: &[f64], r: &mut [f64]) {
+        match self.kernels.reset.get(event) {
+            Some(k) => {
+                k.call(t, x, &[], p, [r, &mut [], &mut []]);
+            }
+            None => poison([r, &mut [], &mut []]),
+        }
+    }
+
+    fn reset_jac(
+        &self,
+        event: usize,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+        rx: &mut [f64],
+        rp: &mut [f64],
+        rt: &mut [f64],
+    ) {
+        match self.kernels.reset_jac.get(event) {
+            Some(k) => {
+                k.call(t, x, &[], p, [rx, rp, rt]);
+            }
+            None => poison([rx, rp, rt]),
+        }
+    }
+
+    fn outputs(&self, t: f64, x: &[f64], p: &[f64], y: &mut [f64]) {
+        self.kernels
+            .outputs
+            .call(t, x, &[], p, [y, &mut [], &mut []]);
+    }
+
+    fn output_jac(
+        &self,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+        yx: &mut [f64],
+        yp: &mut [f64],
+        yt: &mut [f64],
+    ) {
+        self.kernels.output_jac.call(t, x, &[], p, [yx, yp, yt]);
+    }
+}

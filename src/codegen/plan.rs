@@ -1,0 +1,528 @@
+//! Stage 4 (codegen): what each kernel computes, as plain data. Maps the lowered model functions
+//! onto the array layouts of `sim::system` and checks every shape and index on the way. Knows no
+//! Cranelift and no `unsafe`: a plan that passes [`KernelPlan::check`] only ever touches memory
+//! inside the lengths it declares.
+
+use super::CodegenError;
+use crate::expr::{ExprId, ExprStore, ModelFunctions, SparseMat, SparseVec};
+use crate::sim::SystemInfo;
+
+/// Number of output pointers every kernel takes (unused ones receive empty slices).
+pub(crate) const N_OUTS: usize = 3;
+
+/// The slice lengths a kernel reads and writes; the caller must pass exactly these.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Lens {
+    pub x: usize,
+    pub s: usize,
+    pub p: usize,
+    pub out: [usize; N_OUTS],
+}
+
+/// The value stored into one output entry.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) enum Term {
+    Expr(ExprId),
+    Zero,
+    /// `sum_k a_k * s[s_k]` over `products` in order, then `+ bias`: one entry of `f_x S + f_p`.
+    /// The order is fixed so that a hand-written loop in the same order agrees bit for bit.
+    SensDot {
+        products: Vec<(ExprId, u32)>,
+        bias: Option<ExprId>,
+    },
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Write {
+    pub out: usize,
+    pub index: u32,
+    pub term: Term,
+}
+
+/// One native function to generate.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct KernelPlan {
+    /// Exported symbol name, unique per module.
+    pub name: String,
+    pub lens: Lens,
+    /// Outputs the caller zero-fills before the call, because the kernel writes only their
+    /// structurally non-zero entries (sparse Jacobians).
+    pub prefill: [bool; N_OUTS],
+    pub writes: Vec<Write>,
+    /// The kernel's f64 return value; 0.0 when `None`.
+    pub ret: Option<ExprId>,
+}
+
+impl KernelPlan {
+    fn new(name: String, lens: Lens) -> Self {
+        KernelPlan {
+            name,
+            lens,
+            prefill: [false; N_OUTS],
+            writes: Vec::new(),
+            ret: None,
+        }
+    }
+
+    fn write(&mut self, out: usize, index: usize, term: Term) -> Result<(), CodegenError> {
+        let index = u32::try_from(index).map_err(|_| CodegenError::TooLarge {
+            what: self.name.clone(),
+            len: index,
+        })?;
+        self.writes.push(Write { out, index, term });
+        Ok(())
+    }
+
+    /// Every expression the kernel needs, in no particular order.
+    pub(crate) fn roots(&self) -> impl Iterator<Item = ExprId> + '_ {
+        let writes = self.writes.iter().flat_map(|w| match &w.term {
+            Term::Expr(e) => vec![*e],
+            Term::Zero => Vec::new(),
+            Term::SensDot { products, bias } => {
+                products.iter().map(|&(e, _)| e).chain(*bias).collect()
+            }
+        });
+        writes.chain(self.ret)
+    }
+
+    /// Checks that every write and every sensitivity read lies inside the declared lengths, that
+    /// every output entry is written or prefilled, and that every root is in `store`. State and
+    /// parameter reads are checked against `lens` when the nodes are lowered.
+    pub(crate) fn check(&self, store: &ExprStore) -> Result<(), CodegenError> {
+        let mut covered: [Vec<bool>; N_OUTS] = self.lens.out.map(|len| vec![false; len]);
+        for w in &self.writes {
+            let slot = covered
+                .get_mut(w.out)
+                .and_then(|c| c.get_mut(w.index as usize))
+                .ok_or_else(|| CodegenError::IndexOutOfRange {
+                    what: format!("{} output {}", self.name, w.out),
+                    index: w.index as usize,
+                    len: self.lens.out.get(w.out).copied().unwrap_or(0),
+                })?;
+            *slot = true;
+            if let Term::SensDot { products, .. } = &w.term {
+                for &(_, s) in products {
+                    if s as usize >= self.lens.s {
+                        return Err(CodegenError::IndexOutOfRange {
+                            what: format!("{} sensitivity read", self.name),
+                            index: s as usize,
+                            len: self.lens.s,
+                        });
+                    }
+                }
+            }
+        }
+        for (out, cov) in covered.iter().enumerate() {
+            if let Some(index) = cov.iter().position(|&c| !c) {
+                if !self.prefill[out] {
+                    return Err(CodegenError::Unwritten {
+                        what: format!("{} output {out}", self.name),
+                        index,
+                    });
+                }
+            }
+        }
+        for root in self.roots() {
+            if root.index() >= store.len() {
+                return Err(CodegenError::UnknownExpr {
+                    id: root.0,
+                    len: store.len(),
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One `K` per kernel of a model, indexed like the `HybridSystem` methods that call them:
+/// first the plans, then the compiled functions.
+#[derive(Clone, Debug)]
+pub(crate) struct ModelKernels<K> {
+    /// Per mode.
+    pub flow: Vec<K>,
+    pub flow_sens: Vec<K>,
+    pub guards: Vec<K>,
+    /// Per event.
+    pub guard_grad: Vec<K>,
+    pub condition: Vec<Option<K>>,
+    pub reset: Vec<K>,
+    pub reset_jac: Vec<K>,
+    pub init: K,
+    pub init_sens: K,
+    pub outputs: K,
+    pub output_jac: K,
+}
+
+pub(crate) type ModelPlan = ModelKernels<KernelPlan>;
+
+impl<K> ModelKernels<K> {
+    /// Every kernel, in a fixed order.
+    pub(crate) fn iter(&self) -> impl Iterator<Item = &K> {
+        self.flow
+            .iter()
+            .chain(&self.flow_sens)
+            .chain(&self.guards)
+            .chain(&self.guard_grad)
+            .chain(self.condition.iter().flatten())
+            .chain(&self.reset)
+            .chain(&self.reset_jac)
+            .chain([&self.init, &self.init_sens, &self.outputs, &self.output_jac])
+    }
+
+    /// Applies `f` to every kernel, keeping the structure; stops at the first error.
+    pub(crate) fn try_map<L, E>(
+        &self,
+        mut f: impl FnMut(&K) -> Result<L, E>,
+    ) -> Result<ModelKernels<L>, E> {
+        let mut all = |ks: &[K]| ks.iter().map(&mut f).collect::<Result<Vec<L>, E>>();
+        let flow = all(&self.flow)?;
+        let flow_sens = all(&self.flow_sens)?;
+        let guards = all(&self.guards)?;
+        let guard_grad = all(&self.guard_grad)?;
+        let reset = all(&self.reset)?;
+        let reset_jac = all(&self.reset_jac)?;
+        let condition = self
+            .condition
+            .iter()
+            .map(|k| k.as_ref().map(&mut f).transpose())
+            .collect::<Result<Vec<Option<L>>, E>>()?;
+        Ok(ModelKernels {
+            flow,
+            flow_sens,
+            guards,
+            guard_grad,
+            condition,
+            reset,
+            reset_jac,
+            init: f(&self.init)?,
+            init_sens: f(&self.init_sens)?,
+            outputs: f(&self.outputs)?,
+            output_jac: f(&self.output_jac)?,
+        })
+    }
+}
+
+/// Sizes shared by all plan builders.
+struct Dims {
+    n: usize,
+    n_params: usize,
+    n_grad: usize,
+    n_outputs: usize,
+    /// Sensitivity column of each parameter, `None` for parameters not differentiated.
+    grad_col: Vec<Option<usize>>,
+}
+
+impl Dims {
+    fn lens(&self, x: usize, s: usize, out: [usize; N_OUTS]) -> Lens {
+        Lens {
+            x,
+            s,
+            p: self.n_params,
+            out,
+        }
+    }
+}
+
+/// Builds and checks the plan of every kernel of `funcs` under the shape `info`.
+pub(crate) fn plan_model(
+    funcs: &ModelFunctions,
+    info: &SystemInfo,
+) -> Result<ModelPlan, CodegenError> {
+    let dims = check_shape(funcs, info)?;
+    let (n, m) = (dims.n, dims.n_grad);
+    let mut plan = ModelPlan {
+        flow: Vec::new(),
+        flow_sens: Vec::new(),
+        guards: Vec::new(),
+        guard_grad: Vec::new(),
+        condition: Vec::new(),
+        reset: Vec::new(),
+        reset_jac: Vec::new(),
+        init: KernelPlan::new("init".into(), dims.lens(0, 0, [n, 0, 0])),
+        init_sens: KernelPlan::new("init_sens".into(), dims.lens(0, 0, [n * m, 0, 0])),
+        outputs: KernelPlan::new("outputs".into(), dims.lens(n, 0, [dims.n_outputs, 0, 0])),
+        output_jac: KernelPlan::new(
+            "output_jac".into(),
+            dims.lens(n, 0, [dims.n_outputs * n, dims.n_outputs * m, dims.n_outputs]),
+        ),
+    };
+
+    for (mode_idx, (mode, mode_info)) in funcs.modes.iter().zip(&info.modes).enumerate() {
+        let mut flow = KernelPlan::new(format!("mode{mode_idx}_flow"), dims.lens(n, 0, [n, 0, 0]));
+        let mut sens = KernelPlan::new(
+            format!("mode{mode_idx}_flow_sens"),
+            dims.lens(n, n * m, [n, n * m, 0]),
+        );
+        for (i, &f) in mode.flow.iter().enumerate() {
+            flow.write(0, i, Term::Expr(f))?;
+            sens.write(0, i, Term::Expr(f))?;
+        }
+        let fx_rows = rows(&mode.flow_x, n);
+        let fp_rows = rows(&mode.flow_p, n);
+        for j in 0..m {
+            for i in 0..n {
+                let products: Vec<(ExprId, u32)> = fx_rows[i]
+                    .iter()
+                    .map(|&(k, e)| Ok((e, index_u32(&sens.name, j * n + k)?)))
+                    .collect::<Result<_, CodegenError>>()?;
+                let bias = fp_rows[i]
+                    .iter()
+                    .find(|&&(param, _)| dims.grad_col[param] == Some(j))
+                    .map(|&(_, e)| e);
+                let term = if products.is_empty() && bias.is_none() {
+                    Term::Zero
+                } else {
+                    Term::SensDot { products, bias }
+                };
+                sens.write(1, j * n + i, term)?;
+            }
+        }
+        let mut guards = KernelPlan::new(
+            format!("mode{mode_idx}_guards"),
+            dims.lens(n, 0, [mode_info.events.len(), 0, 0]),
+        );
+        for (k, &ev) in mode_info.events.iter().enumerate() {
+            guards.write(0, k, Term::Expr(funcs.events[ev].guard))?;
+        }
+        plan.flow.push(flow);
+        plan.flow_sens.push(sens);
+        plan.guards.push(guards);
+    }
+
+    for (ev_idx, ev) in funcs.events.iter().enumerate() {
+        let mut gg = KernelPlan::new(
+            format!("event{ev_idx}_guard_grad"),
+            dims.lens(n, 0, [n, m, 0]),
+        );
+        gg.prefill = [true, true, false];
+        for &(i, e) in &ev.guard_x.entries {
+            gg.write(0, i as usize, Term::Expr(e))?;
+        }
+        for &(param, e) in &ev.guard_p.entries {
+            if let Some(c) = dims.grad_col[param as usize] {
+                gg.write(1, c, Term::Expr(e))?;
+            }
+        }
+        gg.ret = Some(ev.guard_t);
+
+        let condition = ev.condition.map(|c| {
+            let mut k =
+                KernelPlan::new(format!("event{ev_idx}_condition"), dims.lens(n, 0, [0; 3]));
+            k.ret = Some(c);
+            k
+        });
+
+        let mut reset =
+            KernelPlan::new(format!("event{ev_idx}_reset"), dims.lens(n, 0, [n, 0, 0]));
+        for (i, &r) in ev.reset.iter().enumerate() {
+            reset.write(0, i, Term::Expr(r))?;
+        }
+
+        let mut rj = KernelPlan::new(
+            format!("event{ev_idx}_reset_jac"),
+            dims.lens(n, 0, [n * n, n * m, n]),
+        );
+        rj.prefill = [true; 3];
+        for &(i, c, e) in &ev.reset_x.entries {
+            rj.write(0, i as usize * n + c as usize, Term::Expr(e))?;
+        }
+        for &(i, param, e) in &ev.reset_p.entries {
+            if let Some(c) = dims.grad_col[param as usize] {
+                rj.write(1, c * n + i as usize, Term::Expr(e))?;
+            }
+        }
+        for &(i, e) in &ev.reset_t.entries {
+            rj.write(2, i as usize, Term::Expr(e))?;
+        }
+
+        plan.guard_grad.push(gg);
+        plan.condition.push(condition);
+        plan.reset.push(reset);
+        plan.reset_jac.push(rj);
+    }
+
+    for (i, &e) in funcs.init.iter().enumerate() {
+        plan.init.write(0, i, Term::Expr(e))?;
+    }
+    plan.init_sens.prefill[0] = true;
+    for &(i, param, e) in &funcs.init_p.entries {
+        if let Some(c) = dims.grad_col[param as usize] {
+            plan.init_sens.write(0, c * n + i as usize, Term::Expr(e))?;
+        }
+    }
+
+    let k = dims.n_outputs;
+    for (i, &e) in funcs.outputs.iter().enumerate() {
+        plan.outputs.write(0, i, Term::Expr(e))?;
+    }
+    plan.output_jac.prefill = [true; 3];
+    for &(i, c, e) in &funcs.output_x.entries {
+        plan.output_jac.write(0, i as usize * n + c as usize, Term::Expr(e))?;
+    }
+    for &(i, param, e) in &funcs.output_p.entries {
+        if let Some(c) = dims.grad_col[param as usize] {
+            plan.output_jac.write(1, c * k + i as usize, Term::Expr(e))?;
+        }
+    }
+    for &(i, e) in &funcs.output_t.entries {
+        plan.output_jac.write(2, i as usize, Term::Expr(e))?;
+    }
+
+    for kernel in plan.iter() {
+        kernel.check(&funcs.store)?;
+    }
+    Ok(plan)
+}
+
+fn index_u32(what: &str, index: usize) -> Result<u32, CodegenError> {
+    u32::try_from(index).map_err(|_| CodegenError::TooLarge {
+        what: what.to_owned(),
+        len: index,
+    })
+}
+
+/// The entries of a checked sparse matrix grouped by row: `(column, expression)` ascending.
+fn rows(mat: &SparseMat, n_rows: usize) -> Vec<Vec<(usize, ExprId)>> {
+    let mut rows = vec![Vec::new(); n_rows];
+    for &(r, c, e) in &mat.entries {
+        rows[r as usize].push((c as usize, e));
+    }
+    rows
+}
+
+/// Checks that `funcs` and `info` describe the same model and that every sparse entry is in
+/// range and strictly ascending, so the builders above can index without further checks.
+fn check_shape(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Dims, CodegenError> {
+    let n = info.n_states();
+    let n_params = info.n_params();
+    let n_outputs = info.n_outputs();
+    let n_events = info.events.len();
+    let count = |what: &str, expected: usize, found: usize| {
+        if expected == found {
+            Ok(())
+        } else {
+            Err(CodegenError::ShapeMismatch {
+                what: what.to_owned(),
+                expected,
+                found,
+            })
+        }
+    };
+    count("states", n, funcs.n_states as usize)?;
+    count("parameters", n_params, funcs.n_params as usize)?;
+    count("modes", info.modes.len(), funcs.modes.len())?;
+    count("events", n_events, funcs.events.len())?;
+    count("outputs", n_outputs, funcs.outputs.len())?;
+    count("initial state", n, funcs.init.len())?;
+
+    let mut grad_col = vec![None; n_params];
+    for (c, &param) in info.grad_params.iter().enumerate() {
+        match grad_col.get_mut(param) {
+            None => {
+                return Err(CodegenError::IndexOutOfRange {
+                    what: "gradient parameter".into(),
+                    index: param,
+                    len: n_params,
+                })
+            }
+            Some(Some(_)) => return Err(CodegenError::DuplicateGradParam { param }),
+            Some(slot) => *slot = Some(c),
+        }
+    }
+
+    for (idx, mode) in funcs.modes.iter().enumerate() {
+        count(&format!("mode {idx} flow"), n, mode.flow.len())?;
+        check_mat(&format!("mode {idx} flow_x"), &mode.flow_x, n, n)?;
+        check_mat(&format!("mode {idx} flow_p"), &mode.flow_p, n, n_params)?;
+        check_vec(&format!("mode {idx} flow_t"), &mode.flow_t, n)?;
+        for &ev in &info.modes[idx].events {
+            if ev >= n_events {
+                return Err(CodegenError::IndexOutOfRange {
+                    what: format!("mode {idx} event"),
+                    index: ev,
+                    len: n_events,
+                });
+            }
+        }
+    }
+    for (idx, ev) in funcs.events.iter().enumerate() {
+        check_vec(&format!("event {idx} guard_x"), &ev.guard_x, n)?;
+        check_vec(&format!("event {idx} guard_p"), &ev.guard_p, n_params)?;
+        count(&format!("event {idx} reset"), n, ev.reset.len())?;
+        check_mat(&format!("event {idx} reset_x"), &ev.reset_x, n, n)?;
+        check_mat(&format!("event {idx} reset_p"), &ev.reset_p, n, n_params)?;
+        check_vec(&format!("event {idx} reset_t"), &ev.reset_t, n)?;
+    }
+    check_mat("init_p", &funcs.init_p, n, n_params)?;
+    check_mat("output_x", &funcs.output_x, n_outputs, n)?;
+    check_mat("output_p", &funcs.output_p, n_outputs, n_params)?;
+    check_vec("output_t", &funcs.output_t, n_outputs)?;
+
+    Ok(Dims {
+        n,
+        n_params,
+        n_grad: info.n_grad(),
+        n_outputs,
+        grad_col,
+    })
+}
+
+fn check_mat(what: &str, mat: &SparseMat, n_rows: usize, n_cols: usize) -> Result<(), CodegenError> {
+    let shape = |expected: usize, found: u32| CodegenError::ShapeMismatch {
+        what: what.to_owned(),
+        expected,
+        found: found as usize,
+    };
+    if mat.n_rows as usize != n_rows {
+        return Err(shape(n_rows, mat.n_rows));
+    }
+    if mat.n_cols as usize != n_cols {
+        return Err(shape(n_cols, mat.n_cols));
+    }
+    let keys = mat
+        .entries
+        .iter()
+        .map(|&(r, c, _)| (r as usize) * n_cols + c as usize);
+    for &(r, c, _) in &mat.entries {
+        let (index, len) = if r as usize >= n_rows {
+            (r as usize, n_rows)
+        } else {
+            (c as usize, n_cols)
+        };
+        if index >= len {
+            return Err(CodegenError::IndexOutOfRange {
+                what: what.to_owned(),
+                index,
+                len,
+            });
+        }
+    }
+    check_ascending(what, keys)
+}
+
+fn check_vec(what: &str, vec: &SparseVec, len: usize) -> Result<(), CodegenError> {
+    if let Some(&(index, _)) = vec.entries.iter().find(|&&(i, _)| i as usize >= len) {
+        return Err(CodegenError::IndexOutOfRange {
+            what: what.to_owned(),
+            index: index as usize,
+            len,
+        });
+    }
+    check_ascending(what, vec.entries.iter().map(|&(i, _)| i as usize))
+}
+
+/// Sparse entries must be strictly ascending: a repeated entry would be written twice and the
+/// second write would silently win.
+fn check_ascending(what: &str, keys: impl Iterator<Item = usize>) -> Result<(), CodegenError> {
+    let mut prev: Option<usize> = None;
+    for (position, key) in keys.enumerate() {
+        if prev.is_some_and(|p| p >= key) {
+            return Err(CodegenError::UnsortedSparse {
+                what: what.to_owned(),
+                position,
+            });
+        }
+        prev = Some(key);
+    }
+    Ok(())
+}
