@@ -57,7 +57,7 @@ impl RunReport {
     pub fn failure(&self) -> Option<String> {
         let f = &self.result.final_state;
         let state: Vec<String> =
-            self.info.state_names.iter().zip(&f.state).map(|(n, v)| format!("{n} = {v}")).collect();
+            self.info.state_names.iter().zip(&f.state).map(|(n, v)| format!("{n} = {}", num(*v))).collect();
         match &self.result.stopped_by {
             StopReason::TEnd | StopReason::Event { .. } => None,
             StopReason::Zeno { time, event, count, accumulation } => Some(format!(
@@ -196,7 +196,10 @@ impl RunReport {
 
 /// A number with ten significant digits, without trailing zeros.
 pub fn num(v: f64) -> String {
-    if v == 0.0 || !v.is_finite() {
+    if v == 0.0 {
+        return "0".to_string(); // also for -0.0, which says nothing a reader needs
+    }
+    if !v.is_finite() {
         return format!("{v}");
     }
     let a = v.abs();

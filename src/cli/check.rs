@@ -15,7 +15,7 @@ pub struct CheckArgs {
 pub fn run(args: &CheckArgs) -> ExitCode {
     match load_model(&args.model.file) {
         Ok((model, _)) => {
-            print!("{}", summary(&model));
+            super::print_out(&summary(&model));
             ExitCode::SUCCESS
         }
         Err(code) => code,

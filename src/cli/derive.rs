@@ -41,6 +41,6 @@ pub fn run(args: &DeriveArgs) -> ExitCode {
         },
     };
     let funcs = lower(&model);
-    print!("{}", derive_report(&model, &funcs, &wrt, mode));
+    super::print_out(&derive_report(&model, &funcs, &wrt, mode));
     ExitCode::SUCCESS
 }

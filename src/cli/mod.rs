@@ -106,3 +106,11 @@ pub(crate) fn unknown_param(model: &Model, name: &str, flag: &str) -> String {
         .unwrap_or_default();
     format!("{flag}: model `{}` has no parameter `{name}`{hint}; its parameters are {}", model.name, names.join(", "))
 }
+
+/// Writes `text` to stdout. A closed pipe (`hybc run ... | head`) is not an error worth a panic:
+/// the reader has what it wanted.
+pub(crate) fn print_out(text: &str) {
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    let _ = out.write_all(text.as_bytes()).and_then(|()| out.flush());
+}

@@ -186,13 +186,18 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
             return Err(format!("--trajectory: cannot write `{}`: {e}", path.display()));
         }
     }
-    for w in &report.result.warnings {
+    // A run into a Zeno point grazes ever more often; the first few warnings say it all.
+    const SHOWN_WARNINGS: usize = 3;
+    for w in report.result.warnings.iter().take(SHOWN_WARNINGS) {
         eprintln!("warning: {w}");
+    }
+    if report.result.warnings.len() > SHOWN_WARNINGS {
+        eprintln!("warning: ... and {} more (all are in --format json)", report.result.warnings.len() - SHOWN_WARNINGS);
     }
     if !args.quiet {
         match args.format {
-            Format::Table => print!("{}", report.to_table()),
-            Format::Json => println!("{}", report.to_json()),
+            Format::Table => super::print_out(&report.to_table()),
+            Format::Json => super::print_out(&format!("{}\n", report.to_json())),
         }
     }
     Ok(match report.failure() {
