@@ -1,0 +1,172 @@
+//! `hybc run` end to end: the binary's JSON against the bouncing ball's closed form, exit codes,
+//! Zeno and grazing reports. Closed forms: ../shared/reference/closed-forms.md.
+
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+use approx::assert_relative_eq;
+use serde_json::Value;
+
+fn hybc(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hybc"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("hybc runs")
+}
+
+fn run_json(args: &[&str]) -> (Value, Output) {
+    let mut all = vec!["run"];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["--format", "json"]);
+    let out = hybc(&all);
+    let json: Value = serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("not JSON ({e}): {}", String::from_utf8_lossy(&out.stdout)));
+    (json, out)
+}
+
+fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+#[test]
+fn ball_reproduces_the_closed_form_to_1e_9() {
+    let (json, out) = run_json(&["models/ball.hyb", "--grad", "e,h0"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (g, e, h0) = (9.81_f64, 0.8_f64, 1.0_f64);
+    let t1 = (2.0 * h0 / g).sqrt();
+    let v1 = (2.0 * g * h0).sqrt();
+    let events = json["events"].as_array().expect("events");
+    assert_eq!(events.len(), 4, "four bounces before 2.5 s");
+    // Bounce k+1 follows bounce k after a flight of 2 e^k v1 / g.
+    let mut t = t1;
+    for (k, ev) in events.iter().enumerate() {
+        assert_relative_eq!(f(&ev["time"]), t, max_relative = 1e-9);
+        assert_eq!(ev["grazing"], Value::Bool(false));
+        t += 2.0 * e.powi(k as i32 + 1) * v1 / g;
+    }
+    assert_relative_eq!(f(&events[0]["dtime"]["h0"]), 1.0 / (2.0 * g * h0).sqrt(), max_relative = 1e-9);
+    assert_relative_eq!(f(&events[0]["dtime"]["h0"]), 0.2257618205, max_relative = 1e-9);
+    let k = 4;
+    let energy = g * h0 * e.powi(2 * k);
+    let fin = &json["final"];
+    assert_relative_eq!(f(&fin["outputs"]["energy"]), energy, max_relative = 1e-9);
+    assert_relative_eq!(
+        f(&fin["doutputs"]["energy"]["e"]),
+        2.0 * k as f64 * g * h0 * e.powi(2 * k - 1),
+        max_relative = 1e-9
+    );
+    assert_relative_eq!(f(&fin["doutputs"]["energy"]["h0"]), g * e.powi(2 * k), max_relative = 1e-9);
+    assert_eq!(json["stopped_by"], "t_end");
+    assert_eq!(json["grad"], serde_json::json!(["e", "h0"]));
+}
+
+#[test]
+fn second_closed_form_point_matches_state_and_sensitivities() {
+    let (json, out) =
+        run_json(&["models/ball.hyb", "--grad", "all", "--set", "h0=10", "--t-end", "2"]);
+    assert!(out.status.success());
+    let fin = &json["final"];
+    assert_relative_eq!(f(&fin["state"]["y"]), 4.80570772929, max_relative = 1e-9);
+    assert_relative_eq!(f(&fin["state"]["v"]), 5.59285386465, max_relative = 1e-9);
+    let expect = [
+        ("h0", -0.0787146135354, 1.26064269323),
+        ("g", 0.570117621269, -0.714941189366),
+        ("e", 8.01428207183, 14.0071410359),
+    ];
+    for (p, dy, dv) in expect {
+        assert_relative_eq!(f(&fin["dstate"]["y"][p]), dy, max_relative = 1e-8);
+        assert_relative_eq!(f(&fin["dstate"]["v"][p]), dv, max_relative = 1e-8);
+    }
+    let ev = &json["events"][0];
+    assert_relative_eq!(f(&ev["time"]), 1.42784312293, max_relative = 1e-10);
+    assert_relative_eq!(f(&ev["dtime"]["g"]), -0.0727748788444, max_relative = 1e-9);
+    assert_relative_eq!(f(&ev["dtime"]["h0"]), 0.0713921561464, max_relative = 1e-9);
+}
+
+#[test]
+fn zeno_ball_is_reported_quickly_with_its_accumulation_point() {
+    let started = Instant::now();
+    let out = hybc(&["run", "models/ball.hyb", "--grad", "e", "--t-end", "10"]);
+    assert!(started.elapsed() < Duration::from_secs(1), "took {:?}", started.elapsed());
+    assert_eq!(out.status.code(), Some(3));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("Zeno"), "{stderr}");
+    assert!(stderr.contains("4.06371276"), "accumulation point t* = 4.0637127689 missing: {stderr}");
+}
+
+#[test]
+fn grazing_contact_is_flagged_with_its_denominator_and_no_gradient() {
+    let (json, out) = run_json(&["tests/data/run/ceiling_graze.hyb", "--grad", "all"]);
+    assert!(out.status.success());
+    let ev = &json["events"][0];
+    assert_eq!(ev["name"], "ceiling");
+    assert_eq!(ev["grazing"], Value::Bool(true));
+    assert!(f(&ev["denominator"]).abs() < 1e-3, "{ev}");
+    assert_eq!(ev["dtime"], Value::Null, "gradients of a grazing event are not meaningful");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("grazes"));
+    assert!(!json["warnings"].as_array().expect("warnings").is_empty());
+}
+
+#[test]
+fn stop_event_reports_total_derivatives() {
+    // Time-triggered stop at t = 1: y(1) = h0 - g/2, and dy/dt_stop = v(1) = -g.
+    let src = "model s\nparam g = 9.81\nparam h0 = 10\nparam ts = 1\nstate y = h0\nstate v = 0\n\
+               der(y) = v\nder(v) = -g\nevent done when t >= ts {\n    stop\n}\n";
+    let dir = std::env::temp_dir().join(format!("hybc-stop-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let path = dir.join("stop.hyb");
+    std::fs::write(&path, src).expect("write model");
+    let (json, out) = run_json(&[path.to_str().expect("utf-8 path"), "--grad", "ts,h0", "--t-end", "5"]);
+    assert!(out.status.success());
+    assert_eq!(json["stopped_by"], "done");
+    let fin = &json["final"];
+    assert_relative_eq!(f(&fin["time"]), 1.0, max_relative = 1e-12);
+    assert_relative_eq!(f(&fin["dstate_total"]["y"]["ts"]), -9.81, max_relative = 1e-9);
+    assert_relative_eq!(f(&fin["dstate_total"]["v"]["ts"]), -9.81, max_relative = 1e-9);
+    assert_relative_eq!(f(&fin["dstate_total"]["y"]["h0"]), 1.0, max_relative = 1e-9);
+}
+
+#[test]
+fn exit_codes_distinguish_model_usage_and_runtime_errors() {
+    assert_eq!(hybc(&["check", "models/ball.hyb"]).status.code(), Some(0));
+    assert_eq!(hybc(&["check", "tests/data/sema_err/let_cycle.hyb"]).status.code(), Some(1));
+    assert_eq!(hybc(&["check", "no/such/file.hyb"]).status.code(), Some(2));
+    assert_eq!(hybc(&["run", "models/ball.hyb", "--grad", "nope"]).status.code(), Some(2));
+    assert_eq!(hybc(&["run", "models/ball.hyb", "--set", "e=2"]).status.code(), Some(2));
+    assert_eq!(hybc(&["run", "models/ball.hyb", "--rtol", "-1"]).status.code(), Some(2));
+    assert_eq!(hybc(&["run", "models/ball.hyb", "--bogus"]).status.code(), Some(2));
+    let err = hybc(&["run", "models/ball.hyb", "--set", "e=2"]);
+    assert!(String::from_utf8_lossy(&err.stderr).contains("outside its range [0, 1]"));
+}
+
+#[test]
+fn every_shipped_model_runs_and_the_table_shows_its_gradients() {
+    for entry in std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/models")).expect("models") {
+        let path = entry.expect("entry").path();
+        let out = hybc(&["run", path.to_str().expect("utf-8"), "--grad", "all"]);
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success(), "{}: {}", path.display(), String::from_utf8_lossy(&out.stderr));
+        assert!(stdout.contains("final: t = "), "{stdout}");
+        assert!(stdout.contains("d/d"), "{stdout}");
+    }
+}
+
+#[test]
+fn trajectory_csv_has_a_header_and_uniform_samples() {
+    let path = std::env::temp_dir().join(format!("hybc-traj-{}.csv", std::process::id()));
+    let out = hybc(&[
+        "run", "models/ball.hyb", "--grad", "e", "--trajectory", path.to_str().expect("utf-8"),
+        "--sample", "0.5", "--quiet",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let csv = std::fs::read_to_string(&path).expect("csv written");
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some("t,mode,y,v,energy,dy/de,dv/de"));
+    let times: Vec<f64> =
+        lines.map(|l| l.split(',').next().expect("t").parse().expect("number")).collect();
+    assert_eq!(times.len(), 6, "t = 0, 0.5, ..., 2.5: {times:?}");
+    for (k, t) in times.iter().enumerate() {
+        assert_relative_eq!(*t, 0.5 * k as f64, epsilon = 1e-12);
+    }
+}
