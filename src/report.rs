@@ -48,7 +48,11 @@ impl RunReport {
         match a {
             None => Value::Null,
             Some(a) => Value::Object(
-                names.iter().enumerate().map(|(i, n)| (n.clone(), self.by_param(a, names.len(), i))).collect(),
+                names
+                    .iter()
+                    .enumerate()
+                    .map(|(i, n)| (n.clone(), self.by_param(a, names.len(), i)))
+                    .collect(),
             ),
         }
     }
@@ -144,8 +148,13 @@ impl RunReport {
         let f = &r.final_state;
         let grad = self.grad_names();
         let mut out = String::new();
-        let params: Vec<String> =
-            self.info.param_names.iter().zip(&self.params).map(|(n, v)| format!("{n} = {}", num(*v))).collect();
+        let params: Vec<String> = self
+            .info
+            .param_names
+            .iter()
+            .zip(&self.params)
+            .map(|(n, v)| format!("{n} = {}", num(*v)))
+            .collect();
         let _ = writeln!(out, "model {}   t_end = {}   {}", self.model, num(self.t_end), params.join(", "));
         let dcols: String = grad.iter().map(|p| format!("  {:>18}", format!("dt/d{p}"))).collect();
         let _ = writeln!(out, "\nevents: {}", r.events.len());
@@ -160,7 +169,8 @@ impl RunReport {
                 None => grad.iter().map(|_| format!("  {:>18}", "-")).collect(),
             };
             let flag = if e.grazing { format!("  GRAZING (d = {:e})", e.denominator) } else { String::new() };
-            let _ = writeln!(out, "  {:>4}  {:>18}  {:<14}  {:<22}{d}{flag}", e.index, num(e.time), e.name, mode);
+            let _ =
+                writeln!(out, "  {:>4}  {:>18}  {:<14}  {:<22}{d}{flag}", e.index, num(e.time), e.name, mode);
         }
         let dcols: String = grad.iter().map(|p| format!("  {:>18}", format!("d/d{p}"))).collect();
         let _ = writeln!(out, "\nfinal: t = {}, mode {}", num(f.time), self.mode_name(f.mode));
@@ -168,7 +178,9 @@ impl RunReport {
         let rows = |out: &mut String, names: &[String], v: &[f64], d: &Option<Vec<f64>>| {
             for (i, (n, x)) in names.iter().zip(v).enumerate() {
                 let ds: String = match d {
-                    Some(d) => (0..grad.len()).map(|j| format!("  {:>18}", num(d[j * names.len() + i]))).collect(),
+                    Some(d) => {
+                        (0..grad.len()).map(|j| format!("  {:>18}", num(d[j * names.len() + i]))).collect()
+                    }
                     None => grad.iter().map(|_| format!("  {:>18}", "-")).collect(),
                 };
                 let _ = writeln!(out, "  {n:<14}  {:>18}{ds}", num(*x));

@@ -63,8 +63,7 @@ fn ball_reproduces_the_closed_form_to_1e_9() {
 
 #[test]
 fn second_closed_form_point_matches_state_and_sensitivities() {
-    let (json, out) =
-        run_json(&["models/ball.hyb", "--grad", "all", "--set", "h0=10", "--t-end", "2"]);
+    let (json, out) = run_json(&["models/ball.hyb", "--grad", "all", "--set", "h0=10", "--t-end", "2"]);
     assert!(out.status.success());
     let fin = &json["final"];
     assert_relative_eq!(f(&fin["state"]["y"]), 4.80570772929, max_relative = 1e-9);
@@ -156,15 +155,21 @@ fn every_shipped_model_runs_and_the_table_shows_its_gradients() {
 fn trajectory_csv_has_a_header_and_uniform_samples() {
     let path = std::env::temp_dir().join(format!("hybc-traj-{}.csv", std::process::id()));
     let out = hybc(&[
-        "run", "models/ball.hyb", "--grad", "e", "--trajectory", path.to_str().expect("utf-8"),
-        "--sample", "0.5", "--quiet",
+        "run",
+        "models/ball.hyb",
+        "--grad",
+        "e",
+        "--trajectory",
+        path.to_str().expect("utf-8"),
+        "--sample",
+        "0.5",
+        "--quiet",
     ]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let csv = std::fs::read_to_string(&path).expect("csv written");
     let mut lines = csv.lines();
     assert_eq!(lines.next(), Some("t,mode,y,v,energy,dy/de,dv/de"));
-    let times: Vec<f64> =
-        lines.map(|l| l.split(',').next().expect("t").parse().expect("number")).collect();
+    let times: Vec<f64> = lines.map(|l| l.split(',').next().expect("t").parse().expect("number")).collect();
     assert_eq!(times.len(), 6, "t = 0, 0.5, ..., 2.5: {times:?}");
     for (k, t) in times.iter().enumerate() {
         assert_relative_eq!(*t, 0.5 * k as f64, epsilon = 1e-12);

@@ -104,7 +104,11 @@ pub(crate) fn unknown_param(model: &Model, name: &str, flag: &str) -> String {
     let hint = crate::sema::closest_name(name, names.iter().copied())
         .map(|s| format!(" (did you mean `{s}`?)"))
         .unwrap_or_default();
-    format!("{flag}: model `{}` has no parameter `{name}`{hint}; its parameters are {}", model.name, names.join(", "))
+    format!(
+        "{flag}: model `{}` has no parameter `{name}`{hint}; its parameters are {}",
+        model.name,
+        names.join(", ")
+    )
 }
 
 /// Writes `text` to stdout. A closed pipe (`hybc run ... | head`) is not an error worth a panic:

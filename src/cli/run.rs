@@ -192,7 +192,10 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         eprintln!("warning: {w}");
     }
     if report.result.warnings.len() > SHOWN_WARNINGS {
-        eprintln!("warning: ... and {} more (all are in --format json)", report.result.warnings.len() - SHOWN_WARNINGS);
+        eprintln!(
+            "warning: ... and {} more (all are in --format json)",
+            report.result.warnings.len() - SHOWN_WARNINGS
+        );
     }
     if !args.quiet {
         match args.format {

@@ -85,28 +85,11 @@ pub trait HybridSystem: Sync {
     /// Flow and sensitivity right-hand side in one call: `dx = f`, `ds = f_x s + f_p`.
     // The argument list mirrors the native kernel's ABI; a struct would only add a copy.
     #[allow(clippy::too_many_arguments)]
-    fn flow_sens(
-        &self,
-        mode: usize,
-        t: f64,
-        x: &[f64],
-        s: &[f64],
-        p: &[f64],
-        dx: &mut [f64],
-        ds: &mut [f64],
-    );
+    fn flow_sens(&self, mode: usize, t: f64, x: &[f64], s: &[f64], p: &[f64], dx: &mut [f64], ds: &mut [f64]);
     /// Guards of every event active in `mode`, in the order of `ModeInfo::events`.
     fn guards(&self, mode: usize, t: f64, x: &[f64], p: &[f64], g: &mut [f64]);
     /// Partial derivatives of one guard: `gx` (n), `gp` (m), returns `g_t`.
-    fn guard_grad(
-        &self,
-        event: usize,
-        t: f64,
-        x: &[f64],
-        p: &[f64],
-        gx: &mut [f64],
-        gp: &mut [f64],
-    ) -> f64;
+    fn guard_grad(&self, event: usize, t: f64, x: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) -> f64;
     /// Whether the enabling condition holds (true for events without one).
     fn condition(&self, event: usize, t: f64, x: &[f64], p: &[f64]) -> bool;
 
@@ -128,13 +111,5 @@ pub trait HybridSystem: Sync {
     /// Outputs `y = h(t, x, p)`.
     fn outputs(&self, t: f64, x: &[f64], p: &[f64], y: &mut [f64]);
     /// Output Jacobians `yx` (k * n, row-major), `yp` (k * m), `yt` (k).
-    fn output_jac(
-        &self,
-        t: f64,
-        x: &[f64],
-        p: &[f64],
-        yx: &mut [f64],
-        yp: &mut [f64],
-        yt: &mut [f64],
-    );
+    fn output_jac(&self, t: f64, x: &[f64], p: &[f64], yx: &mut [f64], yp: &mut [f64], yt: &mut [f64]);
 }

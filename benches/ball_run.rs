@@ -1,0 +1,40 @@
+//! One run of the compiled bouncing ball to T = 2.5 at rtol 1e-10 with gradients with respect to
+//! all three parameters (the README's headline figure), plus the same without gradients.
+//! Run: `cargo bench --bench ball_run`.
+
+use std::hint::black_box;
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use hybc::codegen::{compile, CompileOptions};
+use hybc::lower::{lower, system_info};
+use hybc::sema::ParamIdx;
+use hybc::sim::{run, SimOptions};
+
+fn ball_run(c: &mut Criterion) {
+    let model = hybc::check_source(include_str!("../models/ball.hyb")).expect("ball checks");
+    let funcs = lower(&model);
+    let opts = SimOptions { t_end: 2.5, rtol: 1e-10, atol: 1e-12, ..SimOptions::default() };
+    let p: Vec<f64> = model.params.iter().map(|p| p.default).collect();
+    for (label, grad) in [("grad_all", vec![ParamIdx(0), ParamIdx(1), ParamIdx(2)]), ("no_grad", vec![])] {
+        let compiled =
+            compile(&funcs, system_info(&model, &grad), &CompileOptions::default()).expect("compiles");
+        c.bench_function(&format!("ball_run_T2.5_rtol1e-10_{label}"), |b| {
+            b.iter(|| run(black_box(&compiled), black_box(&p), &opts).expect("runs"))
+        });
+    }
+}
+
+fn ball_compile(c: &mut Criterion) {
+    let source = include_str!("../models/ball.hyb");
+    c.bench_function("ball_compile_parse_to_kernels_grad_all", |b| {
+        b.iter(|| {
+            let model = hybc::check_source(black_box(source)).expect("ball checks");
+            let funcs = lower(&model);
+            let grad: Vec<ParamIdx> = (0..model.params.len() as u32).map(ParamIdx).collect();
+            compile(&funcs, system_info(&model, &grad), &CompileOptions::default()).expect("compiles")
+        })
+    });
+}
+
+criterion_group!(benches, ball_run, ball_compile);
+criterion_main!(benches);
