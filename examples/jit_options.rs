@@ -80,16 +80,11 @@ fn main() {
     let (mut dx, mut ds) = (vec![0.0; n], vec![0.0; n * m]);
 
     // Growth of compile time with model size: default options against the fastest-compiling.
-    let fast = CompileOptions {
-        opt_level: OptLevel::None,
-        verifier: false,
-        regalloc: RegAlloc::SinglePass,
-    };
+    let fast = CompileOptions { opt_level: OptLevel::None, verifier: false, regalloc: RegAlloc::SinglePass };
     for size in [10, 100, 1000] {
         let (funcs, info) = front_end(&chain_source(size));
         let start = Instant::now();
-        let jit = CompiledModel::compile(&funcs, info.clone(), &CompileOptions::default())
-            .expect("compiles");
+        let jit = CompiledModel::compile(&funcs, info.clone(), &CompileOptions::default()).expect("compiles");
         let default_t = start.elapsed();
         let start = Instant::now();
         drop(CompiledModel::compile(&funcs, info, &fast).expect("compiles"));

@@ -11,8 +11,7 @@ use jit_support::{ball, ball_info, same, E, G, H0};
 const P: [f64; 3] = [9.81, 0.8, 10.0];
 
 fn compiled(grad: Vec<usize>) -> CompiledModel {
-    CompiledModel::compile(&ball(), ball_info(grad), &CompileOptions::default())
-        .expect("the ball compiles")
+    CompiledModel::compile(&ball(), ball_info(grad), &CompileOptions::default()).expect("the ball compiles")
 }
 
 #[test]
@@ -147,13 +146,9 @@ fn every_option_combination_computes_the_same_bits() {
     for opt_level in [OptLevel::None, OptLevel::Speed, OptLevel::SpeedAndSize] {
         for regalloc in [RegAlloc::Backtracking, RegAlloc::SinglePass, RegAlloc::Auto] {
             for verifier in [false, true] {
-                let opts = CompileOptions {
-                    opt_level,
-                    verifier,
-                    regalloc,
-                };
-                let m = CompiledModel::compile(&ball(), ball_info(vec![G, E]), &opts)
-                    .expect("the ball compiles");
+                let opts = CompileOptions { opt_level, verifier, regalloc };
+                let m =
+                    CompiledModel::compile(&ball(), ball_info(vec![G, E]), &opts).expect("the ball compiles");
                 let (mut dx, mut ds, mut r) = ([0.0; 2], [0.0; 4], [0.0; 2]);
                 m.flow_sens(0, 0.0, &x, &s, &P, &mut dx, &mut ds);
                 m.reset(0, 0.0, &x, &P, &mut r);

@@ -100,7 +100,10 @@ fn value() -> impl Strategy<Value = f64> {
 fn random_dag() -> impl Strategy<Value = RandomDag> {
     (
         proptest::collection::vec(value(), 1..4),
-        proptest::collection::vec((0..UNARY.len() + BINARY.len() + 1, any::<usize>(), any::<usize>(), any::<usize>()), 1..40),
+        proptest::collection::vec(
+            (0..UNARY.len() + BINARY.len() + 1, any::<usize>(), any::<usize>(), any::<usize>()),
+            1..40,
+        ),
         1..6usize,
     )
         .prop_map(|(consts, ops, n_outputs)| RandomDag { consts, ops, n_outputs })

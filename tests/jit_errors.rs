@@ -8,7 +8,10 @@ use hybc::codegen::{CodegenError, CompileOptions, CompiledModel};
 use hybc::expr::Node;
 use jit_support::{ball, ball_info, mat, vec_, E, G};
 
-fn compile(funcs: hybc::expr::ModelFunctions, info: hybc::sim::SystemInfo) -> Result<CompiledModel, CodegenError> {
+fn compile(
+    funcs: hybc::expr::ModelFunctions,
+    info: hybc::sim::SystemInfo,
+) -> Result<CompiledModel, CodegenError> {
     CompiledModel::compile(&funcs, info, &CompileOptions::default())
 }
 

@@ -36,7 +36,12 @@ impl Rng {
 fn assert_bits(what: &str, jit: &[f64], reference: &[f64]) {
     assert_eq!(jit.len(), reference.len(), "{what}");
     for (i, (a, b)) in jit.iter().zip(reference).enumerate() {
-        assert!(same(*a, *b), "{what}[{i}]: jit {a:e} ({:#x}) vs evaluator {b:e} ({:#x})", a.to_bits(), b.to_bits());
+        assert!(
+            same(*a, *b),
+            "{what}[{i}]: jit {a:e} ({:#x}) vs evaluator {b:e} ({:#x})",
+            a.to_bits(),
+            b.to_bits()
+        );
     }
 }
 
@@ -99,7 +104,8 @@ fn compare(name: &str, jit: &dyn HybridSystem, reference: &dyn HybridSystem, p: 
             let (a, b) = run2(&|s, o| s.reset(event, t, &x, p, o), n);
             assert_bits(&what("reset"), &a, &b);
             let rj = |s: &dyn HybridSystem| {
-                let (mut rx, mut rp, mut rt) = (vec![f64::NAN; n * n], vec![f64::NAN; n * m], vec![f64::NAN; n]);
+                let (mut rx, mut rp, mut rt) =
+                    (vec![f64::NAN; n * n], vec![f64::NAN; n * m], vec![f64::NAN; n]);
                 s.reset_jac(event, t, &x, p, &mut rx, &mut rp, &mut rt);
                 [rx, rp, rt].concat()
             };

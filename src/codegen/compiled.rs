@@ -17,15 +17,8 @@ use crate::expr::ModelFunctions;
 use crate::sim::{HybridSystem, SystemInfo};
 
 /// The native signature shared by every kernel (see `lower`).
-type KernelFn = unsafe extern "C" fn(
-    f64,
-    *const f64,
-    *const f64,
-    *const f64,
-    *mut f64,
-    *mut f64,
-    *mut f64,
-) -> f64;
+type KernelFn =
+    unsafe extern "C" fn(f64, *const f64, *const f64, *const f64, *mut f64, *mut f64, *mut f64) -> f64;
 
 /// A finalized kernel with the exact slice lengths it was generated for.
 #[derive(Clone, Copy)]
@@ -39,14 +32,7 @@ impl Kernel {
     /// Calls the kernel if every slice has the length it was generated for. Otherwise nothing
     /// native runs, the outputs are filled with NaN (so a caller's bug shows up in its results
     /// rather than as memory corruption) and `None` is returned.
-    fn call(
-        &self,
-        t: f64,
-        x: &[f64],
-        s: &[f64],
-        p: &[f64],
-        outs: [&mut [f64]; N_OUTS],
-    ) -> Option<f64> {
+    fn call(&self, t: f64, x: &[f64], s: &[f64], p: &[f64], outs: [&mut [f64]; N_OUTS]) -> Option<f64> {
         let fits = x.len() == self.lens.x
             && s.len() == self.lens.s
             && p.len() == self.lens.p
@@ -71,15 +57,7 @@ impl Kernel {
         // loads assume. The kernel touches no other memory: its only calls are the pure
         // wrappers in `runtime`.
         let r = unsafe {
-            (self.f)(
-                t,
-                x.as_ptr(),
-                s.as_ptr(),
-                p.as_ptr(),
-                o0.as_mut_ptr(),
-                o1.as_mut_ptr(),
-                o2.as_mut_ptr(),
-            )
+            (self.f)(t, x.as_ptr(), s.as_ptr(), p.as_ptr(), o0.as_mut_ptr(), o1.as_mut_ptr(), o2.as_mut_ptr())
         };
         Some(r)
     }
@@ -188,9 +166,8 @@ fn new_module(opts: &CompileOptions, largest_kernel: usize) -> Result<JITModule,
         .map_err(CodegenError::Target)?;
     let mut builder = JITBuilder::with_isa(isa, default_libcall_names());
     for callee in Callee::all() {
-        let address = callee.address().ok_or(CodegenError::Internal {
-            reason: "host wrapper without an address",
-        })?;
+        let address =
+            callee.address().ok_or(CodegenError::Internal { reason: "host wrapper without an address" })?;
         builder.symbol(callee.symbol(), address);
     }
     Ok(JITModule::new(builder))
@@ -211,10 +188,7 @@ fn build_kernels(
     })?;
     module
         .finalize_definitions()
-        .map_err(|source| CodegenError::Module {
-            kernel: "finalize".into(),
-            source: Box::new(source),
-        })?;
+        .map_err(|source| CodegenError::Module { kernel: "finalize".into(), source: Box::new(source) })?;
     ids.try_map(|&(id, lens, prefill)| {
         let code = module.get_finalized_function(id);
         // SAFETY: `code` is the finalized entry of a function defined with `kernel_signature`,
@@ -239,15 +213,11 @@ impl HybridSystem for CompiledModel {
 
     fn initial_state(&self, p: &[f64], x0: &mut [f64]) {
         // Initial values depend on parameters only; `t` is never read.
-        self.kernels
-            .init
-            .call(0.0, &[], &[], p, [x0, &mut [], &mut []]);
+        self.kernels.init.call(0.0, &[], &[], p, [x0, &mut [], &mut []]);
     }
 
     fn initial_sens(&self, p: &[f64], s0: &mut [f64]) {
-        self.kernels
-            .init_sens
-            .call(0.0, &[], &[], p, [s0, &mut [], &mut []]);
+        self.kernels.init_sens.call(0.0, &[], &[], p, [s0, &mut [], &mut []]);
     }
 
     fn flow(&self, mode: usize, t: f64, x: &[f64], p: &[f64], dx: &mut [f64]) {
@@ -286,15 +256,7 @@ impl HybridSystem for CompiledModel {
         }
     }
 
-    fn guard_grad(
-        &self,
-        event: usize,
-        t: f64,
-        x: &[f64],
-        p: &[f64],
-        gx: &mut [f64],
-        gp: &mut [f64],
-    ) -> f64 {
+    fn guard_grad(&self, event: usize, t: f64, x: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) -> f64 {
         match self.kernels.guard_grad.get(event) {
             Some(k) => k.call(t, x, &[], p, [gx, gp, &mut []]).unwrap_or(f64::NAN),
             None => {
@@ -307,9 +269,7 @@ impl HybridSystem for CompiledModel {
     fn condition(&self, event: usize, t: f64, x: &[f64], p: &[f64]) -> bool {
         match self.kernels.condition.get(event) {
             // Same rule as `Select`: any value other than 0.0 (NaN included) is true.
-            Some(Some(k)) => k
-                .call(t, x, &[], p, [&mut [], &mut [], &mut []])
-                .is_some_and(|c| c != 0.0),
+            Some(Some(k)) => k.call(t, x, &[], p, [&mut [], &mut [], &mut []]).is_some_and(|c| c != 0.0),
             Some(None) => true,
             None => false,
         }
@@ -343,20 +303,10 @@ impl HybridSystem for CompiledModel {
     }
 
     fn outputs(&self, t: f64, x: &[f64], p: &[f64], y: &mut [f64]) {
-        self.kernels
-            .outputs
-            .call(t, x, &[], p, [y, &mut [], &mut []]);
+        self.kernels.outputs.call(t, x, &[], p, [y, &mut [], &mut []]);
     }
 
-    fn output_jac(
-        &self,
-        t: f64,
-        x: &[f64],
-        p: &[f64],
-        yx: &mut [f64],
-        yp: &mut [f64],
-        yt: &mut [f64],
-    ) {
+    fn output_jac(&self, t: f64, x: &[f64], p: &[f64], yx: &mut [f64], yp: &mut [f64], yt: &mut [f64]) {
         self.kernels.output_jac.call(t, x, &[], p, [yx, yp, yt]);
     }
 }

@@ -10,8 +10,7 @@ use std::collections::{HashMap, HashSet};
 
 use cranelift_codegen::ir::immediates::Ieee64;
 use cranelift_codegen::ir::{
-    condcodes::FloatCC, types, AbiParam, FuncRef, InstBuilder, MemFlagsData, Signature,
-    UserFuncName, Value,
+    condcodes::FloatCC, types, AbiParam, FuncRef, InstBuilder, MemFlagsData, Signature, UserFuncName, Value,
 };
 use cranelift_codegen::Context;
 use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
@@ -28,29 +27,22 @@ pub(crate) fn kernel_signature(module: &JITModule) -> Signature {
     let ptr = module.target_config().pointer_type();
     let mut sig = module.make_signature();
     sig.params.push(AbiParam::new(types::F64));
-    sig.params
-        .extend(std::iter::repeat_n(AbiParam::new(ptr), 3 + N_OUTS));
+    sig.params.extend(std::iter::repeat_n(AbiParam::new(ptr), 3 + N_OUTS));
     sig.returns.push(AbiParam::new(types::F64));
     sig
 }
 
 /// Declares every host function once per module; kernels import them by id.
-pub(crate) fn declare_callees(
-    module: &mut JITModule,
-) -> Result<HashMap<Callee, FuncId>, CodegenError> {
+pub(crate) fn declare_callees(module: &mut JITModule) -> Result<HashMap<Callee, FuncId>, CodegenError> {
     let mut ids = HashMap::new();
     for callee in Callee::all() {
         let mut sig = module.make_signature();
-        sig.params
-            .extend(std::iter::repeat_n(AbiParam::new(types::F64), callee.arity()));
+        sig.params.extend(std::iter::repeat_n(AbiParam::new(types::F64), callee.arity()));
         sig.returns.push(AbiParam::new(types::F64));
         let name = callee.symbol();
         let id = module
             .declare_function(&name, Linkage::Import, &sig)
-            .map_err(|source| CodegenError::Module {
-                kernel: name.clone(),
-                source: Box::new(source),
-            })?;
+            .map_err(|source| CodegenError::Module { kernel: name.clone(), source: Box::new(source) })?;
         ids.insert(callee, id);
     }
     Ok(ids)
@@ -66,14 +58,9 @@ pub(crate) fn define_kernel(
     store: &ExprStore,
     plan: &KernelPlan,
 ) -> Result<FuncId, CodegenError> {
-    let module_err = |source| CodegenError::Module {
-        kernel: plan.name.clone(),
-        source: Box::new(source),
-    };
+    let module_err = |source| CodegenError::Module { kernel: plan.name.clone(), source: Box::new(source) };
     let sig = kernel_signature(module);
-    let id = module
-        .declare_function(&plan.name, Linkage::Export, &sig)
-        .map_err(module_err)?;
+    let id = module.declare_function(&plan.name, Linkage::Export, &sig).map_err(module_err)?;
     ctx.func.signature = sig;
     ctx.func.name = UserFuncName::user(0, id.as_u32());
 
@@ -189,9 +176,7 @@ impl Translator<'_, '_> {
             Term::SensDot { products, bias } => self.translate_sens_dot(products, *bias)?,
         };
         let offset = byte_offset(w.index, kernel)?;
-        self.b
-            .ins()
-            .store(MemFlagsData::trusted(), value, self.outs[w.out], offset);
+        self.b.ins().store(MemFlagsData::trusted(), value, self.outs[w.out], offset);
         Ok(())
     }
 
@@ -233,11 +218,7 @@ impl Translator<'_, '_> {
             Input::P => (self.p, self.lens.p, "parameter"),
         };
         if index as usize >= len {
-            return Err(CodegenError::IndexOutOfRange {
-                what: what.into(),
-                index: index as usize,
-                len,
-            });
+            return Err(CodegenError::IndexOutOfRange { what: what.into(), index: index as usize, len });
         }
         let offset = byte_offset(index, what)?;
         let flags = MemFlagsData::trusted().with_readonly();
@@ -282,12 +263,7 @@ impl Translator<'_, '_> {
     /// NaN, like Rust's `<`); `And`/`Or` combine two `!= 0` tests (NaN counts as true, the `!=`
     /// being unordered-or-not-equal); the rest call host wrappers. Min and max are calls because
     /// Cranelift's `fmin`/`fmax` propagate NaN while `f64::min`/`max` do not.
-    fn translate_binary(
-        &mut self,
-        op: BinaryOp,
-        a: ExprId,
-        b: ExprId,
-    ) -> Result<Value, CodegenError> {
+    fn translate_binary(&mut self, op: BinaryOp, a: ExprId, b: ExprId) -> Result<Value, CodegenError> {
         let (a, b) = (self.value(a), self.value(b));
         Ok(match op {
             BinaryOp::Add => self.b.ins().fadd(a, b),
@@ -305,11 +281,8 @@ impl Translator<'_, '_> {
                 let zero = self.constant(0.0f64.to_bits());
                 let ca = self.b.ins().fcmp(FloatCC::NotEqual, a, zero);
                 let cb = self.b.ins().fcmp(FloatCC::NotEqual, b, zero);
-                let c = if op == BinaryOp::And {
-                    self.b.ins().band(ca, cb)
-                } else {
-                    self.b.ins().bor(ca, cb)
-                };
+                let c =
+                    if op == BinaryOp::And { self.b.ins().band(ca, cb) } else { self.b.ins().bor(ca, cb) };
                 self.bool_to_f64(c)
             }
             _ => self.translate_call(Callee::for_binary(op), &[a, b])?,
@@ -326,20 +299,17 @@ impl Translator<'_, '_> {
     }
 
     /// Recipe: import the host wrapper into this function on first use, then a plain call.
-    fn translate_call(
-        &mut self,
-        callee: Option<Callee>,
-        args: &[Value],
-    ) -> Result<Value, CodegenError> {
+    fn translate_call(&mut self, callee: Option<Callee>, args: &[Value]) -> Result<Value, CodegenError> {
         let callee = callee.ok_or(CodegenError::Internal {
             reason: "operation without a native lowering or a host wrapper",
         })?;
         let func_ref = match self.imported.get(&callee) {
             Some(&f) => f,
             None => {
-                let id = *self.callees.get(&callee).ok_or(CodegenError::Internal {
-                    reason: "host wrapper not declared in the module",
-                })?;
+                let id = *self
+                    .callees
+                    .get(&callee)
+                    .ok_or(CodegenError::Internal { reason: "host wrapper not declared in the module" })?;
                 let f = self.module.declare_func_in_func(id, self.b.func);
                 self.imported.insert(callee, f);
                 f
@@ -413,8 +383,6 @@ fn needed_nodes(store: &ExprStore, roots: impl Iterator<Item = ExprId>) -> Vec<E
 
 /// Byte offset of entry `index` of an f64 array, as Cranelift's 32-bit immediate.
 fn byte_offset(index: u32, what: &str) -> Result<i32, CodegenError> {
-    i32::try_from(u64::from(index) * 8).map_err(|_| CodegenError::TooLarge {
-        what: what.to_owned(),
-        len: index as usize,
-    })
+    i32::try_from(u64::from(index) * 8)
+        .map_err(|_| CodegenError::TooLarge { what: what.to_owned(), len: index as usize })
 }

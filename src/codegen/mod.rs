@@ -96,17 +96,9 @@ pub enum CodegenError {
         source: Box<cranelift_module::ModuleError>,
     },
     #[error("{what} has {found} entries, expected {expected}")]
-    ShapeMismatch {
-        what: String,
-        expected: usize,
-        found: usize,
-    },
+    ShapeMismatch { what: String, expected: usize, found: usize },
     #[error("{what} index {index} out of range for length {len}")]
-    IndexOutOfRange {
-        what: String,
-        index: usize,
-        len: usize,
-    },
+    IndexOutOfRange { what: String, index: usize, len: usize },
     #[error("{what} entries are not strictly ascending at position {position}")]
     UnsortedSparse { what: String, position: usize },
     #[error("parameter {param} is listed twice among the gradient parameters")]

@@ -55,20 +55,12 @@ pub(crate) struct KernelPlan {
 
 impl KernelPlan {
     fn new(name: String, lens: Lens) -> Self {
-        KernelPlan {
-            name,
-            lens,
-            prefill: [false; N_OUTS],
-            writes: Vec::new(),
-            ret: None,
-        }
+        KernelPlan { name, lens, prefill: [false; N_OUTS], writes: Vec::new(), ret: None }
     }
 
     fn write(&mut self, out: usize, index: usize, term: Term) -> Result<(), CodegenError> {
-        let index = u32::try_from(index).map_err(|_| CodegenError::TooLarge {
-            what: self.name.clone(),
-            len: index,
-        })?;
+        let index = u32::try_from(index)
+            .map_err(|_| CodegenError::TooLarge { what: self.name.clone(), len: index })?;
         self.writes.push(Write { out, index, term });
         Ok(())
     }
@@ -90,9 +82,7 @@ impl KernelPlan {
         let writes = self.writes.iter().flat_map(|w| match &w.term {
             Term::Expr(e) => vec![*e],
             Term::Zero => Vec::new(),
-            Term::SensDot { products, bias } => {
-                products.iter().map(|&(e, _)| e).chain(*bias).collect()
-            }
+            Term::SensDot { products, bias } => products.iter().map(|&(e, _)| e).chain(*bias).collect(),
         });
         writes.chain(self.ret)
     }
@@ -103,14 +93,13 @@ impl KernelPlan {
     pub(crate) fn check(&self, store: &ExprStore) -> Result<(), CodegenError> {
         let mut covered: [Vec<bool>; N_OUTS] = self.lens.out.map(|len| vec![false; len]);
         for w in &self.writes {
-            let slot = covered
-                .get_mut(w.out)
-                .and_then(|c| c.get_mut(w.index as usize))
-                .ok_or_else(|| CodegenError::IndexOutOfRange {
+            let slot = covered.get_mut(w.out).and_then(|c| c.get_mut(w.index as usize)).ok_or_else(|| {
+                CodegenError::IndexOutOfRange {
                     what: format!("{} output {}", self.name, w.out),
                     index: w.index as usize,
                     len: self.lens.out.get(w.out).copied().unwrap_or(0),
-                })?;
+                }
+            })?;
             *slot = true;
             if let Term::SensDot { products, .. } = &w.term {
                 for &(_, s) in products {
@@ -136,10 +125,7 @@ impl KernelPlan {
         }
         for root in self.roots() {
             if root.index() >= store.len() {
-                return Err(CodegenError::UnknownExpr {
-                    id: root.0,
-                    len: store.len(),
-                });
+                return Err(CodegenError::UnknownExpr { id: root.0, len: store.len() });
             }
         }
         Ok(())
@@ -182,10 +168,7 @@ impl<K> ModelKernels<K> {
     }
 
     /// Applies `f` to every kernel, keeping the structure; stops at the first error.
-    pub(crate) fn try_map<L, E>(
-        &self,
-        mut f: impl FnMut(&K) -> Result<L, E>,
-    ) -> Result<ModelKernels<L>, E> {
+    pub(crate) fn try_map<L, E>(&self, mut f: impl FnMut(&K) -> Result<L, E>) -> Result<ModelKernels<L>, E> {
         let mut all = |ks: &[K]| ks.iter().map(&mut f).collect::<Result<Vec<L>, E>>();
         let flow = all(&self.flow)?;
         let flow_sens = all(&self.flow_sens)?;
@@ -226,20 +209,12 @@ struct Dims {
 
 impl Dims {
     fn lens(&self, x: usize, s: usize, out: [usize; N_OUTS]) -> Lens {
-        Lens {
-            x,
-            s,
-            p: self.n_params,
-            out,
-        }
+        Lens { x, s, p: self.n_params, out }
     }
 }
 
 /// Builds and checks the plan of every kernel of `funcs` under the shape `info`.
-pub(crate) fn plan_model(
-    funcs: &ModelFunctions,
-    info: &SystemInfo,
-) -> Result<ModelPlan, CodegenError> {
+pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<ModelPlan, CodegenError> {
     let dims = check_shape(funcs, info)?;
     let (n, m) = (dims.n, dims.n_grad);
     let mut plan = ModelPlan {
@@ -261,10 +236,8 @@ pub(crate) fn plan_model(
 
     for (mode_idx, (mode, mode_info)) in funcs.modes.iter().zip(&info.modes).enumerate() {
         let mut flow = KernelPlan::new(format!("mode{mode_idx}_flow"), dims.lens(n, 0, [n, 0, 0]));
-        let mut sens = KernelPlan::new(
-            format!("mode{mode_idx}_flow_sens"),
-            dims.lens(n, n * m, [n, n * m, 0]),
-        );
+        let mut sens =
+            KernelPlan::new(format!("mode{mode_idx}_flow_sens"), dims.lens(n, n * m, [n, n * m, 0]));
         for (i, &f) in mode.flow.iter().enumerate() {
             flow.write(0, i, Term::Expr(f))?;
             sens.write(0, i, Term::Expr(f))?;
@@ -277,10 +250,8 @@ pub(crate) fn plan_model(
                     .iter()
                     .map(|&(k, e)| Ok((e, index_u32(&sens.name, j * n + k)?)))
                     .collect::<Result<_, CodegenError>>()?;
-                let bias = fp_rows[i]
-                    .iter()
-                    .find(|&&(param, _)| dims.grad_col[param] == Some(j))
-                    .map(|&(_, e)| e);
+                let bias =
+                    fp_rows[i].iter().find(|&&(param, _)| dims.grad_col[param] == Some(j)).map(|&(_, e)| e);
                 let term = if products.is_empty() && bias.is_none() {
                     Term::Zero
                 } else {
@@ -302,10 +273,7 @@ pub(crate) fn plan_model(
     }
 
     for (ev_idx, ev) in funcs.events.iter().enumerate() {
-        let mut gg = KernelPlan::new(
-            format!("event{ev_idx}_guard_grad"),
-            dims.lens(n, 0, [n, m, 0]),
-        );
+        let mut gg = KernelPlan::new(format!("event{ev_idx}_guard_grad"), dims.lens(n, 0, [n, m, 0]));
         gg.prefill = [true, true, false];
         for &(i, e) in &ev.guard_x.entries {
             gg.write(0, i as usize, Term::Expr(e))?;
@@ -318,22 +286,17 @@ pub(crate) fn plan_model(
         gg.ret = Some(ev.guard_t);
 
         let condition = ev.condition.map(|c| {
-            let mut k =
-                KernelPlan::new(format!("event{ev_idx}_condition"), dims.lens(n, 0, [0; 3]));
+            let mut k = KernelPlan::new(format!("event{ev_idx}_condition"), dims.lens(n, 0, [0; 3]));
             k.ret = Some(c);
             k
         });
 
-        let mut reset =
-            KernelPlan::new(format!("event{ev_idx}_reset"), dims.lens(n, 0, [n, 0, 0]));
+        let mut reset = KernelPlan::new(format!("event{ev_idx}_reset"), dims.lens(n, 0, [n, 0, 0]));
         for (i, &r) in ev.reset.iter().enumerate() {
             reset.write(0, i, Term::Expr(r))?;
         }
 
-        let mut rj = KernelPlan::new(
-            format!("event{ev_idx}_reset_jac"),
-            dims.lens(n, 0, [n * n, n * m, n]),
-        );
+        let mut rj = KernelPlan::new(format!("event{ev_idx}_reset_jac"), dims.lens(n, 0, [n * n, n * m, n]));
         rj.prefill = [true; 3];
         for &(i, c, e) in &ev.reset_x.entries {
             rj.write(0, i as usize * n + c as usize, Term::Expr(e))?;
@@ -387,10 +350,7 @@ pub(crate) fn plan_model(
 }
 
 fn index_u32(what: &str, index: usize) -> Result<u32, CodegenError> {
-    u32::try_from(index).map_err(|_| CodegenError::TooLarge {
-        what: what.to_owned(),
-        len: index,
-    })
+    u32::try_from(index).map_err(|_| CodegenError::TooLarge { what: what.to_owned(), len: index })
 }
 
 /// The entries of a checked sparse matrix grouped by row: `(column, expression)` ascending.
@@ -413,11 +373,7 @@ fn check_shape(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Dims, Codege
         if expected == found {
             Ok(())
         } else {
-            Err(CodegenError::ShapeMismatch {
-                what: what.to_owned(),
-                expected,
-                found,
-            })
+            Err(CodegenError::ShapeMismatch { what: what.to_owned(), expected, found })
         }
     };
     count("states", n, funcs.n_states as usize)?;
@@ -470,13 +426,7 @@ fn check_shape(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Dims, Codege
     check_mat("output_p", &funcs.output_p, n_outputs, n_params)?;
     check_vec("output_t", &funcs.output_t, n_outputs)?;
 
-    Ok(Dims {
-        n,
-        n_params,
-        n_grad: info.n_grad(),
-        n_outputs,
-        grad_col,
-    })
+    Ok(Dims { n, n_params, n_grad: info.n_grad(), n_outputs, grad_col })
 }
 
 fn check_mat(what: &str, mat: &SparseMat, n_rows: usize, n_cols: usize) -> Result<(), CodegenError> {
@@ -491,22 +441,11 @@ fn check_mat(what: &str, mat: &SparseMat, n_rows: usize, n_cols: usize) -> Resul
     if mat.n_cols as usize != n_cols {
         return Err(shape(n_cols, mat.n_cols));
     }
-    let keys = mat
-        .entries
-        .iter()
-        .map(|&(r, c, _)| (r as usize) * n_cols + c as usize);
+    let keys = mat.entries.iter().map(|&(r, c, _)| (r as usize) * n_cols + c as usize);
     for &(r, c, _) in &mat.entries {
-        let (index, len) = if r as usize >= n_rows {
-            (r as usize, n_rows)
-        } else {
-            (c as usize, n_cols)
-        };
+        let (index, len) = if r as usize >= n_rows { (r as usize, n_rows) } else { (c as usize, n_cols) };
         if index >= len {
-            return Err(CodegenError::IndexOutOfRange {
-                what: what.to_owned(),
-                index,
-                len,
-            });
+            return Err(CodegenError::IndexOutOfRange { what: what.to_owned(), index, len });
         }
     }
     check_ascending(what, keys)
@@ -514,11 +453,7 @@ fn check_mat(what: &str, mat: &SparseMat, n_rows: usize, n_cols: usize) -> Resul
 
 fn check_vec(what: &str, vec: &SparseVec, len: usize) -> Result<(), CodegenError> {
     if let Some(&(index, _)) = vec.entries.iter().find(|&&(i, _)| i as usize >= len) {
-        return Err(CodegenError::IndexOutOfRange {
-            what: what.to_owned(),
-            index: index as usize,
-            len,
-        });
+        return Err(CodegenError::IndexOutOfRange { what: what.to_owned(), index: index as usize, len });
     }
     check_ascending(what, vec.entries.iter().map(|&(i, _)| i as usize))
 }
@@ -529,10 +464,7 @@ fn check_ascending(what: &str, keys: impl Iterator<Item = usize>) -> Result<(), 
     let mut prev: Option<usize> = None;
     for (position, key) in keys.enumerate() {
         if prev.is_some_and(|p| p >= key) {
-            return Err(CodegenError::UnsortedSparse {
-                what: what.to_owned(),
-                position,
-            });
+            return Err(CodegenError::UnsortedSparse { what: what.to_owned(), position });
         }
         prev = Some(key);
     }

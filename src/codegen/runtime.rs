@@ -30,17 +30,9 @@ impl Callee {
             UnaryOp::Exp,
             UnaryOp::Log,
         ];
-        const BINARY: [BinaryOp; 5] = [
-            BinaryOp::Pow,
-            BinaryOp::Atan2,
-            BinaryOp::Hypot,
-            BinaryOp::Min,
-            BinaryOp::Max,
-        ];
-        UNARY
-            .into_iter()
-            .map(Callee::Unary)
-            .chain(BINARY.into_iter().map(Callee::Binary))
+        const BINARY: [BinaryOp; 5] =
+            [BinaryOp::Pow, BinaryOp::Atan2, BinaryOp::Hypot, BinaryOp::Min, BinaryOp::Max];
+        UNARY.into_iter().map(Callee::Unary).chain(BINARY.into_iter().map(Callee::Binary))
     }
 
     /// The callee for a unary operation, or `None` when Cranelift lowers it natively.

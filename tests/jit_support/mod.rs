@@ -4,8 +4,8 @@
 #![allow(dead_code)]
 
 use hybc::expr::{
-    BinaryOp, EventFunctions, ExprId, ExprStore, ModeFunctions, ModelFunctions, Node, SparseMat,
-    SparseVec, UnaryOp,
+    BinaryOp, EventFunctions, ExprId, ExprStore, ModeFunctions, ModelFunctions, Node, SparseMat, SparseVec,
+    UnaryOp,
 };
 use hybc::sim::{Direction, EventInfo, ModeInfo, SystemInfo};
 
@@ -26,11 +26,7 @@ pub fn bin(s: &mut ExprStore, op: BinaryOp, a: ExprId, b: ExprId) -> ExprId {
 }
 
 pub fn mat(n_rows: u32, n_cols: u32, entries: Vec<(u32, u32, ExprId)>) -> SparseMat {
-    SparseMat {
-        n_rows,
-        n_cols,
-        entries,
-    }
+    SparseMat { n_rows, n_cols, entries }
 }
 pub fn vec_(entries: Vec<(u32, ExprId)>) -> SparseVec {
     SparseVec { entries }
@@ -95,10 +91,7 @@ pub fn ball_info(grad_params: Vec<usize>) -> SystemInfo {
         output_names: vec!["h".into(), "v2".into()],
         param_names: vec!["g".into(), "e".into(), "h0".into()],
         grad_params,
-        modes: vec![ModeInfo {
-            name: "main".into(),
-            events: vec![0],
-        }],
+        modes: vec![ModeInfo { name: "main".into(), events: vec![0] }],
         events: vec![EventInfo {
             name: "bounce".into(),
             direction: Direction::Falling,
@@ -112,7 +105,12 @@ pub fn ball_info(grad_params: Vec<usize>) -> SystemInfo {
 
 /// A model with no events and one output `y = expr` of `n_states` states and `n_params`
 /// parameters; every other function is zero. Used to test single operations and random DAGs.
-pub fn output_only(store: ExprStore, outputs: Vec<ExprId>, n_states: u32, n_params: u32) -> (ModelFunctions, SystemInfo) {
+pub fn output_only(
+    store: ExprStore,
+    outputs: Vec<ExprId>,
+    n_states: u32,
+    n_params: u32,
+) -> (ModelFunctions, SystemInfo) {
     let mut store = store;
     let zero = c(&mut store, 0.0);
     let k = outputs.len() as u32;
@@ -139,10 +137,7 @@ pub fn output_only(store: ExprStore, outputs: Vec<ExprId>, n_states: u32, n_para
         output_names: (0..k).map(|i| format!("y{i}")).collect(),
         param_names: (0..n_params).map(|j| format!("p{j}")).collect(),
         grad_params: vec![],
-        modes: vec![ModeInfo {
-            name: "main".into(),
-            events: vec![],
-        }],
+        modes: vec![ModeInfo { name: "main".into(), events: vec![] }],
         events: vec![],
         initial_mode: 0,
     };
