@@ -144,7 +144,7 @@ fn every_option_combination_computes_the_same_bits() {
     let s = [0.3, -0.7, 1.1, 0.9];
     let mut reference: Option<Vec<f64>> = None;
     for opt_level in [OptLevel::None, OptLevel::Speed, OptLevel::SpeedAndSize] {
-        for regalloc in [RegAlloc::Backtracking, RegAlloc::SinglePass] {
+        for regalloc in [RegAlloc::Backtracking, RegAlloc::SinglePass, RegAlloc::Auto] {
             for verifier in [false, true] {
                 let opts = CompileOptions { opt_level, verifier, regalloc };
                 let m =

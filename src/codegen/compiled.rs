@@ -12,7 +12,7 @@ use cranelift_module::{default_libcall_names, Module};
 use super::lower::{declare_callees, define_kernel};
 use super::plan::{plan_model, KernelPlan, Lens, ModelKernels, N_OUTS};
 use super::runtime::Callee;
-use super::{CodegenError, CompileOptions, OptLevel, RegAlloc};
+use super::{CodegenError, CompileOptions, OptLevel, RegAlloc, AUTO_REGALLOC_LIMIT};
 use crate::expr::ModelFunctions;
 use crate::sim::{HybridSystem, SystemInfo};
 
@@ -93,7 +93,8 @@ impl CompiledModel {
         opts: &CompileOptions,
     ) -> Result<CompiledModel, CodegenError> {
         let plan = plan_model(funcs, &info)?;
-        let mut module = new_module(opts)?;
+        let largest = plan.iter().map(KernelPlan::size).max().unwrap_or(0);
+        let mut module = new_module(opts, largest)?;
         match build_kernels(&mut module, funcs, &plan) {
             Ok(kernels) => Ok(CompiledModel {
                 info,
@@ -132,9 +133,10 @@ impl Drop for CompiledModel {
     }
 }
 
-/// A JIT module with the chosen flags and every host wrapper registered, so no import can stay
+/// A JIT module with the chosen flags (the register allocator may depend on the size of the
+/// largest kernel) and every host wrapper registered, so no import can stay
 /// unresolved (which would panic inside `finalize_definitions`).
-fn new_module(opts: &CompileOptions) -> Result<JITModule, CodegenError> {
+fn new_module(opts: &CompileOptions, largest_kernel: usize) -> Result<JITModule, CodegenError> {
     let mut flags = settings::builder();
     let opt_level = match opts.opt_level {
         OptLevel::None => "none",
@@ -144,6 +146,8 @@ fn new_module(opts: &CompileOptions) -> Result<JITModule, CodegenError> {
     let regalloc = match opts.regalloc {
         RegAlloc::Backtracking => "backtracking",
         RegAlloc::SinglePass => "single_pass",
+        RegAlloc::Auto if largest_kernel > AUTO_REGALLOC_LIMIT => "single_pass",
+        RegAlloc::Auto => "backtracking",
     };
     let verifier = if opts.verifier { "true" } else { "false" };
     for (name, value) in [

@@ -17,7 +17,7 @@ use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
 use cranelift_jit::JITModule;
 use cranelift_module::{FuncId, Linkage, Module};
 
-use super::plan::{KernelPlan, Lens, Term, N_OUTS};
+use super::plan::{KernelPlan, Lens, Term, Write, N_OUTS};
 use super::runtime::Callee;
 use super::CodegenError;
 use crate::expr::{BinaryOp, ExprId, ExprStore, Node, UnaryOp};
@@ -135,28 +135,48 @@ struct Translator<'a, 'f> {
 
 impl Translator<'_, '_> {
     /// Recipe: translate every node the plan needs in ascending id order (children first, so the
-    /// DAG's sharing is the common-subexpression elimination), then store each output entry and
-    /// return.
+    /// DAG's sharing is the common-subexpression elimination), storing each output entry as soon
+    /// as the last node it depends on exists (so finished values do not stay live and spill at
+    /// `opt_level = none`, where nothing reschedules them), then return.
     fn translate_plan(&mut self, plan: &KernelPlan) -> Result<(), CodegenError> {
+        // Writes ordered by the largest node id they need; `Zero` needs none.
+        let mut writes: Vec<(Option<ExprId>, &Write)> =
+            plan.writes.iter().map(|w| (ready_after(&w.term), w)).collect();
+        writes.sort_by_key(|&(ready, _)| ready);
+        let mut pending = writes.into_iter().peekable();
+        while let Some((_, w)) = pending.next_if(|&(ready, _)| ready.is_none()) {
+            self.translate_write(w, &plan.name)?;
+        }
         for id in needed_nodes(self.store, plan.roots()) {
             let value = self.translate_node(id)?;
             self.values.insert(id, value);
+            while let Some((_, w)) = pending.next_if(|&(ready, _)| ready == Some(id)) {
+                self.translate_write(w, &plan.name)?;
+            }
         }
-        for w in &plan.writes {
-            let value = match &w.term {
-                Term::Expr(e) => self.value(*e),
-                Term::Zero => self.constant(0.0f64.to_bits()),
-                Term::SensDot { products, bias } => self.translate_sens_dot(products, *bias)?,
-            };
-            // Offsets were range-checked against the output length by `KernelPlan::check`.
-            let offset = byte_offset(w.index, &plan.name)?;
-            self.b.ins().store(MemFlagsData::trusted(), value, self.outs[w.out], offset);
+        // Every write's dependencies are among the needed nodes, so none is left; storing any
+        // stragglers anyway keeps the kernel complete if that ever changes.
+        for (_, w) in pending {
+            self.translate_write(w, &plan.name)?;
         }
         let ret = match plan.ret {
             Some(e) => self.value(e),
             None => self.constant(0.0f64.to_bits()),
         };
         self.b.ins().return_(&[ret]);
+        Ok(())
+    }
+
+    /// Recipe: compute the entry's value and store it at a constant offset (range-checked
+    /// against the output's length by `KernelPlan::check`).
+    fn translate_write(&mut self, w: &Write, kernel: &str) -> Result<(), CodegenError> {
+        let value = match &w.term {
+            Term::Expr(e) => self.value(*e),
+            Term::Zero => self.constant(0.0f64.to_bits()),
+            Term::SensDot { products, bias } => self.translate_sens_dot(products, *bias)?,
+        };
+        let offset = byte_offset(w.index, kernel)?;
+        self.b.ins().store(MemFlagsData::trusted(), value, self.outs[w.out], offset);
         Ok(())
     }
 
@@ -332,6 +352,15 @@ impl Translator<'_, '_> {
         let one = self.constant(1.0f64.to_bits());
         let zero = self.constant(0.0f64.to_bits());
         self.b.ins().select(cond, one, zero)
+    }
+}
+
+/// The largest node id a term needs, i.e. the point in the ascending walk where it can be stored.
+fn ready_after(term: &Term) -> Option<ExprId> {
+    match term {
+        Term::Expr(e) => Some(*e),
+        Term::Zero => None,
+        Term::SensDot { products, bias } => products.iter().map(|&(e, _)| e).chain(*bias).max(),
     }
 }
 

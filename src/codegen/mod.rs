@@ -39,11 +39,22 @@ pub enum OptLevel {
 /// Cranelift's register allocator.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum RegAlloc {
-    /// Better code, slower to compile.
+    /// Better code, slower to compile; its compile time grows faster than linearly with the
+    /// size of one kernel (measured: a 1000-state chain's fused sensitivity kernel, 4000
+    /// outputs, takes 1.7-2.4 s against 0.11-0.15 s with `SinglePass`).
     Backtracking,
-    /// About three times faster to compile, 1.2-1.5x slower code (CRANELIFT.md).
+    /// Linear compile time, about 1.2-1.4x slower code.
     SinglePass,
+    /// `Backtracking` unless the largest kernel exceeds [`AUTO_REGALLOC_LIMIT`] operations,
+    /// then `SinglePass`: big models stay quick to compile, small ones get the better code.
+    Auto,
 }
+
+/// Size of the largest kernel (output entries plus sensitivity products) above which
+/// [`RegAlloc::Auto`] switches to the single-pass allocator. A 100-state chain (about 1000)
+/// compiles in ~25 ms either way; a 1000-state chain (about 10000) is where backtracking
+/// becomes seconds.
+pub const AUTO_REGALLOC_LIMIT: usize = 3000;
 
 /// How kernels are compiled.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -55,14 +66,16 @@ pub struct CompileOptions {
 }
 
 impl Default for CompileOptions {
-    /// Kernels run millions of times per simulation and compile in well under a millisecond
-    /// each, so run-time speed wins: `Speed` with the backtracking allocator. The verifier stays
-    /// on in debug builds only, where catching a codegen bug matters more than compile time.
+    /// Kernels run millions of times per simulation, so run-time speed wins where it is cheap:
+    /// `Speed` (it cost no measurable compile time over `None` on the ball or a 100-state chain)
+    /// and [`RegAlloc::Auto`]. The verifier (10-25% of compile time) stays on in debug builds
+    /// only, where catching a codegen bug matters more than compile time. Measured with
+    /// `cargo run --example jit_options`; figures in that file's header.
     fn default() -> Self {
         CompileOptions {
             opt_level: OptLevel::Speed,
             verifier: cfg!(debug_assertions),
-            regalloc: RegAlloc::Backtracking,
+            regalloc: RegAlloc::Auto,
         }
     }
 }

@@ -65,6 +65,18 @@ impl KernelPlan {
         Ok(())
     }
 
+    /// A size measure for choosing the register allocator: output entries plus sensitivity
+    /// products.
+    pub(crate) fn size(&self) -> usize {
+        self.writes
+            .iter()
+            .map(|w| match &w.term {
+                Term::SensDot { products, .. } => 1 + products.len(),
+                _ => 1,
+            })
+            .sum()
+    }
+
     /// Every expression the kernel needs, in no particular order.
     pub(crate) fn roots(&self) -> impl Iterator<Item = ExprId> + '_ {
         let writes = self.writes.iter().flat_map(|w| match &w.term {
