@@ -168,8 +168,14 @@ fn trajectory_csv_has_a_header_and_uniform_samples() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let csv = std::fs::read_to_string(&path).expect("csv written");
     let mut lines = csv.lines();
-    assert_eq!(lines.next(), Some("t,mode,y,v,energy,dy/de,dv/de"));
-    let times: Vec<f64> = lines.map(|l| l.split(',').next().expect("t").parse().expect("number")).collect();
+    assert_eq!(lines.next(), Some("t,mode,y,v,energy,dy/de,dv/de,denergy/de"));
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').filter(|c| *c != "main").map(|c| c.parse().expect("number")).collect())
+        .collect();
+    let times: Vec<f64> = rows.iter().map(|r| r[0]).collect();
+    // dE/de at t = 2.5 (after 4 bounces) is 8 g h0 e^7, the closed form.
+    let last = rows.last().expect("rows");
+    assert_relative_eq!(last[6], 8.0 * 9.81 * 0.8_f64.powi(7), max_relative = 1e-8);
     assert_eq!(times.len(), 6, "t = 0, 0.5, ..., 2.5: {times:?}");
     for (k, t) in times.iter().enumerate() {
         assert_relative_eq!(*t, 0.5 * k as f64, epsilon = 1e-12);

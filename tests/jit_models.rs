@@ -15,6 +15,7 @@ use hybc::lower::{lower, system_info, Interpreter};
 use hybc::sema::ParamIdx;
 use hybc::sim::HybridSystem;
 use jit_support::same;
+use proptest::prelude::*;
 
 /// A small deterministic generator (xorshift64*), so failures reproduce.
 struct Rng(u64);
@@ -122,6 +123,123 @@ fn compare(name: &str, jit: &dyn HybridSystem, reference: &dyn HybridSystem, p: 
     }
 }
 
+/// Compiles `source` with all parameters and with a reordered subset differentiated, and compares
+/// the JIT with the interpreter on every method.
+fn compare_model_text(name: &str, source: &str, rng: &mut Rng) {
+    let model = hybc::check_source(source).unwrap_or_else(|e| panic!("{name}: {e}\n{source}"));
+    let funcs = lower(&model);
+    let p: Vec<f64> = model.params.iter().map(|p| p.default).collect();
+    // All parameters, and then every other one in reverse order, so the column mapping of a
+    // strict, reordered subset is exercised too.
+    let all: Vec<ParamIdx> = (0..model.n_params() as u32).map(ParamIdx).collect();
+    let some: Vec<ParamIdx> = all.iter().rev().step_by(2).copied().collect();
+    for grad in [all, some] {
+        let info = system_info(&model, &grad);
+        let jit = CompiledModel::compile(&funcs, info.clone(), &CompileOptions::default())
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let reference = Interpreter::new(funcs.clone(), info);
+        compare(name, &jit, &reference, &p, rng);
+    }
+}
+
+/// A random real expression over `names` using the whole language (operators, every function,
+/// `if` with `and`/`or`/`not`, `t` where `with_time`, `pi`), as .hyb text.
+fn expr_text(names: Vec<String>, with_time: bool) -> impl Strategy<Value = String> {
+    let time = if with_time { "t" } else { "pi" };
+    let leaf = prop_oneof![
+        (-30i32..30).prop_map(|k| format!("{}", k as f64 / 4.0)),
+        prop::sample::select(names),
+        Just(time.to_string()),
+        Just("pi".to_string()),
+    ];
+    leaf.prop_recursive(4, 24, 3, |inner| {
+        let unary = prop::sample::select(vec![
+            "sin", "cos", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "exp", "log", "sqrt", "abs",
+            "sign",
+        ]);
+        let binary = prop::sample::select(vec!["atan2", "min", "max", "pow", "hypot"]);
+        let op = prop::sample::select(vec!["+", "-", "*", "/", "^"]);
+        let cmp = prop::sample::select(vec!["<", "<=", ">", ">="]);
+        prop_oneof![
+            (op, inner.clone(), inner.clone()).prop_map(|(o, a, b)| format!("({a} {o} {b})")),
+            inner.clone().prop_map(|a| format!("(-{a})")),
+            (unary, inner.clone()).prop_map(|(f, a)| format!("{f}({a})")),
+            (binary, inner.clone(), inner.clone()).prop_map(|(f, a, b)| format!("{f}({a}, {b})")),
+            (cmp.clone(), cmp, inner.clone(), inner.clone(), inner.clone(), inner.clone(), any::<u8>())
+                .prop_map(|(c1, c2, a, b, x, y, shape)| {
+                    let cond = match shape % 3 {
+                        0 => format!("{a} {c1} {b}"),
+                        1 => format!("{a} {c1} {b} and not ({x} {c2} {y})"),
+                        _ => format!("{a} {c1} {b} or {x} {c2} {y}"),
+                    };
+                    format!("(if {cond} then {x} else {y})")
+                }),
+        ]
+    })
+}
+
+/// A random well-formed model: 1-4 states, 1-3 parameters, one or two modes, an event per mode
+/// with a random guard, condition and resets, and a random output.
+fn model_text() -> impl Strategy<Value = String> {
+    (1usize..=4, 1usize..=3, any::<bool>()).prop_flat_map(|(n, m, two_modes)| {
+        let states: Vec<String> = (0..n).map(|i| format!("x{i}")).collect();
+        let params: Vec<String> = (0..m).map(|j| format!("p{j}")).collect();
+        let all: Vec<String> = states.iter().chain(&params).cloned().collect();
+        let modes = if two_modes { 2 } else { 1 };
+        (
+            prop::collection::vec(expr_text(params.clone(), false), n),
+            prop::collection::vec(expr_text(all.clone(), true), n * modes),
+            prop::collection::vec(expr_text(all.clone(), true), modes * 2),
+            prop::collection::vec(expr_text(all.clone(), true), n),
+            expr_text(all, true),
+            prop::collection::vec(-20i32..20, m),
+        )
+            .prop_map(move |(inits, flows, guards, resets, output, defaults)| {
+                let mut s = String::from("model generated\n");
+                for (j, d) in defaults.iter().enumerate() {
+                    s.push_str(&format!("param p{j} = {}\n", *d as f64 / 8.0));
+                }
+                for (i, init) in inits.iter().enumerate() {
+                    s.push_str(&format!("state x{i} = {init}\n"));
+                }
+                for mode in 0..modes {
+                    let (open, close) = match (modes, mode) {
+                        (1, _) => (String::new(), String::new()),
+                        (_, 0) => ("initial mode a {\n".to_string(), "}\n".to_string()),
+                        _ => ("mode b {\n".to_string(), "}\n".to_string()),
+                    };
+                    s.push_str(&open);
+                    for i in 0..n {
+                        s.push_str(&format!("der(x{i}) = {}\n", flows[mode * n + i]));
+                    }
+                    let target = match (modes, mode) {
+                        (1, _) => "",
+                        (_, 0) => " -> b",
+                        _ => " -> a",
+                    };
+                    let (g, c) = (&guards[2 * mode], &guards[2 * mode + 1]);
+                    s.push_str(&format!("event e{mode} when {g} crosses x0 if {c} > 0{target} {{\n"));
+                    s.push_str(&format!("    x{} := {}\n", mode % n, resets[mode % n]));
+                    s.push_str("}\n");
+                    s.push_str(&close);
+                }
+                s.push_str(&format!("output y = {output}\n"));
+                s
+            })
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    /// Random well-formed models of random sizes through the whole pipeline: the JIT agrees with
+    /// the interpreter on every method, bit for bit.
+    #[test]
+    fn generated_models_match_the_interpreter(source in model_text(), seed in any::<u64>()) {
+        compare_model_text("generated", &source, &mut Rng(seed | 1));
+    }
+}
+
 #[test]
 fn every_shipped_model_matches_the_interpreter() {
     let mut paths: Vec<_> = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/models"))
@@ -135,19 +253,6 @@ fn every_shipped_model_matches_the_interpreter() {
     for path in paths {
         let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("?").to_owned();
         let source = std::fs::read_to_string(&path).expect("model text");
-        let model = hybc::check_source(&source).unwrap_or_else(|e| panic!("{name}: {e}"));
-        let funcs = lower(&model);
-        let p: Vec<f64> = model.params.iter().map(|p| p.default).collect();
-        // All parameters, and then every other one in reverse order, so the column mapping of
-        // a strict, reordered subset is exercised too.
-        let all: Vec<ParamIdx> = (0..model.n_params() as u32).map(ParamIdx).collect();
-        let some: Vec<ParamIdx> = all.iter().rev().step_by(2).copied().collect();
-        for grad in [all, some] {
-            let info = system_info(&model, &grad);
-            let jit = CompiledModel::compile(&funcs, info.clone(), &CompileOptions::default())
-                .unwrap_or_else(|e| panic!("{name}: {e}"));
-            let reference = Interpreter::new(funcs.clone(), info);
-            compare(&name, &jit, &reference, &p, &mut rng);
-        }
+        compare_model_text(&name, &source, &mut rng);
     }
 }

@@ -13,7 +13,7 @@ use crate::codegen::{self, CompileOptions};
 use crate::lower::{lower, system_info};
 use crate::report::{num, RunReport};
 use crate::sema::Model;
-use crate::sim::{self, Method, SimOptions, TrajectoryRequest};
+use crate::sim::{self, HybridSystem, Method, SimOptions, TrajectoryRequest};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum MethodArg {
@@ -182,7 +182,7 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         run_seconds,
     };
     if let Some(path) = &args.trajectory {
-        if let Err(e) = write_trajectory(path, &report) {
+        if let Err(e) = write_trajectory(path, &report, &compiled) {
             return Err(format!("--trajectory: cannot write `{}`: {e}", path.display()));
         }
     }
@@ -212,9 +212,11 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
     })
 }
 
-/// CSV columns: t, mode, the states, the outputs, then with gradients `d<state>/d<param>`.
-fn write_trajectory(path: &PathBuf, report: &RunReport) -> std::io::Result<()> {
+/// CSV columns: t, mode, the states, the outputs, then with gradients `d<state>/d<param>` and
+/// `d<output>/d<param>` (output sensitivities `h_x S + h_p`, from the compiled output Jacobians).
+fn write_trajectory(path: &PathBuf, report: &RunReport, system: &impl HybridSystem) -> std::io::Result<()> {
     let info = &report.info;
+    let (n, k, m) = (info.n_states(), info.n_outputs(), info.n_grad());
     let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
     let mut header: Vec<String> = vec!["t".into(), "mode".into()];
     header.extend(info.state_names.iter().cloned());
@@ -222,11 +224,25 @@ fn write_trajectory(path: &PathBuf, report: &RunReport) -> std::io::Result<()> {
     for &j in &info.grad_params {
         header.extend(info.state_names.iter().map(|s| format!("d{s}/d{}", info.param_names[j])));
     }
+    for &j in &info.grad_params {
+        header.extend(info.output_names.iter().map(|o| format!("d{o}/d{}", info.param_names[j])));
+    }
     writeln!(out, "{}", header.join(","))?;
+    let (mut yx, mut yp, mut yt) = (vec![0.0; k * n], vec![0.0; k * m], vec![0.0; k]);
     for row in report.result.trajectory.iter().flatten() {
         let mode = info.modes.get(row.mode).map(|m| m.name.as_str()).unwrap_or("?");
         let mut cells: Vec<String> = vec![num(row.t), mode.to_string()];
         cells.extend(row.x.iter().chain(&row.outputs).chain(&row.s).map(|v| format!("{v:e}")));
+        if m > 0 && row.s.len() == n * m {
+            system.output_jac(row.t, &row.x, &report.params, &mut yx, &mut yp, &mut yt);
+            for j in 0..m {
+                for i in 0..k {
+                    let dy: f64 =
+                        (0..n).map(|c| yx[i * n + c] * row.s[j * n + c]).sum::<f64>() + yp[j * k + i];
+                    cells.push(format!("{dy:e}"));
+                }
+            }
+        }
         writeln!(out, "{}", cells.join(","))?;
     }
     out.flush()
