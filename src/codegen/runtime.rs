@@ -17,22 +17,9 @@ pub(crate) enum Callee {
 impl Callee {
     /// Every callee, so the JIT can register all symbols before any kernel refers to one.
     pub(crate) fn all() -> impl Iterator<Item = Callee> {
-        const UNARY: [UnaryOp; 11] = [
-            UnaryOp::Sin,
-            UnaryOp::Cos,
-            UnaryOp::Tan,
-            UnaryOp::Asin,
-            UnaryOp::Acos,
-            UnaryOp::Atan,
-            UnaryOp::Sinh,
-            UnaryOp::Cosh,
-            UnaryOp::Tanh,
-            UnaryOp::Exp,
-            UnaryOp::Log,
-        ];
-        const BINARY: [BinaryOp; 5] =
-            [BinaryOp::Pow, BinaryOp::Atan2, BinaryOp::Hypot, BinaryOp::Min, BinaryOp::Max];
-        UNARY.into_iter().map(Callee::Unary).chain(BINARY.into_iter().map(Callee::Binary))
+        // Exactly the operations that have a host wrapper (the rest Cranelift lowers natively).
+        let unary = UnaryOp::ALL.into_iter().filter_map(Callee::for_unary);
+        unary.chain(BinaryOp::ALL.into_iter().filter_map(Callee::for_binary))
     }
 
     /// The callee for a unary operation, or `None` when Cranelift lowers it natively.

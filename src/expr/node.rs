@@ -54,7 +54,45 @@ pub enum BinaryOp {
     Or,
 }
 
+impl UnaryOp {
+    /// Every unary operation, for tables and exhaustive tests.
+    pub const ALL: [UnaryOp; 16] = [
+        UnaryOp::Neg,
+        UnaryOp::Sin,
+        UnaryOp::Cos,
+        UnaryOp::Tan,
+        UnaryOp::Asin,
+        UnaryOp::Acos,
+        UnaryOp::Atan,
+        UnaryOp::Sinh,
+        UnaryOp::Cosh,
+        UnaryOp::Tanh,
+        UnaryOp::Exp,
+        UnaryOp::Log,
+        UnaryOp::Sqrt,
+        UnaryOp::Abs,
+        UnaryOp::Sign,
+        UnaryOp::Not,
+    ];
+}
+
 impl BinaryOp {
+    /// Every binary operation, for tables and exhaustive tests.
+    pub const ALL: [BinaryOp; 12] = [
+        BinaryOp::Add,
+        BinaryOp::Mul,
+        BinaryOp::Div,
+        BinaryOp::Pow,
+        BinaryOp::Atan2,
+        BinaryOp::Hypot,
+        BinaryOp::Min,
+        BinaryOp::Max,
+        BinaryOp::Lt,
+        BinaryOp::Le,
+        BinaryOp::And,
+        BinaryOp::Or,
+    ];
+
     pub fn is_commutative(self) -> bool {
         matches!(
             self,
