@@ -10,7 +10,7 @@
 //! Dormand-Prince 5(4) has one correction (4th-order accurate), DOP853 four, built from three extra
 //! stages (7th-order accurate). Because of the Hermite part, `P'` matches `f` at both ends.
 
-use super::rk::Rk;
+use super::rk::{stage_sum, Rk};
 use super::tableau::DenseKind;
 
 pub(crate) struct Dense {
@@ -55,15 +55,7 @@ impl Dense {
         }
         for (row, d) in tab.d.iter().enumerate() {
             let out = &mut self.r[(4 + row) * nz..(5 + row) * nz];
-            out.fill(0.0);
-            for (j, &dj) in d.iter().enumerate() {
-                if dj != 0.0 {
-                    let kj = &rk.k[j * nz..(j + 1) * nz];
-                    for (o, kv) in out.iter_mut().zip(kj) {
-                        *o += dj * kv;
-                    }
-                }
-            }
+            stage_sum(&rk.k, nz, d, 1.0, |_| 0.0, out);
             for o in out.iter_mut() {
                 *o *= h;
             }
