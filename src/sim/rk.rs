@@ -43,7 +43,10 @@ pub(crate) struct Rk {
     /// The error estimates of the last attempt (5th- and 3rd-order for DOP853).
     err5: Vec<f64>,
     err3: Vec<f64>,
-    err_prev: f64,
+    /// The controller's memory, kept as `err_prev^beta`.
+    err_prev_beta: f64,
+    /// `1e-10^(-alpha)` and `1e-4^beta`: the controller's powers at the floors of `err`.
+    floors: (f64, f64),
     pub rhs_calls: usize,
 }
 
@@ -63,7 +66,11 @@ impl Rk {
             ytmp: vec![0.0; nz],
             err5: vec![0.0; n_err],
             err3: vec![0.0; n_err],
-            err_prev: 1e-4,
+            err_prev_beta: 0.0,
+            floors: {
+                let (alpha, beta) = controller_exponents(tab);
+                (1e-10f64.powf(-alpha), 1e-4f64.powf(beta))
+            },
             rhs_calls: 0,
         }
     }
@@ -74,7 +81,7 @@ impl Rk {
         let nz = self.nz;
         rhs(self.t, &self.y, &mut self.k[..nz]);
         self.rhs_calls += 1;
-        self.err_prev = 1e-4;
+        self.err_prev_beta = self.floors.1;
     }
 
     /// Stage `i`'s input `ytmp = y + h sum_j a_ij k_j`.
@@ -160,12 +167,13 @@ impl Rk {
 
     /// Next step size after an accepted step with error `err`; updates the controller memory.
     pub fn grow(&mut self, err: f64) -> f64 {
-        let q = self.tab.order as f64;
-        let beta = 0.2 / q;
-        let alpha = 1.0 / q - 0.75 * beta;
+        let (alpha, beta) = controller_exponents(self.tab);
+        // Both powers are often at their floors (tiny errors), which are computed once.
         let err = err.max(1e-10);
-        let fac = SAFETY * err.powf(-alpha) * self.err_prev.powf(beta);
-        self.err_prev = err.max(1e-4);
+        let err_alpha = if err == 1e-10 { self.floors.0 } else { err.powf(-alpha) };
+        let fac = SAFETY * err_alpha * self.err_prev_beta;
+        let prev = err.max(1e-4);
+        self.err_prev_beta = if prev == 1e-4 { self.floors.1 } else { prev.powf(beta) };
         self.h * fac.clamp(FAC_MIN, FAC_MAX)
     }
 
@@ -227,6 +235,13 @@ impl Rk {
         };
         (100.0 * h0).min(h1).min(h_max)
     }
+}
+
+/// The PI controller's `(alpha, beta)` for the tableau's order.
+fn controller_exponents(tab: &Tableau) -> (f64, f64) {
+    let q = tab.order as f64;
+    let beta = 0.2 / q;
+    (1.0 / q - 0.75 * beta, beta)
 }
 
 /// `out_i = init(i) + sum_j (scale w_j) k_{j,i}` for the first `out.len()` components, summed in
