@@ -10,22 +10,28 @@
 //! Dormand-Prince 5(4) has one correction (4th-order accurate), DOP853 four, built from three extra
 //! stages (7th-order accurate). Because of the Hermite part, `P'` matches `f` at both ends.
 
-use super::rk::Rk;
+use super::rk::{stage_sum, Rk};
 use super::tableau::DenseKind;
+
+/// Most coefficient vectors of any method (DOP853; Dopri5 uses 5).
+const MAX_COEF: usize = 8;
 
 pub(crate) struct Dense {
     pub t0: f64,
     pub h: f64,
     nz: usize,
     n_coef: usize,
+    /// Component-major: the coefficients of component `i` are `r[i * MAX_COEF..][..n_coef]`, so
+    /// one evaluation reads one short contiguous run per component.
     r: Vec<f64>,
+    /// One correction vector before it is spread into `r`.
+    row: Vec<f64>,
 }
 
 impl Dense {
     pub fn new(nz: usize) -> Dense {
-        // Room for DOP853's 8 vectors; Dopri5 uses 5.
         // Until the first build the interpolant is the zero constant, never an out-of-range read.
-        Dense { t0: 0.0, h: 0.0, nz, n_coef: 1, r: vec![0.0; 8 * nz] }
+        Dense { t0: 0.0, h: 0.0, nz, n_coef: 1, r: vec![0.0; MAX_COEF * nz], row: vec![0.0; nz] }
     }
 
     /// Builds the interpolant of the last attempt of `rk` (before `rk.accept()`: `rk.y` is the
@@ -43,61 +49,53 @@ impl Dense {
             DenseKind::Dopri5 => 5,
             DenseKind::Dop853 => 8,
         };
-        let f1 = (tab.stages - 1) * nz;
-        for i in 0..nz {
-            let y0 = rk.y[i];
-            let ydiff = rk.y_new[i] - y0;
-            let bspl = h * rk.k[i] - ydiff;
-            self.r[i] = y0;
-            self.r[nz + i] = ydiff;
-            self.r[2 * nz + i] = bspl;
-            self.r[3 * nz + i] = ydiff - h * rk.k[f1 + i] - bspl;
+        let f0 = &rk.k[..nz];
+        let f1 = &rk.k[(tab.stages - 1) * nz..tab.stages * nz];
+        let ends = rk.y.iter().zip(&rk.y_new).zip(f0.iter().zip(f1));
+        for (r, ((&y0, &y1), (&f0, &f1))) in self.r.chunks_exact_mut(MAX_COEF).zip(ends) {
+            let ydiff = y1 - y0;
+            let bspl = h * f0 - ydiff;
+            r[..4].copy_from_slice(&[y0, ydiff, bspl, ydiff - h * f1 - bspl]);
         }
         for (row, d) in tab.d.iter().enumerate() {
-            let out = &mut self.r[(4 + row) * nz..(5 + row) * nz];
-            out.fill(0.0);
-            for (j, &dj) in d.iter().enumerate() {
-                if dj != 0.0 {
-                    let kj = &rk.k[j * nz..(j + 1) * nz];
-                    for (o, kv) in out.iter_mut().zip(kj) {
-                        *o += dj * kv;
-                    }
-                }
-            }
-            for o in out.iter_mut() {
-                *o *= h;
+            stage_sum(&rk.k, nz, d, 1.0, |_| 0.0, &mut self.row);
+            for (r, v) in self.r.chunks_exact_mut(MAX_COEF).zip(&self.row) {
+                r[4 + row] = h * v;
             }
         }
     }
 
-    /// Interpolated values of the first `out.len()` components at time `t`.
-    pub fn eval(&self, t: f64, out: &mut [f64]) {
+    /// The factor in front of `r_{j+1}` for `j = 0..`: `s` for odd `j + 1`, `1 - s` for even.
+    fn factors(&self, t: f64) -> [f64; MAX_COEF - 1] {
         let s = if self.h != 0.0 { (t - self.t0) / self.h } else { 0.0 };
         let s1 = 1.0 - s;
-        let nz = self.nz;
-        for (i, o) in out.iter_mut().enumerate() {
-            let mut acc = self.r[(self.n_coef - 1) * nz + i];
-            for j in (0..self.n_coef - 1).rev() {
-                // The factor in front of r_{j+1} is s for odd j+1, (1-s) for even.
-                let mult = if (j + 1) % 2 == 1 { s } else { s1 };
-                acc = self.r[j * nz + i] + mult * acc;
-            }
-            *o = acc;
+        [s, s1, s, s1, s, s1, s]
+    }
+
+    /// Interpolated values of the first `out.len()` components at time `t`.
+    pub fn eval(&self, t: f64, out: &mut [f64]) {
+        let mult = self.factors(t);
+        let nc = self.n_coef;
+        let mult = &mult[..nc - 1];
+        for (o, r) in out.iter_mut().zip(self.r.chunks_exact(MAX_COEF)) {
+            let (rest, last) = (&r[..nc - 1], r[nc - 1]);
+            *o = rest.iter().zip(mult).rev().fold(last, |acc, (rj, m)| rj + m * acc);
         }
     }
 
     /// Interpolated time derivatives of the first `out.len()` components at time `t`.
     pub fn eval_deriv(&self, t: f64, out: &mut [f64]) {
-        let s = if self.h != 0.0 { (t - self.t0) / self.h } else { 0.0 };
-        let s1 = 1.0 - s;
-        let nz = self.nz;
-        for (i, o) in out.iter_mut().enumerate() {
-            let mut acc = self.r[(self.n_coef - 1) * nz + i];
-            let mut dacc = 0.0;
-            for j in (0..self.n_coef - 1).rev() {
-                let (mult, dmult) = if (j + 1) % 2 == 1 { (s, 1.0) } else { (s1, -1.0) };
-                dacc = dmult * acc + mult * dacc;
-                acc = self.r[j * nz + i] + mult * acc;
+        let mult = self.factors(t);
+        let nc = self.n_coef;
+        let mult = &mult[..nc - 1];
+        for (o, r) in out.iter_mut().zip(self.r.chunks_exact(MAX_COEF)) {
+            let (rest, last) = (&r[..nc - 1], r[nc - 1]);
+            let (mut acc, mut dacc) = (last, 0.0);
+            for (j, (rj, &m)) in rest.iter().zip(mult).enumerate().rev() {
+                // d/ds of s is 1, of (1 - s) is -1.
+                let dm = if j % 2 == 0 { 1.0 } else { -1.0 };
+                dacc = dm * acc + m * dacc;
+                acc = rj + m * acc;
             }
             *o = if self.h != 0.0 { dacc / self.h } else { 0.0 };
         }

@@ -75,6 +75,13 @@ fn allows(dir: Direction, sigma: f64) -> bool {
 /// Illinois regula falsi on `[a, b]` with `sigma * fa > 0 >= sigma * fb`; returns the smallest
 /// point found on the crossed side once the bracket is as narrow as the floating-point numbers
 /// allow.
+///
+/// Near the end the secant keeps landing next to the end it last moved, where the function is
+/// round-off, and plain Illinois would then narrow the bracket only by bisection (about 50
+/// halvings). So a trial point keeps a distance `push` from both ends, starting at the final
+/// resolution and doubling while trial points land on the same side as the end they were pushed
+/// away from: once the root is pinned to round-off the bracket closes in a few evaluations, also
+/// when the function is noisy there.
 pub(crate) fn illinois<F: FnMut(f64) -> f64>(
     mut a: f64,
     mut fa: f64,
@@ -85,24 +92,44 @@ pub(crate) fn illinois<F: FnMut(f64) -> f64>(
 ) -> f64 {
     let mut side = 0i8;
     let mut width = b - a;
+    let mut push = 1.0f64;
     for it in 0..200 {
-        if b - a <= 2.0 * EPS * a.abs().max(b.abs()) || b - a <= f64::MIN_POSITIVE {
+        let resolution = EPS * a.abs().max(b.abs());
+        if b - a <= 2.0 * resolution || b - a <= f64::MIN_POSITIVE {
             break;
         }
-        let mut c = if fb != fa { b - fb * (b - a) / (fb - fa) } else { 0.5 * (a + b) };
-        // Safeguard: bisect when the secant leaves the open bracket or every fourth iteration
-        // when the bracket has not at least halved, so the iteration count stays bounded.
-        if !(c > a && c < b) || (it % 4 == 3 && b - a > 0.5 * width) {
+        // Safeguard: bisect when the secant leaves the bracket, when the bracket is too narrow
+        // to keep the push distance from both ends, or every fourth iteration when the bracket
+        // has not at least halved, so the iteration count stays bounded.
+        let secant = if fb != fa { b - fb * (b - a) / (fb - fa) } else { f64::NAN };
+        let stalled = it % 4 == 3 && b - a > 0.5 * width;
+        if it % 4 == 3 {
+            width = b - a;
+        }
+        let d = push * resolution;
+        // Which end the trial point was pushed away from: -1 for `b`, 1 for `a`.
+        let mut pushed = 0i8;
+        let mut c = if stalled || !(secant >= a && secant <= b) || b - a <= 2.0 * d {
+            0.5 * (a + b)
+        } else if secant - a < d {
+            pushed = 1;
+            a + d
+        } else if b - secant < d {
+            pushed = -1;
+            b - d
+        } else {
+            secant
+        };
+        if !(c > a && c < b) {
             c = 0.5 * (a + b);
-            if it % 4 == 3 {
-                width = b - a;
+            pushed = 0;
+            if !(c > a && c < b) {
+                break;
             }
         }
-        if !(c > a && c < b) {
-            break;
-        }
         let fc = f(c);
-        if sigma * fc <= 0.0 || fc.is_nan() {
+        let crossed = sigma * fc <= 0.0 || fc.is_nan();
+        if crossed {
             b = c;
             fb = fc;
             if side == -1 {
@@ -117,6 +144,8 @@ pub(crate) fn illinois<F: FnMut(f64) -> f64>(
             }
             side = 1;
         }
+        let same_side = (pushed == -1 && crossed) || (pushed == 1 && !crossed);
+        push = if same_side { 2.0 * push } else { 1.0 };
     }
     b
 }
@@ -208,7 +237,7 @@ impl Detector {
         self.gtmp[pos]
     }
 
-    /// Guard speed along the interpolant, and the round-off size of the guard value there.
+    /// Guard speed along the interpolant, `g_x P'(t) + g_t`.
     fn speed_on_dense<S: HybridSystem + ?Sized>(
         &mut self,
         sys: &S,
@@ -216,12 +245,25 @@ impl Detector {
         t: f64,
         dense: &Dense,
         p: &[f64],
-    ) -> (f64, f64) {
+    ) -> f64 {
         dense.eval(t, &mut self.x);
         dense.eval_deriv(t, &mut self.dx);
         let gt = sys.guard_grad(ev, t, &self.x, p, &mut self.gx, &mut self.gp);
-        let noise = 16.0 * EPS * (norm(&self.gx) * norm(&self.x) + gt.abs() * t.abs());
-        (dot(&self.gx, &self.dx) + gt, noise)
+        dot(&self.gx, &self.dx) + gt
+    }
+
+    /// The round-off size of the guard value on the interpolant at `t`.
+    fn noise_on_dense<S: HybridSystem + ?Sized>(
+        &mut self,
+        sys: &S,
+        ev: usize,
+        t: f64,
+        dense: &Dense,
+        p: &[f64],
+    ) -> f64 {
+        dense.eval(t, &mut self.x);
+        let gt = sys.guard_grad(ev, t, &self.x, p, &mut self.gx, &mut self.gp);
+        16.0 * EPS * (norm(&self.gx) * norm(&self.x) + gt.abs() * t.abs())
     }
 
     /// Locates the first crossing of every event of `mode` in the step `[t0, t1]` described by
@@ -246,11 +288,11 @@ impl Detector {
             if self.dg0[pos] * self.dg1[pos] < 0.0 {
                 let s0 = self.dg0[pos].signum();
                 let te = illinois(t0, self.dg0[pos], t1, self.dg1[pos], s0, |t| {
-                    self.speed_on_dense(sys, ev, t, dense, p).0
+                    self.speed_on_dense(sys, ev, t, dense, p)
                 });
                 if te > t0 && te < t1 {
                     let ge = self.guard_on_dense(sys, mode, ne, pos, te, dense, p);
-                    let (_, noise) = self.speed_on_dense(sys, ev, te, dense, p);
+                    let noise = self.noise_on_dense(sys, ev, te, dense, p);
                     ext = Some((te, ge, noise));
                 }
             }
@@ -363,6 +405,31 @@ mod tests {
         let f = |t: f64| 0.5 - t;
         let t = illinois(0.0, 0.5, 1.0, -0.5, 1.0, f);
         assert_eq!(t, 0.5);
+    }
+
+    #[test]
+    fn illinois_closes_the_bracket_in_few_evaluations() {
+        // A linear function is found by the first secant; closing the bracket around it must not
+        // fall back to some 50 bisections.
+        let mut calls = 0;
+        let t = illinois(1.349, 1.11, 1.782, -3.13, 1.0, |t| {
+            calls += 1;
+            (1.462_936_596_793_766 - t) * 7.3
+        });
+        assert!((t - 1.462_936_596_793_766).abs() <= 4.0 * EPS * 1.5, "{t}");
+        assert!(calls <= 8, "{calls} evaluations");
+        // Round-off noise of a few hundred ulps around the root: still few evaluations.
+        let mut calls = 0;
+        let noisy = |t: f64| {
+            let wobble = ((t.to_bits() % 7) as f64 - 3.0) * 1e-14;
+            (0.75 - t) + wobble
+        };
+        let t = illinois(0.0, noisy(0.0), 1.0, noisy(1.0), 1.0, |t| {
+            calls += 1;
+            noisy(t)
+        });
+        assert!(noisy(t) <= 0.0 && (t - 0.75).abs() < 1e-13, "{t}");
+        assert!(calls <= 30, "{calls} evaluations");
     }
 
     #[test]

@@ -17,7 +17,7 @@
 //! scaled norm, `h0 = 0.01 d0 / d1`; one explicit Euler step gives `d2 = |f(z0 + h0 f0) - f0| / h0`
 //! and `h1 = (0.01 / max(d1, d2))^(1/q)`; the estimate is `min(100 h0, h1)`.
 
-use super::tableau::Tableau;
+use super::tableau::{Tableau, Terms};
 
 const SAFETY: f64 = 0.9;
 const FAC_MIN: f64 = 0.2;
@@ -40,7 +40,13 @@ pub(crate) struct Rk {
     pub h: f64,
     pub y_new: Vec<f64>,
     pub ytmp: Vec<f64>,
-    err_prev: f64,
+    /// The error estimates of the last attempt (5th- and 3rd-order for DOP853).
+    err5: Vec<f64>,
+    err3: Vec<f64>,
+    /// The controller's memory, kept as `err_prev^beta`.
+    err_prev_beta: f64,
+    /// `1e-10^(-alpha)` and `1e-4^beta`: the controller's powers at the floors of `err`.
+    floors: (f64, f64),
     pub rhs_calls: usize,
 }
 
@@ -58,7 +64,13 @@ impl Rk {
             h: 0.0,
             y_new: vec![0.0; nz],
             ytmp: vec![0.0; nz],
-            err_prev: 1e-4,
+            err5: vec![0.0; n_err],
+            err3: vec![0.0; n_err],
+            err_prev_beta: 0.0,
+            floors: {
+                let (alpha, beta) = controller_exponents(tab);
+                (1e-10f64.powf(-alpha), 1e-4f64.powf(beta))
+            },
             rhs_calls: 0,
         }
     }
@@ -69,22 +81,13 @@ impl Rk {
         let nz = self.nz;
         rhs(self.t, &self.y, &mut self.k[..nz]);
         self.rhs_calls += 1;
-        self.err_prev = 1e-4;
+        self.err_prev_beta = self.floors.1;
     }
 
     /// Stage `i`'s input `ytmp = y + h sum_j a_ij k_j`.
     fn stage_input(&mut self, i: usize, h: f64) {
-        let nz = self.nz;
-        let row = self.tab.a[i];
-        self.ytmp.copy_from_slice(&self.y);
-        for (j, &a) in row.iter().enumerate() {
-            if a != 0.0 {
-                let kj = &self.k[j * nz..(j + 1) * nz];
-                for (yt, kv) in self.ytmp.iter_mut().zip(kj) {
-                    *yt += h * a * kv;
-                }
-            }
-        }
+        let y = &self.y;
+        stage_sum(&self.k, self.nz, &self.tab.a[i], h, |c| y[c], &mut self.ytmp);
     }
 
     /// Evaluates stages `from..to` with step `h` from `(t, y)`.
@@ -117,41 +120,45 @@ impl Rk {
         rhs(self.t + h, &self.y_new, &mut self.k[(s - 1) * nz..s * nz]);
         self.rhs_calls += 1;
         let err = self.error(h);
-        if err.is_finite() && self.y_new.iter().all(|v| v.is_finite()) {
+        if err.is_finite() && all_finite(&self.y_new) {
             err
         } else {
             f64::INFINITY
         }
     }
 
-    fn error(&self, h: f64) -> f64 {
-        let nz = self.nz;
-        let s = self.tab.stages;
+    fn error(&mut self, h: f64) -> f64 {
+        let ne = self.n_err;
+        stage_sum(&self.k, self.nz, &self.tab.e, 1.0, |_| 0.0, &mut self.err5[..ne]);
         let mut sum5 = 0.0;
         let mut sum3 = 0.0;
-        for i in 0..self.n_err {
-            let sc = self.atol + self.rtol * self.y[i].abs().max(self.y_new[i].abs());
-            let mut e5 = 0.0;
-            let mut e3 = 0.0;
-            for j in 0..s {
-                let kj = self.k[j * nz + i];
-                e5 += self.tab.e[j] * kj;
-                if let Some(e3w) = self.tab.e3 {
-                    e3 += e3w[j] * kj;
+        let scales = self.y[..ne].iter().zip(&self.y_new[..ne]);
+        match &self.tab.e3 {
+            Some(e3) => {
+                stage_sum(&self.k, self.nz, e3, 1.0, |_| 0.0, &mut self.err3[..ne]);
+                for ((y0, y1), (e5, e3)) in scales.zip(self.err5.iter().zip(&self.err3)) {
+                    let sc = self.atol + self.rtol * y0.abs().max(y1.abs());
+                    let (r5, r3) = (h * e5 / sc, h * e3 / sc);
+                    sum5 += r5 * r5;
+                    sum3 += r3 * r3;
                 }
             }
-            let r5 = h * e5 / sc;
-            let r3 = h * e3 / sc;
-            sum5 += r5 * r5;
-            sum3 += r3 * r3;
+            None => {
+                for ((y0, y1), e5) in scales.zip(&self.err5) {
+                    let sc = self.atol + self.rtol * y0.abs().max(y1.abs());
+                    let r5 = h * e5 / sc;
+                    sum5 += r5 * r5;
+                }
+            }
         }
-        let n = self.n_err.max(1) as f64;
+        let n = ne.max(1) as f64;
         if self.tab.e3.is_some() {
             let den = sum5 + 0.01 * sum3;
-            if den > 0.0 {
-                sum5 / (n * den).sqrt()
-            } else {
+            // A NaN estimate stays NaN (the step is rejected); only a zero one is zero.
+            if den == 0.0 {
                 0.0
+            } else {
+                sum5 / (n * den).sqrt()
             }
         } else {
             (sum5 / n).sqrt()
@@ -160,12 +167,13 @@ impl Rk {
 
     /// Next step size after an accepted step with error `err`; updates the controller memory.
     pub fn grow(&mut self, err: f64) -> f64 {
-        let q = self.tab.order as f64;
-        let beta = 0.2 / q;
-        let alpha = 1.0 / q - 0.75 * beta;
+        let (alpha, beta) = controller_exponents(self.tab);
+        // Both powers are often at their floors (tiny errors), which are computed once.
         let err = err.max(1e-10);
-        let fac = SAFETY * err.powf(-alpha) * self.err_prev.powf(beta);
-        self.err_prev = err.max(1e-4);
+        let err_alpha = if err == 1e-10 { self.floors.0 } else { err.powf(-alpha) };
+        let fac = SAFETY * err_alpha * self.err_prev_beta;
+        let prev = err.max(1e-4);
+        self.err_prev_beta = if prev == 1e-4 { self.floors.1 } else { prev.powf(beta) };
         self.h * fac.clamp(FAC_MIN, FAC_MAX)
     }
 
@@ -229,6 +237,81 @@ impl Rk {
     }
 }
 
+/// The PI controller's `(alpha, beta)` for the tableau's order.
+fn controller_exponents(tab: &Tableau) -> (f64, f64) {
+    let q = tab.order as f64;
+    let beta = 0.2 / q;
+    (1.0 / q - 0.75 * beta, beta)
+}
+
+/// `out_i = init(i) + sum_j (scale w_j) k_{j,i}` for the first `out.len()` components, summed in
+/// ascending stage order over the nonzero weights `w` of one tableau row (`k` holds the stages as
+/// blocks of `nz`). Blocks of eight (then four) components are summed in registers, so each stage
+/// block is read once, `out` written once, and the index arithmetic and bounds checks are paid
+/// per block rather than per component.
+#[inline(always)]
+pub(crate) fn stage_sum<I: Fn(usize) -> f64>(
+    k: &[f64],
+    nz: usize,
+    terms: &Terms,
+    scale: f64,
+    init: I,
+    out: &mut [f64],
+) {
+    let mut i0 = 0;
+    while i0 + 8 <= out.len() {
+        sum_block::<8, I>(k, nz, terms, scale, &init, i0, &mut out[i0..i0 + 8]);
+        i0 += 8;
+    }
+    if i0 + 4 <= out.len() {
+        sum_block::<4, I>(k, nz, terms, scale, &init, i0, &mut out[i0..i0 + 4]);
+        i0 += 4;
+    }
+    for (i, o) in out.iter_mut().enumerate().skip(i0) {
+        let mut acc = init(i);
+        for (&j, &w) in terms.stages().iter().zip(terms.weights()) {
+            acc += scale * w * k[j * nz + i];
+        }
+        *o = acc;
+    }
+}
+
+/// Whether every value is finite, in independent lanes that the compiler can vectorise
+/// (`v * 0` is zero for finite `v`, NaN otherwise).
+fn all_finite(v: &[f64]) -> bool {
+    let mut lanes = [0.0f64; 8];
+    let mut chunks = v.chunks_exact(8);
+    for chunk in &mut chunks {
+        for (l, x) in lanes.iter_mut().zip(chunk) {
+            *l += x * 0.0;
+        }
+    }
+    let rest = chunks.remainder().iter().fold(0.0, |acc, x| acc + x * 0.0);
+    lanes.iter().sum::<f64>() + rest == 0.0
+}
+
+/// Components `i0..i0 + W` of [`stage_sum`].
+#[inline(always)]
+fn sum_block<const W: usize, I: Fn(usize) -> f64>(
+    k: &[f64],
+    nz: usize,
+    terms: &Terms,
+    scale: f64,
+    init: &I,
+    i0: usize,
+    out: &mut [f64],
+) {
+    let mut acc: [f64; W] = std::array::from_fn(|l| init(i0 + l));
+    for (&j, &w) in terms.stages().iter().zip(terms.weights()) {
+        let sw = scale * w;
+        let kj: &[f64; W] = k[j * nz + i0..j * nz + i0 + W].try_into().expect("a block of W");
+        for (a, kv) in acc.iter_mut().zip(kj) {
+            *a += sw * kv;
+        }
+    }
+    out.copy_from_slice(&acc);
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::tableau::{DOP853, DOPRI5};
@@ -256,6 +339,23 @@ mod tests {
         }
         let exact = 0.5 * (2f64.cos() + 2f64.sin()) + 1.5 * (-2f64).exp();
         ((rk.y[0] - exact).abs(), steps)
+    }
+
+    #[test]
+    fn non_finite_stage_with_zero_error_weight_rejects_the_step() {
+        // Stage 2 of both pairs has zero weight in `b` and in the error estimators, so `y_new` and
+        // the weighted sums stay finite; an infinite derivative there must still reject the step.
+        for tab in [&DOPRI5, &DOP853] {
+            let mut rk = Rk::new(tab, 1, 1, 1e-8, 1e-10);
+            let mut calls = 0;
+            let mut rhs = |_t: f64, _y: &[f64], dy: &mut [f64]| {
+                calls += 1;
+                dy[0] = if calls == 2 { f64::INFINITY } else { 1.0 };
+            };
+            rk.restart(&mut rhs);
+            assert_eq!(rk.attempt(0.1, &mut rhs), f64::INFINITY, "order {}", tab.order);
+        }
+        assert!(all_finite(&[1.0; 19]) && !all_finite(&[1.0, f64::NAN]) && !all_finite(&[f64::INFINITY; 9]));
     }
 
     #[test]
