@@ -235,13 +235,30 @@ fn diff_binary(
                 prod(s, f, db)
             }
             (None, None) => {
-                // (a^b)' = a^b (b' ln a + b a' / a); each term vanishes with its derivative.
+                // (a^b)' = b a^(b-1) a' + a^b ln(a) b'. The second term exists only where the
+                // exponent moves: for a < 0, ln(a) is NaN, and NaN * 0 would poison a derivative
+                // that is well defined (x^select(.., 0, ..) at a point where the exponent is
+                // locally constant). So it is taken where b' != 0 and is 0 elsewhere; where b'
+                // is structurally 0 it vanishes altogether. The first term, unlike
+                // a^b * b a'/a, stays finite at a = 0 for b >= 1.
+                let one = s.one();
+                let b_minus_1 = s.sub(b, one);
+                let power = s.pow(a, b_minus_1);
+                let slope = prod(s, b, power);
+                let base_term = prod(s, slope, da);
                 let ln = s.unary(UnaryOp::Log, a);
-                let t1 = prod(s, db, ln);
-                let q = s.div(da, a);
-                let t2 = prod(s, b, q);
-                let sum = s.add(t1, t2);
-                prod(s, id, sum)
+                let moving = prod(s, id, ln);
+                let exponent_term = prod(s, moving, db);
+                let exponent_term = if s.const_value(db).is_some() {
+                    exponent_term
+                } else {
+                    let zero = s.zero();
+                    let below = s.lt(db, zero);
+                    let above = s.lt(zero, db);
+                    let moves = s.or(below, above);
+                    s.select(moves, exponent_term, zero)
+                };
+                s.add(base_term, exponent_term)
             }
         },
         BinaryOp::Atan2 => {
