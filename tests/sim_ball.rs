@@ -223,3 +223,23 @@ fn works_through_dyn_and_serialises() {
     assert!(json.contains("\"final\""), "{json}");
     assert!(json.contains("\"floor\""));
 }
+
+#[test]
+fn a_reused_simulator_gives_the_results_of_fresh_runs() {
+    // The scratch buffers outlive each run; nothing of one run may leak into the next, also
+    // after a run that stopped early (Zeno, a NaN fault) or used other parameters.
+    use hybc::sim::Simulator;
+    let ball = Ball::new();
+    for method in [Method::Dopri5, Method::Dop853] {
+        let o = opts(5.0, method, true);
+        let mut sim = Simulator::new(&ball, &o).expect("valid options");
+        let points = [[G, E, 1.0], [G, 0.95, 3.0], [f64::NAN, E, 1.0], [3.7, 0.5, 0.2], [G, E, 1.0]];
+        for p in points {
+            let fresh = run(&ball, &p, &o).expect("valid");
+            let reused = sim.run(&p).expect("valid");
+            // Debug formatting compares NaN fields as equal text and every float exactly.
+            assert_eq!(format!("{reused:?}"), format!("{fresh:?}"), "{method:?} at {p:?}");
+        }
+        assert!(matches!(sim.run(&[G, E]), Err(SimError::ParamLength { expected: 3, got: 2 })));
+    }
+}

@@ -17,5 +17,5 @@ mod tableau;
 
 pub use options::*;
 pub use result::*;
-pub use run::run;
+pub use run::{run, Simulator};
 pub use system::*;

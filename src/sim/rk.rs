@@ -8,20 +8,22 @@
 //! combines its 5th- and 3rd-order estimates as Hairer does,
 //! `err = err5^2 / sqrt(err5^2 + 0.01 err3^2)`, which behaves like an 8th-order estimate.
 //!
-//! Step-size controller (PI, Gustafsson's form as used in Hairer's codes): after an accepted step
-//! `h_new = h * safety * err^(-alpha) * err_prev^beta` with `beta = 0.2 / q`,
-//! `alpha = 1 / q - 0.75 beta`, `q` the order; after a rejection only the I-part
-//! `h * safety * err^(-1/q)` is used and growth is forbidden. Factors are clamped to [0.2, 10].
+//! Step-size controller (PI, Gustafsson's form as used in Hairer's codes, with their defaults):
+//! after an accepted step `h_new = h * safety * err^(-alpha) * err_prev^beta` with
+//! `alpha = 1 / q - 0.75 beta`, `q` the order, `safety = 0.9`, and `beta` and the factor bounds
+//! from the pair's [`Control`] (DOPRI5: `beta = 0.04`, factors in [0.2, 10]; DOP853: `beta = 0`,
+//! [1/3, 6]); after a rejection only the I-part `h * safety * err^(-1/q)` is used and growth is
+//! forbidden.
 //!
 //! Initial step (Hairer, Norsett & Wanner, ODEs I, II.4): with `d0 = |z0|`, `d1 = |f0|` in the
 //! scaled norm, `h0 = 0.01 d0 / d1`; one explicit Euler step gives `d2 = |f(z0 + h0 f0) - f0| / h0`
 //! and `h1 = (0.01 / max(d1, d2))^(1/q)`; the estimate is `min(100 h0, h1)`.
 
+#[cfg(doc)]
+use super::tableau::Control;
 use super::tableau::{Tableau, Terms};
 
 const SAFETY: f64 = 0.9;
-const FAC_MIN: f64 = 0.2;
-const FAC_MAX: f64 = 10.0;
 
 pub(crate) struct Rk {
     pub tab: &'static Tableau,
@@ -73,6 +75,15 @@ impl Rk {
             },
             rhs_calls: 0,
         }
+    }
+
+    /// Forgets everything of an earlier run (the buffers are overwritten before they are read):
+    /// a run on a reused stepper is bit-for-bit a run on a new one.
+    pub fn reset(&mut self, t: f64) {
+        self.t = t;
+        self.h = 0.0;
+        self.rhs_calls = 0;
+        self.err_prev_beta = self.floors.1;
     }
 
     /// Sets `k[0] = f(t, y)` after the caller has placed a new start point in `t`, `y` (at the
@@ -173,15 +184,22 @@ impl Rk {
         let err_alpha = if err == 1e-10 { self.floors.0 } else { err.powf(-alpha) };
         let fac = SAFETY * err_alpha * self.err_prev_beta;
         let prev = err.max(1e-4);
-        self.err_prev_beta = if prev == 1e-4 { self.floors.1 } else { prev.powf(beta) };
-        self.h * fac.clamp(FAC_MIN, FAC_MAX)
+        self.err_prev_beta = if beta == 0.0 {
+            1.0
+        } else if prev == 1e-4 {
+            self.floors.1
+        } else {
+            prev.powf(beta)
+        };
+        self.h * fac.clamp(self.tab.control.fac_min, self.tab.control.fac_max)
     }
 
-    /// Smaller step size after a rejected step with error `err` (infinite: shrink by 5).
+    /// Smaller step size after a rejected step with error `err` (infinite: by the smallest factor).
     pub fn shrink(&self, err: f64) -> f64 {
         let q = self.tab.order as f64;
-        let fac = if err.is_finite() { SAFETY * err.powf(-1.0 / q) } else { FAC_MIN };
-        self.h * fac.clamp(FAC_MIN, 1.0)
+        let fac_min = self.tab.control.fac_min;
+        let fac = if err.is_finite() { SAFETY * err.powf(-1.0 / q) } else { fac_min };
+        self.h * fac.clamp(fac_min, 1.0)
     }
 
     /// Moves to the end of the last attempted step (FSAL: the end derivative becomes `k[0]`).
@@ -240,7 +258,7 @@ impl Rk {
 /// The PI controller's `(alpha, beta)` for the tableau's order.
 fn controller_exponents(tab: &Tableau) -> (f64, f64) {
     let q = tab.order as f64;
-    let beta = 0.2 / q;
+    let beta = tab.control.beta;
     (1.0 / q - 0.75 * beta, beta)
 }
 

@@ -18,6 +18,9 @@ use super::system::{HybridSystem, SystemInfo};
 use super::tableau::{DOP853, DOPRI5};
 
 const EPS: f64 = f64::EPSILON;
+/// Largest ratio of the first step after an event to Hairer's initial estimate at the
+/// post-event state (the estimate is deliberately cautious: its own cap is 100 `h0`).
+const AFTER_EVENT_GROWTH: f64 = 100.0;
 /// Rejections in a row with a non-finite trial state before the run gives up on shrinking.
 const MAX_NONFINITE_REJECTS: usize = 30;
 
@@ -25,16 +28,72 @@ const MAX_NONFINITE_REJECTS: usize = 30;
 /// `opts.t_end`. Bad input (parameter length, an inconsistent model shape, invalid options) is an
 /// error; runtime faults, Zeno behaviour and stop events end the run with everything computed so
 /// far and say why in [`SimResult::stopped_by`].
+///
+/// Shorthand for [`Simulator::new`] followed by one [`Simulator::run`]; to run one model many
+/// times (sweeps, fits, finite differences) keep a `Simulator`, which allocates its scratch
+/// buffers once.
 pub fn run<S: HybridSystem + ?Sized>(sys: &S, p: &[f64], opts: &SimOptions) -> Result<SimResult, SimError> {
-    let info = sys.info();
-    validate(info, p, opts)?;
-    Ok(Driver::new(sys, info, p, opts).run())
+    check_params(sys.info(), p)?;
+    Simulator::new(sys, opts)?.run(p)
 }
 
-fn validate(info: &SystemInfo, p: &[f64], opts: &SimOptions) -> Result<(), SimError> {
+/// A model and options checked once, with the stepper's, interpolant's, detector's and jump's
+/// scratch buffers kept between runs: a run then allocates only what its result holds.
+/// Runs are independent: the same parameters give bit-for-bit the same result, whatever ran
+/// before. One `Simulator` per thread (it is `Send` when the system is `Sync`).
+pub struct Simulator<'a, S: HybridSystem + ?Sized> {
+    sys: &'a S,
+    opts: SimOptions,
+    work: Workspace,
+}
+
+/// Scratch state of the driver, sized by the model and the options.
+struct Workspace {
+    rk: Rk,
+    dense: Dense,
+    det: Detector,
+    jump: Jump,
+}
+
+impl<'a, S: HybridSystem + ?Sized> Simulator<'a, S> {
+    /// Checks the model's shape and the options (an `Err` for an inconsistent shape or an
+    /// invalid option) and allocates the scratch buffers.
+    pub fn new(sys: &'a S, opts: &SimOptions) -> Result<Self, SimError> {
+        let info = sys.info();
+        validate(info, opts)?;
+        let (n, m) = (info.n_states(), info.n_grad());
+        let nz = n * (1 + m);
+        let tab = if opts.method.resolve(opts.rtol) == Method::Dop853 { &DOP853 } else { &DOPRI5 };
+        let n_err = if opts.sens_error_control { nz } else { n };
+        let work = Workspace {
+            rk: Rk::new(tab, nz, n_err, opts.rtol, opts.atol),
+            dense: Dense::new(nz),
+            det: Detector::new(info, n, m),
+            jump: Jump::new(n, m),
+        };
+        Ok(Simulator { sys, opts: opts.clone(), work })
+    }
+
+    /// Simulates with parameters `p` (all of them, `n_params` long; an `Err` otherwise).
+    pub fn run(&mut self, p: &[f64]) -> Result<SimResult, SimError> {
+        let info = self.sys.info();
+        check_params(info, p)?;
+        Ok(Driver::new(self.sys, info, p, &self.opts, &mut self.work).run())
+    }
+
+    pub fn options(&self) -> &SimOptions {
+        &self.opts
+    }
+}
+
+fn check_params(info: &SystemInfo, p: &[f64]) -> Result<(), SimError> {
     if p.len() != info.n_params() {
         return Err(SimError::ParamLength { expected: info.n_params(), got: p.len() });
     }
+    Ok(())
+}
+
+fn validate(info: &SystemInfo, opts: &SimOptions) -> Result<(), SimError> {
     let bad_index = |what, index: usize, count: usize| {
         if index < count {
             Ok(())
@@ -100,10 +159,10 @@ struct Driver<'a, S: HybridSystem + ?Sized> {
     n: usize,
     m: usize,
     mode: usize,
-    rk: Rk,
-    dense: Dense,
-    det: Detector,
-    jump: Jump,
+    rk: &'a mut Rk,
+    dense: &'a mut Dense,
+    det: &'a mut Detector,
+    jump: &'a mut Jump,
     events: Vec<EventRecord>,
     warnings: Vec<SimWarning>,
     /// False once a grazing event has made the sensitivities meaningless.
@@ -116,13 +175,16 @@ struct Driver<'a, S: HybridSystem + ?Sized> {
 }
 
 impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
-    fn new(sys: &'a S, info: &'a SystemInfo, p: &'a [f64], opts: &'a SimOptions) -> Self {
+    fn new(
+        sys: &'a S,
+        info: &'a SystemInfo,
+        p: &'a [f64],
+        opts: &'a SimOptions,
+        work: &'a mut Workspace,
+    ) -> Self {
         let (n, m) = (info.n_states(), info.n_grad());
-        let nz = n * (1 + m);
-        let tab = if opts.method.resolve(opts.rtol) == Method::Dop853 { &DOP853 } else { &DOPRI5 };
-        let n_err = if opts.sens_error_control { nz } else { n };
-        let mut rk = Rk::new(tab, nz, n_err, opts.rtol, opts.atol);
-        rk.t = opts.t_start;
+        let Workspace { rk, dense, det, jump } = work;
+        rk.reset(opts.t_start);
         sys.initial_state(p, &mut rk.y[..n]);
         sys.initial_sens(p, &mut rk.y[n..]);
         Driver {
@@ -134,9 +196,9 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
             m,
             mode: info.initial_mode,
             rk,
-            dense: Dense::new(nz),
-            det: Detector::new(info, n, m),
-            jump: Jump::new(n, m),
+            dense,
+            det,
+            jump,
             events: Vec::new(),
             warnings: Vec::new(),
             sens_valid: true,
@@ -154,7 +216,8 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
         self.rk.y[..self.n].to_vec()
     }
 
-    /// New start point (beginning, after events): derivative, guards and a fresh step estimate.
+    /// New start point (beginning, after events): derivative, guards and Hairer's step estimate
+    /// for the new state.
     fn restart(&mut self) -> f64 {
         let mut rhs = rhs_for(self.sys, self.p, self.n, self.mode);
         self.rk.restart(&mut rhs);
@@ -256,11 +319,11 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
             let may_cross = self.det.may_cross(self.info, self.mode);
             let sample_due = self.sample_due(t1);
             if may_cross || sample_due {
-                self.dense.build(&mut self.rk, &mut rhs);
+                self.dense.build(self.rk, &mut rhs);
             }
             let fire = if may_cross {
-                self.det.locate(self.sys, self.info, self.mode, &self.dense, self.p);
-                self.det.select(self.sys, self.info, self.mode, &self.dense, self.p)
+                self.det.locate(self.sys, self.info, self.mode, self.dense, self.p);
+                self.det.select(self.sys, self.info, self.mode, self.dense, self.p)
             } else {
                 None
             };
@@ -292,9 +355,23 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
                     if self.rk.y.iter().any(|v| !v.is_finite()) {
                         return self.fault_nonfinite();
                     }
-                    h = self.restart();
+                    let estimate = self.restart();
+                    h = self.continue_step(h_next, estimate);
                 }
             }
+        }
+    }
+
+    /// The first step after an event: the controller's proposal from before the event, which
+    /// knows the solution's scales far better than a fresh estimate (restarting from the
+    /// estimate costs several steps of growth per event), but at most [`AFTER_EVENT_GROWTH`]
+    /// times the estimate for the post-event state, in case the reset or the new mode made the
+    /// dynamics much faster. The controller's memory is reset either way.
+    fn continue_step(&self, proposal: f64, estimate: f64) -> f64 {
+        if proposal.is_finite() && proposal > estimate {
+            proposal.min(AFTER_EVENT_GROWTH * estimate).min(self.opts.h_max)
+        } else {
+            estimate
         }
     }
 

@@ -39,9 +39,24 @@ pub(crate) struct Tableau {
     pub e3: Option<Terms>,
     /// Order of the solution; the controller's exponents derive from it.
     pub order: u32,
+    /// Step-size controller settings that go with the pair.
+    pub control: Control,
     pub dense: DenseKind,
     /// Dense-output correction weights, one row per correction vector, over `all_stages`.
     pub d: &'static [Terms],
+}
+
+/// The PI controller's settings for one pair: Hairer's defaults for DOPRI5 and DOP853 (Hairer,
+/// Norsett & Wanner, ODEs I, II.4, and the codes' documented defaults). DOP853 uses no
+/// proportional part (`beta = 0`) and narrower factor bounds: its error estimate behaves like an
+/// 8th-order one, so a pure I-controller is already smooth.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Control {
+    /// Weight of the previous error (`err_prev^beta`).
+    pub beta: f64,
+    /// Bounds of the factor `h_new / h`.
+    pub fac_min: f64,
+    pub fac_max: f64,
 }
 
 /// Largest stage count of any tableau (DOP853 with its dense-output stages).
@@ -139,6 +154,7 @@ pub(crate) static DOPRI5: Tableau = Tableau {
     e: Terms::all(DP5_E),
     e3: None,
     order: 5,
+    control: Control { beta: 0.04, fac_min: 0.2, fac_max: 10.0 },
     dense: DenseKind::Dopri5,
     d: &Terms::rows::<1>(DP5_D),
 };
@@ -438,6 +454,7 @@ pub(crate) static DOP853: Tableau = Tableau {
     e: Terms::all(DP8_E),
     e3: Some(Terms::of(&DP8_E3)),
     order: 8,
+    control: Control { beta: 0.0, fac_min: 1.0 / 3.0, fac_max: 6.0 },
     dense: DenseKind::Dop853,
     d: &Terms::rows::<4>(DP8_D),
 };
