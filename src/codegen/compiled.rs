@@ -31,7 +31,9 @@ struct Kernel {
 impl Kernel {
     /// Calls the kernel if every slice has the length it was generated for. Otherwise nothing
     /// native runs, the outputs are filled with NaN (so a caller's bug shows up in its results
-    /// rather than as memory corruption) and `None` is returned.
+    /// rather than as memory corruption) and `None` is returned. Inlined: the checks are a
+    /// handful of compares, comparable to the cost of a small kernel itself.
+    #[inline]
     fn call(&self, t: f64, x: &[f64], s: &[f64], p: &[f64], outs: [&mut [f64]; N_OUTS]) -> Option<f64> {
         let fits = x.len() == self.lens.x
             && s.len() == self.lens.s
@@ -44,9 +46,11 @@ impl Kernel {
             return None;
         }
         let [o0, o1, o2] = outs;
-        for (o, prefill) in [&mut *o0, &mut *o1, &mut *o2].into_iter().zip(self.prefill) {
-            if prefill {
-                o.fill(0.0);
+        if self.prefill != [false; N_OUTS] {
+            for (o, prefill) in [&mut *o0, &mut *o1, &mut *o2].into_iter().zip(self.prefill) {
+                if prefill {
+                    o.fill(0.0);
+                }
             }
         }
         // SAFETY: `f` was finalized by the module this model owns and is freed only in `Drop`,

@@ -264,6 +264,20 @@ impl Translator<'_, '_> {
     /// being unordered-or-not-equal); the rest call host wrappers. Min and max are calls because
     /// Cranelift's `fmin`/`fmax` propagate NaN while `f64::min`/`max` do not.
     fn translate_binary(&mut self, op: BinaryOp, a: ExprId, b: ExprId) -> Result<Value, CodegenError> {
+        // `a + (-c)` is `a - c` bit for bit (IEEE 754 defines subtraction so), and the
+        // simplifier spells every subtraction as an added negation: one `fsub` instead of a
+        // sign-mask constant, an `xor` and an `fadd`. The then unused `fneg` is dead code.
+        if op == BinaryOp::Add {
+            let minuend_subtrahend = match (self.negated(a), self.negated(b)) {
+                (_, Some(c)) => Some((a, c)),
+                (Some(c), None) => Some((b, c)),
+                (None, None) => None,
+            };
+            if let Some((x, c)) = minuend_subtrahend {
+                let (x, c) = (self.value(x), self.value(c));
+                return Ok(self.b.ins().fsub(x, c));
+            }
+        }
         let (a, b) = (self.value(a), self.value(b));
         Ok(match op {
             BinaryOp::Add => self.b.ins().fadd(a, b),
@@ -287,6 +301,14 @@ impl Translator<'_, '_> {
             }
             _ => self.translate_call(Callee::for_binary(op), &[a, b])?,
         })
+    }
+
+    /// The operand of `id` when `id` is a negation.
+    fn negated(&self, id: ExprId) -> Option<ExprId> {
+        match *self.store.node(id) {
+            Node::Unary(UnaryOp::Neg, c) => Some(c),
+            _ => None,
+        }
     }
 
     /// Recipe: `Select(c, a, b)` is `a` where `c != 0` (unordered-or-not-equal, so a NaN
@@ -326,20 +348,34 @@ impl Translator<'_, '_> {
         products: &[(ExprId, u32)],
         bias: Option<ExprId>,
     ) -> Result<Value, CodegenError> {
+        // Negated factors become subtractions, as in `translate_binary`: `sum + (-c) s` is
+        // `sum - c s` bit for bit (rounding is symmetric in sign).
         let mut acc: Option<Value> = None;
         for &(a, s_index) in products {
             let s = self.translate_load(Input::S, s_index)?;
-            let term = self.b.ins().fmul(self.values[&a], s);
-            acc = Some(match acc {
-                Some(sum) => self.b.ins().fadd(sum, term),
-                None => term,
+            acc = Some(match (acc, self.negated(a)) {
+                (Some(sum), Some(c)) => {
+                    let term = self.b.ins().fmul(self.values[&c], s);
+                    self.b.ins().fsub(sum, term)
+                }
+                (Some(sum), None) => {
+                    let term = self.b.ins().fmul(self.values[&a], s);
+                    self.b.ins().fadd(sum, term)
+                }
+                (None, _) => self.b.ins().fmul(self.values[&a], s),
             });
         }
         if let Some(bias) = bias {
-            let bias = self.value(bias);
-            acc = Some(match acc {
-                Some(sum) => self.b.ins().fadd(sum, bias),
-                None => bias,
+            acc = Some(match (acc, self.negated(bias)) {
+                (Some(sum), Some(c)) => {
+                    let c = self.value(c);
+                    self.b.ins().fsub(sum, c)
+                }
+                (Some(sum), None) => {
+                    let bias = self.value(bias);
+                    self.b.ins().fadd(sum, bias)
+                }
+                (None, _) => self.value(bias),
             });
         }
         Ok(match acc {
