@@ -13,7 +13,9 @@
 
 mod closed_support;
 
-use closed_support::{derivative, mid_flight, Compiled, Errors};
+use closed_support::{
+    ball_reference, derivative, mid_flight, thermostat_reference, Compiled, Errors, Reference, MAX_EVENTS,
+};
 use hybc::gradcheck::{check, CheckOptions};
 use hybc::sim::{SimOptions, SimResult};
 
@@ -21,20 +23,6 @@ const RTOL: f64 = 1e-10;
 const TIME_REL: f64 = 1e-9;
 const REL: f64 = 1e-8;
 const ABS: f64 = 1e-9;
-/// Events a reference computes at most (the balls' bounces accumulate at a finite time).
-const MAX_EVENTS: usize = 100;
-
-/// A reference solution: event times, then the final state and outputs (in the model's order).
-struct Reference {
-    times: Vec<f64>,
-    finals: Vec<f64>,
-}
-
-impl Reference {
-    fn flat(&self) -> Vec<f64> {
-        self.times.iter().chain(&self.finals).copied().collect()
-    }
-}
 
 /// Compares every event time, final state and output of `r`, and their gradients with respect to
 /// every parameter, with `reference` (a function of all parameters) at `p`.
@@ -84,30 +72,6 @@ fn compare(
 }
 
 // ---- vertical ball: p = [g, e, h0] -------------------------------------------------------------
-
-/// Bounces until `t_end`, then free flight: `[y, v]` and the energy at `t_end`.
-fn ball_reference(p: &[f64], t_end: f64) -> Reference {
-    let (g, e, h0) = (p[0], p[1], p[2]);
-    let v1 = (2.0 * g * h0).sqrt();
-    let mut times = vec![v1 / g];
-    let mut speed = v1; // upward speed after the latest bounce
-    let mut bounces = 0;
-    // (Bounces accumulate at a finite time: the count cap keeps a long horizon finite.)
-    while times[bounces] <= t_end && bounces < MAX_EVENTS {
-        speed *= e;
-        times.push(times[bounces] + 2.0 * speed / g);
-        bounces += 1;
-    }
-    times.pop(); // the first bounce after t_end
-    let (y, v) = match times.last() {
-        None => (h0 - 0.5 * g * t_end * t_end, -g * t_end),
-        Some(&t) => {
-            let tau = t_end - t;
-            (speed / e * e * tau - 0.5 * g * tau * tau, speed - g * tau)
-        }
-    };
-    Reference { times, finals: vec![y, v, 0.5 * v * v + g * y] }
-}
 
 #[test]
 fn vertical_ball_against_its_closed_form_at_four_points() {
@@ -282,28 +246,6 @@ fn first_tilted_bounce_is_delayed_by_a_steeper_downhill_floor() {
 }
 
 // ---- thermostat: p = [k, P, T_out, T_lo, T_hi, T0] ---------------------------------------------
-
-/// In each mode `T' = -k (T - T_eq)` with `T_eq = T_out + P / k` (heating) or `T_out` (cooling), so
-/// `T(t) = T_eq + (T_a - T_eq) e^(-k t)` and the time from `T_a` to `T_b` is
-/// `ln((T_a - T_eq) / (T_b - T_eq)) / k`. Final values: `[T, heat_loss]`.
-fn thermostat_reference(p: &[f64], t_end: f64) -> Reference {
-    let (k, power, t_out, t_lo, t_hi, t0) = (p[0], p[1], p[2], p[3], p[4], p[5]);
-    let (mut t, mut temp, mut heating) = (0.0, t0, true);
-    let mut times = Vec::new();
-    loop {
-        let (eq, target) = if heating { (t_out + power / k, t_hi) } else { (t_out, t_lo) };
-        let tau = ((temp - eq) / (target - eq)).ln() / k;
-        if t + tau > t_end {
-            temp = eq + (temp - eq) * (-k * (t_end - t)).exp();
-            break;
-        }
-        t += tau;
-        times.push(t);
-        temp = target;
-        heating = !heating;
-    }
-    Reference { times, finals: vec![temp, k * (temp - t_out)] }
-}
 
 #[test]
 fn thermostat_switching_times_from_the_exponential_solution() {

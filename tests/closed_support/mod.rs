@@ -104,3 +104,64 @@ pub fn mid_flight(times: &[f64], around: f64) -> f64 {
     let prev = if next == 0 { 0.0 } else { times[next - 1] };
     0.5 * (prev + times[next])
 }
+
+/// Events a reference computes at most (the balls' bounces accumulate at a finite time).
+pub const MAX_EVENTS: usize = 100;
+
+/// A reference solution: event times, then the final state and outputs (in the model's order).
+pub struct Reference {
+    pub times: Vec<f64>,
+    pub finals: Vec<f64>,
+}
+
+impl Reference {
+    pub fn flat(&self) -> Vec<f64> {
+        self.times.iter().chain(&self.finals).copied().collect()
+    }
+}
+
+/// Bounces until `t_end`, then free flight: `[y, v]` and the energy at `t_end`.
+pub fn ball_reference(p: &[f64], t_end: f64) -> Reference {
+    let (g, e, h0) = (p[0], p[1], p[2]);
+    let v1 = (2.0 * g * h0).sqrt();
+    let mut times = vec![v1 / g];
+    let mut speed = v1; // upward speed after the latest bounce
+    let mut bounces = 0;
+    // (Bounces accumulate at a finite time: the count cap keeps a long horizon finite.)
+    while times[bounces] <= t_end && bounces < MAX_EVENTS {
+        speed *= e;
+        times.push(times[bounces] + 2.0 * speed / g);
+        bounces += 1;
+    }
+    times.pop(); // the first bounce after t_end
+    let (y, v) = match times.last() {
+        None => (h0 - 0.5 * g * t_end * t_end, -g * t_end),
+        Some(&t) => {
+            let tau = t_end - t;
+            (speed / e * e * tau - 0.5 * g * tau * tau, speed - g * tau)
+        }
+    };
+    Reference { times, finals: vec![y, v, 0.5 * v * v + g * y] }
+}
+
+/// In each mode `T' = -k (T - T_eq)` with `T_eq = T_out + P / k` (heating) or `T_out` (cooling), so
+/// `T(t) = T_eq + (T_a - T_eq) e^(-k t)` and the time from `T_a` to `T_b` is
+/// `ln((T_a - T_eq) / (T_b - T_eq)) / k`. Final values: `[T, heat_loss]`.
+pub fn thermostat_reference(p: &[f64], t_end: f64) -> Reference {
+    let (k, power, t_out, t_lo, t_hi, t0) = (p[0], p[1], p[2], p[3], p[4], p[5]);
+    let (mut t, mut temp, mut heating) = (0.0, t0, true);
+    let mut times = Vec::new();
+    loop {
+        let (eq, target) = if heating { (t_out + power / k, t_hi) } else { (t_out, t_lo) };
+        let tau = ((temp - eq) / (target - eq)).ln() / k;
+        if t + tau > t_end {
+            temp = eq + (temp - eq) * (-k * (t_end - t)).exp();
+            break;
+        }
+        t += tau;
+        times.push(t);
+        temp = target;
+        heating = !heating;
+    }
+    Reference { times, finals: vec![temp, k * (temp - t_out)] }
+}
