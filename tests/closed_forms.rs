@@ -300,13 +300,16 @@ fn dosing_amounts_from_linear_kinetics() {
     errs.print("dosing");
 }
 
+/// Parameter values to set by name.
+type Sets<'a> = Vec<(&'a str, f64)>;
+
 // ---- nonlinear models: central differences of the compiled model --------------------------------
 
 #[test]
 fn nonlinear_models_match_central_differences_at_several_points() {
     // rtol 1e-12 and a check tolerance of 1e-5: at these tolerances the worst discrepancy of the
     // shipped models is ~1e-6 (the truncation of the difference, README Accuracy).
-    let cases: [(&str, f64, Vec<Vec<(&str, f64)>>); 3] = [
+    let cases: [(&str, f64, Vec<Sets>); 3] = [
         (
             "models/pendulum_wall.hyb",
             5.0,
