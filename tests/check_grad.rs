@@ -156,3 +156,35 @@ fn check_flags_are_validated() {
     let err = hybc(&["run", "models/ball.hyb", "--grad", "e", "--check-grad", "--check-tol", "0"]);
     assert!(String::from_utf8_lossy(&err.stderr).contains("error: --check-tol: expected a positive number"));
 }
+
+#[test]
+fn default_check_passes_every_model_from_rtol_1e_6_to_1e_12() {
+    // The default step and tolerance (`CheckOptions::for_rtol`) must hold at every tolerance a
+    // user may pick, not only at the models' own; the worst discrepancies are printed for the
+    // README (`--nocapture`).
+    let mut paths: Vec<_> = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/models"))
+        .expect("models")
+        .map(|e| e.expect("entry").path())
+        .collect();
+    paths.sort();
+    let rtols = [1e-6, 1e-8, 1e-10, 1e-12];
+    let mut worst = [0.0_f64; 4];
+    for path in paths {
+        let model = hybc::check_source(&std::fs::read_to_string(&path).unwrap()).expect("valid");
+        let grad: Vec<ParamIdx> = (0..model.params.len()).map(|i| ParamIdx(i as u32)).collect();
+        let compiled = compile(&lower(&model), system_info(&model, &grad), &CompileOptions::default())
+            .expect("compiles");
+        let p: Vec<f64> = model.params.iter().map(|p| p.default).collect();
+        for (w, rtol) in worst.iter_mut().zip(rtols) {
+            let t_end = model.simulate.t_end.expect("shipped models set t_end");
+            let opts = SimOptions { t_end, rtol, atol: rtol * 1e-2, ..SimOptions::default() };
+            let nominal = run(&compiled, &p, &opts).expect("runs");
+            let c = check(&compiled, &p, &opts, &nominal, &CheckOptions::for_rtol(rtol)).unwrap();
+            assert!(c.passed(), "{} at rtol {rtol:e}:\n{}", path.display(), c.to_table());
+            *w = c.params.iter().map(|x| x.worst_discrepancy()).fold(*w, f64::max);
+        }
+    }
+    for (w, rtol) in worst.iter().zip(rtols) {
+        println!("rtol {rtol:.0e}: worst --check-grad discrepancy over the shipped models {w:.1e}");
+    }
+}
