@@ -35,6 +35,8 @@ pub const EXIT_MODEL_ERROR: u8 = 1;
 pub const EXIT_USAGE_ERROR: u8 = 2;
 /// The simulation stopped early (Zeno behaviour or a runtime fault); what it computed is printed.
 pub const EXIT_SIM_STOPPED: u8 = 3;
+/// `hybc run --check-grad`: a reported derivative disagrees with its central difference.
+pub const EXIT_GRAD_CHECK_FAILED: u8 = 4;
 
 pub fn main() -> ExitCode {
     let cli = match Cli::try_parse() {

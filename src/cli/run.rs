@@ -8,8 +8,10 @@ use std::time::Instant;
 
 use clap::ValueEnum;
 
+use super::EXIT_GRAD_CHECK_FAILED;
 use super::{load_model, parse_param_list, unknown_param, usage_error, ModelArg, EXIT_SIM_STOPPED};
 use crate::codegen::{self, CompileOptions};
+use crate::gradcheck::{self, CheckOptions};
 use crate::lower::{lower, system_info};
 use crate::report::{num, RunReport};
 use crate::sema::Model;
@@ -30,6 +32,9 @@ enum Format {
 }
 
 #[derive(Debug, clap::Args)]
+#[command(after_help = "Exit codes: 0 success; 1 the model has errors; 2 a usage error; 3 the run \
+                        stopped early (Zeno behaviour or a runtime fault); 4 --check-grad found a \
+                        derivative outside --check-tol.")]
 pub struct RunArgs {
     #[command(flatten)]
     model: ModelArg,
@@ -73,6 +78,15 @@ pub struct RunArgs {
     /// Print nothing but errors; the exit code tells the outcome.
     #[arg(long)]
     quiet: bool,
+    /// After the run, check every reported derivative against central differences of the same
+    /// compiled model at p +/- h, h = 1e-5 max(|p|, 1) per parameter; exit
+    /// code 4 when one disagrees by more than --check-tol. Changed event sequences are reported
+    /// as cusps, grazing events skipped.
+    #[arg(long, requires = "grad")]
+    check_grad: bool,
+    /// Largest relative discrepancy --check-grad accepts (default 1e5 rtol, clamped to [1e-4, 1e-2]).
+    #[arg(long, value_name = "TOL", requires = "check_grad")]
+    check_tol: Option<f64>,
 }
 
 pub fn run(args: &RunArgs) -> ExitCode {
@@ -156,6 +170,7 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
     };
     let p = parameter_values(model, &args.set)?;
     let opts = sim_options(model, args)?;
+    let check_opts = check_options(&opts, args)?;
 
     let started = Instant::now();
     let funcs = lower(model);
@@ -197,19 +212,50 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
             report.result.warnings.len() - SHOWN_WARNINGS
         );
     }
+    let check = match check_opts {
+        Some(check_opts) => Some(
+            gradcheck::check(&compiled, &report.params, &opts, &report.result, &check_opts)
+                .map_err(|e| e.to_string())?,
+        ),
+        None => None,
+    };
     if !args.quiet {
         match args.format {
-            Format::Table => super::print_out(&report.to_table()),
-            Format::Json => super::print_out(&format!("{}\n", report.to_json())),
+            Format::Table => {
+                super::print_out(&report.to_table());
+                if let Some(check) = &check {
+                    super::print_out(&format!("\n{}", check.to_table()));
+                }
+            }
+            Format::Json => {
+                let mut json = report.to_json();
+                if let Some(check) = &check {
+                    json["check_grad"] = serde_json::json!(check);
+                }
+                super::print_out(&format!("{json}\n"));
+            }
         }
     }
     Ok(match report.failure() {
+        None if check.as_ref().is_some_and(|c| !c.passed()) => ExitCode::from(EXIT_GRAD_CHECK_FAILED),
         None => ExitCode::SUCCESS,
         Some(message) => {
             eprintln!("error: {message}");
             ExitCode::from(EXIT_SIM_STOPPED)
         }
     })
+}
+
+/// `--check-grad` options: the defaults for the run's rtol, `--check-tol` if given.
+fn check_options(opts: &SimOptions, args: &RunArgs) -> Result<Option<CheckOptions>, String> {
+    if !args.check_grad {
+        return Ok(None);
+    }
+    let mut check = CheckOptions::for_rtol(opts.rtol);
+    if let Some(tol) = args.check_tol {
+        check.tol = positive("--check-tol", tol)?;
+    }
+    Ok(Some(check))
 }
 
 /// CSV columns: t, mode, the states, the outputs, then with gradients `d<state>/d<param>` and

@@ -1,0 +1,119 @@
+//! docs/tutorial.md runs as written: every `$ hybc ...` line inside a ```console block is run
+//! (from the repository root, with this build's binary), and the numbers in what it prints (stderr
+//! first, then stdout: the order a terminal shows for these commands, whose warnings come before
+//! the report) must equal the numbers pasted below the command, in order. Equal means within a
+//! relative 1e-9, one unit of the tenth significant digit hybc prints. The statistics line
+//! (`... kernel calls, compile ... ms, run ... us`) is left out on both sides: it holds timings.
+
+use std::process::Command;
+
+/// One command of the tutorial and the output pasted under it.
+struct Example {
+    args: Vec<String>,
+    expected: String,
+}
+
+fn examples(doc: &str) -> Vec<Example> {
+    let mut out: Vec<Example> = Vec::new();
+    let mut in_console = false;
+    let mut current: Option<Example> = None;
+    for line in doc.lines() {
+        if line.starts_with("```") {
+            in_console = !in_console && line.starts_with("```console");
+            out.extend(current.take());
+            continue;
+        }
+        if !in_console {
+            continue;
+        }
+        if let Some(command) = line.strip_prefix("$ hybc ") {
+            out.extend(current.take());
+            current = Some(Example {
+                args: command.split_whitespace().map(String::from).collect(),
+                expected: String::new(),
+            });
+        } else if let Some(ex) = current.as_mut() {
+            ex.expected.push_str(line);
+            ex.expected.push('\n');
+        } else {
+            panic!("output without a `$ hybc` command in docs/tutorial.md: {line}");
+        }
+    }
+    out
+}
+
+/// The numbers in `text`, in order, leaving out digits that are part of a name (`h0`, `dt1`) and
+/// the statistics line.
+fn numbers(text: &str) -> Vec<f64> {
+    let mut out = Vec::new();
+    for line in text.lines().filter(|l| !l.contains("kernel calls, compile")) {
+        let b = line.as_bytes();
+        let mut i = 0;
+        while i < b.len() {
+            let c = b[i];
+            if c.is_ascii_alphabetic() || c == b'_' {
+                while i < b.len() && (b[i].is_ascii_alphanumeric() || b[i] == b'_') {
+                    i += 1;
+                }
+                continue;
+            }
+            let starts_number =
+                c.is_ascii_digit() || (c == b'-' && b.get(i + 1).is_some_and(u8::is_ascii_digit));
+            if !starts_number {
+                i += 1;
+                continue;
+            }
+            let start = i;
+            i += 1;
+            while i < b.len() && (b[i].is_ascii_digit() || b[i] == b'.') {
+                i += 1;
+            }
+            // An exponent: e, an optional sign, digits.
+            if i + 1 < b.len() && (b[i] == b'e' || b[i] == b'E') {
+                let mut j = i + 1;
+                if b[j] == b'-' || b[j] == b'+' {
+                    j += 1;
+                }
+                if j < b.len() && b[j].is_ascii_digit() {
+                    i = j;
+                    while i < b.len() && b[i].is_ascii_digit() {
+                        i += 1;
+                    }
+                }
+            }
+            let token = line[start..i].trim_end_matches('.');
+            out.push(token.parse().unwrap_or_else(|e| panic!("`{token}` in `{line}`: {e}")));
+        }
+    }
+    out
+}
+
+#[test]
+fn number_extraction_skips_names_and_reads_exponents() {
+    let got = numbers("h0 = 1.000000000e-6, dt1/dh0 -4.4e-3 (d = -0.5). #3 main -> cooling 7\n9 steps, 1 kernel calls, compile 2 ms");
+    assert_eq!(got, [1e-6, -4.4e-3, -0.5, 3.0, 7.0]);
+}
+
+#[test]
+fn every_tutorial_command_prints_what_the_tutorial_shows() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let doc = std::fs::read_to_string(format!("{root}/docs/tutorial.md")).expect("docs/tutorial.md");
+    let examples = examples(&doc);
+    assert!(examples.len() >= 7, "only {} commands found", examples.len());
+    for ex in examples {
+        let shown = format!("hybc {}", ex.args.join(" "));
+        let out =
+            Command::new(env!("CARGO_BIN_EXE_hybc")).args(&ex.args).current_dir(root).output().expect("runs");
+        let actual =
+            format!("{}{}", String::from_utf8_lossy(&out.stderr), String::from_utf8_lossy(&out.stdout));
+        let (want, got) = (numbers(&ex.expected), numbers(&actual));
+        assert!(!want.is_empty(), "{shown}: no output pasted");
+        assert_eq!(want.len(), got.len(), "{shown}: pasted\n{}\nprinted\n{actual}", ex.expected);
+        for (w, g) in want.iter().zip(&got) {
+            assert!(
+                (w - g).abs() <= 1e-9 * w.abs().max(g.abs()),
+                "{shown}: pasted {w}, printed {g}\n{actual}"
+            );
+        }
+    }
+}
