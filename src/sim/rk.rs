@@ -8,12 +8,11 @@
 //! combines its 5th- and 3rd-order estimates as Hairer does,
 //! `err = err5^2 / sqrt(err5^2 + 0.01 err3^2)`, which behaves like an 8th-order estimate.
 //!
-//! Step-size controller (PI, Gustafsson's form as used in Hairer's codes, with their defaults):
-//! after an accepted step `h_new = h * safety * err^(-alpha) * err_prev^beta` with
-//! `alpha = 1 / q - 0.75 beta`, `q` the order, `safety = 0.9`, and `beta` and the factor bounds
-//! from the pair's [`Control`] (DOPRI5: `beta = 0.04`, factors in [0.2, 10]; DOP853: `beta = 0`,
-//! [1/3, 6]); after a rejection only the I-part `h * safety * err^(-1/q)` is used and growth is
-//! forbidden.
+//! Step-size controller (PI, Gustafsson's form as used in Hairer's codes): after an accepted step
+//! `h_new = h * safety * err^(-alpha) * err_prev^beta` with `alpha = 1 / q - 0.75 beta`, `q` the
+//! order, `safety = 0.9`, and `beta` and the factor bounds from the pair's [`Control`]
+//! (`beta = 0.2 / q`, factors in [0.2, 10]); after a rejection only the I-part
+//! `h * safety * err^(-1/q)` is used and growth is forbidden.
 //!
 //! Initial step (Hairer, Norsett & Wanner, ODEs I, II.4): with `d0 = |z0|`, `d1 = |f0|` in the
 //! scaled norm, `h0 = 0.01 d0 / d1`; one explicit Euler step gives `d2 = |f(z0 + h0 f0) - f0| / h0`
