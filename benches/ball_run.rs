@@ -1,5 +1,8 @@
 //! One run of the compiled bouncing ball to T = 2.5 at rtol 1e-10 with gradients with respect to
-//! all three parameters (the README's headline figure), plus the same without gradients.
+//! all three parameters (the README's headline figure), plus the same without gradients. Each is
+//! timed twice: through `sim::run` (a fresh `Simulator` per run: options checked and scratch
+//! buffers allocated every time) and through one `Simulator` reused for every run, which is what
+//! sweeps, fits and gradient checks do.
 //! Run: `cargo bench --bench ball_run`.
 
 use std::hint::black_box;
@@ -8,7 +11,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use hybc::codegen::{compile, CompileOptions};
 use hybc::lower::{lower, system_info};
 use hybc::sema::ParamIdx;
-use hybc::sim::{run, SimOptions};
+use hybc::sim::{run, SimOptions, Simulator};
 
 fn ball_run(c: &mut Criterion) {
     let model = hybc::check_source(include_str!("../models/ball.hyb")).expect("ball checks");
@@ -20,6 +23,10 @@ fn ball_run(c: &mut Criterion) {
             compile(&funcs, system_info(&model, &grad), &CompileOptions::default()).expect("compiles");
         c.bench_function(&format!("ball_run_T2.5_rtol1e-10_{label}"), |b| {
             b.iter(|| run(black_box(&compiled), black_box(&p), &opts).expect("runs"))
+        });
+        let mut sim = Simulator::new(&compiled, &opts).expect("valid options");
+        c.bench_function(&format!("ball_run_T2.5_rtol1e-10_{label}_reused_simulator"), |b| {
+            b.iter(|| sim.run(black_box(&p)).expect("runs"))
         });
     }
 }

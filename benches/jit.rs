@@ -3,8 +3,11 @@
 //! reference `Interpreter` and the same model written by hand in Rust (the ball and a 100-state
 //! chain); compile time of generated chain models with 10, 100 and 1000 states.
 //!
-//! The hand-written functions are `#[inline(never)]`: a compiled model is always called out of
-//! line, so the fair comparison is with an out-of-line call to the same math.
+//! The hand-written functions are `#[inline(never)]` and take the mode like
+//! `HybridSystem::flow` (a bad mode poisons the output with NaN, as the compiled model does): the
+//! integrator always calls a model out of line through that interface, so the fair comparison is
+//! an out-of-line call to the same math behind the same contract. The JIT side is called through
+//! `HybridSystem` (slice lengths checked, then the native kernel).
 //!
 //! Run with `cargo bench --bench jit` on an otherwise idle machine.
 
@@ -32,7 +35,10 @@ fn front_end(source: &str) -> (ModelFunctions, SystemInfo) {
 
 /// The ball's flow by hand: `der(y) = v, der(v) = -g`.
 #[inline(never)]
-fn ball_flow(_t: f64, x: &[f64], p: &[f64], dx: &mut [f64]) {
+fn ball_flow(mode: usize, _t: f64, x: &[f64], p: &[f64], dx: &mut [f64]) {
+    if mode != 0 {
+        return dx.fill(f64::NAN);
+    }
     dx[0] = x[1];
     dx[1] = -p[0];
 }
@@ -40,8 +46,13 @@ fn ball_flow(_t: f64, x: &[f64], p: &[f64], dx: &mut [f64]) {
 /// The ball's fused sensitivity right-hand side by hand, parameters `(g, e, h0)` all
 /// differentiated: `f_x = [[0, 1], [0, 0]]`, `f_p` has the single entry `df_v/dg = -1`.
 #[inline(never)]
-fn ball_flow_sens(t: f64, x: &[f64], s: &[f64], p: &[f64], dx: &mut [f64], ds: &mut [f64]) {
-    ball_flow(t, x, p, dx);
+fn ball_flow_sens(mode: usize, _t: f64, x: &[f64], s: &[f64], p: &[f64], dx: &mut [f64], ds: &mut [f64]) {
+    if mode != 0 {
+        dx.fill(f64::NAN);
+        return ds.fill(f64::NAN);
+    }
+    dx[0] = x[1];
+    dx[1] = -p[0];
     for j in 0..3 {
         ds[2 * j] = s[2 * j + 1];
         ds[2 * j + 1] = if j == 0 { -1.0 } else { 0.0 };
@@ -65,7 +76,7 @@ fn bench_ball(c: &mut Criterion) {
     flow.bench_function("interpreter", |b| {
         b.iter(|| interp.flow(0, 0.0, black_box(&x), black_box(&p), &mut dx))
     });
-    flow.bench_function("rust", |b| b.iter(|| ball_flow(0.0, black_box(&x), black_box(&p), &mut dx)));
+    flow.bench_function("rust", |b| b.iter(|| ball_flow(0, 0.0, black_box(&x), black_box(&p), &mut dx)));
     flow.finish();
 
     let mut sens = c.benchmark_group("ball/flow_sens");
@@ -76,14 +87,22 @@ fn bench_ball(c: &mut Criterion) {
         b.iter(|| interp.flow_sens(0, 0.0, black_box(&x), black_box(&s), &p, &mut dx, &mut ds))
     });
     sens.bench_function("rust", |b| {
-        b.iter(|| ball_flow_sens(0.0, black_box(&x), black_box(&s), &p, &mut dx, &mut ds))
+        b.iter(|| ball_flow_sens(0, 0.0, black_box(&x), black_box(&s), &p, &mut dx, &mut ds))
     });
     sens.finish();
 }
 
 /// The chain's flow by hand (see `chain_source`), parameters `(k, c, a)`.
 #[inline(never)]
-fn chain_flow(x: &[f64], p: &[f64], dx: &mut [f64]) {
+fn chain_flow(mode: usize, x: &[f64], p: &[f64], dx: &mut [f64]) {
+    if mode != 0 {
+        return dx.fill(f64::NAN);
+    }
+    chain_flow_body(x, p, dx);
+}
+
+#[inline(always)]
+fn chain_flow_body(x: &[f64], p: &[f64], dx: &mut [f64]) {
     let (k, c) = (p[0], p[1]);
     dx[0] = -k * x[0];
     for i in 1..x.len() {
@@ -94,8 +113,12 @@ fn chain_flow(x: &[f64], p: &[f64], dx: &mut [f64]) {
 /// The chain's fused sensitivity right-hand side by hand: `ds_j = f_x s_j + f_p[:, j]` with
 /// `f_x` lower bidiagonal and `f_p = [x_{i-1} - x_i, -x_i^2, 0]` (`-x_0`, 0, 0 in row 0).
 #[inline(never)]
-fn chain_flow_sens(x: &[f64], s: &[f64], p: &[f64], dx: &mut [f64], ds: &mut [f64]) {
-    chain_flow(x, p, dx);
+fn chain_flow_sens(mode: usize, x: &[f64], s: &[f64], p: &[f64], dx: &mut [f64], ds: &mut [f64]) {
+    if mode != 0 {
+        dx.fill(f64::NAN);
+        return ds.fill(f64::NAN);
+    }
+    chain_flow_body(x, p, dx);
     let (k, c, n) = (p[0], p[1], x.len());
     for j in 0..3 {
         let (sj, dsj) = (&s[j * n..(j + 1) * n], &mut ds[j * n..(j + 1) * n]);
@@ -123,7 +146,7 @@ fn bench_chain_calls(c: &mut Criterion) {
     // The hand-written version must compute what the JIT computes, or the comparison is void.
     let (mut dx_ref, mut ds_ref) = (vec![0.0; N], vec![0.0; 3 * N]);
     jit.flow_sens(0, 0.0, &x, &s, &p, &mut dx, &mut ds);
-    chain_flow_sens(&x, &s, &p, &mut dx_ref, &mut ds_ref);
+    chain_flow_sens(0, &x, &s, &p, &mut dx_ref, &mut ds_ref);
     for (a, b) in dx.iter().chain(&ds).zip(dx_ref.iter().chain(&ds_ref)) {
         assert!((a - b).abs() <= 1e-12 * b.abs().max(1.0), "hand-written chain differs: {a} vs {b}");
     }
@@ -132,7 +155,7 @@ fn bench_chain_calls(c: &mut Criterion) {
     flow.bench_function("interpreter", |b| {
         b.iter(|| interp.flow(0, 0.0, black_box(&x), black_box(&p), &mut dx))
     });
-    flow.bench_function("rust", |b| b.iter(|| chain_flow(black_box(&x), black_box(&p), &mut dx)));
+    flow.bench_function("rust", |b| b.iter(|| chain_flow(0, black_box(&x), black_box(&p), &mut dx)));
     flow.finish();
     let mut sens = c.benchmark_group("chain100/flow_sens");
     sens.bench_function("jit", |b| {
@@ -142,7 +165,7 @@ fn bench_chain_calls(c: &mut Criterion) {
         b.iter(|| interp.flow_sens(0, 0.0, black_box(&x), black_box(&s), &p, &mut dx, &mut ds))
     });
     sens.bench_function("rust", |b| {
-        b.iter(|| chain_flow_sens(black_box(&x), black_box(&s), &p, &mut dx, &mut ds))
+        b.iter(|| chain_flow_sens(0, black_box(&x), black_box(&s), &p, &mut dx, &mut ds))
     });
     sens.finish();
 }
