@@ -43,7 +43,7 @@ pub enum RegAlloc {
     /// size of one kernel (measured: a 1000-state chain's fused sensitivity kernel, 4000
     /// outputs, takes 1.7-2.4 s against 0.11-0.15 s with `SinglePass`).
     Backtracking,
-    /// Linear compile time, about 1.2-1.4x slower code.
+    /// Linear compile time; slower code (1.3x to 2.7x on the chains measured below).
     SinglePass,
     /// `Backtracking` unless the largest kernel exceeds [`AUTO_REGALLOC_LIMIT`] operations,
     /// then `SinglePass`: big models stay quick to compile, small ones get the better code.
@@ -51,10 +51,16 @@ pub enum RegAlloc {
 }
 
 /// Size of the largest kernel (output entries plus sensitivity products) above which
-/// [`RegAlloc::Auto`] switches to the single-pass allocator. A 100-state chain (about 1000)
-/// compiles in ~25 ms either way; a 1000-state chain (about 10000) is where backtracking
-/// becomes seconds.
-pub const AUTO_REGALLOC_LIMIT: usize = 3000;
+/// [`RegAlloc::Auto`] switches to the single-pass allocator. Measured on chain models (the
+/// benchmarks' generated model, all parameters differentiated, release build; size of the fused
+/// sensitivity kernel in brackets), compile time and ns per fused-kernel call, backtracking
+/// against single-pass:
+/// - 100 states (997): 10 ms / 191 ns against 3 ms / 511 ns: backtracking's code is 2.7x faster;
+/// - 150 states (1497): 41 ms / 588 ns against 6 ms / 790 ns: 7x the compile time for 1.3x;
+/// - 300 states (2997): 78 ms / 2950 ns against 8 ms / 1577 ns: backtracking loses both ways.
+///
+/// So the switch sits between 100 and 150 states; the shipped models' kernels have under 100.
+pub const AUTO_REGALLOC_LIMIT: usize = 1200;
 
 /// How kernels are compiled.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
