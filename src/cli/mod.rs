@@ -3,6 +3,7 @@
 
 mod check;
 mod derive;
+mod fit;
 mod run;
 
 use std::path::{Path, PathBuf};
@@ -28,6 +29,8 @@ enum Command {
     Derive(derive::DeriveArgs),
     /// Simulate a model; report events, final state, outputs and their gradients.
     Run(run::RunArgs),
+    /// Fit parameters to targets on outputs, states and event times (least squares).
+    Fit(fit::FitArgs),
 }
 
 /// Exit codes, as documented in the README.
@@ -49,6 +52,7 @@ pub fn main() -> ExitCode {
         Command::Check(args) => check::run(&args),
         Command::Derive(args) => derive::run(&args),
         Command::Run(args) => run::run(&args),
+        Command::Fit(args) => fit::run(&args),
     }
 }
 
