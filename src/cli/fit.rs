@@ -149,7 +149,7 @@ fn fit_model(model: &Model, args: &FitArgs) -> Result<ExitCode, String> {
         .collect::<Result<Vec<_>, _>>()?;
     if targets.len() < free.len() {
         eprintln!(
-            "warning: {} free parameters but {} targets: the fit is underdetermined; the damped steps \
+            "warning: {} free parameters but {} target(s): the fit is underdetermined; the damped steps \
              stay near the start and the condition number is infinite",
             free.len(),
             targets.len()

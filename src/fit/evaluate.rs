@@ -90,10 +90,11 @@ pub fn evaluate(
     let mut jacobian = DMatrix::zeros(targets.len(), info.n_grad());
     for (i, target) in targets.iter().enumerate() {
         let label = || target.label(info);
-        let (value, gradient) = read(&result, info, &finals, target.observable).map_err(|missing| match missing {
-            Missing::Event { fired } => Rejection::MissingEvent { target: label(), fired },
-            Missing::Gradient => Rejection::NoGradient { target: label() },
-        })?;
+        let (value, gradient) =
+            read(&result, info, &finals, target.observable).map_err(|missing| match missing {
+                Missing::Event { fired } => Rejection::MissingEvent { target: label(), fired },
+                Missing::Gradient => Rejection::NoGradient { target: label() },
+            })?;
         let residual = target.weight * (value - target.value);
         if !residual.is_finite() || gradient.iter().any(|d| !d.is_finite()) {
             return Err(Rejection::NonFinite { target: label() });
@@ -138,7 +139,8 @@ fn read(
         }
         Observable::EventTime { name_event, occurrence } => {
             let name = &info.events[name_event].name;
-            let firings: Vec<_> = result.events.iter().filter(|e| info.events[e.event].name == *name).collect();
+            let firings: Vec<_> =
+                result.events.iter().filter(|e| info.events[e.event].name == *name).collect();
             let record = firings.get(occurrence - 1).ok_or(Missing::Event { fired: firings.len() })?;
             let d = record.dtime.as_ref().ok_or(Missing::Gradient)?;
             Ok((record.time, d.clone()))

@@ -85,7 +85,8 @@ pub(super) fn minimize(
             nu *= 2.0;
             continue;
         }
-        if iterations.len() - 1 >= opts.max_iter {
+        // `iterations` holds the start and one entry per trial.
+        if iterations.len() > opts.max_iter {
             break FitStop::MaxIterations;
         }
         let trial_x: Vec<f64> = x.iter().zip(&step).map(|(a, d)| a + d).collect();
@@ -109,7 +110,8 @@ pub(super) fn minimize(
             }
             Ok(trial) => {
                 let trial_objective = trial.objective();
-                let rho = (objective - trial_objective) / predicted;
+                let decrease = actual_decrease(&cur, &trial);
+                let rho = decrease / predicted;
                 record.objective = Some(trial_objective);
                 record.events = Some(trial.events.len());
                 record.cusp = trial.events != cur.events;
@@ -132,7 +134,6 @@ pub(super) fn minimize(
                         lambda = Some(lam * (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0));
                     }
                     nu = 2.0;
-                    let decrease = objective - trial_objective;
                     x = trial_x;
                     cur = trial;
                     objective = trial_objective;
@@ -160,7 +161,8 @@ struct LocalModel {
     free: Vec<usize>,
     /// Column scale of each free parameter.
     scale: Vec<f64>,
-    svd: SVD<f64, nalgebra::Dyn, nalgebra::Dyn>,
+    /// SVD of the scaled free columns; `None` when no parameter is free.
+    svd: Option<SVD<f64, nalgebra::Dyn, nalgebra::Dyn>>,
     /// `U^T r`.
     utr: DVector<f64>,
     /// Largest cosine between the residuals and a free column; `None` when the residuals vanish.
@@ -203,9 +205,22 @@ impl LocalModel {
                 .fold(0.0, f64::max)
         });
         let scaled = DMatrix::from_fn(j.nrows(), free.len(), |i, k| j[(i, free[k])] / scale[free[k]]);
-        let svd = SVD::try_new(scaled, true, true, f64::EPSILON, 10_000)?;
-        let utr = svd.u.as_ref()?.transpose() * &r;
-        Some(LocalModel { n: x.len(), scale: free.iter().map(|&c| scale[c]).collect(), free, svd, utr, cosine })
+        // nalgebra refuses an empty matrix; with every parameter held there is no step to take.
+        let (svd, utr) = if free.is_empty() {
+            (None, DVector::zeros(0))
+        } else {
+            let svd = SVD::try_new(scaled, true, true, f64::EPSILON, 10_000)?;
+            let utr = svd.u.as_ref()?.transpose() * &r;
+            (Some(svd), utr)
+        };
+        Some(LocalModel {
+            n: x.len(),
+            scale: free.iter().map(|&c| scale[c]).collect(),
+            free,
+            svd,
+            utr,
+            cosine,
+        })
     }
 
     fn converged(&self, opts: &FitOptions) -> Option<FitStop> {
@@ -218,16 +233,16 @@ impl LocalModel {
     }
 
     fn largest_singular_value(&self) -> f64 {
-        self.svd.singular_values.iter().copied().fold(0.0, f64::max)
+        self.svd.as_ref().map_or(0.0, |svd| svd.singular_values.iter().copied().fold(0.0, f64::max))
     }
 
     /// The step for damping `lambda` in parameter units (zero for held parameters); `lambda = 0`
     /// gives the minimum-norm Gauss-Newton step, ignoring singular values at round-off level.
     fn step(&self, lambda: f64) -> Vec<f64> {
-        let sigma = &self.svd.singular_values;
-        let cutoff = sigma.len() as f64 * f64::EPSILON * self.largest_singular_value();
         let mut scaled = DVector::zeros(self.free.len());
-        if let Some(v_t) = &self.svd.v_t {
+        if let Some((svd, v_t)) = self.svd.as_ref().and_then(|svd| Some((svd, svd.v_t.as_ref()?))) {
+            let sigma = &svd.singular_values;
+            let cutoff = sigma.len() as f64 * f64::EPSILON * self.largest_singular_value();
             for (i, &s) in sigma.iter().enumerate() {
                 let factor = if lambda > 0.0 {
                     s / (s * s + lambda)
@@ -258,13 +273,17 @@ fn small(step: &[f64], x: &[f64], scale: &[f64], xtol: f64) -> bool {
     norm(step) <= xtol * (norm(x) + xtol)
 }
 
-/// `0.5 (|r|^2 - |r + J step|^2)`: the decrease the linear model promises for `step`.
+/// `0.5 (|r|^2 - |r_trial|^2)`, summed as `(a - b)(a + b)` per residual: near the minimum the
+/// objectives agree to round-off while the residuals that still move differ exactly.
+fn actual_decrease(cur: &Evaluation, trial: &Evaluation) -> f64 {
+    0.5 * cur.residuals.iter().zip(&trial.residuals).map(|(a, b)| (a - b) * (a + b)).sum::<f64>()
+}
+
+/// `0.5 (|r|^2 - |r + J step|^2)`: the decrease the linear model promises for `step`, summed as
+/// `-(J step)_i (r_i + (J step)_i / 2)` for the same reason as [`actual_decrease`].
 fn predicted_decrease(cur: &Evaluation, step: &[f64]) -> f64 {
-    let j = &cur.jacobian;
-    let d = DVector::from_column_slice(step);
-    let r = DVector::from_column_slice(&cur.residuals);
-    let linear = &r + j * d;
-    0.5 * (r.norm_squared() - linear.norm_squared())
+    let change = &cur.jacobian * DVector::from_column_slice(step);
+    -cur.residuals.iter().zip(change.iter()).map(|(r, c)| c * (r + 0.5 * c)).sum::<f64>()
 }
 
 /// `sigma_max / sigma_min` of `j`; infinite when it has fewer rows than columns or is singular.
@@ -283,5 +302,56 @@ pub(super) fn condition_number(j: &DMatrix<f64>) -> f64 {
             }
         }
         None => f64::INFINITY,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Rosenbrock as least squares: r = (10 (x1 - x0^2), 1 - x0), minimum 0 at (1, 1).
+    fn rosenbrock(x: &[f64]) -> Result<Evaluation, Rejection> {
+        let residuals = vec![10.0 * (x[1] - x[0] * x[0]), 1.0 - x[0]];
+        let jacobian = DMatrix::from_row_slice(2, 2, &[-20.0 * x[0], 10.0, -1.0, 0.0]);
+        Ok(Evaluation { values: residuals.clone(), residuals, jacobian, events: Vec::new() })
+    }
+
+    #[test]
+    fn rosenbrock_from_the_textbook_start_reaches_its_minimum() {
+        let solved = minimize(vec![-1.2, 1.0], &[Bounds::NONE; 2], &FitOptions::default(), rosenbrock)
+            .expect("start evaluates");
+        assert!(solved.stop.is_converged(), "{:?}", solved.stop);
+        assert!((solved.x[0] - 1.0).abs() < 1e-10 && (solved.x[1] - 1.0).abs() < 1e-10, "{:?}", solved.x);
+    }
+
+    #[test]
+    fn an_upper_bound_below_the_minimum_holds_the_parameter() {
+        // With x0 <= 0.5 the constrained minimum is x0 = 0.5, x1 = 0.25 (r1 = 0, r2 = 0.5).
+        let bounds = [Bounds { lower: -2.0, upper: 0.5 }, Bounds::NONE];
+        let solved = minimize(vec![-1.2, 1.0], &bounds, &FitOptions::default(), rosenbrock).expect("start");
+        assert!(solved.stop.is_converged(), "{:?}", solved.stop);
+        assert_eq!(solved.x[0], 0.5);
+        assert!((solved.x[1] - 0.25).abs() < 1e-10, "{:?}", solved.x);
+    }
+
+    #[test]
+    fn trials_that_fail_shorten_the_step_instead_of_ending_the_fit() {
+        // r = x - 3 on x < 2.5 only (beyond it the "run" fails): the fit stalls at the edge and
+        // names the failure.
+        let eval = |x: &[f64]| {
+            if x[0] >= 2.5 {
+                return Err(Rejection::RunStopped { message: "beyond the edge".into() });
+            }
+            let r = vec![x[0] - 3.0];
+            Ok(Evaluation {
+                values: r.clone(),
+                residuals: r,
+                jacobian: DMatrix::from_element(1, 1, 1.0),
+                events: Vec::new(),
+            })
+        };
+        let solved = minimize(vec![0.0], &[Bounds::NONE], &FitOptions::default(), eval).expect("start");
+        assert!(matches!(solved.stop, FitStop::Stalled(StallCause::Failed { .. })), "{:?}", solved.stop);
+        assert!(solved.x[0] < 2.5 && solved.x[0] > 2.5 - 1e-8, "{:?}", solved.x);
     }
 }

@@ -137,7 +137,8 @@ impl FitReport {
         let mut out = String::new();
         let free = self.free_names();
         let labels: Vec<String> = self.targets.iter().map(|t| t.label(&self.info)).collect();
-        let _ = writeln!(out, "model {}   free {}   targets {}", self.model, free.join(", "), labels.join(", "));
+        let _ =
+            writeln!(out, "model {}   free {}   targets {}", self.model, free.join(", "), labels.join(", "));
         let pcols: String = free.iter().map(|n| format!("  {n:>16}")).collect();
         let _ = writeln!(
             out,
@@ -150,7 +151,9 @@ impl FitReport {
                 Outcome::Start => "start".to_string(),
                 Outcome::Accepted if it.cusp => "accepted across a cusp".to_string(),
                 Outcome::Accepted => "accepted".to_string(),
-                Outcome::Rejected if it.cusp => "rejected: event sequence changed, objective rose".to_string(),
+                Outcome::Rejected if it.cusp => {
+                    "rejected: event sequence changed, objective rose".to_string()
+                }
                 Outcome::Rejected => "rejected: objective rose".to_string(),
                 Outcome::Failed(why) => format!("rejected: {why}"),
             };
@@ -169,7 +172,11 @@ impl FitReport {
         for (name, &j) in free.iter().zip(&self.info.grad_params) {
             let _ = writeln!(out, "  {name} = {}", num(r.params[j]));
         }
-        let _ = writeln!(out, "\n  {:<16}  {:>18}  {:>18}  {:>8}  {:>16}", "target", "goal", "model", "weight", "residual");
+        let _ = writeln!(
+            out,
+            "\n  {:<16}  {:>18}  {:>18}  {:>8}  {:>16}",
+            "target", "goal", "model", "weight", "residual"
+        );
         for (i, (t, label)) in self.targets.iter().zip(&labels).enumerate() {
             let _ = writeln!(
                 out,
@@ -183,20 +190,23 @@ impl FitReport {
         let condition = if r.condition.is_finite() { num(r.condition) } else { "infinite".to_string() };
         let _ = writeln!(
             out,
-            "\nJacobian condition number: {condition} ({} targets, {} free parameters)",
-            self.targets.len(),
-            free.len()
+            "\nJacobian condition number: {condition} ({}, {})",
+            count(self.targets.len(), "target"),
+            count(free.len(), "free parameter")
         );
-        if !r.cusps.is_empty() {
-            let list: Vec<String> = r
-                .cusps
-                .iter()
-                .map(|c| {
-                    let verdict = if c.accepted { "accepted" } else { "rejected" };
-                    format!("iteration {} ({} -> {} events, {verdict})", c.iteration, c.events_before, c.events_after)
-                })
-                .collect();
-            let _ = writeln!(out, "cusps: {}", list.join(", "));
+        if let Some(first) = r.cusps.first() {
+            // The JSON lists every cusp; near a jump there can be dozens.
+            let accepted = r.cusps.iter().filter(|c| c.accepted).count();
+            let _ = writeln!(
+                out,
+                "cusps: {} trials had another event sequence ({accepted} accepted, {} rejected); the \
+                 first at iteration {} ({} -> {} events)",
+                r.cusps.len(),
+                r.cusps.len() - accepted,
+                first.iteration,
+                first.events_before,
+                first.events_after
+            );
         }
         let _ = writeln!(
             out,
@@ -207,6 +217,10 @@ impl FitReport {
         );
         out
     }
+}
+
+fn count(n: usize, what: &str) -> String {
+    format!("{n} {what}{}", if n == 1 { "" } else { "s" })
 }
 
 fn sci(v: f64) -> String {
@@ -224,9 +238,13 @@ fn stall(cause: &StallCause) -> String {
         StallCause::Failed { iteration, rejection } => format!(
             "stalled: trial points beyond this one give no residuals (iteration {iteration}: {rejection})"
         ),
-        StallCause::NoDecrease => "stalled: the objective does not decrease along the Gauss-Newton direction \
+        StallCause::NoDecrease => {
+            "stalled: the objective does not decrease along the Gauss-Newton direction \
              although the step is not small; the simulation error may exceed it (tighten --rtol/--atol)"
-            .to_string(),
-        StallCause::Singular => "stalled: the singular value decomposition of the Jacobian did not converge".to_string(),
+                .to_string()
+        }
+        StallCause::Singular => {
+            "stalled: the singular value decomposition of the Jacobian did not converge".to_string()
+        }
     }
 }

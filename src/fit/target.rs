@@ -35,7 +35,9 @@ pub enum TargetError {
     NotANumber { text: String },
     #[error("weight `{text}` must be a positive finite number")]
     BadWeight { text: String },
-    #[error("in `{text}`: the firing number K of EVENT#K must be a whole number from 1 (1 is the first firing)")]
+    #[error(
+        "in `{text}`: the firing number K of EVENT#K must be a whole number from 1 (1 is the first firing)"
+    )]
     BadOccurrence { text: String },
     #[error("model has no event `{name}`{hint}; its events are {known}")]
     UnknownEvent { name: String, hint: String, known: String },
