@@ -14,7 +14,8 @@ use std::process::{Command, Output};
 use approx::assert_relative_eq;
 use hybc::codegen::{compile, CompileOptions, CompiledModel};
 use hybc::fit::{
-    fit, Bounds, FitError, FitOptions, FitProblem, FitResult, FitStop, Outcome, Rejection, StallCause, Target,
+    fit, Bounds, FitError, FitOptions, FitProblem, FitResult, FitStop, Outcome, Rejection, StallCause,
+    Target, TargetError,
 };
 use hybc::lower::{lower, system_info};
 use hybc::sema::Model;
@@ -420,5 +421,19 @@ fn cli_bad_flags_are_usage_errors_with_clear_messages() {
         assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
         assert!(stderr.contains("error"), "{args:?}: {stderr}");
         assert!(stderr.contains(message), "{args:?}: expected `{message}` in {stderr}");
+    }
+}
+
+#[test]
+fn a_name_that_is_both_an_output_and_a_state_takes_a_prefix() {
+    // y(1) = a + 1 and the output y = 2 y(1): y = 6 means a = 5 for the state, a = 2 for the output.
+    let src = "model m\nparam a = 1\nstate y = a\nder(y) = 1\noutput y = 2 * y\n";
+    let fixture = compile_with_free(src, &["a"]);
+    let info = fixture.compiled.info();
+    assert_eq!(Target::parse("y=6", info), Err(TargetError::Ambiguous { name: "y".to_string() }));
+    for (target, a) in [("state:y=6", 5.0), ("output:y=6", 2.0)] {
+        let r = fit(&fixture.problem(&[], &[target], 1.0), &FitOptions::default()).expect("fit starts");
+        assert!(r.is_converged(), "{target}: {:?}", r.stop);
+        assert_relative_eq!(fixture.param(&r, "a"), a, max_relative = 1e-9);
     }
 }

@@ -199,9 +199,9 @@ impl FitReport {
             let accepted = r.cusps.iter().filter(|c| c.accepted).count();
             let _ = writeln!(
                 out,
-                "cusps: {} trials had another event sequence ({accepted} accepted, {} rejected); the \
-                 first at iteration {} ({} -> {} events)",
-                r.cusps.len(),
+                "cusps: {} with another event sequence ({accepted} accepted, {} rejected); the first at \
+                 iteration {} ({} -> {} events)",
+                count(r.cusps.len(), "trial"),
                 r.cusps.len() - accepted,
                 first.iteration,
                 first.events_before,
