@@ -380,6 +380,11 @@ fn cli_exit_codes_for_no_convergence_and_a_bad_start() {
     let out = hybc(&["fit", "models/ball.hyb", "--free", "e", "--target", "energy=1", "--t-end", "10"]);
     assert_eq!(out.status.code(), Some(3));
     assert!(String::from_utf8_lossy(&out.stderr).contains("Zeno"));
+    // The ball grazes the ceiling: no gradient of the final state exists at the start.
+    let out = hybc(&["fit", "tests/data/run/ceiling_graze.hyb", "--free", "v0", "--target", "y=0.5"]);
+    assert_eq!(out.status.code(), Some(3));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("target `y` has no gradient: a grazing event"), "{stderr}");
 }
 
 #[test]

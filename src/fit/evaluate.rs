@@ -59,7 +59,8 @@ impl fmt::Display for Rejection {
             }
             Rejection::NoGradient { target } => write!(
                 f,
-                "target `{target}` has no gradient: a grazing event came before it (see the run's warnings)"
+                "target `{target}` has no gradient: a grazing event (a guard touched at a crossing speed near \
+                 zero) came at or before it"
             ),
             Rejection::NonFinite { target } => write!(f, "target `{target}` is not a finite number"),
         }
