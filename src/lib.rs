@@ -8,6 +8,7 @@ pub mod cli;
 pub mod codegen;
 pub mod diag;
 pub mod expr;
+pub mod fit;
 pub mod gradcheck;
 pub mod lower;
 pub mod report;

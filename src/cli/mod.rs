@@ -3,6 +3,7 @@
 
 mod check;
 mod derive;
+mod fit;
 mod run;
 
 use std::path::{Path, PathBuf};
@@ -28,6 +29,8 @@ enum Command {
     Derive(derive::DeriveArgs),
     /// Simulate a model; report events, final state, outputs and their gradients.
     Run(run::RunArgs),
+    /// Fit parameters to targets on outputs, states and event times (least squares).
+    Fit(fit::FitArgs),
 }
 
 /// Exit codes, as documented in the README.
@@ -35,8 +38,9 @@ pub const EXIT_MODEL_ERROR: u8 = 1;
 pub const EXIT_USAGE_ERROR: u8 = 2;
 /// The simulation stopped early (Zeno behaviour or a runtime fault); what it computed is printed.
 pub const EXIT_SIM_STOPPED: u8 = 3;
-/// `hybc run --check-grad`: a reported derivative disagrees with its central difference.
-pub const EXIT_GRAD_CHECK_FAILED: u8 = 4;
+/// The command ran but its goal was not met: `hybc run --check-grad` found a derivative that
+/// disagrees with its central difference, or `hybc fit` did not converge.
+pub const EXIT_GOAL_NOT_MET: u8 = 4;
 
 pub fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -51,6 +55,7 @@ pub fn main() -> ExitCode {
         Command::Check(args) => check::run(&args),
         Command::Derive(args) => derive::run(&args),
         Command::Run(args) => run::run(&args),
+        Command::Fit(args) => fit::run(&args),
     }
 }
 

@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use clap::ValueEnum;
 
-use super::EXIT_GRAD_CHECK_FAILED;
+use super::EXIT_GOAL_NOT_MET;
 use super::{load_model, parse_param_list, unknown_param, usage_error, ModelArg, EXIT_SIM_STOPPED};
 use crate::codegen::{self, CompileOptions};
 use crate::gradcheck::{self, CheckOptions};
@@ -237,7 +237,7 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         }
     }
     Ok(match report.failure() {
-        None if check.as_ref().is_some_and(|c| !c.passed()) => ExitCode::from(EXIT_GRAD_CHECK_FAILED),
+        None if check.as_ref().is_some_and(|c| !c.passed()) => ExitCode::from(EXIT_GOAL_NOT_MET),
         None => ExitCode::SUCCESS,
         Some(message) => {
             eprintln!("error: {message}");

@@ -1,0 +1,199 @@
+//! `hybc fit FILE`: compile a model once with the free parameters as gradient parameters, then fit
+//! them to targets on final outputs, final states and event times (`crate::fit`).
+
+use std::process::ExitCode;
+use std::time::Instant;
+
+use clap::ValueEnum;
+
+use super::run::parameter_values;
+use super::{
+    load_model, parse_param_list, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_MODEL_ERROR,
+    EXIT_SIM_STOPPED,
+};
+use crate::codegen::{self, CompileOptions};
+use crate::fit::{self, Bounds, FitError, FitOptions, FitProblem, FitReport, Target};
+use crate::lower::{lower, system_info};
+use crate::sema::Model;
+use crate::sim::{Method, SimOptions};
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum MethodArg {
+    /// DOP853 when rtol < 1e-7, else Dormand-Prince 5(4).
+    Auto,
+    Dopri5,
+    Dop853,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum Format {
+    Table,
+    Json,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct FitArgs {
+    #[command(flatten)]
+    model: ModelArg,
+    /// The parameters to fit: `P1,P2,...` (bounded by their declared ranges).
+    #[arg(long, value_name = "P1,P2")]
+    free: String,
+    /// A target (repeatable): `OUTPUT=VALUE`, `STATE=VALUE` (at the final time), or
+    /// `EVENT#K=TIME` (the K-th firing, 1-based); append `@WEIGHT` to weight its residual.
+    #[arg(long = "target", value_name = "NAME=VALUE[@W]", required = true)]
+    targets: Vec<String>,
+    /// Start value of a parameter, or a fixed value of a parameter not fitted (repeatable).
+    #[arg(long = "set", value_name = "P=VALUE")]
+    set: Vec<String>,
+    /// End time (default: the model's `simulate t_end`, else 10).
+    #[arg(long, value_name = "T")]
+    t_end: Option<f64>,
+    /// Relative tolerance of every run (default: the model's, else 1e-8).
+    #[arg(long)]
+    rtol: Option<f64>,
+    /// Absolute tolerance of every run (default: the model's, else 1e-10).
+    #[arg(long)]
+    atol: Option<f64>,
+    /// Integration method.
+    #[arg(long, value_enum, default_value = "auto")]
+    method: MethodArg,
+    /// A run with more events than this stops as Zeno (and its trial point is rejected).
+    #[arg(long, default_value_t = 10_000)]
+    max_events: usize,
+    /// A crossing slower than this fraction of its scale is grazing (it has no gradient).
+    #[arg(long, default_value_t = 1e-3)]
+    graze_tol: f64,
+    /// Largest number of trial points (one run each).
+    #[arg(long, default_value_t = FitOptions::default().max_iter)]
+    max_iter: usize,
+    /// Converged when the Gauss-Newton step is below this, relative to the parameters.
+    #[arg(long, default_value_t = FitOptions::default().xtol)]
+    xtol: f64,
+    /// Converged when the residuals' cosine with every Jacobian column is below this.
+    #[arg(long, default_value_t = FitOptions::default().gtol)]
+    gtol: f64,
+    /// Converged when an accepted step lowers the objective by less than this fraction.
+    #[arg(long, default_value_t = FitOptions::default().ftol)]
+    ftol: f64,
+    /// Output format.
+    #[arg(long, value_enum, default_value = "table")]
+    format: Format,
+}
+
+pub fn run(args: &FitArgs) -> ExitCode {
+    let (model, _) = match load_model(&args.model.file) {
+        Ok(loaded) => loaded,
+        Err(code) => return code,
+    };
+    match fit_model(&model, args) {
+        Ok(code) => code,
+        Err(message) => usage_error(&message),
+    }
+}
+
+fn positive(name: &str, v: f64) -> Result<f64, String> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("{name}: expected a positive number, found {v}"))
+    }
+}
+
+/// Options of every run of the fit, from the flags or the model's `simulate` defaults (as
+/// `hybc run`).
+fn sim_options(model: &Model, args: &FitArgs) -> Result<SimOptions, String> {
+    let rtol = positive("--rtol", args.rtol.or(model.simulate.rtol).unwrap_or(1e-8))?;
+    if rtol >= 1.0 {
+        return Err(format!("--rtol: expected a number below 1, found {rtol}"));
+    }
+    Ok(SimOptions {
+        t_end: positive("--t-end", args.t_end.or(model.simulate.t_end).unwrap_or(10.0))?,
+        rtol,
+        atol: positive("--atol", args.atol.or(model.simulate.atol).unwrap_or(1e-10))?,
+        method: match args.method {
+            MethodArg::Auto => Method::Auto,
+            MethodArg::Dopri5 => Method::Dopri5,
+            MethodArg::Dop853 => Method::Dop853,
+        },
+        max_events: args.max_events,
+        graze_tol: positive("--graze-tol", args.graze_tol)?,
+        ..SimOptions::default()
+    })
+}
+
+fn fit_options(args: &FitArgs) -> Result<FitOptions, String> {
+    if args.max_iter == 0 {
+        return Err("--max-iter: expected at least 1".to_string());
+    }
+    Ok(FitOptions {
+        max_iter: args.max_iter,
+        xtol: positive("--xtol", args.xtol)?,
+        gtol: positive("--gtol", args.gtol)?,
+        ftol: positive("--ftol", args.ftol)?,
+    })
+}
+
+fn fit_model(model: &Model, args: &FitArgs) -> Result<ExitCode, String> {
+    let free = parse_param_list(model, &args.free, "--free")?;
+    if free.is_empty() {
+        return Err("--free: name at least one parameter to fit".to_string());
+    }
+    let start = parameter_values(model, &args.set)?;
+    let sim = sim_options(model, args)?;
+    let options = fit_options(args)?;
+    let info = system_info(model, &free);
+    let targets = args
+        .targets
+        .iter()
+        .map(|t| Target::parse(t, &info).map_err(|e| format!("--target: {e}")))
+        .collect::<Result<Vec<_>, _>>()?;
+    if targets.len() < free.len() {
+        eprintln!(
+            "warning: {} free parameters but {} target(s): the fit is underdetermined; the damped steps \
+             stay near the start and the condition number is infinite",
+            free.len(),
+            targets.len()
+        );
+    }
+    let bounds = free.iter().map(|p| Bounds::from_range(model.params[p.0 as usize].range)).collect();
+
+    let started = Instant::now();
+    let compiled = match codegen::compile(&lower(model), info.clone(), &CompileOptions::default()) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("error: could not compile `{}`: {e}", model.name);
+            return Ok(ExitCode::from(EXIT_MODEL_ERROR));
+        }
+    };
+    let compile_seconds = started.elapsed().as_secs_f64();
+
+    let problem = FitProblem { system: &compiled, start, bounds, targets, sim };
+    let started = Instant::now();
+    let result = match fit::fit(&problem, &options) {
+        Ok(result) => result,
+        Err(e @ FitError::Start(_)) => {
+            eprintln!("error: {e}");
+            return Ok(ExitCode::from(EXIT_SIM_STOPPED));
+        }
+        Err(e) => return Err(e.to_string()),
+    };
+    let report = FitReport {
+        model: model.name.clone(),
+        info,
+        targets: problem.targets,
+        options,
+        result,
+        compile_seconds,
+        fit_seconds: started.elapsed().as_secs_f64(),
+    };
+    match args.format {
+        Format::Table => super::print_out(&report.to_table()),
+        Format::Json => super::print_out(&format!("{}\n", report.to_json())),
+    }
+    Ok(if report.result.is_converged() {
+        ExitCode::SUCCESS
+    } else {
+        eprintln!("error: {}", report.reason());
+        ExitCode::from(EXIT_GOAL_NOT_MET)
+    })
+}

@@ -1,0 +1,164 @@
+//! One evaluation of a fit: run the compiled model at one parameter vector and read every
+//! target's value and its exact gradient row from the run's sensitivities (`dstate`/`doutputs`
+//! at `t_end`, their totals `dstate_total`/`doutputs_total` at a `stop` event, `dtime` for event
+//! times). Knows runs and targets, not the solver.
+
+use std::fmt;
+
+use nalgebra::DMatrix;
+
+use super::target::{Observable, Target};
+use crate::report::RunReport;
+use crate::sim::{self, HybridSystem, SimOptions, SimResult, StopReason, SystemInfo};
+
+/// The residuals of one run and their Jacobian with respect to the free parameters.
+#[derive(Clone, Debug)]
+pub struct Evaluation {
+    /// The model's value of each target.
+    pub values: Vec<f64>,
+    /// `weight * (value - target)`, one per target.
+    pub residuals: Vec<f64>,
+    /// `d residual_i / d free_j` (targets x free parameters).
+    pub jacobian: DMatrix<f64>,
+    /// Ids of the fired events in order: which smooth piece of the objective this point is on.
+    pub events: Vec<usize>,
+}
+
+impl Evaluation {
+    /// `0.5 * sum(residual^2)`.
+    pub fn objective(&self) -> f64 {
+        0.5 * self.residuals.iter().map(|r| r * r).sum::<f64>()
+    }
+}
+
+/// Why a parameter vector gives no usable residuals. At a trial point the solver rejects the
+/// trial and shortens the step; at the starting point the fit cannot begin.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Rejection {
+    /// The run stopped early (Zeno behaviour or a runtime fault), or refused its input.
+    RunStopped { message: String },
+    /// A target's event fired fewer times than its firing number.
+    MissingEvent { target: String, fired: usize },
+    /// A target's gradient does not exist: a grazing event came at or before it.
+    NoGradient { target: String },
+    /// A target's value or gradient is not a finite number.
+    NonFinite { target: String },
+}
+
+impl fmt::Display for Rejection {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Rejection::RunStopped { message } => write!(f, "the run stopped early: {message}"),
+            Rejection::MissingEvent { target, fired } => {
+                let fired = match fired {
+                    0 => "never fired".to_string(),
+                    1 => "fired only once".to_string(),
+                    n => format!("fired only {n} times"),
+                };
+                write!(f, "target `{target}` does not exist: its event {fired}")
+            }
+            Rejection::NoGradient { target } => write!(
+                f,
+                "target `{target}` has no gradient: a grazing event (a guard touched at a crossing speed near \
+                 zero) came at or before it"
+            ),
+            Rejection::NonFinite { target } => write!(f, "target `{target}` is not a finite number"),
+        }
+    }
+}
+
+/// Runs `system` at parameters `p` (all of them) and reads the targets.
+pub fn evaluate(
+    system: &impl HybridSystem,
+    p: &[f64],
+    targets: &[Target],
+    opts: &SimOptions,
+) -> Result<Evaluation, Rejection> {
+    let info = system.info();
+    let result = sim::run(system, p, opts).map_err(|e| Rejection::RunStopped { message: e.to_string() })?;
+    let f = &result.final_state;
+    // At a stop event the final time moves with the parameters: only the total derivatives
+    // describe how the final values change.
+    let finals = match &result.stopped_by {
+        StopReason::TEnd => Finals { dstate: &f.dstate, doutputs: &f.doutputs },
+        StopReason::Event { .. } => Finals { dstate: &f.dstate_total, doutputs: &f.doutputs_total },
+        StopReason::Zeno { .. } | StopReason::Fault { .. } => {
+            return Err(Rejection::RunStopped { message: failure(&result, info, p, opts) });
+        }
+    };
+    let mut values = Vec::with_capacity(targets.len());
+    let mut residuals = Vec::with_capacity(targets.len());
+    let mut jacobian = DMatrix::zeros(targets.len(), info.n_grad());
+    for (i, target) in targets.iter().enumerate() {
+        let label = || target.label(info);
+        let (value, gradient) =
+            read(&result, info, &finals, target.observable).map_err(|missing| match missing {
+                Missing::Event { fired } => Rejection::MissingEvent { target: label(), fired },
+                Missing::Gradient => Rejection::NoGradient { target: label() },
+            })?;
+        let residual = target.weight * (value - target.value);
+        if !residual.is_finite() || gradient.iter().any(|d| !d.is_finite()) {
+            return Err(Rejection::NonFinite { target: label() });
+        }
+        values.push(value);
+        residuals.push(residual);
+        for (j, d) in gradient.into_iter().enumerate() {
+            jacobian[(i, j)] = target.weight * d;
+        }
+    }
+    Ok(Evaluation { values, residuals, jacobian, events: result.events.iter().map(|e| e.event).collect() })
+}
+
+/// The derivatives of the final values that apply to how the run ended.
+struct Finals<'r> {
+    dstate: &'r Option<Vec<f64>>,
+    doutputs: &'r Option<Vec<f64>>,
+}
+
+enum Missing {
+    Event { fired: usize },
+    Gradient,
+}
+
+/// One target's value and its gradient over the free parameters.
+fn read(
+    result: &SimResult,
+    info: &SystemInfo,
+    finals: &Finals<'_>,
+    observable: Observable,
+) -> Result<(f64, Vec<f64>), Missing> {
+    let f = &result.final_state;
+    let row = |d: &[f64], rows: usize, i: usize| (0..info.n_grad()).map(|j| d[j * rows + i]).collect();
+    match observable {
+        Observable::Output(i) => {
+            let d = finals.doutputs.as_ref().ok_or(Missing::Gradient)?;
+            Ok((f.outputs[i], row(d, info.n_outputs(), i)))
+        }
+        Observable::State(i) => {
+            let d = finals.dstate.as_ref().ok_or(Missing::Gradient)?;
+            Ok((f.state[i], row(d, info.n_states(), i)))
+        }
+        Observable::EventTime { name_event, occurrence } => {
+            let name = &info.events[name_event].name;
+            let firings: Vec<_> =
+                result.events.iter().filter(|e| info.events[e.event].name == *name).collect();
+            let record = firings.get(occurrence - 1).ok_or(Missing::Event { fired: firings.len() })?;
+            let d = record.dtime.as_ref().ok_or(Missing::Gradient)?;
+            Ok((record.time, d.clone()))
+        }
+    }
+}
+
+/// The run report's own wording for a run that stopped early (names, time, mode and state).
+fn failure(result: &SimResult, info: &SystemInfo, p: &[f64], opts: &SimOptions) -> String {
+    let report = RunReport {
+        model: String::new(),
+        t_end: opts.t_end,
+        info: info.clone(),
+        params: p.to_vec(),
+        result: result.clone(),
+        compile_seconds: 0.0,
+        run_seconds: 0.0,
+    };
+    report.failure().unwrap_or_else(|| "the run stopped early".to_string())
+}

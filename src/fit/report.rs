@@ -1,0 +1,250 @@
+//! A finished fit with names attached: the table `hybc fit` prints and its JSON object (field
+//! names are a contract, README "Fitting"). No IO.
+
+use std::fmt::Write as _;
+
+use serde_json::{json, Map, Value};
+
+use super::{FitOptions, FitResult, FitStop, Outcome, StallCause, Target};
+use crate::report::num;
+use crate::sim::SystemInfo;
+
+/// A fit's result with the names and settings needed to report it.
+#[derive(Clone, Debug)]
+pub struct FitReport {
+    pub model: String,
+    pub info: SystemInfo,
+    pub targets: Vec<Target>,
+    pub options: FitOptions,
+    pub result: FitResult,
+    pub compile_seconds: f64,
+    pub fit_seconds: f64,
+}
+
+impl FitReport {
+    fn free_names(&self) -> Vec<&str> {
+        self.info.grad_params.iter().map(|&j| self.info.param_names[j].as_str()).collect()
+    }
+
+    fn free_object(&self, free: &[f64]) -> Value {
+        Value::Object(self.free_names().iter().zip(free).map(|(n, v)| (n.to_string(), json!(v))).collect())
+    }
+
+    /// One sentence: whether the fit converged and why it stopped.
+    pub fn reason(&self) -> String {
+        let o = &self.options;
+        let trials = self.result.iterations.len() - 1;
+        match &self.result.stop {
+            FitStop::Gradient => format!(
+                "converged after {trials} trials: the gradient vanishes (every free column's cosine \
+                 with the residuals is below gtol {:e}, or the free parameters are held at their bounds)",
+                o.gtol
+            ),
+            FitStop::Step => {
+                format!("converged after {trials} trials: the Gauss-Newton step is below xtol {:e}", o.xtol)
+            }
+            FitStop::Objective => format!(
+                "converged after {trials} trials: the residuals vanish or the objective stopped \
+                 decreasing (relative decrease below ftol {:e})",
+                o.ftol
+            ),
+            FitStop::MaxIterations => format!("did not converge in {trials} trials (--max-iter)"),
+            FitStop::Stalled(cause) => format!("did not converge: {}", stall(cause)),
+        }
+    }
+
+    /// The JSON object documented in the README.
+    pub fn to_json(&self) -> Value {
+        let r = &self.result;
+        let params: Map<String, Value> =
+            self.info.param_names.iter().zip(&r.params).map(|(n, v)| (n.clone(), json!(v))).collect();
+        let residuals: Vec<Value> = self
+            .targets
+            .iter()
+            .enumerate()
+            .map(|(i, t)| {
+                json!({
+                    "target": t.label(&self.info),
+                    "goal": t.value,
+                    "value": r.evaluation.values[i],
+                    "weight": t.weight,
+                    "residual": r.evaluation.residuals[i],
+                })
+            })
+            .collect();
+        let iterations: Vec<Value> = r
+            .iterations
+            .iter()
+            .map(|it| {
+                let (outcome, rejection) = match &it.outcome {
+                    Outcome::Start => ("start", Value::Null),
+                    Outcome::Accepted => ("accepted", Value::Null),
+                    Outcome::Rejected => ("rejected", Value::Null),
+                    Outcome::Failed(why) => ("failed", json!(why.to_string())),
+                };
+                json!({
+                    "iteration": it.iteration,
+                    "params": self.free_object(&it.free),
+                    "objective": it.objective,
+                    "step_norm": it.step_norm,
+                    "events": it.events,
+                    "damping": it.damping,
+                    "cusp": it.cusp,
+                    "outcome": outcome,
+                    "rejection": rejection,
+                })
+            })
+            .collect();
+        let cusps: Vec<Value> = r
+            .cusps
+            .iter()
+            .map(|c| {
+                json!({"iteration": c.iteration, "events_before": c.events_before,
+                       "events_after": c.events_after, "accepted": c.accepted})
+            })
+            .collect();
+        let reason = match &r.stop {
+            FitStop::Gradient => "gradient",
+            FitStop::Step => "step",
+            FitStop::Objective => "objective",
+            FitStop::MaxIterations => "max_iterations",
+            FitStop::Stalled(_) => "stalled",
+        };
+        json!({
+            "model": self.model,
+            "free": self.free_names(),
+            "params": params,
+            "residuals": residuals,
+            "objective": r.evaluation.objective(),
+            "iterations": iterations,
+            "converged": r.is_converged(),
+            "reason": reason,
+            "message": self.reason(),
+            // JSON has no infinity: a rank-deficient Jacobian's condition number is null.
+            "condition": r.condition.is_finite().then_some(r.condition),
+            "cusps": cusps,
+            "stats": {
+                "runs": r.iterations.len(),
+                "compile_seconds": self.compile_seconds,
+                "fit_seconds": self.fit_seconds,
+            },
+        })
+    }
+
+    /// The human-readable report `hybc fit` prints by default.
+    pub fn to_table(&self) -> String {
+        let r = &self.result;
+        let mut out = String::new();
+        let free = self.free_names();
+        let labels: Vec<String> = self.targets.iter().map(|t| t.label(&self.info)).collect();
+        let _ =
+            writeln!(out, "model {}   free {}   targets {}", self.model, free.join(", "), labels.join(", "));
+        let pcols: String = free.iter().map(|n| format!("  {n:>16}")).collect();
+        let _ = writeln!(
+            out,
+            "\n  {:>4}  {:>16}  {:>12}  {:>6}  {:>9}{pcols}  outcome",
+            "iter", "objective", "step", "events", "damping"
+        );
+        for it in &r.iterations {
+            let opt = |v: Option<String>| v.unwrap_or_else(|| "-".to_string());
+            let outcome = match &it.outcome {
+                Outcome::Start => "start".to_string(),
+                Outcome::Accepted if it.cusp => "accepted across a cusp".to_string(),
+                Outcome::Accepted => "accepted".to_string(),
+                Outcome::Rejected if it.cusp => {
+                    "rejected: event sequence changed, objective rose".to_string()
+                }
+                Outcome::Rejected => "rejected: objective rose".to_string(),
+                Outcome::Failed(why) => format!("rejected: {why}"),
+            };
+            let values: String = it.free.iter().map(|v| format!("  {:>16}", num(*v))).collect();
+            let _ = writeln!(
+                out,
+                "  {:>4}  {:>16}  {:>12}  {:>6}  {:>9}{values}  {outcome}",
+                it.iteration,
+                opt(it.objective.map(sci)),
+                if it.iteration == 0 { "-".to_string() } else { sci(it.step_norm) },
+                opt(it.events.map(|e| e.to_string())),
+                opt(it.damping.map(|d| format!("{d:.1e}"))),
+            );
+        }
+        let _ = writeln!(out, "\n{}", self.reason());
+        for (name, &j) in free.iter().zip(&self.info.grad_params) {
+            let _ = writeln!(out, "  {name} = {}", num(r.params[j]));
+        }
+        let _ = writeln!(
+            out,
+            "\n  {:<16}  {:>18}  {:>18}  {:>8}  {:>16}",
+            "target", "goal", "model", "weight", "residual"
+        );
+        for (i, (t, label)) in self.targets.iter().zip(&labels).enumerate() {
+            let _ = writeln!(
+                out,
+                "  {label:<16}  {:>18}  {:>18}  {:>8}  {:>16}",
+                num(t.value),
+                num(r.evaluation.values[i]),
+                num(t.weight),
+                sci(r.evaluation.residuals[i])
+            );
+        }
+        let condition = if r.condition.is_finite() { num(r.condition) } else { "infinite".to_string() };
+        let _ = writeln!(
+            out,
+            "\nJacobian condition number: {condition} ({}, {})",
+            count(self.targets.len(), "target"),
+            count(free.len(), "free parameter")
+        );
+        if let Some(first) = r.cusps.first() {
+            // The JSON lists every cusp; near a jump there can be dozens.
+            let accepted = r.cusps.iter().filter(|c| c.accepted).count();
+            let _ = writeln!(
+                out,
+                "cusps: {} with another event sequence ({accepted} accepted, {} rejected); the first at \
+                 iteration {} ({} -> {} events)",
+                count(r.cusps.len(), "trial"),
+                r.cusps.len() - accepted,
+                first.iteration,
+                first.events_before,
+                first.events_after
+            );
+        }
+        let _ = writeln!(
+            out,
+            "{} runs, compile {:.2} ms, fit {:.2} ms",
+            r.iterations.len(),
+            self.compile_seconds * 1e3,
+            self.fit_seconds * 1e3
+        );
+        out
+    }
+}
+
+fn count(n: usize, what: &str) -> String {
+    format!("{n} {what}{}", if n == 1 { "" } else { "s" })
+}
+
+fn sci(v: f64) -> String {
+    format!("{v:.6e}")
+}
+
+fn stall(cause: &StallCause) -> String {
+    match cause {
+        StallCause::Cusp(c) => format!(
+            "stalled at a cusp: steps towards smaller residuals change the number of events ({} -> {} \
+             at iteration {}) and the objective is higher there; the targets may lie in the jump \
+             between two event sequences, or be reachable only from another start",
+            c.events_before, c.events_after, c.iteration
+        ),
+        StallCause::Failed { iteration, rejection } => format!(
+            "stalled: trial points beyond this one give no residuals (iteration {iteration}: {rejection})"
+        ),
+        StallCause::NoDecrease => {
+            "stalled: the objective does not decrease along the Gauss-Newton direction \
+             although the step is not small; the simulation error may exceed it (tighten --rtol/--atol)"
+                .to_string()
+        }
+        StallCause::Singular => {
+            "stalled: the singular value decomposition of the Jacobian did not converge".to_string()
+        }
+    }
+}

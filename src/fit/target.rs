@@ -1,0 +1,152 @@
+//! What a fit aims at: a number a run reports (an output or a state at the final time, or the time
+//! of the K-th firing of an event) and the value it should take. Parses the command line's
+//! `NAME=VALUE[@WEIGHT]` form against a model's names; knows nothing of the solver.
+
+use crate::sim::SystemInfo;
+
+/// A number one simulation run reports, which a target fixes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Observable {
+    /// An output at the final time (index into `SystemInfo::output_names`).
+    Output(usize),
+    /// A state at the final time (index into `SystemInfo::state_names`).
+    State(usize),
+    /// The time of the `occurrence`-th firing (1-based) of any event named `name`; the name, not
+    /// an event id, because events of different modes may share a name and the user counts
+    /// firings of the name.
+    EventTime { name_event: usize, occurrence: usize },
+}
+
+/// One residual: `weight * (observed - value)`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Target {
+    pub observable: Observable,
+    pub value: f64,
+    /// Multiplies the residual (the inverse of a standard deviation, in a weighted fit).
+    pub weight: f64,
+}
+
+/// A `--target` text that does not name a target of the model.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum TargetError {
+    #[error("expected NAME=VALUE, NAME=VALUE@WEIGHT or EVENT#K=TIME, found `{text}`")]
+    Malformed { text: String },
+    #[error("`{text}` is not a finite number")]
+    NotANumber { text: String },
+    #[error("weight `{text}` must be a positive finite number")]
+    BadWeight { text: String },
+    #[error(
+        "in `{text}`: the firing number K of EVENT#K must be a whole number from 1 (1 is the first firing)"
+    )]
+    BadOccurrence { text: String },
+    #[error("model has no event `{name}`{hint}; its events are {known}")]
+    UnknownEvent { name: String, hint: String, known: String },
+    #[error("model has no output or state `{name}`{hint}; its outputs are {outputs}, its states {states}")]
+    UnknownName { name: String, hint: String, outputs: String, states: String },
+    #[error("`{name}` is both an output and a state; write `output:{name}` or `state:{name}`")]
+    Ambiguous { name: String },
+}
+
+impl Target {
+    /// Parses `NAME=VALUE`, `NAME=VALUE@WEIGHT` or `EVENT#K=TIME[@WEIGHT]` against the names in
+    /// `info`. `NAME` is an output or a state (prefix `output:` or `state:` when a name is both).
+    pub fn parse(text: &str, info: &SystemInfo) -> Result<Target, TargetError> {
+        let malformed = || TargetError::Malformed { text: text.to_string() };
+        let (name, rhs) = text.split_once('=').ok_or_else(malformed)?;
+        let name = name.trim();
+        let (value, weight) = match rhs.split_once('@') {
+            Some((v, w)) => (v.trim(), Some(w.trim())),
+            None => (rhs.trim(), None),
+        };
+        if name.is_empty() || value.is_empty() {
+            return Err(malformed());
+        }
+        let value = finite(value).ok_or_else(|| TargetError::NotANumber { text: value.to_string() })?;
+        let weight = match weight {
+            None => 1.0,
+            Some(w) => finite(w)
+                .filter(|w| *w > 0.0)
+                .ok_or_else(|| TargetError::BadWeight { text: w.to_string() })?,
+        };
+        let observable = match name.split_once('#') {
+            Some((event, k)) => event_time(event.trim(), k.trim(), text, info)?,
+            None => named_value(name, info)?,
+        };
+        Ok(Target { observable, value, weight })
+    }
+
+    /// The target's name as the user writes it (`energy`, `touchdown#2`).
+    pub fn label(&self, info: &SystemInfo) -> String {
+        match self.observable {
+            Observable::Output(i) => info.output_names[i].clone(),
+            Observable::State(i) => info.state_names[i].clone(),
+            Observable::EventTime { name_event, occurrence } => {
+                format!("{}#{occurrence}", info.events[name_event].name)
+            }
+        }
+    }
+}
+
+fn finite(text: &str) -> Option<f64> {
+    text.parse::<f64>().ok().filter(|v| v.is_finite())
+}
+
+fn event_time(name: &str, k: &str, text: &str, info: &SystemInfo) -> Result<Observable, TargetError> {
+    let occurrence: usize = k
+        .parse()
+        .ok()
+        .filter(|k| *k >= 1)
+        .ok_or_else(|| TargetError::BadOccurrence { text: text.to_string() })?;
+    let names: Vec<&str> = info.events.iter().map(|e| e.name.as_str()).collect();
+    match names.iter().position(|n| *n == name) {
+        Some(name_event) => Ok(Observable::EventTime { name_event, occurrence }),
+        None => Err(TargetError::UnknownEvent {
+            name: name.to_string(),
+            hint: hint(name, &names),
+            known: list(&names),
+        }),
+    }
+}
+
+fn named_value(name: &str, info: &SystemInfo) -> Result<Observable, TargetError> {
+    let find = |names: &[String], n: &str| names.iter().position(|x| x == n);
+    if let Some(n) = name.strip_prefix("output:") {
+        if let Some(i) = find(&info.output_names, n) {
+            return Ok(Observable::Output(i));
+        }
+    } else if let Some(n) = name.strip_prefix("state:") {
+        if let Some(i) = find(&info.state_names, n) {
+            return Ok(Observable::State(i));
+        }
+    } else {
+        match (find(&info.output_names, name), find(&info.state_names, name)) {
+            (Some(_), Some(_)) => return Err(TargetError::Ambiguous { name: name.to_string() }),
+            (Some(i), None) => return Ok(Observable::Output(i)),
+            (None, Some(i)) => return Ok(Observable::State(i)),
+            (None, None) => {}
+        }
+    }
+    let outputs: Vec<&str> = info.output_names.iter().map(String::as_str).collect();
+    let states: Vec<&str> = info.state_names.iter().map(String::as_str).collect();
+    let all: Vec<&str> = outputs.iter().chain(&states).copied().collect();
+    Err(TargetError::UnknownName {
+        name: name.to_string(),
+        hint: hint(name, &all),
+        outputs: list(&outputs),
+        states: list(&states),
+    })
+}
+
+fn hint(name: &str, names: &[&str]) -> String {
+    crate::sema::closest_name(name, names.iter().copied())
+        .map(|s| format!(" (did you mean `{s}`?)"))
+        .unwrap_or_default()
+}
+
+fn list(names: &[&str]) -> String {
+    if names.is_empty() {
+        "none".to_string()
+    } else {
+        names.join(", ")
+    }
+}
