@@ -9,9 +9,11 @@ pub mod codegen;
 pub mod diag;
 pub mod expr;
 pub mod lower;
+pub mod plot;
 pub mod report;
 pub mod sema;
 pub mod sim;
+pub mod sweep;
 pub mod syntax;
 
 use diag::Diagnostic;
