@@ -4,6 +4,7 @@
 mod check;
 mod derive;
 mod run;
+mod sweep;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -28,6 +29,8 @@ enum Command {
     Derive(derive::DeriveArgs),
     /// Simulate a model; report events, final state, outputs and their gradients.
     Run(run::RunArgs),
+    /// Run a model at many parameter points in parallel; one CSV or JSON row per point.
+    Sweep(sweep::SweepArgs),
 }
 
 /// Exit codes, as documented in the README.
@@ -49,6 +52,7 @@ pub fn main() -> ExitCode {
         Command::Check(args) => check::run(&args),
         Command::Derive(args) => derive::run(&args),
         Command::Run(args) => run::run(&args),
+        Command::Sweep(args) => sweep::run(&args),
     }
 }
 

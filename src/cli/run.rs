@@ -29,16 +29,9 @@ enum Format {
     Json,
 }
 
+/// The integrator flags `hybc run` and `hybc sweep` share.
 #[derive(Debug, clap::Args)]
-pub struct RunArgs {
-    #[command(flatten)]
-    model: ModelArg,
-    /// Parameters to differentiate with respect to: `P1,P2,...` or `all`.
-    #[arg(long, value_name = "P1,P2|all")]
-    grad: Option<String>,
-    /// Set a parameter for this run (repeatable); checked against its declared range.
-    #[arg(long = "set", value_name = "P=VALUE")]
-    set: Vec<String>,
+pub(crate) struct SimFlags {
     /// End time (default: the model's `simulate t_end`, else 10).
     #[arg(long, value_name = "T")]
     t_end: Option<f64>,
@@ -61,6 +54,20 @@ pub struct RunArgs {
     /// accurate).
     #[arg(long)]
     no_sens_error_control: bool,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct RunArgs {
+    #[command(flatten)]
+    model: ModelArg,
+    /// Parameters to differentiate with respect to: `P1,P2,...` or `all`.
+    #[arg(long, value_name = "P1,P2|all")]
+    grad: Option<String>,
+    /// Set a parameter for this run (repeatable); checked against its declared range.
+    #[arg(long = "set", value_name = "P=VALUE")]
+    set: Vec<String>,
+    #[command(flatten)]
+    sim: SimFlags,
     /// Output format.
     #[arg(long, value_enum, default_value = "table")]
     format: Format,
@@ -70,6 +77,9 @@ pub struct RunArgs {
     /// Sample the trajectory every DT using the dense output.
     #[arg(long, value_name = "DT", requires = "trajectory")]
     sample: Option<f64>,
+    /// Plot states and outputs against time, with event lines and mode bands, into this file.
+    #[arg(long, value_name = "FILE.svg|.png")]
+    plot: Option<PathBuf>,
     /// Print nothing but errors; the exit code tells the outcome.
     #[arg(long)]
     quiet: bool,
@@ -122,8 +132,9 @@ fn positive(name: &str, v: f64) -> Result<f64, String> {
     }
 }
 
-/// Simulation options from the flags, falling back on the model's `simulate` defaults.
-fn sim_options(model: &Model, args: &RunArgs) -> Result<SimOptions, String> {
+/// Simulation options from the flags, falling back on the model's `simulate` defaults; no
+/// trajectory.
+pub(crate) fn sim_options(model: &Model, args: &SimFlags) -> Result<SimOptions, String> {
     let rtol = positive("--rtol", args.rtol.or(model.simulate.rtol).unwrap_or(1e-8))?;
     if rtol >= 1.0 {
         return Err(format!("--rtol: expected a number below 1, found {rtol}"));
@@ -140,12 +151,16 @@ fn sim_options(model: &Model, args: &RunArgs) -> Result<SimOptions, String> {
         max_events: args.max_events,
         graze_tol: positive("--graze-tol", args.graze_tol)?,
         sens_error_control: !args.no_sens_error_control,
-        trajectory: match (&args.trajectory, args.sample) {
-            (None, _) => TrajectoryRequest::None,
-            (Some(_), None) => TrajectoryRequest::Steps,
-            (Some(_), Some(dt)) => TrajectoryRequest::Sample(positive("--sample", dt)?),
-        },
         ..SimOptions::default()
+    })
+}
+
+/// The trajectory `--trajectory`/`--sample` ask for.
+fn trajectory_request(args: &RunArgs) -> Result<TrajectoryRequest, String> {
+    Ok(match (&args.trajectory, args.sample) {
+        (None, _) => TrajectoryRequest::None,
+        (Some(_), None) => TrajectoryRequest::Steps,
+        (Some(_), Some(dt)) => TrajectoryRequest::Sample(positive("--sample", dt)?),
     })
 }
 
@@ -155,7 +170,9 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         None => Vec::new(),
     };
     let p = parameter_values(model, &args.set)?;
-    let opts = sim_options(model, args)?;
+    let mut opts = sim_options(model, &args.sim)?;
+    opts.trajectory = trajectory_request(args)?;
+    plot_trajectory(args, &mut opts)?;
 
     let started = Instant::now();
     let funcs = lower(model);
@@ -186,6 +203,9 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
             return Err(format!("--trajectory: cannot write `{}`: {e}", path.display()));
         }
     }
+    if let Some(path) = &args.plot {
+        crate::plot::plot_run(&report, path).map_err(|e| format!("--plot: {e}"))?;
+    }
     // A run into a Zeno point grazes ever more often; the first few warnings say it all.
     const SHOWN_WARNINGS: usize = 3;
     for w in report.result.warnings.iter().take(SHOWN_WARNINGS) {
@@ -210,6 +230,18 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
             ExitCode::from(EXIT_SIM_STOPPED)
         }
     })
+}
+
+/// `--plot`: checks the file's extension before the run and, unless `--trajectory` asked for
+/// rows, samples the dense output 1000 times over the run for the curves.
+fn plot_trajectory(args: &RunArgs, opts: &mut SimOptions) -> Result<(), String> {
+    if let Some(path) = &args.plot {
+        crate::plot::ImageFormat::from_path(path).map_err(|e| format!("--plot: {e}"))?;
+        if opts.trajectory == TrajectoryRequest::None {
+            opts.trajectory = TrajectoryRequest::Sample((opts.t_end - opts.t_start) / 1000.0);
+        }
+    }
+    Ok(())
 }
 
 /// CSV columns: t, mode, the states, the outputs, then with gradients `d<state>/d<param>` and

@@ -38,6 +38,7 @@ pub enum Format {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Cell {
     Num(f64),
+    Count(usize),
     Text(String),
     Empty,
 }
@@ -120,7 +121,7 @@ impl<'a> Columns<'a> {
         };
         let complete = status == "ok";
         row.push(Cell::Text(status.into()));
-        row.push(Cell::Num(r.events.len() as f64));
+        row.push(Cell::Count(r.events.len()));
         for slot in 0..self.events {
             match r.events.get(slot) {
                 Some(e) => {
@@ -195,7 +196,8 @@ impl<'a> Columns<'a> {
                 let text: Vec<String> = cells
                     .iter()
                     .map(|c| match c {
-                        Cell::Num(v) => format!("{v}"),
+                        Cell::Num(v) => number(*v),
+                        Cell::Count(c) => c.to_string(),
                         Cell::Text(s) => csv_field(s),
                         Cell::Empty => String::new(),
                     })
@@ -210,6 +212,7 @@ impl<'a> Columns<'a> {
                     .map(|(name, c)| {
                         let v = match c {
                             Cell::Num(v) => Value::from(v),
+                            Cell::Count(c) => Value::from(c),
                             Cell::Text(s) => Value::String(s),
                             Cell::Empty => Value::Null,
                         };
@@ -242,6 +245,17 @@ fn grad_cells(a: Option<&[f64]>, rows: usize, i: usize, m: usize) -> Vec<Cell> {
     (0..m).map(|j| a.map_or(Cell::Empty, |a| Cell::Num(a[j * rows + i]))).collect()
 }
 
+/// The shortest text that reads back as exactly `v`, in scientific notation when plain digits
+/// would be long (Rust's `{}` never uses an exponent: 1e-300 would take 300 zeros).
+fn number(v: f64) -> String {
+    let a = v.abs();
+    if a != 0.0 && !(1e-4..1e15).contains(&a) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
 /// A CSV field, quoted (RFC 4180) when it holds a comma, a quote or a line break.
 fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n', '\r']) {
@@ -253,7 +267,16 @@ fn csv_field(s: &str) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::csv_field;
+    use super::{csv_field, number};
+
+    #[test]
+    fn numbers_read_back_exactly() {
+        for v in [0.1, -2.5, 1e-300, 7.3e-5, 123456789.125, 4.5e20, 0.0, -0.0, f64::MIN_POSITIVE, 1.0 / 3.0] {
+            let text = number(v);
+            assert_eq!(text.parse::<f64>().map(f64::to_bits), Ok(v.to_bits()), "{text}");
+            assert!(text.len() <= 24, "{text}");
+        }
+    }
 
     #[test]
     fn csv_fields_are_quoted_only_when_needed() {
