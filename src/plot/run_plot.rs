@@ -22,6 +22,22 @@ const MODE_COLORS: [RGBColor; 6] = [
     RGBColor(0x17, 0xbe, 0xcf),
 ];
 
+/// A plotted quantity: a state or an output, by index.
+#[derive(Clone, Copy)]
+enum Variable {
+    State(usize),
+    Output(usize),
+}
+
+impl Variable {
+    fn value(self, row: &TrajectoryRow) -> f64 {
+        match self {
+            Variable::State(i) => row.x[i],
+            Variable::Output(i) => row.outputs[i],
+        }
+    }
+}
+
 /// A run with its trajectory, ready to draw.
 pub struct RunFigure<'a> {
     report: &'a RunReport,
@@ -38,17 +54,13 @@ pub fn plot_run(report: &RunReport, path: &Path) -> Result<(), PlotError> {
 }
 
 impl RunFigure<'_> {
-    /// Every plotted variable: its name and how to read it from a row.
-    fn variables(&self) -> Vec<(&str, Box<dyn Fn(&TrajectoryRow) -> f64>)> {
+    /// Every plotted variable: its name and where it is in a row.
+    fn variables(&self) -> Vec<(&str, Variable)> {
         let info = &self.report.info;
-        let mut vars: Vec<(&str, Box<dyn Fn(&TrajectoryRow) -> f64>)> = Vec::new();
-        for (i, name) in info.state_names.iter().enumerate() {
-            vars.push((name, Box::new(move |r| r.x[i])));
-        }
-        for (i, name) in info.output_names.iter().enumerate() {
-            vars.push((name, Box::new(move |r| r.outputs[i])));
-        }
-        vars
+        let states = info.state_names.iter().enumerate().map(|(i, n)| (n.as_str(), Variable::State(i)));
+        states
+            .chain(info.output_names.iter().enumerate().map(|(i, n)| (n.as_str(), Variable::Output(i))))
+            .collect()
     }
 
     /// `(from, to, mode)` for each stretch of time spent in one mode.
@@ -109,8 +121,8 @@ impl Figure for RunFigure<'_> {
         let segments = segments(self.rows, &event_times);
         let spans = if info.modes.len() > 1 { self.mode_spans() } else { Vec::new() };
         let panels = area.split_evenly((self.panels(), 1));
-        for (p, ((name, value), panel)) in self.variables().into_iter().zip(&panels).enumerate() {
-            let (lo, hi) = padded_range(self.rows.iter().map(&value));
+        for (p, ((name, var), panel)) in self.variables().into_iter().zip(&panels).enumerate() {
+            let (lo, hi) = padded_range(self.rows.iter().map(|r| var.value(r)));
             let mut chart = ChartBuilder::on(panel)
                 .margin(6)
                 .x_label_area_size(32)
@@ -144,7 +156,7 @@ impl Figure for RunFigure<'_> {
             )?;
             for seg in segments.iter().filter(|s| s.len() >= 2) {
                 chart.draw_series(LineSeries::new(
-                    self.rows[seg.clone()].iter().map(|r| (r.t, value(r))),
+                    self.rows[seg.clone()].iter().map(|r| (r.t, var.value(r))),
                     DATA_COLOR.stroke_width(2),
                 ))?;
             }
