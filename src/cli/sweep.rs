@@ -245,11 +245,15 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
         FormatArg::Csv => Format::Csv,
         FormatArg::Jsonl => Format::Jsonl,
     };
-    if let Err(e) = columns.write_all(&mut out, format, &points, &results) {
+    match sweep::write_rows(&mut out, &columns, format, &points, &results, args.threads) {
         // A closed stdout pipe (`hybc sweep ... | head`) means the reader has what it wanted.
-        if let Some(path) = &args.output {
+        Err(sweep::SweepError::Write(_)) if args.output.is_none() => {}
+        Err(sweep::SweepError::Write(e)) => {
+            let path = args.output.as_deref().unwrap_or(std::path::Path::new("-"));
             return Err(format!("--output: cannot write `{}`: {e}", path.display()));
         }
+        Err(e) => return Err(format!("--threads: {e}")),
+        Ok(()) => {}
     }
     drop(out);
 

@@ -27,6 +27,20 @@ pub enum SweepError {
         #[source]
         source: rayon::ThreadPoolBuildError,
     },
+    #[error("cannot write the rows")]
+    Write(#[source] std::io::Error),
+}
+
+/// Rows formatted in parallel per chunk, then written in order: formatting costs about as much
+/// as a small model's run, and the chunk bounds the memory the texts take.
+const WRITE_CHUNK: usize = 4096;
+
+/// A pool of `threads` workers (0: one per core) for one call, not rayon's global pool.
+fn pool(threads: usize) -> Result<rayon::ThreadPool, SweepError> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|source| SweepError::ThreadPool { threads, source })
 }
 
 /// Runs `sys` at every point with `opts`, on a pool of `threads` threads built for this call
@@ -43,11 +57,7 @@ pub fn run_points<S: HybridSystem + ?Sized>(
     threads: usize,
     progress: &(dyn Fn() + Sync),
 ) -> Result<Vec<PointResult>, SweepError> {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|source| SweepError::ThreadPool { threads, source })?;
-    Ok(pool.install(|| {
+    Ok(pool(threads)?.install(|| {
         points
             .par_iter()
             .map(|p| {
@@ -57,4 +67,26 @@ pub fn run_points<S: HybridSystem + ?Sized>(
             })
             .collect()
     }))
+}
+
+/// Writes the header and one row per point to `w`, in the order of `points`, formatting on
+/// `threads` threads. The bytes do not depend on the thread count.
+pub fn write_rows(
+    w: &mut impl std::io::Write,
+    columns: &Columns,
+    format: Format,
+    points: &[Vec<f64>],
+    results: &[PointResult],
+    threads: usize,
+) -> Result<(), SweepError> {
+    let pool = pool(threads)?;
+    columns.write_header(w, format).map_err(SweepError::Write)?;
+    for (ps, rs) in points.chunks(WRITE_CHUNK).zip(results.chunks(WRITE_CHUNK)) {
+        let texts: Vec<String> =
+            pool.install(|| ps.par_iter().zip(rs).map(|(p, r)| columns.row_text(format, p, r)).collect());
+        for text in texts {
+            w.write_all(text.as_bytes()).map_err(SweepError::Write)?;
+        }
+    }
+    w.flush().map_err(SweepError::Write)
 }

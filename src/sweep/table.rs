@@ -182,14 +182,8 @@ impl<'a> Columns<'a> {
         }
     }
 
-    /// Writes one point as a CSV line or a JSON object on one line.
-    pub fn write_row(
-        &self,
-        w: &mut impl Write,
-        format: Format,
-        params: &[f64],
-        result: &PointResult,
-    ) -> io::Result<()> {
+    /// One point as a CSV line or a JSON object on one line, with its line break.
+    pub fn row_text(&self, format: Format, params: &[f64], result: &PointResult) -> String {
         let cells = self.cells(params, result);
         match format {
             Format::Csv => {
@@ -202,7 +196,7 @@ impl<'a> Columns<'a> {
                         Cell::Empty => String::new(),
                     })
                     .collect();
-                writeln!(w, "{}", text.join(","))
+                format!("{}\n", text.join(","))
             }
             Format::Jsonl => {
                 let object: Map<String, Value> = self
@@ -219,24 +213,9 @@ impl<'a> Columns<'a> {
                         (name.clone(), v)
                     })
                     .collect();
-                writeln!(w, "{}", Value::Object(object))
+                format!("{}\n", Value::Object(object))
             }
         }
-    }
-
-    /// Writes the header and every point, in order.
-    pub fn write_all(
-        &self,
-        w: &mut impl Write,
-        format: Format,
-        points: &[Vec<f64>],
-        results: &[PointResult],
-    ) -> io::Result<()> {
-        self.write_header(w, format)?;
-        for (p, r) in points.iter().zip(results) {
-            self.write_row(w, format, p, r)?;
-        }
-        w.flush()
     }
 }
 
