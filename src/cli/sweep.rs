@@ -298,8 +298,12 @@ fn plot_sweep(
 ) -> Result<(), String> {
     let param = varied[0];
     let info = compiled.info();
-    let title = format!("{}: {} points against {}", model.name, points.len(), info.param_names[param]);
-    let mut figure = SweepFigure::new(&title, info, param, points, results, varied.len() == 1);
+    let mut figure = SweepFigure::new("", info, param, points, results, varied.len() == 1);
+    let shown = figure.series.first().map_or(0, |s| s.points.len());
+    figure.title = format!("{}: final values against {}", model.name, info.param_names[param]);
+    if shown < points.len() {
+        figure.title += &format!(" ({} of {} points; the others ended early)", shown, points.len());
+    }
     let at = SweepFigure::tangent_points(points, results, param, PLOT_TANGENTS);
     let at_points: Vec<Vec<f64>> = at.iter().map(|&i| points[i].clone()).collect();
     let added = if grad.iter().any(|g| g.0 as usize == param) {
