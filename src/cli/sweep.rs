@@ -21,6 +21,10 @@ use crate::sweep::{self, AxisSpec, Columns, Format, PointResult};
 /// More points than this would not fit in memory on an ordinary machine (each point keeps its
 /// whole result until the rows are written); a larger sweep is a usage error, not an abort.
 const MAX_POINTS: usize = 10_000_000;
+/// Caps on flags whose size is allocated up front (columns per event, worker threads), so that a
+/// typo is a usage error rather than an out-of-memory abort.
+const MAX_EVENT_COLUMNS: usize = 10_000;
+const MAX_THREADS: usize = 1024;
 /// Tangents drawn per panel of a sweep plot.
 const PLOT_TANGENTS: usize = 5;
 
@@ -203,7 +207,7 @@ fn run_with_progress(
     threads: usize,
 ) -> Result<Vec<PointResult>, String> {
     let bar = if std::io::stderr().is_terminal() {
-        let style = ProgressStyle::with_template("{bar:40} {pos}/{len} points  {per_sec}  eta {eta}")
+        let style = ProgressStyle::with_template("{bar:40} {pos}/{len} points, eta {eta}")
             .unwrap_or_else(|_| ProgressStyle::default_bar());
         ProgressBar::new(points.len() as u64).with_style(style)
     } else {
@@ -220,6 +224,12 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
         Some(list) => parse_param_list(model, list, "--grad")?,
         None => Vec::new(),
     };
+    if args.events > MAX_EVENT_COLUMNS {
+        return Err(format!("--events: at most {MAX_EVENT_COLUMNS}, found {}", args.events));
+    }
+    if args.threads > MAX_THREADS {
+        return Err(format!("--threads: at most {MAX_THREADS}, found {}", args.threads));
+    }
     let (points, varied) = points(model, args)?;
     let opts = sim_options(model, &args.sim)?;
     if let Some(path) = &args.plot {
