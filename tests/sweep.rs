@@ -26,6 +26,8 @@ fn sweep_ok(args: &[&str]) -> String {
     all.extend_from_slice(args);
     let out = hybc(&all);
     assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    // No progress bar when stderr is not a terminal, and nothing else to say.
+    assert!(out.stderr.is_empty(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
     String::from_utf8(out.stdout).expect("utf-8")
 }
 
@@ -342,5 +344,37 @@ fn output_file_gets_the_rows() {
     let text = std::fs::read_to_string(&path).expect("written");
     assert_eq!(text, sweep_ok(&["models/ball.hyb", "--vary", "e=0.7:0.9:3"]));
     assert_eq!(text.lines().count(), 4);
+    let _ = std::fs::remove_file(&path);
+}
+
+#[test]
+fn after_a_stop_event_the_gradients_are_total_derivatives() {
+    // Free fall stopped at t = ts: y = h0 - g ts^2 / 2 and v = -g ts, so dy/dts = -g ts and
+    // dv/dts = -g (the fixed-time sensitivities would be 0).
+    let src = "model s\nparam g = 9.81\nparam h0 = 10\nparam ts = 1\nstate y = h0\nstate v = 0\n\
+               der(y) = v\nder(v) = -g\nevent done when t >= ts {\n    stop\n}\n";
+    let path = std::env::temp_dir().join(format!("hybc-sweep-stop-{}.hyb", std::process::id()));
+    std::fs::write(&path, src).expect("write model");
+    let out = sweep_ok(&[
+        path.to_str().expect("utf-8"),
+        "--vary",
+        "ts=0.5:1.5:3",
+        "--grad",
+        "ts",
+        "--t-end",
+        "5",
+        "--format",
+        "jsonl",
+    ]);
+    let rows = jsonl(out.as_bytes());
+    assert_eq!(rows.len(), 3);
+    for row in &rows {
+        let ts = f(&row["ts"]);
+        assert_eq!(row["status"], "ok");
+        assert_relative_eq!(f(&row["t_final"]), ts, max_relative = 1e-12);
+        assert_relative_eq!(f(&row["y"]), 10.0 - 9.81 * ts * ts / 2.0, max_relative = 1e-9);
+        assert_relative_eq!(f(&row["dy/dts"]), -9.81 * ts, max_relative = 1e-9);
+        assert_relative_eq!(f(&row["dv/dts"]), -9.81, max_relative = 1e-9);
+    }
     let _ = std::fs::remove_file(&path);
 }
