@@ -11,9 +11,11 @@ pub mod expr;
 pub mod fit;
 pub mod gradcheck;
 pub mod lower;
+pub mod plot;
 pub mod report;
 pub mod sema;
 pub mod sim;
+pub mod sweep;
 pub mod syntax;
 
 use diag::Diagnostic;

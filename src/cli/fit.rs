@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use clap::ValueEnum;
 
-use super::run::parameter_values;
+use super::run::{parameter_values, positive, sim_options, SimFlags};
 use super::{
     load_model, parse_param_list, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_MODEL_ERROR,
     EXIT_SIM_STOPPED,
@@ -15,15 +15,6 @@ use crate::codegen::{self, CompileOptions};
 use crate::fit::{self, Bounds, FitError, FitOptions, FitProblem, FitReport, Target};
 use crate::lower::{lower, system_info};
 use crate::sema::Model;
-use crate::sim::{Method, SimOptions};
-
-#[derive(Debug, Clone, Copy, ValueEnum)]
-enum MethodArg {
-    /// DOP853 when rtol < 1e-7, else Dormand-Prince 5(4).
-    Auto,
-    Dopri5,
-    Dop853,
-}
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum Format {
@@ -45,24 +36,8 @@ pub struct FitArgs {
     /// Start value of a parameter, or a fixed value of a parameter not fitted (repeatable).
     #[arg(long = "set", value_name = "P=VALUE")]
     set: Vec<String>,
-    /// End time (default: the model's `simulate t_end`, else 10).
-    #[arg(long, value_name = "T")]
-    t_end: Option<f64>,
-    /// Relative tolerance of every run (default: the model's, else 1e-8).
-    #[arg(long)]
-    rtol: Option<f64>,
-    /// Absolute tolerance of every run (default: the model's, else 1e-10).
-    #[arg(long)]
-    atol: Option<f64>,
-    /// Integration method.
-    #[arg(long, value_enum, default_value = "auto")]
-    method: MethodArg,
-    /// A run with more events than this stops as Zeno (and its trial point is rejected).
-    #[arg(long, default_value_t = 10_000)]
-    max_events: usize,
-    /// A crossing slower than this fraction of its scale is grazing (it has no gradient).
-    #[arg(long, default_value_t = 1e-3)]
-    graze_tol: f64,
+    #[command(flatten)]
+    sim: SimFlags,
     /// Largest number of trial points (one run each).
     #[arg(long, default_value_t = FitOptions::default().max_iter)]
     max_iter: usize,
@@ -91,36 +66,6 @@ pub fn run(args: &FitArgs) -> ExitCode {
     }
 }
 
-fn positive(name: &str, v: f64) -> Result<f64, String> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        Err(format!("{name}: expected a positive number, found {v}"))
-    }
-}
-
-/// Options of every run of the fit, from the flags or the model's `simulate` defaults (as
-/// `hybc run`).
-fn sim_options(model: &Model, args: &FitArgs) -> Result<SimOptions, String> {
-    let rtol = positive("--rtol", args.rtol.or(model.simulate.rtol).unwrap_or(1e-8))?;
-    if rtol >= 1.0 {
-        return Err(format!("--rtol: expected a number below 1, found {rtol}"));
-    }
-    Ok(SimOptions {
-        t_end: positive("--t-end", args.t_end.or(model.simulate.t_end).unwrap_or(10.0))?,
-        rtol,
-        atol: positive("--atol", args.atol.or(model.simulate.atol).unwrap_or(1e-10))?,
-        method: match args.method {
-            MethodArg::Auto => Method::Auto,
-            MethodArg::Dopri5 => Method::Dopri5,
-            MethodArg::Dop853 => Method::Dop853,
-        },
-        max_events: args.max_events,
-        graze_tol: positive("--graze-tol", args.graze_tol)?,
-        ..SimOptions::default()
-    })
-}
-
 fn fit_options(args: &FitArgs) -> Result<FitOptions, String> {
     if args.max_iter == 0 {
         return Err("--max-iter: expected at least 1".to_string());
@@ -139,7 +84,7 @@ fn fit_model(model: &Model, args: &FitArgs) -> Result<ExitCode, String> {
         return Err("--free: name at least one parameter to fit".to_string());
     }
     let start = parameter_values(model, &args.set)?;
-    let sim = sim_options(model, args)?;
+    let sim = sim_options(model, &args.sim)?;
     let options = fit_options(args)?;
     let info = system_info(model, &free);
     let targets = args

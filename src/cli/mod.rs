@@ -5,6 +5,7 @@ mod check;
 mod derive;
 mod fit;
 mod run;
+mod sweep;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -31,6 +32,8 @@ enum Command {
     Run(run::RunArgs),
     /// Fit parameters to targets on outputs, states and event times (least squares).
     Fit(fit::FitArgs),
+    /// Run a model at many parameter points in parallel; one CSV or JSON row per point.
+    Sweep(sweep::SweepArgs),
 }
 
 /// Exit codes, as documented in the README.
@@ -56,6 +59,7 @@ pub fn main() -> ExitCode {
         Command::Derive(args) => derive::run(&args),
         Command::Run(args) => run::run(&args),
         Command::Fit(args) => fit::run(&args),
+        Command::Sweep(args) => sweep::run(&args),
     }
 }
 

@@ -31,19 +31,9 @@ enum Format {
     Json,
 }
 
+/// The integrator flags `hybc run` and `hybc sweep` share.
 #[derive(Debug, clap::Args)]
-#[command(after_help = "Exit codes: 0 success; 1 the model has errors; 2 a usage error; 3 the run \
-                        stopped early (Zeno behaviour or a runtime fault); 4 --check-grad found a \
-                        derivative outside --check-tol.")]
-pub struct RunArgs {
-    #[command(flatten)]
-    model: ModelArg,
-    /// Parameters to differentiate with respect to: `P1,P2,...` or `all`.
-    #[arg(long, value_name = "P1,P2|all")]
-    grad: Option<String>,
-    /// Set a parameter for this run (repeatable); checked against its declared range.
-    #[arg(long = "set", value_name = "P=VALUE")]
-    set: Vec<String>,
+pub(crate) struct SimFlags {
     /// End time (default: the model's `simulate t_end`, else 10).
     #[arg(long, value_name = "T")]
     t_end: Option<f64>,
@@ -66,6 +56,23 @@ pub struct RunArgs {
     /// accurate).
     #[arg(long)]
     no_sens_error_control: bool,
+}
+
+#[derive(Debug, clap::Args)]
+#[command(after_help = "Exit codes: 0 success; 1 the model has errors; 2 a usage error; 3 the run \
+                        stopped early (Zeno behaviour or a runtime fault); 4 --check-grad found a \
+                        derivative outside --check-tol.")]
+pub struct RunArgs {
+    #[command(flatten)]
+    model: ModelArg,
+    /// Parameters to differentiate with respect to: `P1,P2,...` or `all`.
+    #[arg(long, value_name = "P1,P2|all")]
+    grad: Option<String>,
+    /// Set a parameter for this run (repeatable); checked against its declared range.
+    #[arg(long = "set", value_name = "P=VALUE")]
+    set: Vec<String>,
+    #[command(flatten)]
+    sim: SimFlags,
     /// Output format.
     #[arg(long, value_enum, default_value = "table")]
     format: Format,
@@ -75,6 +82,9 @@ pub struct RunArgs {
     /// Sample the trajectory every DT using the dense output.
     #[arg(long, value_name = "DT", requires = "trajectory")]
     sample: Option<f64>,
+    /// Plot states and outputs against time, with event lines and mode bands, into this file.
+    #[arg(long, value_name = "FILE.svg|.png")]
+    plot: Option<PathBuf>,
     /// Print nothing but errors; the exit code tells the outcome.
     #[arg(long)]
     quiet: bool,
@@ -128,7 +138,7 @@ pub(crate) fn parameter_values(model: &Model, sets: &[String]) -> Result<Vec<f64
     Ok(p)
 }
 
-fn positive(name: &str, v: f64) -> Result<f64, String> {
+pub(crate) fn positive(name: &str, v: f64) -> Result<f64, String> {
     if v.is_finite() && v > 0.0 {
         Ok(v)
     } else {
@@ -136,8 +146,9 @@ fn positive(name: &str, v: f64) -> Result<f64, String> {
     }
 }
 
-/// Simulation options from the flags, falling back on the model's `simulate` defaults.
-fn sim_options(model: &Model, args: &RunArgs) -> Result<SimOptions, String> {
+/// Simulation options from the flags, falling back on the model's `simulate` defaults; no
+/// trajectory.
+pub(crate) fn sim_options(model: &Model, args: &SimFlags) -> Result<SimOptions, String> {
     let rtol = positive("--rtol", args.rtol.or(model.simulate.rtol).unwrap_or(1e-8))?;
     if rtol >= 1.0 {
         return Err(format!("--rtol: expected a number below 1, found {rtol}"));
@@ -154,12 +165,16 @@ fn sim_options(model: &Model, args: &RunArgs) -> Result<SimOptions, String> {
         max_events: args.max_events,
         graze_tol: positive("--graze-tol", args.graze_tol)?,
         sens_error_control: !args.no_sens_error_control,
-        trajectory: match (&args.trajectory, args.sample) {
-            (None, _) => TrajectoryRequest::None,
-            (Some(_), None) => TrajectoryRequest::Steps,
-            (Some(_), Some(dt)) => TrajectoryRequest::Sample(positive("--sample", dt)?),
-        },
         ..SimOptions::default()
+    })
+}
+
+/// The trajectory `--trajectory`/`--sample` ask for.
+fn trajectory_request(args: &RunArgs) -> Result<TrajectoryRequest, String> {
+    Ok(match (&args.trajectory, args.sample) {
+        (None, _) => TrajectoryRequest::None,
+        (Some(_), None) => TrajectoryRequest::Steps,
+        (Some(_), Some(dt)) => TrajectoryRequest::Sample(positive("--sample", dt)?),
     })
 }
 
@@ -169,7 +184,9 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         None => Vec::new(),
     };
     let p = parameter_values(model, &args.set)?;
-    let opts = sim_options(model, args)?;
+    let mut opts = sim_options(model, &args.sim)?;
+    opts.trajectory = trajectory_request(args)?;
+    plot_trajectory(args, &mut opts)?;
     let check_opts = check_options(&opts, args)?;
 
     let started = Instant::now();
@@ -200,6 +217,9 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         if let Err(e) = write_trajectory(path, &report, &compiled) {
             return Err(format!("--trajectory: cannot write `{}`: {e}", path.display()));
         }
+    }
+    if let Some(path) = &args.plot {
+        crate::plot::plot_run(&report, path).map_err(|e| format!("--plot: {e}"))?;
     }
     // A run into a Zeno point grazes ever more often; the first few warnings say it all.
     const SHOWN_WARNINGS: usize = 3;
@@ -256,6 +276,18 @@ fn check_options(opts: &SimOptions, args: &RunArgs) -> Result<Option<CheckOption
         check.tol = positive("--check-tol", tol)?;
     }
     Ok(Some(check))
+}
+
+/// `--plot`: checks the file's extension before the run and, unless `--trajectory` asked for
+/// rows, samples the dense output 1000 times over the run for the curves.
+fn plot_trajectory(args: &RunArgs, opts: &mut SimOptions) -> Result<(), String> {
+    if let Some(path) = &args.plot {
+        crate::plot::ImageFormat::from_path(path).map_err(|e| format!("--plot: {e}"))?;
+        if opts.trajectory == TrajectoryRequest::None {
+            opts.trajectory = TrajectoryRequest::Sample((opts.t_end - opts.t_start) / 1000.0);
+        }
+    }
+    Ok(())
 }
 
 /// CSV columns: t, mode, the states, the outputs, then with gradients `d<state>/d<param>` and

@@ -1,0 +1,334 @@
+//! `hybc sweep FILE`: compile a model once, run it at many parameter points in parallel and write
+//! one row per point (CSV or JSON lines), optionally with a plot. A thin layer over
+//! `crate::sweep` and `crate::plot`: flags to points and options, files, exit codes.
+
+use std::io::{IsTerminal as _, Write};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::ValueEnum;
+use indicatif::{ProgressBar, ProgressStyle};
+
+use super::run::{parameter_values, sim_options, SimFlags};
+use super::{load_model, parse_param_list, unknown_param, usage_error, ModelArg, EXIT_SIM_STOPPED};
+use crate::codegen::{self, CompileOptions, CompiledModel};
+use crate::lower::{lower, system_info};
+use crate::plot::{self, SweepFigure};
+use crate::sema::{Model, ParamIdx};
+use crate::sim::{HybridSystem as _, SimOptions, StopReason};
+use crate::sweep::{self, AxisSpec, Columns, Format, PointResult};
+
+/// More points than this would not fit in memory on an ordinary machine (each point keeps its
+/// whole result until the rows are written); a larger sweep is a usage error, not an abort.
+const MAX_POINTS: usize = 10_000_000;
+/// Caps on flags whose size is allocated up front (columns per event, worker threads), so that a
+/// typo is a usage error rather than an out-of-memory abort.
+const MAX_EVENT_COLUMNS: usize = 10_000;
+const MAX_THREADS: usize = 1024;
+/// Tangents drawn per panel of a sweep plot.
+const PLOT_TANGENTS: usize = 5;
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum FormatArg {
+    /// Comma-separated values with a header line.
+    Csv,
+    /// One JSON object per line, keyed by the CSV column names.
+    Jsonl,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct SweepArgs {
+    #[command(flatten)]
+    model: ModelArg,
+    /// A parameter to vary (repeatable; several make a full grid, the first varying slowest):
+    /// `P=LO:HI:N` (N points from LO to HI), `P=V1,V2,...`, or with --samples `P=LO:HI` or `P`
+    /// (its declared range).
+    #[arg(long, value_name = "P=LO:HI:N|P=V1,V2|P=LO:HI|P")]
+    vary: Vec<String>,
+    /// Draw N points uniformly from the ranges of the varied parameters (without --vary: every
+    /// parameter with a declared range).
+    #[arg(long, value_name = "N")]
+    samples: Option<usize>,
+    /// Seed of the sampling; the same seed gives the same points [default: 0].
+    #[arg(long, value_name = "S", requires = "samples")]
+    seed: Option<u64>,
+    /// Parameters to differentiate with respect to: `P1,P2,...` or `all`.
+    #[arg(long, value_name = "P1,P2|all")]
+    grad: Option<String>,
+    /// Set a parameter for every point (repeatable); checked against its declared range.
+    #[arg(long = "set", value_name = "P=VALUE")]
+    set: Vec<String>,
+    #[command(flatten)]
+    sim: SimFlags,
+    /// Worker threads (0: one per core).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    threads: usize,
+    /// Output format.
+    #[arg(long, value_enum, default_value = "csv")]
+    format: FormatArg,
+    /// Write the rows to this file instead of stdout.
+    #[arg(long, short = 'o', value_name = "FILE")]
+    output: Option<PathBuf>,
+    /// Events shown per row (their names, times and time gradients).
+    #[arg(long, value_name = "K", default_value_t = 5)]
+    events: usize,
+    /// Plot each output (or final state) against the first varied parameter, with gradient
+    /// tangents, into this file.
+    #[arg(long, value_name = "FILE.svg|.png")]
+    plot: Option<PathBuf>,
+}
+
+pub fn run(args: &SweepArgs) -> ExitCode {
+    let (model, _) = match load_model(&args.model.file) {
+        Ok(loaded) => loaded,
+        Err(code) => return code,
+    };
+    match sweep_model(&model, args) {
+        Ok(code) => code,
+        Err(message) => usage_error(&message),
+    }
+}
+
+/// The points of the sweep and the varied parameters, in flag order.
+fn points(model: &Model, args: &SweepArgs) -> Result<(Vec<Vec<f64>>, Vec<usize>), String> {
+    let base = parameter_values(model, &args.set)?;
+    let mut specs: Vec<(usize, AxisSpec, &str)> = Vec::new();
+    for text in &args.vary {
+        let spec = sweep::parse_vary(text).map_err(|e| format!("--vary: {e}"))?;
+        let Some(idx) = model.param_index(&spec.name) else {
+            return Err(unknown_param(model, &spec.name, "--vary"));
+        };
+        let idx = idx.0 as usize;
+        if specs.iter().any(|s| s.0 == idx) {
+            return Err(format!("--vary: `{}` is varied twice", spec.name));
+        }
+        let set_too = args.set.iter().any(|s| s.split_once('=').is_some_and(|(n, _)| n.trim() == spec.name));
+        if set_too {
+            return Err(format!("`{}` is given both by --set and by --vary", spec.name));
+        }
+        specs.push((idx, spec.axis, text));
+    }
+    let range_of = |idx: usize| model.params[idx].range;
+    let in_range = |idx: usize, v: f64| -> Result<f64, String> {
+        match range_of(idx) {
+            Some((lo, hi)) if !(lo..=hi).contains(&v) => {
+                Err(format!("--vary: {} = {v} is outside its range [{lo}, {hi}]", model.params[idx].name))
+            }
+            _ => Ok(v),
+        }
+    };
+    match args.samples {
+        Some(n) => {
+            if n == 0 || n > MAX_POINTS {
+                return Err(format!("--samples: expected 1 to {MAX_POINTS} points, found {n}"));
+            }
+            let ranges: Vec<(usize, f64, f64)> = if specs.is_empty() {
+                (0..model.params.len()).filter_map(|i| range_of(i).map(|(lo, hi)| (i, lo, hi))).collect()
+            } else {
+                specs
+                    .iter()
+                    .map(|(idx, axis, text)| match axis {
+                        AxisSpec::Range { lo, hi } => Ok((*idx, in_range(*idx, *lo)?, in_range(*idx, *hi)?)),
+                        AxisSpec::Declared => range_of(*idx).map(|(lo, hi)| (*idx, lo, hi)).ok_or_else(|| {
+                            format!(
+                                "--vary {text}: `{text}` has no declared range to sample from; give one \
+                                 (--vary {text}=LO:HI)"
+                            )
+                        }),
+                        AxisSpec::Grid { .. } | AxisSpec::List(_) => Err(format!(
+                            "--vary {text}: --samples draws from ranges; give P=LO:HI or P, not a grid or list"
+                        )),
+                    })
+                    .collect::<Result<_, String>>()?
+            };
+            if ranges.is_empty() {
+                return Err(format!(
+                    "--samples: model `{}` declares no parameter range; name the parameters to sample \
+                     with --vary P=LO:HI",
+                    model.name
+                ));
+            }
+            let varied = ranges.iter().map(|r| r.0).collect();
+            Ok((sweep::uniform_samples(&base, &ranges, n, args.seed.unwrap_or(0)), varied))
+        }
+        None => {
+            if specs.is_empty() {
+                return Err(
+                    "nothing to vary: give --vary P=LO:HI:N, --vary P=V1,V2,... or --samples N".into()
+                );
+            }
+            let mut axes: Vec<(usize, Vec<f64>)> = Vec::new();
+            let mut count: usize = 1;
+            for (idx, axis, text) in &specs {
+                let values = match axis {
+                    AxisSpec::Grid { lo, hi, n } => {
+                        in_range(*idx, *lo)?;
+                        in_range(*idx, *hi)?;
+                        if *n > MAX_POINTS {
+                            return Err(format!("--vary {text}: at most {MAX_POINTS} points"));
+                        }
+                        sweep::linspace(*lo, *hi, *n)
+                    }
+                    AxisSpec::List(values) => {
+                        values.iter().map(|&v| in_range(*idx, v)).collect::<Result<Vec<f64>, String>>()?
+                    }
+                    AxisSpec::Range { .. } | AxisSpec::Declared => {
+                        return Err(format!(
+                            "--vary {text}: a grid needs P=LO:HI:N or P=V1,V2,...; ranges are for --samples N"
+                        ))
+                    }
+                };
+                count = count.saturating_mul(values.len());
+                axes.push((*idx, values));
+            }
+            if count > MAX_POINTS {
+                return Err(format!(
+                    "--vary: the grid has {count} points; at most {MAX_POINTS} are supported"
+                ));
+            }
+            let varied = axes.iter().map(|a| a.0).collect();
+            Ok((sweep::full_grid(&base, &axes), varied))
+        }
+    }
+}
+
+fn compile(model: &Model, grad: &[ParamIdx]) -> Result<CompiledModel, ExitCode> {
+    codegen::compile(&lower(model), system_info(model, grad), &CompileOptions::default()).map_err(|e| {
+        eprintln!("error: could not compile `{}`: {e}", model.name);
+        ExitCode::from(super::EXIT_MODEL_ERROR)
+    })
+}
+
+/// Runs the points with a progress bar on stderr when stderr is a terminal.
+fn run_with_progress(
+    compiled: &CompiledModel,
+    points: &[Vec<f64>],
+    opts: &SimOptions,
+    threads: usize,
+) -> Result<Vec<PointResult>, String> {
+    let bar = if std::io::stderr().is_terminal() {
+        let style = ProgressStyle::with_template("{bar:40} {pos}/{len} points, eta {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar());
+        ProgressBar::new(points.len() as u64).with_style(style)
+    } else {
+        ProgressBar::hidden()
+    };
+    let results = sweep::run_points(compiled, points, opts, threads, &|| bar.inc(1))
+        .map_err(|e| format!("--threads: {e}"))?;
+    bar.finish_and_clear();
+    Ok(results)
+}
+
+fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
+    let grad = match &args.grad {
+        Some(list) => parse_param_list(model, list, "--grad")?,
+        None => Vec::new(),
+    };
+    if args.events > MAX_EVENT_COLUMNS {
+        return Err(format!("--events: at most {MAX_EVENT_COLUMNS}, found {}", args.events));
+    }
+    if args.threads > MAX_THREADS {
+        return Err(format!("--threads: at most {MAX_THREADS}, found {}", args.threads));
+    }
+    let (points, varied) = points(model, args)?;
+    let opts = sim_options(model, &args.sim)?;
+    if let Some(path) = &args.plot {
+        plot::ImageFormat::from_path(path).map_err(|e| format!("--plot: {e}"))?;
+    }
+    // Open the output before the work, so that a bad path fails at once.
+    let mut out: Box<dyn Write> = match &args.output {
+        Some(path) => Box::new(std::io::BufWriter::new(
+            std::fs::File::create(path)
+                .map_err(|e| format!("--output: cannot write `{}`: {e}", path.display()))?,
+        )),
+        None => Box::new(std::io::BufWriter::new(std::io::stdout().lock())),
+    };
+
+    let compiled = match compile(model, &grad) {
+        Ok(c) => c,
+        Err(code) => return Ok(code),
+    };
+    let results = run_with_progress(&compiled, &points, &opts, args.threads)?;
+    let info = compiled.info();
+    let columns = Columns::new(info, opts.t_end, args.events, grad.len());
+    let format = match args.format {
+        FormatArg::Csv => Format::Csv,
+        FormatArg::Jsonl => Format::Jsonl,
+    };
+    match sweep::write_rows(&mut out, &columns, format, &points, &results, args.threads) {
+        // A closed stdout pipe (`hybc sweep ... | head`) means the reader has what it wanted.
+        Err(sweep::SweepError::Write(_)) if args.output.is_none() => {}
+        Err(sweep::SweepError::Write(e)) => {
+            let path = args.output.as_deref().unwrap_or(std::path::Path::new("-"));
+            return Err(format!("--output: cannot write `{}`: {e}", path.display()));
+        }
+        Err(e) => return Err(format!("--threads: {e}")),
+        Ok(()) => {}
+    }
+    drop(out);
+
+    if let Some(path) = &args.plot {
+        plot_sweep(model, &compiled, &grad, &points, &results, &varied, &opts, args.threads, path)?;
+    }
+    let failed: Vec<usize> = (0..points.len())
+        .filter(|&i| {
+            !results[i]
+                .as_ref()
+                .is_ok_and(|r| matches!(r.stopped_by, StopReason::TEnd | StopReason::Event { .. }))
+        })
+        .collect();
+    Ok(match failed.first() {
+        None => ExitCode::SUCCESS,
+        Some(first) => {
+            eprintln!(
+                "error: {} of {} points ended early (status and error columns); the first is row {}",
+                failed.len(),
+                points.len(),
+                first + 1
+            );
+            ExitCode::from(EXIT_SIM_STOPPED)
+        }
+    })
+}
+
+/// Draws the sweep against its first varied parameter. Tangents come from the sweep's own
+/// gradients when `--grad` has that parameter, else from extra runs at the tangent points with a
+/// model compiled to differentiate it (the table is not affected).
+#[allow(clippy::too_many_arguments)]
+fn plot_sweep(
+    model: &Model,
+    compiled: &CompiledModel,
+    grad: &[ParamIdx],
+    points: &[Vec<f64>],
+    results: &[PointResult],
+    varied: &[usize],
+    opts: &SimOptions,
+    threads: usize,
+    path: &std::path::Path,
+) -> Result<(), String> {
+    let param = varied[0];
+    let info = compiled.info();
+    let mut figure = SweepFigure::new("", info, param, points, results, varied.len() == 1);
+    let shown = figure.series.first().map_or(0, |s| s.points.len());
+    figure.title = format!("{}: final values against {}", model.name, info.param_names[param]);
+    if shown < points.len() {
+        figure.title += &format!(" ({} of {} points; the others ended early)", shown, points.len());
+    }
+    let at = SweepFigure::tangent_points(points, results, param, PLOT_TANGENTS);
+    let at_points: Vec<Vec<f64>> = at.iter().map(|&i| points[i].clone()).collect();
+    let added = if grad.iter().any(|g| g.0 as usize == param) {
+        let at_results: Vec<PointResult> = at.iter().map(|&i| results[i].clone()).collect();
+        figure.add_tangents(info, param, &at_points, &at_results)
+    } else {
+        let with_param = codegen::compile(
+            &lower(model),
+            system_info(model, &[ParamIdx(param as u32)]),
+            &CompileOptions::default(),
+        )
+        .map_err(|e| format!("--plot: could not compile `{}` for the tangents: {e}", model.name))?;
+        let at_results = sweep::run_points(&with_param, &at_points, opts, threads, &|| ())
+            .map_err(|e| format!("--threads: {e}"))?;
+        figure.add_tangents(with_param.info(), param, &at_points, &at_results)
+    };
+    added.and_then(|()| plot::plot_sweep(&figure, path)).map_err(|e| format!("--plot: {e}"))
+}

@@ -1,0 +1,266 @@
+//! One row per sweep point, with a fixed column scheme (documented in the README, "Sweeps"),
+//! written as CSV or as JSON lines with the same names. Numbers are printed in Rust's shortest
+//! round-trip form, so a row reads back as exactly the `f64`s the run computed.
+//!
+//! Columns, in order (`K` = the number of events shown, grads = the differentiated parameters
+//! shown):
+//! - every parameter, in declaration order;
+//! - `status`: `ok` (ended at t_end or by a `stop` event), `zeno`, `fault` (ended early) or
+//!   `error` (the run was refused);
+//! - `events`: how many events fired;
+//! - for k = 1..=K: `event<k>` (its name), `t<k>` (its time), `dt<k>/d<p>` per grad;
+//! - `t_final`: the time the run ended;
+//! - the final states, then the outputs;
+//! - `d<state>/d<p>`, then `d<output>/d<p>` (for each grad, all states, then for each grad all
+//!   outputs); after a `stop` event these are the total derivatives that include the motion of
+//!   the stopping time (`dstate_total`), so they are the derivatives of the row's values;
+//! - `error`: why the run ended early, else empty.
+//!
+//! Empty cells (`null` in JSON) mean "does not exist": events beyond the count, gradients after
+//! a grazing event, and final values and their gradients of a run that ended early.
+
+use std::io::{self, Write};
+
+use serde_json::{Map, Value};
+
+use super::PointResult;
+use crate::report::RunReport;
+use crate::sim::{SimResult, StopReason, SystemInfo};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    Csv,
+    /// One JSON object per line, keyed by the column names.
+    Jsonl,
+}
+
+/// One cell of a row.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Cell {
+    Num(f64),
+    Count(usize),
+    Text(String),
+    Empty,
+}
+
+/// The column scheme of one sweep.
+#[derive(Clone, Debug)]
+pub struct Columns<'a> {
+    info: &'a SystemInfo,
+    t_end: f64,
+    /// Events shown per row.
+    events: usize,
+    /// The first `shown_grad` sensitivity columns of the run are shown (a plot may have asked for
+    /// one more than the user).
+    shown_grad: usize,
+    /// The column names, built once.
+    header: Vec<String>,
+}
+
+impl<'a> Columns<'a> {
+    /// Columns for runs of a model with shape `info` to `t_end`, showing `events` events and the
+    /// gradients with respect to the first `shown_grad` of `info.grad_params`.
+    pub fn new(info: &'a SystemInfo, t_end: f64, events: usize, shown_grad: usize) -> Self {
+        let mut c =
+            Columns { info, t_end, events, shown_grad: shown_grad.min(info.n_grad()), header: Vec::new() };
+        c.header = c.build_header();
+        c
+    }
+
+    /// The column names, in row order.
+    pub fn header(&self) -> &[String] {
+        &self.header
+    }
+
+    fn grad_names(&self) -> impl Iterator<Item = &str> + '_ {
+        self.info.grad_params[..self.shown_grad].iter().map(|&j| self.info.param_names[j].as_str())
+    }
+
+    fn build_header(&self) -> Vec<String> {
+        let info = self.info;
+        let mut h: Vec<String> = info.param_names.clone();
+        h.extend(["status".to_string(), "events".to_string()]);
+        for k in 1..=self.events {
+            h.push(format!("event{k}"));
+            h.push(format!("t{k}"));
+            h.extend(self.grad_names().map(|p| format!("dt{k}/d{p}")));
+        }
+        h.push("t_final".into());
+        h.extend(info.state_names.iter().cloned());
+        h.extend(info.output_names.iter().cloned());
+        for p in self.grad_names() {
+            h.extend(info.state_names.iter().map(|s| format!("d{s}/d{p}")));
+        }
+        for p in self.grad_names() {
+            h.extend(info.output_names.iter().map(|o| format!("d{o}/d{p}")));
+        }
+        h.push("error".into());
+        h
+    }
+
+    /// The cells of the point `params` with outcome `result`, in header order.
+    pub fn cells(&self, params: &[f64], result: &PointResult) -> Vec<Cell> {
+        let mut row: Vec<Cell> = params.iter().map(|&v| Cell::Num(v)).collect();
+        match result {
+            Ok(r) => self.result_cells(params, r, &mut row),
+            Err(e) => {
+                row.push(Cell::Text("error".into()));
+                row.resize(self.header.len() - 1, Cell::Empty);
+                row.push(Cell::Text(e.to_string()));
+            }
+        }
+        row
+    }
+
+    fn result_cells(&self, params: &[f64], r: &SimResult, row: &mut Vec<Cell>) {
+        let (n, k, m) = (self.info.n_states(), self.info.n_outputs(), self.info.n_grad());
+        let status = match r.stopped_by {
+            StopReason::TEnd | StopReason::Event { .. } => "ok",
+            StopReason::Zeno { .. } => "zeno",
+            StopReason::Fault { .. } => "fault",
+        };
+        let complete = status == "ok";
+        row.push(Cell::Text(status.into()));
+        row.push(Cell::Count(r.events.len()));
+        for slot in 0..self.events {
+            match r.events.get(slot) {
+                Some(e) => {
+                    row.push(Cell::Text(e.name.clone()));
+                    row.push(Cell::Num(e.time));
+                    row.extend(grad_cells(e.dtime.as_deref(), 1, 0, self.shown_grad));
+                }
+                None => row.extend(std::iter::repeat_n(Cell::Empty, 2 + self.shown_grad)),
+            }
+        }
+        let f = &r.final_state;
+        row.push(Cell::Num(f.time));
+        let values =
+            |v: &[f64]| v.iter().map(|&x| if complete { Cell::Num(x) } else { Cell::Empty }).collect();
+        row.extend::<Vec<Cell>>(values(&f.state));
+        row.extend::<Vec<Cell>>(values(&f.outputs));
+        let by_event = matches!(r.stopped_by, StopReason::Event { .. });
+        let (ds, dy) = if by_event { (&f.dstate_total, &f.doutputs_total) } else { (&f.dstate, &f.doutputs) };
+        let (ds, dy) = if complete { (ds.as_deref(), dy.as_deref()) } else { (None, None) };
+        debug_assert!(ds.is_none_or(|d| d.len() == n * m) && dy.is_none_or(|d| d.len() == k * m));
+        for j in 0..self.shown_grad {
+            row.extend((0..n).map(|i| ds.map_or(Cell::Empty, |d| Cell::Num(d[j * n + i]))));
+        }
+        for j in 0..self.shown_grad {
+            row.extend((0..k).map(|i| dy.map_or(Cell::Empty, |d| Cell::Num(d[j * k + i]))));
+        }
+        row.push(match self.failure(params, r) {
+            Some(message) => Cell::Text(message),
+            None => Cell::Empty,
+        });
+    }
+
+    /// The same message `hybc run` prints for a run that ended early.
+    fn failure(&self, params: &[f64], r: &SimResult) -> Option<String> {
+        if matches!(r.stopped_by, StopReason::TEnd | StopReason::Event { .. }) {
+            return None;
+        }
+        RunReport {
+            model: String::new(),
+            t_end: self.t_end,
+            info: self.info.clone(),
+            params: params.to_vec(),
+            result: r.clone(),
+            compile_seconds: 0.0,
+            run_seconds: 0.0,
+        }
+        .failure()
+    }
+
+    /// Writes the header (CSV only; JSON lines name every value).
+    pub fn write_header(&self, w: &mut impl Write, format: Format) -> io::Result<()> {
+        match format {
+            Format::Csv => {
+                let names: Vec<String> = self.header().iter().map(|h| csv_field(h)).collect();
+                writeln!(w, "{}", names.join(","))
+            }
+            Format::Jsonl => Ok(()),
+        }
+    }
+
+    /// One point as a CSV line or a JSON object on one line, with its line break.
+    pub fn row_text(&self, format: Format, params: &[f64], result: &PointResult) -> String {
+        let cells = self.cells(params, result);
+        match format {
+            Format::Csv => {
+                let text: Vec<String> = cells
+                    .iter()
+                    .map(|c| match c {
+                        Cell::Num(v) => number(*v),
+                        Cell::Count(c) => c.to_string(),
+                        Cell::Text(s) => csv_field(s),
+                        Cell::Empty => String::new(),
+                    })
+                    .collect();
+                format!("{}\n", text.join(","))
+            }
+            Format::Jsonl => {
+                let object: Map<String, Value> = self
+                    .header
+                    .iter()
+                    .zip(cells)
+                    .map(|(name, c)| {
+                        let v = match c {
+                            Cell::Num(v) => Value::from(v),
+                            Cell::Count(c) => Value::from(c),
+                            Cell::Text(s) => Value::String(s),
+                            Cell::Empty => Value::Null,
+                        };
+                        (name.clone(), v)
+                    })
+                    .collect();
+                format!("{}\n", Value::Object(object))
+            }
+        }
+    }
+}
+
+/// `m` gradient cells from a column-per-parameter array with `rows` rows, row `i`.
+fn grad_cells(a: Option<&[f64]>, rows: usize, i: usize, m: usize) -> Vec<Cell> {
+    (0..m).map(|j| a.map_or(Cell::Empty, |a| Cell::Num(a[j * rows + i]))).collect()
+}
+
+/// The shortest text that reads back as exactly `v`, in scientific notation when plain digits
+/// would be long (Rust's `{}` never uses an exponent: 1e-300 would take 300 zeros).
+fn number(v: f64) -> String {
+    let a = v.abs();
+    if a != 0.0 && !(1e-4..1e15).contains(&a) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
+/// A CSV field, quoted (RFC 4180) when it holds a comma, a quote or a line break.
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{csv_field, number};
+
+    #[test]
+    fn numbers_read_back_exactly() {
+        for v in [0.1, -2.5, 1e-300, 7.3e-5, 123456789.125, 4.5e20, 0.0, -0.0, f64::MIN_POSITIVE, 1.0 / 3.0] {
+            let text = number(v);
+            assert_eq!(text.parse::<f64>().map(f64::to_bits), Ok(v.to_bits()), "{text}");
+            assert!(text.len() <= 24, "{text}");
+        }
+    }
+
+    #[test]
+    fn csv_fields_are_quoted_only_when_needed() {
+        assert_eq!(csv_field("touchdown"), "touchdown");
+        assert_eq!(csv_field("a, b"), "\"a, b\"");
+        assert_eq!(csv_field("say \"hi\""), "\"say \"\"hi\"\"\"");
+    }
+}
