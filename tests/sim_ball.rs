@@ -243,3 +243,33 @@ fn a_reused_simulator_gives_the_results_of_fresh_runs() {
         assert!(matches!(sim.run(&[G, E]), Err(SimError::ParamLength { expected: 3, got: 2 })));
     }
 }
+
+#[test]
+fn bounces_too_small_to_resolve_stop_as_zeno_instead_of_falling_through() {
+    // With a tiny restitution the bounces shrink by e each time and soon fall below round-off:
+    // the state must never end up under the floor; the run stops as Zeno at the last bounce,
+    // with the accumulation point t1 + 2 e v1 / (g (1 - e)) estimated.
+    let ball = Ball::new();
+    let o = opts(2.5, Method::Auto, true);
+    let mut zeno = 0;
+    for i in 0..200 {
+        let e = 1e-3 * 1.03f64.powi(i); // 0.001 .. 0.37
+        let r = run(&ball, &[G, e, 1.0], &o).expect("valid");
+        let y = r.final_state.state[0];
+        assert!(y > -1e-9, "e = {e}: the ball fell through the floor to y = {y}");
+        match r.stopped_by {
+            StopReason::TEnd => {}
+            StopReason::Zeno { time, accumulation, .. } => {
+                zeno += 1;
+                let t1 = bounce_time(G, e, 1.0, 1);
+                let t_star = t1 + 2.0 * e * G * t1 / (G * (1.0 - e));
+                assert!((time - t_star).abs() < 1e-6, "e = {e}: stopped at {time}, accumulation at {t_star}");
+                if let Some(a) = accumulation {
+                    assert!((a - t_star).abs() < 1e-6, "e = {e}: estimated {a}, exact {t_star}");
+                }
+            }
+            ref other => panic!("e = {e}: stopped by {other:?}"),
+        }
+    }
+    assert!(zeno > 0, "no run reached its accumulation point before t = 2.5");
+}

@@ -47,6 +47,12 @@ pub(crate) struct Detector {
     dx: Vec<f64>,
     /// Events (id and crossing) that fire together at `t_fire`, in declaration order.
     pub group: Vec<(usize, Crossing)>,
+    /// Per position: the pre-crossing sign of an event whose reset sent its guard back (a
+    /// bounce) while the guard has not yet been strictly on that side again (see
+    /// [`Detector::penetrated`]).
+    bounced: Vec<Option<f64>>,
+    /// Round-off size of `g1` per position.
+    noise1: Vec<f64>,
 }
 
 /// Whether the guard went from its pre-crossing side at `ga` to the crossed side at `gb`;
@@ -234,6 +240,8 @@ impl Detector {
             x: vec![0.0; nx],
             dx: vec![0.0; nx],
             group: Vec::with_capacity(ne),
+            bounced: vec![None; ne],
+            noise1: vec![0.0; ne],
         }
     }
 
@@ -258,7 +266,44 @@ impl Detector {
         for (pos, &ev) in evs.iter().enumerate() {
             let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
             dg[pos] = dot(&self.gx, f) + gt;
+            if end {
+                self.noise1[pos] = 16.0 * EPS * (norm(&self.gx) * norm(x) + gt.abs() * t.abs());
+            }
         }
+    }
+
+    /// Forgets every bounce (at the start of a run and after every event group).
+    pub fn clear_bounces(&mut self) {
+        self.bounced.fill(None);
+    }
+
+    /// Records that the event at `pos` (in the current mode) just fired from the side of sign
+    /// `sigma` and its reset turned the guard speed around from `speed_before`, when the guard
+    /// is not yet strictly back on that side (`g0`, `dg0` hold the post-event values).
+    pub fn note_bounce(&mut self, pos: usize, sigma: f64, speed_before: f64) {
+        let reversed = self.dg0[pos] * speed_before < 0.0;
+        if reversed && sigma * self.g0[pos] <= 0.0 {
+            self.bounced[pos] = Some(sigma);
+        }
+    }
+
+    /// After an accepted step without a firing: the position of a bounced event whose guard
+    /// went deeper into the crossed side than round-off without ever getting strictly back. The
+    /// reset meant to send the state back, but the bounce was too small to resolve: in exact
+    /// arithmetic the event would fire again and again (Zeno), in floating point the state
+    /// would fall through the guard. Otherwise forgets the bounces that are back on their side.
+    pub fn penetrated(&mut self) -> Option<usize> {
+        for (pos, b) in self.bounced.iter_mut().enumerate() {
+            if let Some(sigma) = *b {
+                if sigma * self.g1[pos] < -self.noise1[pos] {
+                    return Some(pos);
+                }
+                if sigma * self.g1[pos] > 0.0 {
+                    *b = None;
+                }
+            }
+        }
+        None
     }
 
     /// After a step without events the end values become the next step's start values.

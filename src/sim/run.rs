@@ -172,6 +172,8 @@ struct Driver<'a, S: HybridSystem + ?Sized> {
     next_sample: usize,
     /// Total derivative of the final state and `dt/dp` of a stop event.
     stop_total: Option<(Vec<f64>, Vec<f64>)>,
+    /// The events of the last group that fired: id, pre-crossing sign, crossing speed.
+    fired: Vec<(usize, f64, f64)>,
 }
 
 impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
@@ -209,6 +211,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
             },
             next_sample: 0,
             stop_total: None,
+            fired: Vec::new(),
         }
     }
 
@@ -246,6 +249,8 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
             return self.fault_nonfinite();
         }
         let mut h = self.restart();
+        // A reused detector may remember bounces of an earlier run.
+        self.det.clear_bounces();
         self.push_step_row();
         if let TrajectoryRequest::Sample(_) = self.opts.trajectory {
             self.push_row(self.rk.t, &self.rk.y.clone());
@@ -328,6 +333,10 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
                 None
             };
             match fire {
+                None if self.det.penetrated().is_some() => {
+                    // Stop where the last bounce left the state (the step is not taken).
+                    return self.zeno_stop();
+                }
                 None => {
                     if sample_due {
                         self.push_samples(t1);
@@ -356,6 +365,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
                         return self.fault_nonfinite();
                     }
                     let estimate = self.restart();
+                    self.note_bounces();
                     h = self.continue_step(h_next, estimate);
                 }
             }
@@ -386,6 +396,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
     fn fire_group(&mut self) -> Option<StopReason> {
         let (n, t) = (self.n, self.rk.t);
         let group_len = self.det.group.len();
+        self.fired.clear();
         for gi in 0..group_len {
             let (ev, crossing): (usize, Crossing) = self.det.group[gi];
             let Some(pos) = self.info.modes[self.mode].events.iter().position(|&e| e == ev) else {
@@ -440,6 +451,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
                 denominator: out.denominator,
             });
             self.stats.events += 1;
+            self.fired.push((ev, crossing.sigma, out.denominator));
             self.mode = mode_after;
             if einfo.is_stop {
                 if self.sens_valid {
@@ -449,6 +461,32 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
             }
         }
         None
+    }
+
+    /// Marks the events of the group just fired that bounced: their reset turned the guard
+    /// speed around (`g0`, `dg0` are the post-event values after `restart`).
+    fn note_bounces(&mut self) {
+        self.det.clear_bounces();
+        let events = &self.info.modes[self.mode].events;
+        for &(ev, sigma, speed_before) in &self.fired {
+            if let Some(pos) = events.iter().position(|&e| e == ev) {
+                self.det.note_bounce(pos, sigma, speed_before);
+            }
+        }
+    }
+
+    /// Zeno behaviour at the last event: the accumulation point is estimated from the last
+    /// inter-event intervals.
+    fn zeno_stop(&self) -> StopReason {
+        match self.events.last() {
+            Some(last) => StopReason::Zeno {
+                time: last.time,
+                event: last.event,
+                count: self.events.len(),
+                accumulation: self.accumulation(),
+            },
+            None => StopReason::TEnd,
+        }
     }
 
     /// Zeno: `max_events` in total, or `zeno_events` events inside the window.
@@ -463,12 +501,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
         if !(too_many || crowded) {
             return None;
         }
-        Some(StopReason::Zeno {
-            time: last.time,
-            event: last.event,
-            count,
-            accumulation: self.accumulation(),
-        })
+        Some(self.zeno_stop())
     }
 
     /// Geometric extrapolation of the last two inter-event intervals: with ratio
