@@ -266,7 +266,8 @@ impl Detector {
         for (pos, &ev) in evs.iter().enumerate() {
             let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
             dg[pos] = dot(&self.gx, f) + gt;
-            if end {
+            // Only a bounced event's guard is compared with its round-off (`penetrated`).
+            if end && self.bounced[pos].is_some() {
                 self.noise1[pos] = 16.0 * EPS * (norm(&self.gx) * norm(x) + gt.abs() * t.abs());
             }
         }
