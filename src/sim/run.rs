@@ -19,8 +19,12 @@ use super::tableau::{DOP853, DOPRI5};
 
 const EPS: f64 = f64::EPSILON;
 /// Largest ratio of the first step after an event to Hairer's initial estimate at the
-/// post-event state (the estimate is deliberately cautious: its own cap is 100 `h0`).
-const AFTER_EVENT_GROWTH: f64 = 100.0;
+/// post-event state. Measured (`tests/closed_forms.rs`, thermostat, 30 events at rtol 1e-10):
+/// the largest relative error of the event-time gradients is 6.4e-10 with 10 (as with no
+/// continuation at all), 1.1e-8 with 30 and 8.4e-9 with 100: long first steps after a switch
+/// each spend the whole local tolerance, and over many events that adds up. 10 keeps the
+/// accuracy and still saves a fifth of the bouncing ball's right-hand-side calls.
+const AFTER_EVENT_GROWTH: f64 = 10.0;
 /// Rejections in a row with a non-finite trial state before the run gives up on shrinking.
 const MAX_NONFINITE_REJECTS: usize = 30;
 
