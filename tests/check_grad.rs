@@ -2,7 +2,10 @@
 //! model, fails on an absurd tolerance or a corrupted derivative, reports cusps instead of
 //! failing, and puts its result in the JSON report.
 
-use std::process::{Command, Output};
+mod cli_support;
+use cli_support::hybc;
+
+use std::process::Output;
 
 use hybc::codegen::{compile, CompileOptions};
 use hybc::gradcheck::{check, CheckOptions};
@@ -10,14 +13,6 @@ use hybc::lower::{lower, system_info};
 use hybc::sema::ParamIdx;
 use hybc::sim::{run, SimOptions};
 use serde_json::Value;
-
-fn hybc(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hybc"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("hybc runs")
-}
 
 fn json_of(out: &Output) -> Value {
     serde_json::from_slice(&out.stdout)

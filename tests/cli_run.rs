@@ -1,19 +1,14 @@
 //! `hybc run` end to end: the binary's JSON against the bouncing ball's closed form, exit codes,
 //! Zeno and grazing reports. Closed forms: ../shared/reference/closed-forms.md.
 
-use std::process::{Command, Output};
+mod cli_support;
+use cli_support::hybc;
+
+use std::process::Output;
 use std::time::{Duration, Instant};
 
 use approx::assert_relative_eq;
 use serde_json::Value;
-
-fn hybc(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hybc"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("hybc runs")
-}
 
 fn run_json(args: &[&str]) -> (Value, Output) {
     let mut all = vec!["run"];

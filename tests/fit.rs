@@ -9,7 +9,10 @@
 //! compared at relative 1e-8: an error of 1e-9 in E moves e = (E / (g h0))^(1/8) by 1.3e-10, and the
 //! solver stops once its Gauss-Newton step is below xtol = 1e-10 relative.
 
-use std::process::{Command, Output};
+mod cli_support;
+use cli_support::hybc;
+
+use std::process::Output;
 
 use approx::assert_relative_eq;
 use hybc::codegen::{compile, CompileOptions, CompiledModel};
@@ -301,14 +304,6 @@ fn a_stop_event_target_uses_the_total_derivative() {
 }
 
 // ---- the binary ----
-
-fn hybc(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hybc"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("hybc runs")
-}
 
 fn fit_json(args: &[&str]) -> (Value, Output) {
     let mut all = vec!["fit", "models/ball.hyb"];

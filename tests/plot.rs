@@ -3,8 +3,10 @@
 //! point and the tangents; tangent slopes are the gradients (checked against central
 //! differences). Elements are counted by their colours, which `hybc::plot` exports.
 
+mod cli_support;
+use cli_support::hybc;
+
 use std::path::PathBuf;
-use std::process::{Command, Output};
 
 use approx::assert_relative_eq;
 use hybc::codegen::{compile, CompileOptions};
@@ -15,14 +17,6 @@ use hybc::sim::{self, SimOptions};
 use hybc::sweep;
 use plotters::style::RGBColor;
 use serde_json::Value;
-
-fn hybc(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hybc"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("hybc runs")
-}
 
 fn temp(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("hybc-plot-{}", std::process::id()));

@@ -3,7 +3,8 @@
 //! point is reported in its row while the sweep goes on, and that bad flags are usage errors.
 //! Closed forms (bouncing ball): ../shared/reference/closed-forms.md.
 
-use std::process::{Command, Output};
+mod cli_support;
+use cli_support::hybc;
 
 use approx::assert_relative_eq;
 use hybc::codegen::{compile, CompileOptions, CompiledModel};
@@ -12,14 +13,6 @@ use hybc::sema::ParamIdx;
 use hybc::sim::{self, SimOptions};
 use hybc::sweep::{self, Columns, Format};
 use serde_json::Value;
-
-fn hybc(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hybc"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("hybc runs")
-}
 
 fn sweep_ok(args: &[&str]) -> String {
     let mut all = vec!["sweep"];
