@@ -10,7 +10,7 @@
 //! Dormand-Prince 5(4) has one correction (4th-order accurate), DOP853 four, built from three extra
 //! stages (7th-order accurate). Because of the Hermite part, `P'` matches `f` at both ends.
 
-use super::rk::{stage_sum, Rk};
+use super::rk::{centred_sum, Rk};
 use super::tableau::DenseKind;
 
 /// Most coefficient vectors of any method (DOP853; Dopri5 uses 5).
@@ -58,7 +58,7 @@ impl Dense {
             r[..4].copy_from_slice(&[y0, ydiff, bspl, ydiff - h * f1 - bspl]);
         }
         for (row, d) in tab.d.iter().enumerate() {
-            stage_sum(&rk.k, nz, d, 1.0, |_| 0.0, &mut self.row);
+            centred_sum(&rk.k, nz, d, &mut self.row);
             for (r, v) in self.r.chunks_exact_mut(MAX_COEF).zip(&self.row) {
                 r[4 + row] = h * v;
             }

@@ -214,6 +214,11 @@ pub(crate) fn hermite_root(a: f64, ga: f64, da: f64, b: f64, gb: f64, db: f64) -
         }
         let d = dp(s);
         let newton = s - v / d;
+        if d != 0.0 && (newton - s).abs() <= 4.0 * EPS {
+            // Converged. Without this test a Newton step that lands on the bracket's end it just
+            // moved would hand over to bisection, which then halves ~50 times to 4 EPS.
+            break;
+        }
         let next = if d != 0.0 && newton > lo && newton < hi { newton } else { 0.5 * (lo + hi) };
         if (next - s).abs() <= 4.0 * EPS {
             s = next;

@@ -505,6 +505,17 @@ mod tests {
         let all: Vec<(usize, f64)> =
             t.e.stages().iter().copied().zip(t.e.weights().iter().copied()).collect();
         assert_eq!(all, rows.e.iter().copied().enumerate().collect::<Vec<_>>());
+        // The stepper sums these rows centred on the first stage (`rk::centred_sum`), which is
+        // exact only because their weights sum to zero (an estimator of `b - b_hat`; a dense
+        // correction that vanishes when every stage derivative is the same).
+        let zero_sum = |row: &[f64], what: &str| {
+            let sum: f64 = row.iter().sum();
+            let size: f64 = row.iter().map(|w| w.abs()).sum();
+            assert!(sum.abs() <= 1e-15 * size, "{what}: weights sum to {sum}");
+        };
+        zero_sum(rows.e, "error row");
+        rows.e3.iter().for_each(|e3| zero_sum(e3, "3rd-order error row"));
+        rows.d.iter().for_each(|d| zero_sum(d, "dense row"));
         assert_eq!(t.e3.is_some(), rows.e3.is_some());
         if let (Some(terms), Some(row)) = (&t.e3, rows.e3) {
             same(terms, row);
