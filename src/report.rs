@@ -67,7 +67,7 @@ impl RunReport {
             StopReason::Zeno { time, event, count, accumulation } => Some(format!(
                 "Zeno behaviour: event `{}` fired {count} times, the last at t = {time}; events \
                  accumulate{} (mode {}, state {})",
-                self.info.events.get(*event).map(|e| e.name.as_str()).unwrap_or("?"),
+                self.info.events.get(*event).map(|e| &*e.name).unwrap_or("?"),
                 accumulation.map(|a| format!(" near t = {a:.10}")).unwrap_or_default(),
                 self.mode_name(f.mode),
                 state.join(", "),

@@ -36,7 +36,7 @@ fn short_hop_through_a_ceiling_within_one_step_is_caught() {
 
     let on = run(&Ball::with_ceiling(v0, c, true), &[g, 0.8, 0.0], &o).expect("valid");
     let ev = on.events.first().expect("the ceiling event fires");
-    assert_eq!(ev.name, "ceiling");
+    assert_eq!(&*ev.name, "ceiling");
     assert!(close(ev.time, t_in, 1e-12), "{} vs {t_in}", ev.time);
     assert!(!ev.grazing);
     // t_c solves h0 + v0 t - g t^2 / 2 = c: dt/dg = (t^2/2) / (v0 - g t), dt/dh0 = -1/(v0 - g t).
@@ -59,7 +59,7 @@ fn apex_exactly_touching_the_ceiling_is_flagged_grazing() {
         let r = grazing_run(ceiling);
         // The floor guard starts at zero (y0 = 0): it must not fire at t = 0.
         let ev = r.events.first().expect("the touch is an event");
-        assert_eq!(ev.name, "ceiling", "ceiling {ceiling}");
+        assert_eq!(&*ev.name, "ceiling", "ceiling {ceiling}");
         assert!((ev.time - 0.5).abs() < 1e-4, "{}", ev.time);
         assert!(ev.grazing);
         assert!(ev.dtime.is_none());
@@ -111,7 +111,7 @@ fn thermostat_switching_times_and_gradients_match_closed_form() {
         for (ev, t) in r.events.iter().zip(&times) {
             assert!(close(ev.time, *t, 1e-9), "{method:?}: {} vs {t}", ev.time);
         }
-        assert_eq!(r.events[0].name, "off");
+        assert_eq!(&*r.events[0].name, "off");
         assert_eq!((r.events[0].mode_before, r.events[0].mode_after), (0, 1));
         assert_eq!((r.events[1].mode_before, r.events[1].mode_after), (1, 0));
         assert_eq!(r.final_state.mode, 1);
@@ -146,7 +146,7 @@ fn simultaneous_events_fire_in_declaration_order_once() {
     let r = run(&Counter::new(1.0), &[1.0], &o).expect("valid");
     // A (x := 0, c += 1) then B (c *= 10) at t = 1, and neither again although x sits on the
     // guard right after A.
-    let names: Vec<&str> = r.events.iter().map(|e| e.name.as_str()).collect();
+    let names: Vec<&str> = r.events.iter().map(|e| &*e.name).collect();
     assert_eq!(names, ["A", "B"]);
     assert!(r.events.iter().all(|e| close(e.time, 1.0, 1e-12)));
     assert_eq!(r.final_state.state[1], 10.0);

@@ -97,7 +97,7 @@ fn event_time(name: &str, k: &str, text: &str, info: &SystemInfo) -> Result<Obse
         .ok()
         .filter(|k| *k >= 1)
         .ok_or_else(|| TargetError::BadOccurrence { text: text.to_string() })?;
-    let names: Vec<&str> = info.events.iter().map(|e| e.name.as_str()).collect();
+    let names: Vec<&str> = info.events.iter().map(|e| &*e.name).collect();
     match names.iter().position(|n| *n == name) {
         Some(name_event) => Ok(Observable::EventTime { name_event, occurrence }),
         None => Err(TargetError::UnknownEvent {

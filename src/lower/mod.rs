@@ -112,7 +112,7 @@ pub fn system_info(model: &Model, grad_params: &[sema::ParamIdx]) -> SystemInfo 
             .events
             .iter()
             .map(|e| sim::EventInfo {
-                name: e.name.clone(),
+                name: e.name.as_str().into(),
                 direction: match e.direction {
                     sema::Direction::Falling => sim::Direction::Falling,
                     sema::Direction::Rising => sim::Direction::Rising,

@@ -8,6 +8,7 @@
 
 use serde::Serialize;
 use std::fmt;
+use std::sync::Arc;
 
 /// Errors of a simulation: bad input (returned by `run`) and runtime faults (carried by
 /// [`StopReason::Fault`] next to everything computed before them).
@@ -32,7 +33,7 @@ pub enum SimError {
 pub enum SimWarning {
     /// The guard was crossed (or touched) at a speed too small for its time gradient to exist;
     /// this event's and all later gradients are `None`.
-    Grazing { event: usize, name: String, time: f64, denominator: f64, scale: f64 },
+    Grazing { event: usize, name: Arc<str>, time: f64, denominator: f64, scale: f64 },
 }
 
 impl fmt::Display for SimWarning {
@@ -54,7 +55,7 @@ pub struct EventRecord {
     pub index: usize,
     /// Event id (index into `SystemInfo::events`).
     pub event: usize,
-    pub name: String,
+    pub name: Arc<str>,
     pub time: f64,
     pub mode_before: usize,
     pub mode_after: usize,
@@ -91,7 +92,7 @@ pub enum StopReason {
     /// A stop event fired.
     Event {
         event: usize,
-        name: String,
+        name: Arc<str>,
     },
     /// Too many events in a short window, or `max_events`.
     Zeno {

@@ -19,12 +19,15 @@ use super::tableau::{DOP853, DOPRI5};
 
 const EPS: f64 = f64::EPSILON;
 /// Largest ratio of the first step after an event to Hairer's initial estimate at the
-/// post-event state. Measured (`tests/closed_forms.rs`, thermostat, 30 events at rtol 1e-10):
-/// the largest relative error of the event-time gradients is 6.4e-10 with 10 (as with no
-/// continuation at all), 1.1e-8 with 30 and 8.4e-9 with 100: long first steps after a switch
-/// each spend the whole local tolerance, and over many events that adds up. 10 keeps the
-/// accuracy and still saves a fifth of the bouncing ball's right-hand-side calls.
-const AFTER_EVENT_GROWTH: f64 = 10.0;
+/// post-event state, when the event switched the mode (the controller's proposal was learnt on
+/// another vector field) and when it did not. Measured (`tests/closed_forms.rs`, thermostat, 30
+/// mode switches at rtol 1e-10): the largest relative error of the event-time gradients is
+/// 6.4e-10 with 10 (as with no continuation at all), 1.1e-8 with 30 and 8.6e-9 with 100: long
+/// first steps in a new mode each spend the whole local tolerance, and over many events that
+/// adds up. Within one mode (the bouncing ball, the tilted floor) 100 loses nothing measurable
+/// (event-time gradients 5.2e-12 and 2.5e-10, as with 10) and halves the ball's steps, 17 to 10.
+const AFTER_SWITCH_GROWTH: f64 = 10.0;
+const AFTER_RESET_GROWTH: f64 = 100.0;
 /// Rejections in a row with a non-finite trial state before the run gives up on shrinking.
 const MAX_NONFINITE_REJECTS: usize = 30;
 
@@ -57,6 +60,10 @@ struct Workspace {
     dense: Dense,
     det: Detector,
     jump: Jump,
+    /// The events of the last group that fired: id, pre-crossing sign, crossing speed.
+    fired: Vec<(usize, f64, f64)>,
+    /// The output Jacobians `y_x`, `y_p`, `y_t` at the final state.
+    output_jac: (Vec<f64>, Vec<f64>, Vec<f64>),
 }
 
 impl<'a, S: HybridSystem + ?Sized> Simulator<'a, S> {
@@ -74,6 +81,11 @@ impl<'a, S: HybridSystem + ?Sized> Simulator<'a, S> {
             dense: Dense::new(nz),
             det: Detector::new(info, n, m),
             jump: Jump::new(n, m),
+            fired: Vec::new(),
+            output_jac: {
+                let k = info.n_outputs();
+                (vec![0.0; k * n], vec![0.0; k * m], vec![0.0; k])
+            },
         };
         Ok(Simulator { sys, opts: opts.clone(), work })
     }
@@ -176,8 +188,8 @@ struct Driver<'a, S: HybridSystem + ?Sized> {
     next_sample: usize,
     /// Total derivative of the final state and `dt/dp` of a stop event.
     stop_total: Option<(Vec<f64>, Vec<f64>)>,
-    /// The events of the last group that fired: id, pre-crossing sign, crossing speed.
-    fired: Vec<(usize, f64, f64)>,
+    fired: &'a mut Vec<(usize, f64, f64)>,
+    output_jac: &'a mut (Vec<f64>, Vec<f64>, Vec<f64>),
 }
 
 impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
@@ -189,7 +201,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
         work: &'a mut Workspace,
     ) -> Self {
         let (n, m) = (info.n_states(), info.n_grad());
-        let Workspace { rk, dense, det, jump } = work;
+        let Workspace { rk, dense, det, jump, fired, output_jac } = work;
         rk.reset(opts.t_start);
         sys.initial_state(p, &mut rk.y[..n]);
         sys.initial_sens(p, &mut rk.y[n..]);
@@ -215,7 +227,8 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
             },
             next_sample: 0,
             stop_total: None,
-            fired: Vec::new(),
+            fired,
+            output_jac,
         }
     }
 
@@ -352,6 +365,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
                     h = h_next;
                 }
                 Some(t_fire) => {
+                    let mode_before = self.mode;
                     if sample_due || self.sample_due(t_fire) {
                         self.push_samples(t_fire);
                     }
@@ -370,7 +384,9 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
                     }
                     let estimate = self.restart();
                     self.note_bounces();
-                    h = self.continue_step(h_next, estimate);
+                    let growth =
+                        if self.mode == mode_before { AFTER_RESET_GROWTH } else { AFTER_SWITCH_GROWTH };
+                    h = self.continue_step(h_next, estimate, growth);
                 }
             }
         }
@@ -378,12 +394,13 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
 
     /// The first step after an event: the controller's proposal from before the event, which
     /// knows the solution's scales far better than a fresh estimate (restarting from the
-    /// estimate costs several steps of growth per event), but at most [`AFTER_EVENT_GROWTH`]
-    /// times the estimate for the post-event state, in case the reset or the new mode made the
-    /// dynamics much faster. The controller's memory is reset either way.
-    fn continue_step(&self, proposal: f64, estimate: f64) -> f64 {
+    /// estimate costs several steps of growth per event), but at most `growth` times the
+    /// estimate for the post-event state ([`AFTER_RESET_GROWTH`], [`AFTER_SWITCH_GROWTH`]), in
+    /// case the reset or the new mode made the dynamics much faster. The controller's memory is
+    /// reset either way.
+    fn continue_step(&self, proposal: f64, estimate: f64, growth: f64) -> f64 {
         if proposal.is_finite() && proposal > estimate {
-            proposal.min(AFTER_EVENT_GROWTH * estimate).min(self.opts.h_max)
+            proposal.min(growth * estimate).min(self.opts.h_max)
         } else {
             estimate
         }
@@ -472,7 +489,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
     fn note_bounces(&mut self) {
         self.det.clear_bounces();
         let events = &self.info.modes[self.mode].events;
-        for &(ev, sigma, speed_before) in &self.fired {
+        for &(ev, sigma, speed_before) in self.fired.iter() {
             if let Some(pos) = events.iter().position(|&e| e == ev) {
                 self.det.note_bounce(pos, sigma, speed_before);
             }
@@ -571,10 +588,8 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
         let s = &self.rk.y[n..];
         let mut outputs = vec![0.0; k];
         self.sys.outputs(t, x, self.p, &mut outputs);
-        let mut yx = vec![0.0; k * n];
-        let mut yp = vec![0.0; k * m];
-        let mut yt = vec![0.0; k];
-        self.sys.output_jac(t, x, self.p, &mut yx, &mut yp, &mut yt);
+        let (yx, yp, yt) = &mut *self.output_jac;
+        self.sys.output_jac(t, x, self.p, yx, yp, yt);
         // y_x S_j + y_p_j (+ y_t dt_j for totals), column per parameter.
         let chain = |sens: &[f64], dte: Option<&[f64]>| {
             let mut out = vec![0.0; k * m];

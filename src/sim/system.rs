@@ -11,6 +11,8 @@
 //! Implementations may assume the lengths above; callers must guarantee them (the JIT-backed
 //! implementation checks them before entering native code).
 
+use std::sync::Arc;
+
 /// Crossing direction of a guard `g`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -32,7 +34,8 @@ pub struct ModeInfo {
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct EventInfo {
-    pub name: String,
+    /// Shared, so that every fired event's record names it without an allocation.
+    pub name: Arc<str>,
     pub direction: Direction,
     /// Mode after the event; `None` keeps the current one.
     pub target_mode: Option<usize>,

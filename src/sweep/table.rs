@@ -125,7 +125,7 @@ impl<'a> Columns<'a> {
         for slot in 0..self.events {
             match r.events.get(slot) {
                 Some(e) => {
-                    row.push(Cell::Text(e.name.clone()));
+                    row.push(Cell::Text(e.name.to_string()));
                     row.push(Cell::Num(e.time));
                     row.extend(grad_cells(e.dtime.as_deref(), 1, 0, self.shown_grad));
                 }
