@@ -66,7 +66,12 @@ fn main() {
     let (mut dx, mut ds) = (vec![0.0; n], vec![0.0; n * m]);
 
     // Growth of compile time with model size: default options against the fastest-compiling.
-    let fast = CompileOptions { opt_level: OptLevel::None, verifier: false, regalloc: RegAlloc::SinglePass };
+    let fast = CompileOptions {
+        opt_level: OptLevel::None,
+        verifier: false,
+        regalloc: RegAlloc::SinglePass,
+        ..CompileOptions::default()
+    };
     for size in [10, 100, 1000] {
         let (funcs, info) = front_end(&chain_source(size));
         let start = Instant::now();
@@ -88,7 +93,7 @@ fn main() {
     for opt_level in [OptLevel::None, OptLevel::Speed, OptLevel::SpeedAndSize] {
         for regalloc in [RegAlloc::Backtracking, RegAlloc::SinglePass] {
             for verifier in [false, true] {
-                let opts = CompileOptions { opt_level, verifier, regalloc };
+                let opts = CompileOptions { opt_level, verifier, regalloc, ..CompileOptions::default() };
                 let ball_t = compile_time(&ball.0, &ball.1, &opts);
                 let chain_t = compile_time(&chain.0, &chain.1, &opts);
                 let jit = CompiledModel::compile(&chain.0, chain.1.clone(), &opts).expect("compiles");

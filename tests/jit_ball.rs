@@ -145,8 +145,10 @@ fn every_option_combination_computes_the_same_bits() {
     let mut reference: Option<Vec<f64>> = None;
     for opt_level in [OptLevel::None, OptLevel::Speed, OptLevel::SpeedAndSize] {
         for regalloc in [RegAlloc::Backtracking, RegAlloc::SinglePass, RegAlloc::Auto] {
-            for verifier in [false, true] {
-                let opts = CompileOptions { opt_level, verifier, regalloc };
+            // Part size 1 compiles every output entry as its own native function.
+            for (verifier, max_part_size) in [(false, usize::MAX), (true, usize::MAX), (true, 1), (false, 3)]
+            {
+                let opts = CompileOptions { opt_level, verifier, regalloc, max_part_size };
                 let m =
                     CompiledModel::compile(&ball(), ball_info(vec![G, E]), &opts).expect("the ball compiles");
                 let (mut dx, mut ds, mut r) = ([0.0; 2], [0.0; 4], [0.0; 2]);

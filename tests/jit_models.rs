@@ -135,10 +135,15 @@ fn compare_model_text(name: &str, source: &str, rng: &mut Rng) {
     let some: Vec<ParamIdx> = all.iter().rev().step_by(2).copied().collect();
     for grad in [all, some] {
         let info = system_info(&model, &grad);
-        let jit = CompiledModel::compile(&funcs, info.clone(), &CompileOptions::default())
-            .unwrap_or_else(|e| panic!("{name}: {e}"));
-        let reference = Interpreter::new(funcs.clone(), info);
-        compare(name, &jit, &reference, &p, rng);
+        let reference = Interpreter::new(funcs.clone(), info.clone());
+        // Also with every kernel cut into parts of at most two operations (separate native
+        // functions called in order), as big models' kernels are.
+        for max_part_size in [CompileOptions::default().max_part_size, 2] {
+            let opts = CompileOptions { max_part_size, ..CompileOptions::default() };
+            let jit =
+                CompiledModel::compile(&funcs, info.clone(), &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
+            compare(name, &jit, &reference, &p, rng);
+        }
     }
 }
 

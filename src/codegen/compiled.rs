@@ -7,9 +7,9 @@ use std::sync::Mutex;
 use cranelift_codegen::settings::{self, Configurable};
 use cranelift_frontend::FunctionBuilderContext;
 use cranelift_jit::{JITBuilder, JITModule};
-use cranelift_module::{default_libcall_names, Module};
+use cranelift_module::{default_libcall_names, FuncId, Module};
 
-use super::lower::{declare_callees, define_kernel};
+use super::lower::{declare_callees, define_driver, define_kernel};
 use super::plan::{plan_model, KernelPlan, Lens, ModelKernels, N_OUTS};
 use super::runtime::Callee;
 use super::{CodegenError, CompileOptions, OptLevel, RegAlloc, AUTO_REGALLOC_LIMIT};
@@ -97,12 +97,14 @@ impl CompiledModel {
         opts: &CompileOptions,
     ) -> Result<CompiledModel, CodegenError> {
         let plan = plan_model(funcs, &info)?;
-        let largest = plan.iter().map(KernelPlan::size).max().unwrap_or(0);
+        let parts = plan.try_map(|k| Ok::<_, CodegenError>((k.name.clone(), k.parts(opts.max_part_size))))?;
+        let largest = parts.iter().flat_map(|(_, p)| p).map(KernelPlan::size).max().unwrap_or(0);
         let mut module = new_module(opts, largest)?;
-        match build_kernels(&mut module, funcs, &plan) {
+        match build_kernels(&mut module, funcs, &parts) {
             Ok(kernels) => Ok(CompiledModel {
                 info,
-                n_kernels: plan.iter().count(),
+                // A kernel cut into parts is the parts plus their driver.
+                n_kernels: parts.iter().map(|(_, p)| if p.len() > 1 { p.len() + 1 } else { 1 }).sum(),
                 kernels,
                 module: Mutex::new(Some(module)),
             }),
@@ -177,18 +179,27 @@ fn new_module(opts: &CompileOptions, largest_kernel: usize) -> Result<JITModule,
     Ok(JITModule::new(builder))
 }
 
-/// Defines every planned kernel, finalizes the module and fetches the function pointers.
+/// Defines every planned kernel (a big one as its parts and a driver that calls them, see
+/// `KernelPlan::parts`), finalizes the module and fetches the function pointers.
 fn build_kernels(
     module: &mut JITModule,
     funcs: &ModelFunctions,
-    plan: &ModelKernels<KernelPlan>,
+    parts: &ModelKernels<(String, Vec<KernelPlan>)>,
 ) -> Result<ModelKernels<Kernel>, CodegenError> {
     let callees = declare_callees(module)?;
     let mut ctx = module.make_context();
     let mut fn_ctx = FunctionBuilderContext::new();
-    let ids = plan.try_map(|k| {
-        let id = define_kernel(module, &mut ctx, &mut fn_ctx, &callees, &funcs.store, k)?;
-        Ok::<_, CodegenError>((id, k.lens, k.prefill))
+    let ids = parts.try_map(|(name, kernel_parts)| {
+        let first = kernel_parts.first().ok_or(CodegenError::Internal { reason: "kernel without parts" })?;
+        let ids = kernel_parts
+            .iter()
+            .map(|part| define_kernel(module, &mut ctx, &mut fn_ctx, &callees, &funcs.store, part))
+            .collect::<Result<Vec<FuncId>, CodegenError>>()?;
+        let entry = match ids.as_slice() {
+            [single] => *single,
+            _ => define_driver(module, &mut ctx, &mut fn_ctx, name, &ids)?,
+        };
+        Ok::<_, CodegenError>((entry, first.lens, first.prefill))
     })?;
     module
         .finalize_definitions()

@@ -106,6 +106,44 @@ pub(crate) fn define_kernel(
     Ok(id)
 }
 
+/// Defines `name` as a kernel that calls the already declared kernels `parts` in order with its
+/// own arguments and returns the last one's value: a big kernel cut into parts
+/// (`KernelPlan::parts`) keeps one entry point, so callers pay nothing for the cut and small
+/// kernels nothing at all.
+pub(crate) fn define_driver(
+    module: &mut JITModule,
+    ctx: &mut Context,
+    fn_ctx: &mut FunctionBuilderContext,
+    name: &str,
+    parts: &[FuncId],
+) -> Result<FuncId, CodegenError> {
+    let module_err = |source| CodegenError::Module { kernel: name.to_owned(), source: Box::new(source) };
+    let sig = kernel_signature(module);
+    let id = module.declare_function(name, Linkage::Export, &sig).map_err(module_err)?;
+    ctx.func.signature = sig;
+    ctx.func.name = UserFuncName::user(0, id.as_u32());
+    {
+        let mut b = FunctionBuilder::new(&mut ctx.func, fn_ctx);
+        let block = b.create_block();
+        b.append_block_params_for_function_params(block);
+        b.switch_to_block(block);
+        b.seal_block(block);
+        let args = b.block_params(block).to_vec();
+        let mut ret = b.ins().f64const(Ieee64::with_float(0.0));
+        for &part in parts {
+            let callee = module.declare_func_in_func(part, b.func);
+            let call = b.ins().call(callee, &args);
+            ret = b.inst_results(call)[0];
+        }
+        b.ins().return_(&[ret]);
+        b.finalize(module.target_config());
+    }
+    let defined = module.define_function(id, ctx).map_err(module_err);
+    module.clear_context(ctx);
+    defined?;
+    Ok(id)
+}
+
 /// Which input array a load reads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 enum Input {

@@ -45,13 +45,15 @@ pub enum RegAlloc {
     Backtracking,
     /// Linear compile time; slower code (1.3x to 2.7x on the chains measured below).
     SinglePass,
-    /// `Backtracking` unless the largest kernel exceeds [`AUTO_REGALLOC_LIMIT`] operations,
+    /// `Backtracking` unless the largest kernel part exceeds [`AUTO_REGALLOC_LIMIT`] operations,
     /// then `SinglePass`: big models stay quick to compile, small ones get the better code.
     Auto,
 }
 
-/// Size of the largest kernel (output entries plus sensitivity products) above which
-/// [`RegAlloc::Auto`] switches to the single-pass allocator. Measured on chain models (the
+/// Size of the largest kernel part (output entries plus sensitivity products) above which
+/// [`RegAlloc::Auto`] switches to the single-pass allocator. Since kernels are cut into parts of
+/// at most [`MAX_PART_SIZE`], this only happens for a single entry with more than this many
+/// sensitivity products. Measured before kernels were cut into parts, on chain models (the
 /// benchmarks' generated model, all parameters differentiated, release build; size of the fused
 /// sensitivity kernel in brackets), compile time and ns per fused-kernel call, backtracking
 /// against single-pass:
@@ -62,6 +64,20 @@ pub enum RegAlloc {
 /// So the switch sits between 100 and 150 states; the shipped models' kernels have under 100.
 pub const AUTO_REGALLOC_LIMIT: usize = 1200;
 
+/// Default [`CompileOptions::max_part_size`]. The backtracking allocator's compile time grows
+/// faster than linearly with the size of one function, so big kernels are cut into parts of at
+/// most this size, each compiled on its own, behind one driver function that calls them.
+/// Measured on chain models (`PART=N RA=auto cargo run --release --example jit_parts`): compile
+/// time at 10, 100 and 1000 states; ns per call of the 100-state fused sensitivity kernel (997 in
+/// size) and of the 1000-state one:
+/// - no parts: 0.72 / 10.9 / 27.6 ms, 194 ns, 5.9 us (at 1000 states `Auto` switched to the
+///   single-pass allocator; backtracking on the whole kernel took 718 ms);
+/// - 1000: 0.85 / 11.5 / 102 ms, 202 ns, 4.3 us;
+/// - 500: 0.73 / 9.6 / 78 ms, 204 ns, 4.8 us: 73-96 us of compile time per state at every size;
+/// - 350: 0.78 / 8.5 / 69 ms, 310-840 ns (erratic), 4.7 us;
+/// - 100: 0.99 / 6.5 / 57 ms, 398 ns, 4.5 us: parts recompute the subexpressions they share.
+pub const MAX_PART_SIZE: usize = 500;
+
 /// How kernels are compiled.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct CompileOptions {
@@ -69,6 +85,10 @@ pub struct CompileOptions {
     /// Run Cranelift's IR verifier on every kernel (catches codegen bugs, costs 20-30%).
     pub verifier: bool,
     pub regalloc: RegAlloc,
+    /// Kernels larger than this (`KernelPlan::size`: output entries plus
+    /// sensitivity products) are compiled as several native functions of at most this size,
+    /// called in order.
+    pub max_part_size: usize,
 }
 
 impl Default for CompileOptions {
@@ -82,6 +102,7 @@ impl Default for CompileOptions {
             opt_level: OptLevel::Speed,
             verifier: cfg!(debug_assertions),
             regalloc: RegAlloc::Auto,
+            max_part_size: MAX_PART_SIZE,
         }
     }
 }

@@ -77,6 +77,36 @@ impl KernelPlan {
             .sum()
     }
 
+    /// The kernel cut into consecutive runs of writes of at most `limit` [`size`](Self::size)
+    /// each (a single larger write stays whole), to be compiled as separate native functions
+    /// and called one after the other. Each part shares the kernel's lengths and writes a
+    /// subset of its entries; the return value is computed by the last part. The plan is
+    /// [checked](Self::check) whole, before it is cut.
+    pub(crate) fn parts(&self, limit: usize) -> Vec<KernelPlan> {
+        if self.size() <= limit {
+            return vec![self.clone()];
+        }
+        let mut parts: Vec<KernelPlan> = Vec::new();
+        let mut size = 0;
+        for w in &self.writes {
+            let w_size = match &w.term {
+                Term::SensDot { products, .. } => 1 + products.len(),
+                _ => 1,
+            };
+            if parts.is_empty() || size + w_size > limit {
+                let name = format!("{}_part{}", self.name, parts.len());
+                parts.push(KernelPlan { prefill: self.prefill, ..KernelPlan::new(name, self.lens) });
+                size = 0;
+            }
+            size += w_size;
+            parts.last_mut().expect("a part was just pushed").writes.push(w.clone());
+        }
+        if let Some(last) = parts.last_mut() {
+            last.ret = self.ret;
+        }
+        parts
+    }
+
     /// Every expression the kernel needs, in no particular order.
     pub(crate) fn roots(&self) -> impl Iterator<Item = ExprId> + '_ {
         let writes = self.writes.iter().flat_map(|w| match &w.term {
