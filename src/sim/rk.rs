@@ -178,9 +178,9 @@ impl Rk {
     /// Next step size after an accepted step with error `err`; updates the controller memory.
     pub fn grow(&mut self, err: f64) -> f64 {
         let (alpha, beta) = controller_exponents(self.tab);
-        // Both powers are often at their floors (tiny errors), which are computed once.
-        // Both powers of one error share its logarithm: one `ln` and two `exp` cost less than
-        // two `powf` (6% of a bouncing-ball run).
+        // Both powers are often at their floors (tiny errors), which are computed once; otherwise
+        // they share the error's logarithm: one `ln` and two `exp` cost less than two `powf`
+        // (which took 6% of a bouncing-ball run).
         let err = err.max(1e-10);
         let ln_err = if err == 1e-10 { 0.0 } else { err.ln() };
         let err_alpha = if err == 1e-10 { self.floors.0 } else { (-alpha * ln_err).exp() };
@@ -224,7 +224,7 @@ impl Rk {
         let nz = self.nz;
         let mut d0 = 0.0;
         let mut d1 = 0.0;
-        // The scales' reciprocals, kept in `err5` (free until the first attempt) for `d2`.
+        // The scales' reciprocals, kept for `d2` in `err5` (scratch: every attempt overwrites it).
         let ne = self.n_err;
         for ((inv, &y), &f) in self.err5[..ne].iter_mut().zip(&self.y[..ne]).zip(&self.k[..ne]) {
             *inv = 1.0 / (self.atol + self.rtol * y.abs());
@@ -286,8 +286,8 @@ pub(crate) fn stage_sum<I: Fn(usize) -> f64>(
 /// arithmetic, but the part of the derivative common to all stages cancels before it is
 /// weighted instead of after. Where the derivative hardly changes over a step (tight
 /// tolerances, nearly polynomial solutions) the plain sum leaves round-off of size
-/// `eps |f| max |w_j|` in the error estimate, which at rtol 1e-10 is larger than the true error
-/// and holds the step size down (the bouncing ball: 18 steps instead of 12).
+/// `eps |f| max |w_j|` in the error estimate, which at rtol 1e-10 can exceed the true error and
+/// hold the step size down (on the bouncing ball, whose flights every pair integrates exactly).
 #[inline(always)]
 pub(crate) fn centred_sum(k: &[f64], nz: usize, terms: &Terms, out: &mut [f64]) {
     sum_blocks::<true, _>(k, nz, terms, 1.0, |_| 0.0, out)
