@@ -39,6 +39,16 @@ pub(crate) struct Write {
     pub term: Term,
 }
 
+impl Write {
+    /// This write's share of [`KernelPlan::size`].
+    fn size(&self) -> usize {
+        match &self.term {
+            Term::SensDot { products, .. } => 1 + products.len(),
+            _ => 1,
+        }
+    }
+}
+
 /// One native function to generate.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct KernelPlan {
@@ -68,13 +78,7 @@ impl KernelPlan {
     /// A size measure for choosing the register allocator: output entries plus sensitivity
     /// products.
     pub(crate) fn size(&self) -> usize {
-        self.writes
-            .iter()
-            .map(|w| match &w.term {
-                Term::SensDot { products, .. } => 1 + products.len(),
-                _ => 1,
-            })
-            .sum()
+        self.writes.iter().map(Write::size).sum()
     }
 
     /// The kernel cut into consecutive runs of writes of at most `limit` [`size`](Self::size)
@@ -89,10 +93,7 @@ impl KernelPlan {
         let mut parts: Vec<KernelPlan> = Vec::new();
         let mut size = 0;
         for w in &self.writes {
-            let w_size = match &w.term {
-                Term::SensDot { products, .. } => 1 + products.len(),
-                _ => 1,
-            };
+            let w_size = w.size();
             if parts.is_empty() || size + w_size > limit {
                 let name = format!("{}_part{}", self.name, parts.len());
                 parts.push(KernelPlan { prefill: self.prefill, ..KernelPlan::new(name, self.lens) });
