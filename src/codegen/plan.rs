@@ -10,6 +10,10 @@ use crate::sim::SystemInfo;
 /// Number of output pointers every kernel takes (unused ones receive empty slices).
 pub(crate) const N_OUTS: usize = 3;
 
+/// Largest sparse output that the kernel zero-fills itself (see
+/// [`KernelPlan::write_small_zeros`]); larger ones are zero-filled by the caller.
+const MAX_ZERO_WRITES: usize = 64;
+
 /// The slice lengths a kernel reads and writes; the caller must pass exactly these.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct Lens {
@@ -108,6 +112,29 @@ impl KernelPlan {
         parts
     }
 
+    /// Outputs of at most [`MAX_ZERO_WRITES`] entries get explicit zero writes for their
+    /// structural zeros instead of being zero-filled by the caller: a handful of constant stores
+    /// in the kernel cost less than a `memset` call per output per call (the guard and reset
+    /// Jacobians, called at every step and event).
+    fn write_small_zeros(&mut self) {
+        for out in 0..N_OUTS {
+            let len = self.lens.out[out];
+            if !self.prefill[out] || len > MAX_ZERO_WRITES {
+                continue;
+            }
+            let mut written = vec![false; len];
+            for w in self.writes.iter().filter(|w| w.out == out) {
+                if let Some(slot) = written.get_mut(w.index as usize) {
+                    *slot = true;
+                }
+            }
+            for (index, _) in written.iter().enumerate().filter(|(_, &w)| !w) {
+                self.writes.push(Write { out, index: index as u32, term: Term::Zero });
+            }
+            self.prefill[out] = false;
+        }
+    }
+
     /// Every expression the kernel needs, in no particular order.
     pub(crate) fn roots(&self) -> impl Iterator<Item = ExprId> + '_ {
         let writes = self.writes.iter().flat_map(|w| match &w.term {
@@ -196,6 +223,19 @@ impl<K> ModelKernels<K> {
             .chain(&self.reset)
             .chain(&self.reset_jac)
             .chain([&self.init, &self.init_sens, &self.outputs, &self.output_jac])
+    }
+
+    /// Every kernel, mutably, in the order of [`Self::iter`].
+    pub(crate) fn iter_mut(&mut self) -> impl Iterator<Item = &mut K> {
+        self.flow
+            .iter_mut()
+            .chain(&mut self.flow_sens)
+            .chain(&mut self.guards)
+            .chain(&mut self.guard_grad)
+            .chain(self.condition.iter_mut().flatten())
+            .chain(&mut self.reset)
+            .chain(&mut self.reset_jac)
+            .chain([&mut self.init, &mut self.init_sens, &mut self.outputs, &mut self.output_jac])
     }
 
     /// Applies `f` to every kernel, keeping the structure; stops at the first error.
@@ -374,7 +414,8 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
         plan.output_jac.write(2, i as usize, Term::Expr(e))?;
     }
 
-    for kernel in plan.iter() {
+    for kernel in plan.iter_mut() {
+        kernel.write_small_zeros();
         kernel.check(&funcs.store)?;
     }
     Ok(plan)
