@@ -65,39 +65,59 @@ impl Dense {
         }
     }
 
-    /// The factor in front of `r_{j+1}` for `j = 0..`: `s` for odd `j + 1`, `1 - s` for even.
-    fn factors(&self, t: f64) -> [f64; MAX_COEF - 1] {
-        let s = if self.h != 0.0 { (t - self.t0) / self.h } else { 0.0 };
-        let s1 = 1.0 - s;
-        [s, s1, s, s1, s, s1, s]
-    }
-
-    /// Interpolated values of the first `out.len()` components at time `t`.
-    pub fn eval(&self, t: f64, out: &mut [f64]) {
-        let mult = self.factors(t);
-        let nc = self.n_coef;
-        let mult = &mult[..nc - 1];
-        for (o, r) in out.iter_mut().zip(self.r.chunks_exact(MAX_COEF)) {
-            let (rest, last) = (&r[..nc - 1], r[nc - 1]);
-            *o = rest.iter().zip(mult).rev().fold(last, |acc, (rj, m)| rj + m * acc);
+    /// `s = (t - t0) / h`, zero before the first build.
+    fn unit_time(&self, t: f64) -> f64 {
+        if self.h != 0.0 {
+            (t - self.t0) / self.h
+        } else {
+            0.0
         }
     }
 
-    /// Interpolated time derivatives of the first `out.len()` components at time `t`.
-    pub fn eval_deriv(&self, t: f64, out: &mut [f64]) {
-        let mult = self.factors(t);
+    /// Interpolated values of the first `out.len()` components at time `t`.
+    ///
+    /// The nested form is evaluated two levels at a time: with `u = s (1 - s)`,
+    /// `r1 + (1-s) (r2 + s Q) = (r1 + (1-s) r2) + u Q`, so the chain of dependent operations is
+    /// half as long (the root searches evaluate the interpolant several times per event, and each
+    /// evaluation waited on seven multiply-adds in a row).
+    pub fn eval(&self, t: f64, out: &mut [f64]) {
+        let s = self.unit_time(t);
+        let s1 = 1.0 - s;
+        let u = s * s1;
         let nc = self.n_coef;
-        let mult = &mult[..nc - 1];
+        // `r1 .. r_{nc-1}` in pairs from the top; an odd one out is the innermost term.
+        let pairs = (nc - 1) / 2;
+        let odd = (nc - 1) % 2 == 1;
         for (o, r) in out.iter_mut().zip(self.r.chunks_exact(MAX_COEF)) {
-            let (rest, last) = (&r[..nc - 1], r[nc - 1]);
-            let (mut acc, mut dacc) = (last, 0.0);
-            for (j, (rj, &m)) in rest.iter().zip(mult).enumerate().rev() {
-                // d/ds of s is 1, of (1 - s) is -1.
-                let dm = if j % 2 == 0 { 1.0 } else { -1.0 };
-                dacc = dm * acc + m * dacc;
-                acc = rj + m * acc;
+            let mut acc = if odd { r[nc - 1] } else { 0.0 };
+            for k in (0..pairs).rev().map(|p| 1 + 2 * p) {
+                acc = (r[k] + s1 * r[k + 1]) + u * acc;
             }
-            *o = if self.h != 0.0 { dacc / self.h } else { 0.0 };
+            *o = r[0] + s * acc;
+        }
+    }
+
+    /// Interpolated time derivatives of the first `out.len()` components at time `t`: the
+    /// derivative of [`Self::eval`]'s form, with `u' = 1 - 2 s` and `(r_k + (1-s) r_{k+1})' =
+    /// -r_{k+1}`.
+    pub fn eval_deriv(&self, t: f64, out: &mut [f64]) {
+        if self.h == 0.0 {
+            out.fill(0.0);
+            return;
+        }
+        let s = self.unit_time(t);
+        let s1 = 1.0 - s;
+        let (u, du) = (s * s1, 1.0 - 2.0 * s);
+        let nc = self.n_coef;
+        let pairs = (nc - 1) / 2;
+        let odd = (nc - 1) % 2 == 1;
+        for (o, r) in out.iter_mut().zip(self.r.chunks_exact(MAX_COEF)) {
+            let (mut acc, mut dacc) = (if odd { r[nc - 1] } else { 0.0 }, 0.0);
+            for k in (0..pairs).rev().map(|p| 1 + 2 * p) {
+                dacc = -r[k + 1] + du * acc + u * dacc;
+                acc = (r[k] + s1 * r[k + 1]) + u * acc;
+            }
+            *o = (acc + s * dacc) / self.h;
         }
     }
 }

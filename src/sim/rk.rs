@@ -247,13 +247,22 @@ impl Rk {
         }
         let d2 = (d2 / n).sqrt() / h0;
         let dmax = d1.max(d2);
-        let q = self.tab.order as f64;
         let h1 = if dmax <= 1e-15 || !dmax.is_finite() {
             (h0 * 1e-3).max(1e-6)
         } else {
-            (0.01 / dmax).powf(1.0 / q)
+            root_q(0.01 / dmax, self.tab.order)
         };
         (100.0 * h0).min(h1).min(h_max)
+    }
+}
+
+/// `x^(1/q)`: three square roots for the 8th-order pair, a third of the cost of `powf` (which
+/// took 2% of a bouncing-ball run, in the step estimates after its events).
+fn root_q(x: f64, q: u32) -> f64 {
+    if q == 8 {
+        x.sqrt().sqrt().sqrt()
+    } else {
+        x.powf(1.0 / q as f64)
     }
 }
 
@@ -295,6 +304,41 @@ pub(crate) fn centred_sum(k: &[f64], nz: usize, terms: &Terms, out: &mut [f64]) 
 
 #[inline(always)]
 fn sum_blocks<const CENTRED: bool, I: Fn(usize) -> f64>(
+    k: &[f64],
+    nz: usize,
+    terms: &Terms,
+    scale: f64,
+    init: I,
+    out: &mut [f64],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU supports AVX (checked just above).
+        unsafe { sum_blocks_avx::<CENTRED, I>(k, nz, terms, scale, init, out) };
+        return;
+    }
+    sum_blocks_portable::<CENTRED, I>(k, nz, terms, scale, init, out)
+}
+
+/// [`sum_blocks_portable`] compiled for AVX: the blocks of eight components are then summed in
+/// two 4-wide registers instead of four 2-wide ones. Only the vector width changes (no fused
+/// multiply-add, same order of operations), so the results are bit for bit those of the
+/// baseline code. Measured: a bouncing-ball run (nz = 8) 3% faster.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+fn sum_blocks_avx<const CENTRED: bool, I: Fn(usize) -> f64>(
+    k: &[f64],
+    nz: usize,
+    terms: &Terms,
+    scale: f64,
+    init: I,
+    out: &mut [f64],
+) {
+    sum_blocks_portable::<CENTRED, I>(k, nz, terms, scale, init, out)
+}
+
+#[inline(always)]
+fn sum_blocks_portable<const CENTRED: bool, I: Fn(usize) -> f64>(
     k: &[f64],
     nz: usize,
     terms: &Terms,
