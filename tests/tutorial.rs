@@ -4,6 +4,10 @@
 //! the report) must equal the numbers pasted below the command, in order. Equal means within a
 //! relative 1e-9, one unit of the tenth significant digit hybc prints. The statistics line
 //! (`... kernel calls, compile ... ms, run ... us`) is left out on both sides: it holds timings.
+//!
+//! After a change that moves printed numbers, `HYBC_BLESS=1 cargo test --release --test tutorial`
+//! rewrites every pasted output with what this build prints (release, so that the pasted
+//! statistics lines show representative timings; review the diff before committing).
 
 use std::process::Command;
 
@@ -94,18 +98,54 @@ fn number_extraction_skips_names_and_reads_exponents() {
     assert_eq!(got, [1e-6, -4.4e-3, -0.5, 3.0, 7.0]);
 }
 
+/// What `hybc ARGS` prints, run from the repository root: stderr, then stdout.
+fn printed(root: &str, args: &[String]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_hybc")).args(args).current_dir(root).output().expect("runs");
+    format!("{}{}", String::from_utf8_lossy(&out.stderr), String::from_utf8_lossy(&out.stdout))
+}
+
+/// `doc` with the output under every `$ hybc` line of a console block replaced by what this
+/// build prints.
+fn blessed(root: &str, doc: &str) -> String {
+    let mut out = String::new();
+    let mut in_console = false;
+    let mut skipping = false;
+    for line in doc.lines() {
+        if line.starts_with("```") {
+            in_console = !in_console && line.starts_with("```console");
+            skipping = false;
+        } else if in_console {
+            if let Some(command) = line.strip_prefix("$ hybc ") {
+                out.push_str(line);
+                out.push('\n');
+                let args: Vec<String> = command.split_whitespace().map(String::from).collect();
+                out.push_str(&printed(root, &args));
+                skipping = true;
+                continue;
+            }
+        }
+        if !skipping {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    out
+}
+
 #[test]
 fn every_tutorial_command_prints_what_the_tutorial_shows() {
     let root = env!("CARGO_MANIFEST_DIR");
-    let doc = std::fs::read_to_string(format!("{root}/docs/tutorial.md")).expect("docs/tutorial.md");
+    let path = format!("{root}/docs/tutorial.md");
+    let mut doc = std::fs::read_to_string(&path).expect("docs/tutorial.md");
+    if std::env::var_os("HYBC_BLESS").is_some() {
+        doc = blessed(root, &doc);
+        std::fs::write(&path, &doc).expect("docs/tutorial.md is writable");
+    }
     let examples = examples(&doc);
     assert!(examples.len() >= 7, "only {} commands found", examples.len());
     for ex in examples {
         let shown = format!("hybc {}", ex.args.join(" "));
-        let out =
-            Command::new(env!("CARGO_BIN_EXE_hybc")).args(&ex.args).current_dir(root).output().expect("runs");
-        let actual =
-            format!("{}{}", String::from_utf8_lossy(&out.stderr), String::from_utf8_lossy(&out.stdout));
+        let actual = printed(root, &ex.args);
         let (want, got) = (numbers(&ex.expected), numbers(&actual));
         assert!(!want.is_empty(), "{shown}: no output pasted");
         assert_eq!(want.len(), got.len(), "{shown}: pasted\n{}\nprinted\n{actual}", ex.expected);
