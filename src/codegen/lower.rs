@@ -316,6 +316,12 @@ impl Translator<'_, '_> {
                 return Ok(self.b.ins().fsub(x, c));
             }
         }
+        // `x^2` is `x * x` by definition (`apply_binary`): a multiply instead of a libm call,
+        // in every kinetic energy, drag and spring law.
+        if op == BinaryOp::Pow && self.store.node(b).as_const() == Some(2.0) {
+            let x = self.value(a);
+            return Ok(self.b.ins().fmul(x, x));
+        }
         let (a, b) = (self.value(a), self.value(b));
         Ok(match op {
             BinaryOp::Add => self.b.ins().fadd(a, b),
