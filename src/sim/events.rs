@@ -25,6 +25,10 @@ const EPS: f64 = f64::EPSILON;
 /// A Newton step on the guard's Hermite cubic at most this long (in the step's unit interval)
 /// is the last one [`hermite_root`] takes.
 const NEWTON_LAST_STEP: f64 = 1e-9;
+/// Relative accuracy (in units of the step) to which [`extremum_time`] locates a guard's
+/// extremum: its error of order 1e-9 h changes the guard value there by about 1e-18 of the
+/// guard's variation over the step, far below its round-off.
+const EXTREMUM_TOL: f64 = 1e-9;
 
 /// A crossing located in the current step.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -112,17 +116,44 @@ fn allows(dir: Direction, sigma: f64) -> bool {
 /// [`hermite_root`]) lets the search start next to the root instead of creeping towards it from
 /// a far end, as regula falsi does on a convex function.
 pub(crate) fn illinois<F: FnMut(f64) -> f64>(
+    a: f64,
+    fa: f64,
+    b: f64,
+    fb: f64,
+    sigma: f64,
+    first: Option<f64>,
+    f: F,
+) -> f64 {
+    illinois_until(a, fa, b, fb, sigma, first, 0.0, f)
+}
+
+/// The time in `(a, b)` where a guard's speed, `sa` at `a` and `sb` at `b` of opposite signs,
+/// is zero: [`illinois`], but returning the next secant point as soon as it lies within
+/// [`EXTREMUM_TOL`]` (b - a)` of the last trial point. The extremum only has to be known well
+/// enough for the guard's value there, whose error is of second order in the time's; pinning
+/// it to adjacent floating-point numbers took two evaluations more (three instead of one on a
+/// ball's apex, where the speed is linear and the first secant point is the root).
+pub(crate) fn extremum_time<F: FnMut(f64) -> f64>(a: f64, sa: f64, b: f64, sb: f64, f: F) -> f64 {
+    illinois_until(a, sa, b, sb, sa.signum(), None, EXTREMUM_TOL * (b - a), f)
+}
+
+/// [`illinois`], or when `enough > 0`, stopping at a secant point within `enough` of the last
+/// trial point (a secant step that short means the iteration has converged to about that).
+#[allow(clippy::too_many_arguments)]
+fn illinois_until<F: FnMut(f64) -> f64>(
     mut a: f64,
     mut fa: f64,
     mut b: f64,
     mut fb: f64,
     sigma: f64,
     first: Option<f64>,
+    enough: f64,
     mut f: F,
 ) -> f64 {
     let mut side = 0i8;
     let mut width = b - a;
     let mut push = 1.0f64;
+    let mut last = f64::NAN;
     for it in 0..200 {
         let resolution = EPS * a.abs().max(b.abs());
         if b - a <= 2.0 * resolution || b - a <= f64::MIN_POSITIVE {
@@ -136,6 +167,9 @@ pub(crate) fn illinois<F: FnMut(f64) -> f64>(
             _ if fb != fa => b - fb * (b - a) / (fb - fa),
             _ => f64::NAN,
         };
+        if enough > 0.0 && (secant - last).abs() <= enough && secant > a && secant < b {
+            return secant;
+        }
         let stalled = it % 4 == 3 && b - a > 0.5 * width;
         if it % 4 == 3 {
             width = b - a;
@@ -162,6 +196,7 @@ pub(crate) fn illinois<F: FnMut(f64) -> f64>(
             }
         }
         let fc = f(c);
+        last = c;
         let crossed = sigma * fc <= 0.0 || fc.is_nan();
         if crossed {
             b = c;
@@ -204,7 +239,7 @@ pub(crate) fn hermite_root(a: f64, ga: f64, da: f64, b: f64, gb: f64, db: f64) -
     let dp = |s: f64| (3.0 * c3 * s + 2.0 * c2) * s + c1;
     let (mut lo, mut hi) = (0.0f64, 1.0f64);
     let lo_sign = ga.signum();
-    let mut s = if ga != gb { ga / (ga - gb) } else { 0.5 };
+    let mut s = quadratic_start(ga, ma, gb);
     for _ in 0..60 {
         let v = p(s);
         if v == 0.0 {
@@ -234,6 +269,25 @@ pub(crate) fn hermite_root(a: f64, ga: f64, da: f64, b: f64, gb: f64, db: f64) -
     }
     let t = a + s * w;
     (t > a && t < b).then_some(t)
+}
+
+/// Newton's start for [`hermite_root`] on `s` in `[0, 1]`: the root of the quadratic
+/// `q(s) = ga + ma s + (gb - ga - ma) s^2` through both ends with the start slope `ma`. It differs
+/// from the Hermite cubic by `c3 s^2 (s - 1)`, so for a guard at most quadratic along the solution
+/// (a ball's height, by far the commonest contact) it is the root itself and Newton stops after
+/// one iteration; from the secant point that took four to six (on the bouncing ball, where the
+/// crossing sits late in a step that starts at the apex). `ga`, `gb` bracket a root, so `q` has
+/// exactly one in `[0, 1]`; the secant point stands in when round-off puts it outside.
+fn quadratic_start(ga: f64, ma: f64, gb: f64) -> f64 {
+    let secant = ga / (ga - gb);
+    let (a, b, c) = (gb - ga - ma, ma, ga);
+    if a == 0.0 {
+        return if b != 0.0 && (0.0..=1.0).contains(&(-c / b)) { -c / b } else { secant };
+    }
+    // The cancellation-free pair of roots, `q / a` and `c / q`.
+    let root = (b * b - 4.0 * a * c).max(0.0).sqrt();
+    let q = -0.5 * (b + root.copysign(b));
+    [q / a, c / q].into_iter().find(|s| (0.0..=1.0).contains(s)).unwrap_or(secant)
 }
 
 impl Detector {
@@ -407,8 +461,7 @@ impl Detector {
             // The extremum, when the guard speed changes sign and a crossing could hide there.
             let mut ext = None;
             if extremum_may_cross(dir, g0, g1, self.dg0[pos], self.dg1[pos]) {
-                let s0 = self.dg0[pos].signum();
-                let te = illinois(t0, self.dg0[pos], t1, self.dg1[pos], s0, None, |t| {
+                let te = extremum_time(t0, self.dg0[pos], t1, self.dg1[pos], |t| {
                     self.speed_on_dense(sys, ev, t, dense, p)
                 });
                 if te > t0 && te < t1 {
@@ -567,6 +620,13 @@ mod tests {
         let first = hermite_root(0.2, y(0.2), dy(0.2), 0.9, y(0.9), dy(0.9)).expect("a root");
         let exact = (1.0f64 / 4.905).sqrt();
         assert!((first - exact).abs() <= 4.0 * EPS, "{first} vs {exact}");
+        // From the apex (zero speed at the start), as after every bounce.
+        let from_apex = hermite_root(0.0, y(0.0), dy(0.0), 0.9, y(0.9), dy(0.9)).expect("a root");
+        assert!((from_apex - exact).abs() <= 4.0 * EPS, "{from_apex} vs {exact}");
+        // A cubic guard (c3 != 0): Newton from the quadratic start still reaches the cubic's root.
+        let cubic = |t: f64| t * t * t - 0.3;
+        let t = hermite_root(0.0, cubic(0.0), 0.0, 1.0, cubic(1.0), 3.0).expect("a root");
+        assert!((t - 0.3f64.cbrt()).abs() <= 4.0 * EPS, "{t}");
         // A first estimate on the root closes the bracket in a few evaluations (about ten
         // without it, see the evaluation counts above).
         let mut calls = 0;
