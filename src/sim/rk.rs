@@ -247,13 +247,26 @@ impl Rk {
         }
         let d2 = (d2 / n).sqrt() / h0;
         let dmax = d1.max(d2);
-        let h1 = if dmax <= 1e-15 || !dmax.is_finite() {
-            (h0 * 1e-3).max(1e-6)
+        let h_euler = 100.0 * h0;
+        let h = if dmax <= 1e-15 || !dmax.is_finite() {
+            h_euler.min((h0 * 1e-3).max(1e-6))
+        } else if euler_bound_is_smaller(h_euler, dmax, self.tab.order) {
+            h_euler
         } else {
-            root_q(0.01 / dmax, self.tab.order)
+            h_euler.min(root_q(0.01 / dmax, self.tab.order))
         };
-        (100.0 * h0).min(h1).min(h_max)
+        h.min(h_max)
     }
+}
+
+/// Whether `h_euler <= (0.01 / dmax)^(1/q)`, tested as `h_euler^q dmax <= 0.01` (`q` dependent
+/// multiplications at most) instead of taking the root (a division and, for q = 8, three dependent
+/// square roots: the longest chain of the estimate). The Euler bound is the smaller one at every
+/// restart of the bouncing ball, whose zero velocity puts its scale at `atol`. Powers that
+/// overflow or underflow leave the answer to the root.
+fn euler_bound_is_smaller(h_euler: f64, dmax: f64, q: u32) -> bool {
+    let power = h_euler.powi(q as i32);
+    power > 0.0 && power.is_finite() && power * dmax <= 0.01
 }
 
 /// `x^(1/q)`: three square roots for the 8th-order pair, a third of the cost of `powf` (which
