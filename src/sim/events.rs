@@ -644,6 +644,22 @@ mod tests {
     }
 
     #[test]
+    fn extremum_time_takes_one_evaluation_for_a_linear_speed_and_is_close_for_others() {
+        // A ball's height speed 3.5 - 9.81 t: the first secant point is the apex.
+        let mut calls = 0;
+        let apex = 3.5 / 9.81;
+        let t = extremum_time(0.1, 3.5 - 0.981, 0.9, 3.5 - 8.829, |t| {
+            calls += 1;
+            3.5 - 9.81 * t
+        });
+        assert!((t - apex).abs() <= 4.0 * EPS, "{t} vs {apex}");
+        assert_eq!(calls, 1);
+        // A curved speed (-sin, extremum of cos at pi): within the tolerance of the step.
+        let t = extremum_time(2.5, -2.5f64.sin(), 3.9, -3.9f64.sin(), |t| -t.sin());
+        assert!((t - std::f64::consts::PI).abs() <= EXTREMUM_TOL * 1.4, "{t}");
+    }
+
+    #[test]
     fn only_extrema_that_can_hide_a_crossing_are_searched() {
         use Direction::*;
         // The apex of a falling ball above a floor (maximum, starts positive): nothing to find.
