@@ -66,6 +66,9 @@ const MAX_STAGES: usize = 16;
 /// The structurally nonzero weights of one tableau row as `(stage, weight)` pairs, found at
 /// compile time, so the stage sums neither multiply by zero (a third of DOP853's weights) nor
 /// test every weight on every step.
+///
+/// Invariant (the stage sums' unchecked loads rely on it): the stages strictly ascend. Both
+/// constructors enumerate the row in order, and the fields are private to this module.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Terms {
     len: usize,
@@ -119,6 +122,11 @@ impl Terms {
     /// Their weights, in the same order.
     pub fn weights(&self) -> &[f64] {
         &self.weight[..self.len]
+    }
+
+    /// The largest stage with a nonzero weight (the last one: they ascend), 0 for an empty row.
+    pub fn last_stage(&self) -> usize {
+        self.stages().last().copied().unwrap_or(0)
     }
 }
 
