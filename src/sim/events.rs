@@ -256,7 +256,8 @@ pub(crate) fn hermite_root(a: f64, ga: f64, da: f64, b: f64, gb: f64, db: f64) -
             // Converged: Newton's error after a step of size delta is about K delta^2 with
             // K = |p''/2p'|, far below round-off here unless the root is nearly double, and the
             // caller polishes the estimate on the true guard anyway. Waiting for a step of 4 EPS
-            // instead costs one or two more iterations (of 5 to 7 per event on the ball).
+            // instead costs one or two more iterations (from the quadratic start, the ball
+            // needs one).
             s = newton;
             break;
         }
