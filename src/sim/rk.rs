@@ -362,7 +362,8 @@ fn sum_blocks_portable<const CENTRED: bool, I: Fn(usize) -> f64>(
     // Checked once per row instead of per term (the per-term checks took 3% of a
     // bouncing-ball run): every block `sum_block` reads lies in `k`, since each stage is at most
     // the last (they ascend, `Terms`' invariant) and each block ends by `nz` within its stage.
-    assert!(out.len() <= nz && (terms.last_stage() + 1) * nz <= k.len(), "stage sum outside the stages");
+    let stages_end = (terms.last_stage() + 1).checked_mul(nz);
+    assert!(out.len() <= nz && stages_end.is_some_and(|end| end <= k.len()), "stage sum outside the stages");
     let mut i0 = 0;
     while i0 + 8 <= out.len() {
         // SAFETY: `i0 + 8 <= out.len()`, with the check above.
