@@ -237,9 +237,14 @@ pub(crate) fn hermite_root(a: f64, ga: f64, da: f64, b: f64, gb: f64, db: f64) -
     let c3 = 2.0 * (ga - gb) + ma + mb;
     let p = |s: f64| ((c3 * s + c2) * s + c1) * s + c0;
     let dp = |s: f64| (3.0 * c3 * s + 2.0 * c2) * s + c1;
+    let mut s = quadratic_start(ga, ma, gb);
+    if c3.abs() <= 8.0 * EPS * (ga.abs() + gb.abs() + ma.abs() + mb.abs()) {
+        // The cubic term is round-off: the quadratic's root is the cubic's (the ball's case).
+        let t = a + s * w;
+        return (t > a && t < b).then_some(t);
+    }
     let (mut lo, mut hi) = (0.0f64, 1.0f64);
     let lo_sign = ga.signum();
-    let mut s = quadratic_start(ga, ma, gb);
     for _ in 0..60 {
         let v = p(s);
         if v == 0.0 {
@@ -256,8 +261,7 @@ pub(crate) fn hermite_root(a: f64, ga: f64, da: f64, b: f64, gb: f64, db: f64) -
             // Converged: Newton's error after a step of size delta is about K delta^2 with
             // K = |p''/2p'|, far below round-off here unless the root is nearly double, and the
             // caller polishes the estimate on the true guard anyway. Waiting for a step of 4 EPS
-            // instead costs one or two more iterations (from the quadratic start, the ball
-            // needs one).
+            // instead costs one or two more iterations.
             s = newton;
             break;
         }
@@ -275,9 +279,9 @@ pub(crate) fn hermite_root(a: f64, ga: f64, da: f64, b: f64, gb: f64, db: f64) -
 /// Newton's start for [`hermite_root`] on `s` in `[0, 1]`: the root of the quadratic
 /// `q(s) = ga + ma s + (gb - ga - ma) s^2` through both ends with the start slope `ma`. It differs
 /// from the Hermite cubic by `c3 s^2 (s - 1)`, so for a guard at most quadratic along the solution
-/// (a ball's height, by far the commonest contact) it is the root itself and Newton stops after
-/// one iteration; from the secant point that took four to six (on the bouncing ball, where the
-/// crossing sits late in a step that starts at the apex). `ga`, `gb` bracket a root, so `q` has
+/// (a ball's height, by far the commonest contact) it is the root itself and [`hermite_root`]
+/// needs no Newton iteration at all; from the secant point it took four to six (on the bouncing
+/// ball, where the crossing sits late in a step that starts at the apex). `ga`, `gb` bracket a root, so `q` has
 /// exactly one in `[0, 1]`; the secant point stands in when round-off puts it outside.
 fn quadratic_start(ga: f64, ma: f64, gb: f64) -> f64 {
     let secant = ga / (ga - gb);
