@@ -284,15 +284,16 @@ pub(crate) fn hermite_root(a: f64, ga: f64, da: f64, b: f64, gb: f64, db: f64) -
 /// ball, where the crossing sits late in a step that starts at the apex). `ga`, `gb` bracket a root, so `q` has
 /// exactly one in `[0, 1]`; the secant point stands in when round-off puts it outside.
 fn quadratic_start(ga: f64, ma: f64, gb: f64) -> f64 {
-    let secant = ga / (ga - gb);
     let (a, b, c) = (gb - ga - ma, ma, ga);
-    if a == 0.0 {
-        return if b != 0.0 && (0.0..=1.0).contains(&(-c / b)) { -c / b } else { secant };
-    }
-    // The cancellation-free pair of roots, `q / a` and `c / q`.
-    let root = (b * b - 4.0 * a * c).max(0.0).sqrt();
-    let q = -0.5 * (b + root.copysign(b));
-    [q / a, c / q].into_iter().find(|s| (0.0..=1.0).contains(s)).unwrap_or(secant)
+    let candidates = if a == 0.0 {
+        [-c / b, f64::NAN]
+    } else {
+        // The cancellation-free pair of roots, `q / a` and `c / q`.
+        let root = (b * b - 4.0 * a * c).max(0.0).sqrt();
+        let q = -0.5 * (b + root.copysign(b));
+        [q / a, c / q]
+    };
+    candidates.into_iter().find(|s| (0.0..=1.0).contains(s)).unwrap_or_else(|| ga / (ga - gb))
 }
 
 impl Detector {
