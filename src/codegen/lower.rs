@@ -66,11 +66,7 @@ pub(crate) fn define_kernel(
 
     let result = {
         let mut b = FunctionBuilder::new(&mut ctx.func, fn_ctx);
-        let block = b.create_block();
-        b.append_block_params_for_function_params(block);
-        b.switch_to_block(block);
-        b.seal_block(block);
-        let params = b.block_params(block).to_vec();
+        let params = enter_body(&mut b);
         let mut tr = Translator {
             b,
             module: &mut *module,
@@ -124,11 +120,7 @@ pub(crate) fn define_driver(
     ctx.func.name = UserFuncName::user(0, id.as_u32());
     {
         let mut b = FunctionBuilder::new(&mut ctx.func, fn_ctx);
-        let block = b.create_block();
-        b.append_block_params_for_function_params(block);
-        b.switch_to_block(block);
-        b.seal_block(block);
-        let args = b.block_params(block).to_vec();
+        let args = enter_body(&mut b);
         let mut ret = b.ins().f64const(Ieee64::with_float(0.0));
         for &part in parts {
             let callee = module.declare_func_in_func(part, b.func);
@@ -433,6 +425,15 @@ impl Translator<'_, '_> {
         let zero = self.constant(0.0f64.to_bits());
         self.b.ins().select(cond, one, zero)
     }
+}
+
+/// Opens a function's single block, taking the signature's parameters, and returns them.
+fn enter_body(b: &mut FunctionBuilder) -> Vec<Value> {
+    let block = b.create_block();
+    b.append_block_params_for_function_params(block);
+    b.switch_to_block(block);
+    b.seal_block(block);
+    b.block_params(block).to_vec()
 }
 
 /// The largest node id a term needs, i.e. the point in the ascending walk where it can be stored.
