@@ -29,7 +29,7 @@ use serde::Serialize;
 use crate::report::num;
 
 use crate::sim::{
-    self, EventRecord, HybridSystem, SimError, SimOptions, SimResult, StopReason, TrajectoryRequest,
+    EventRecord, HybridSystem, SimError, SimOptions, SimResult, Simulator, StopReason, TrajectoryRequest,
 };
 
 /// Derivatives smaller than this fraction of their natural scale `|Q| / max(|p_j|, 1)` are
@@ -205,13 +205,14 @@ pub fn check(
 ) -> Result<GradCheck, SimError> {
     let info = sys.info();
     let opts = SimOptions { trajectory: TrajectoryRequest::None, ..opts.clone() };
+    let mut simulator = Simulator::new(sys, &opts)?;
     let mut params = Vec::with_capacity(info.n_grad());
     for (j, &param) in info.grad_params.iter().enumerate() {
         let step = check.rel_step * p[param].abs().max(1.0);
-        let perturbed = |sign: f64| {
+        let mut perturbed = |sign: f64| {
             let mut q = p.to_vec();
             q[param] += sign * step;
-            sim::run(sys, &q, &opts)
+            simulator.run(&q)
         };
         let (minus, plus) = (perturbed(-1.0)?, perturbed(1.0)?);
         let mut param_check = ParamCheck {

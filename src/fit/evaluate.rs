@@ -9,7 +9,7 @@ use nalgebra::DMatrix;
 
 use super::target::{Observable, Target};
 use crate::report::RunReport;
-use crate::sim::{self, HybridSystem, SimOptions, SimResult, StopReason, SystemInfo};
+use crate::sim::{HybridSystem, SimOptions, SimResult, Simulator, StopReason, SystemInfo};
 
 /// The residuals of one run and their Jacobian with respect to the free parameters.
 #[derive(Clone, Debug)]
@@ -67,15 +67,16 @@ impl fmt::Display for Rejection {
     }
 }
 
-/// Runs `system` at parameters `p` (all of them) and reads the targets.
-pub fn evaluate(
-    system: &impl HybridSystem,
+/// Runs the simulator's model at parameters `p` (all of them) and reads the targets. A fit keeps
+/// one `Simulator` for all its evaluations, so its scratch buffers are allocated once.
+pub fn evaluate<S: HybridSystem + ?Sized>(
+    simulator: &mut Simulator<'_, S>,
     p: &[f64],
     targets: &[Target],
-    opts: &SimOptions,
 ) -> Result<Evaluation, Rejection> {
-    let info = system.info();
-    let result = sim::run(system, p, opts).map_err(|e| Rejection::RunStopped { message: e.to_string() })?;
+    let info = simulator.system().info();
+    let result = simulator.run(p).map_err(|e| Rejection::RunStopped { message: e.to_string() })?;
+    let opts = simulator.options();
     let f = &result.final_state;
     // At a stop event the final time moves with the parameters: only the total derivatives
     // describe how the final values change.

@@ -22,7 +22,7 @@ pub use evaluate::{evaluate, Evaluation, Rejection};
 pub use report::FitReport;
 pub use target::{Observable, Target, TargetError};
 
-use crate::sim::{HybridSystem, SimOptions};
+use crate::sim::{HybridSystem, SimOptions, Simulator};
 
 /// The box a free parameter must stay in; infinite ends for none. Trial points are projected
 /// onto the box, and a parameter at a bound that the gradient pushes outwards is held there.
@@ -223,8 +223,10 @@ pub fn fit<S: HybridSystem>(problem: &FitProblem<'_, S>, opts: &FitOptions) -> R
         }
         p
     };
+    let mut simulator = Simulator::new(problem.system, &problem.sim)
+        .map_err(|e| FitError::Start(Rejection::RunStopped { message: e.to_string() }))?;
     let solved = lm::minimize(x0, &problem.bounds, opts, |x| {
-        evaluate(problem.system, &with_free(x), &problem.targets, &problem.sim)
+        evaluate(&mut simulator, &with_free(x), &problem.targets)
     })
     .map_err(FitError::Start)?;
     Ok(FitResult {

@@ -103,6 +103,11 @@ impl<'a, S: HybridSystem + ?Sized> Simulator<'a, S> {
     pub fn options(&self) -> &SimOptions {
         &self.opts
     }
+
+    /// The model this simulator runs.
+    pub fn system(&self) -> &'a S {
+        self.sys
+    }
 }
 
 fn check_params(info: &SystemInfo, p: &[f64]) -> Result<(), SimError> {
