@@ -107,9 +107,8 @@ fn stop_event_reports_total_derivatives() {
     // Time-triggered stop at t = 1: y(1) = h0 - g/2, and dy/dt_stop = v(1) = -g.
     let src = "model s\nparam g = 9.81\nparam h0 = 10\nparam ts = 1\nstate y = h0\nstate v = 0\n\
                der(y) = v\nder(v) = -g\nevent done when t >= ts {\n    stop\n}\n";
-    let dir = std::env::temp_dir().join(format!("hybc-stop-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let path = dir.join("stop.hyb");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("stop.hyb");
     std::fs::write(&path, src).expect("write model");
     let (json, out) = run_json(&[path.to_str().expect("utf-8 path"), "--grad", "ts,h0", "--t-end", "5"]);
     assert!(out.status.success());
@@ -148,7 +147,8 @@ fn every_shipped_model_runs_and_the_table_shows_its_gradients() {
 
 #[test]
 fn trajectory_csv_has_a_header_and_uniform_samples() {
-    let path = std::env::temp_dir().join(format!("hybc-traj-{}.csv", std::process::id()));
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("traj.csv");
     let out = hybc(&[
         "run",
         "models/ball.hyb",

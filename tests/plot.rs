@@ -18,10 +18,11 @@ use hybc::sweep;
 use plotters::style::RGBColor;
 use serde_json::Value;
 
-fn temp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("hybc-plot-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    dir.join(name)
+/// A fresh directory, removed when the returned guard drops, and `name` inside it.
+fn temp(name: &str) -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join(name);
+    (dir, path)
 }
 
 fn hex(c: RGBColor) -> String {
@@ -55,7 +56,7 @@ fn run_json(args: &[&str]) -> Value {
 
 #[test]
 fn run_plot_has_a_panel_per_variable_and_a_line_per_event() {
-    let path = temp("ball.svg");
+    let (_dir, path) = temp("ball.svg");
     let out = hybc(&["run", "models/ball.hyb", "--quiet", "--plot", path.to_str().expect("utf-8")]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let text = svg(&path);
@@ -79,7 +80,7 @@ fn run_plot_has_a_panel_per_variable_and_a_line_per_event() {
 
 #[test]
 fn run_plot_shades_a_band_per_stretch_in_one_mode() {
-    let path = temp("thermostat.svg");
+    let (_dir, path) = temp("thermostat.svg");
     let out = hybc(&["run", "models/thermostat.hyb", "--quiet", "--plot", path.to_str().expect("utf-8")]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let text = svg(&path);
@@ -98,7 +99,7 @@ fn png_plots_decode_to_the_documented_size() {
         (vec!["run", "models/ball.hyb", "--quiet"], 3),
         (vec!["sweep", "models/ball.hyb", "--vary", "e=0.75:0.95:9", "--grad", "e"], 1),
     ] {
-        let path = temp(&format!("{}.png", args[0]));
+        let (_dir, path) = temp(&format!("{}.png", args[0]));
         let mut all = args.clone();
         all.extend(["--plot", path.to_str().expect("utf-8")]);
         let out = hybc(&all);
@@ -118,7 +119,7 @@ fn png_plots_decode_to_the_documented_size() {
 #[test]
 fn sweep_plot_marks_every_point_and_draws_tangents_with_or_without_grad() {
     for grad in [&["--grad", "e,h0"][..], &[]] {
-        let path = temp(&format!("sweep{}.svg", grad.len()));
+        let (_dir, path) = temp(&format!("sweep{}.svg", grad.len()));
         let mut args = vec!["sweep", "models/ball.hyb", "--vary", "e=0.75:0.95:11"];
         args.extend_from_slice(grad);
         args.extend(["--plot", path.to_str().expect("utf-8")]);
@@ -186,7 +187,7 @@ fn unknown_plot_formats_are_usage_errors_and_write_nothing() {
         vec!["sweep", "models/ball.hyb", "--vary", "e=0.8,0.9", "--plot"],
     ] {
         for name in ["out.pdf", "out", "out.svg.txt"] {
-            let path = temp(name);
+            let (_dir, path) = temp(name);
             let mut all = args.clone();
             all.push(path.to_str().expect("utf-8"));
             let out = hybc(&all);

@@ -323,7 +323,8 @@ fn bad_flags_are_usage_errors_with_clear_messages() {
 
 #[test]
 fn output_file_gets_the_rows() {
-    let path = std::env::temp_dir().join(format!("hybc-sweep-out-{}.csv", std::process::id()));
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("rows.csv");
     let out = hybc(&[
         "sweep",
         "models/ball.hyb",
@@ -337,7 +338,6 @@ fn output_file_gets_the_rows() {
     let text = std::fs::read_to_string(&path).expect("written");
     assert_eq!(text, sweep_ok(&["models/ball.hyb", "--vary", "e=0.7:0.9:3"]));
     assert_eq!(text.lines().count(), 4);
-    let _ = std::fs::remove_file(&path);
 }
 
 #[test]
@@ -346,7 +346,8 @@ fn after_a_stop_event_the_gradients_are_total_derivatives() {
     // dv/dts = -g (the fixed-time sensitivities would be 0).
     let src = "model s\nparam g = 9.81\nparam h0 = 10\nparam ts = 1\nstate y = h0\nstate v = 0\n\
                der(y) = v\nder(v) = -g\nevent done when t >= ts {\n    stop\n}\n";
-    let path = std::env::temp_dir().join(format!("hybc-sweep-stop-{}.hyb", std::process::id()));
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("stop.hyb");
     std::fs::write(&path, src).expect("write model");
     let out = sweep_ok(&[
         path.to_str().expect("utf-8"),
@@ -369,5 +370,4 @@ fn after_a_stop_event_the_gradients_are_total_derivatives() {
         assert_relative_eq!(f(&row["dy/dts"]), -9.81 * ts, max_relative = 1e-9);
         assert_relative_eq!(f(&row["dv/dts"]), -9.81, max_relative = 1e-9);
     }
-    let _ = std::fs::remove_file(&path);
 }
