@@ -136,6 +136,7 @@ impl RunReport {
                 "rejected": r.stats.rejected,
                 "rhs_calls": r.stats.rhs_calls,
                 "events": r.stats.events,
+                "switches": r.stats.switches,
                 "compile_seconds": self.compile_seconds,
                 "run_seconds": self.run_seconds,
             },
@@ -193,9 +194,14 @@ impl RunReport {
             rows(&mut out, &self.info.state_names, &f.state, &f.dstate_total);
             rows(&mut out, &self.info.output_names, &f.outputs, &f.doutputs_total);
         }
+        let switches = match r.stats.switches {
+            0 => String::new(),
+            1 => ", 1 flow switch crossed".to_string(),
+            k => format!(", {k} flow switches crossed"),
+        };
         let _ = writeln!(
             out,
-            "\n{} steps ({} rejected), {} kernel calls, compile {:.2} ms, run {:.1} us",
+            "\n{} steps ({} rejected), {} kernel calls{switches}, compile {:.2} ms, run {:.1} us",
             r.stats.steps,
             r.stats.rejected,
             r.stats.rhs_calls,

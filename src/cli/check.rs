@@ -33,7 +33,7 @@ pub fn summary(model: &Model) -> String {
         plural(model.states.len(), "state"),
         plural(model.params.len(), "parameter"),
         plural(model.modes.len(), "mode"),
-        plural(model.events.len(), "event"),
+        plural(model.events.iter().filter(|e| !e.implicit).count(), "event"),
         plural(model.outputs.len(), "output"),
     );
     let _ = writeln!(out, "parameters");
@@ -54,7 +54,7 @@ pub fn summary(model: &Model) -> String {
         }
     }
     let _ = writeln!(out, "events");
-    for ev in &model.events {
+    for ev in model.events.iter().filter(|e| !e.implicit) {
         let dir = match ev.direction {
             Direction::Falling => "falling (from > 0 to <= 0)",
             Direction::Rising => "rising (from < 0 to >= 0)",
@@ -86,6 +86,16 @@ pub fn summary(model: &Model) -> String {
         }
         if ev.is_stop {
             let _ = writeln!(out, "    stop");
+        }
+    }
+    let switches: Vec<_> = model.events.iter().filter(|e| e.implicit).collect();
+    if !switches.is_empty() {
+        let _ = writeln!(
+            out,
+            "flow switches (where a flow jumps: located like events, the gradients jump there)"
+        );
+        for ev in switches {
+            let _ = writeln!(out, "  {}: at {} = 0", ev.name, crate::lower::show_expr(model, &ev.guard));
         }
     }
     let _ = writeln!(out, "outputs");

@@ -97,9 +97,11 @@ fn event_time(name: &str, k: &str, text: &str, info: &SystemInfo) -> Result<Obse
         .ok()
         .filter(|k| *k >= 1)
         .ok_or_else(|| TargetError::BadOccurrence { text: text.to_string() })?;
-    let names: Vec<&str> = info.events.iter().map(|e| &*e.name).collect();
-    match names.iter().position(|n| *n == name) {
-        Some(name_event) => Ok(Observable::EventTime { name_event, occurrence }),
+    // Flow switches are not events of the run's record, so they cannot be targets.
+    let declared = || info.events.iter().enumerate().filter(|(_, e)| !e.implicit);
+    let names: Vec<&str> = declared().map(|(_, e)| &*e.name).collect();
+    match declared().find(|(_, e)| &*e.name == name) {
+        Some((name_event, _)) => Ok(Observable::EventTime { name_event, occurrence }),
         None => Err(TargetError::UnknownEvent {
             name: name.to_string(),
             hint: hint(name, &names),

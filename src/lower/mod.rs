@@ -121,6 +121,7 @@ pub fn system_info(model: &Model, grad_params: &[sema::ParamIdx]) -> SystemInfo 
                 target_mode: e.target.map(|m| m.0 as usize),
                 is_stop: e.is_stop,
                 has_condition: e.condition.is_some(),
+                implicit: e.implicit,
             })
             .collect(),
         initial_mode: model.initial_mode.0 as usize,

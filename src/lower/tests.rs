@@ -44,6 +44,7 @@ fn ball() -> Model {
             is_stop: false,
             owner: None,
             span,
+            implicit: false,
         }],
         outputs: vec![Output {
             name: "energy".into(),

@@ -6,14 +6,16 @@ use std::collections::HashMap;
 use super::error::CheckError;
 use super::model::*;
 use super::names::{resolve_all_lets, resolve_names, Binding, ScopeId, Scopes};
+use super::switches::add_flow_switches;
 use crate::syntax::ast;
 use crate::syntax::Span;
 
 /// Checks a parsed file. Returns the model, or every error found.
 pub fn check(file: &ast::File) -> Result<Model, Vec<CheckError>> {
     let mut cx = Checker::default();
-    let model = cx.check_file(file);
+    let mut model = cx.check_file(file);
     if cx.errors.is_empty() {
+        add_flow_switches(&mut model);
         Ok(model)
     } else {
         cx.errors.sort_by_key(|e| e.span().start);
@@ -430,6 +432,7 @@ impl<'a> Checker<'a> {
             is_stop,
             owner: pe.owner,
             span: d.name.span,
+            implicit: false,
         }
     }
 

@@ -4,6 +4,7 @@ mod check;
 mod error;
 pub mod model;
 mod names;
+mod switches;
 
 pub use check::check;
 pub use error::CheckError;

@@ -89,6 +89,9 @@ pub struct Event {
     /// `None` for a top-level event (active in every mode).
     pub owner: Option<ModeId>,
     pub span: Span,
+    /// Not declared but implied by a discontinuous flow (see `switches`): located and jumped
+    /// over like an event, never reported as one.
+    pub implicit: bool,
 }
 
 #[derive(Clone, Debug, PartialEq)]

@@ -38,6 +38,9 @@ pub(crate) struct Crossing {
     pub sigma: f64,
     /// Located at an extremum that only touches zero within round-off.
     pub touch: bool,
+    /// The last time found on the pre-crossing side (next to `t`; `t` itself for a touch): where
+    /// a flow switch reads the flow from before its jump.
+    pub t_pre: f64,
 }
 
 pub(crate) struct Detector {
@@ -101,9 +104,9 @@ fn allows(dir: Direction, sigma: f64) -> bool {
     }
 }
 
-/// Illinois regula falsi on `[a, b]` with `sigma * fa > 0 >= sigma * fb`; returns the smallest
-/// point found on the crossed side once the bracket is as narrow as the floating-point numbers
-/// allow.
+/// Illinois regula falsi on `[a, b]` with `sigma * fa > 0 >= sigma * fb`; returns the final
+/// bracket once it is as narrow as the floating-point numbers allow: the largest point found on
+/// the pre-crossing side and the smallest point found on the crossed side (the root).
 ///
 /// Near the end the secant keeps landing next to the end it last moved, where the function is
 /// round-off, and plain Illinois would then narrow the bracket only by bisection (about 50
@@ -123,7 +126,7 @@ pub(crate) fn illinois<F: FnMut(f64) -> f64>(
     sigma: f64,
     first: Option<f64>,
     f: F,
-) -> f64 {
+) -> (f64, f64) {
     illinois_until(a, fa, b, fb, sigma, first, 0.0, f)
 }
 
@@ -134,11 +137,12 @@ pub(crate) fn illinois<F: FnMut(f64) -> f64>(
 /// it to adjacent floating-point numbers took two evaluations more (three instead of one on a
 /// ball's apex, where the speed is linear and the first secant point is the root).
 pub(crate) fn extremum_time<F: FnMut(f64) -> f64>(a: f64, sa: f64, b: f64, sb: f64, f: F) -> f64 {
-    illinois_until(a, sa, b, sb, sa.signum(), None, EXTREMUM_TOL * (b - a), f)
+    illinois_until(a, sa, b, sb, sa.signum(), None, EXTREMUM_TOL * (b - a), f).1
 }
 
 /// [`illinois`], or when `enough > 0`, stopping at a secant point within `enough` of the last
-/// trial point (a secant step that short means the iteration has converged to about that).
+/// trial point (a secant step that short means the iteration has converged to about that),
+/// returned as both ends.
 #[allow(clippy::too_many_arguments)]
 fn illinois_until<F: FnMut(f64) -> f64>(
     mut a: f64,
@@ -149,7 +153,7 @@ fn illinois_until<F: FnMut(f64) -> f64>(
     first: Option<f64>,
     enough: f64,
     mut f: F,
-) -> f64 {
+) -> (f64, f64) {
     let mut side = 0i8;
     let mut width = b - a;
     let mut push = 1.0f64;
@@ -168,7 +172,7 @@ fn illinois_until<F: FnMut(f64) -> f64>(
             _ => f64::NAN,
         };
         if enough > 0.0 && (secant - last).abs() <= enough && secant > a && secant < b {
-            return secant;
+            return (secant, secant);
         }
         let stalled = it % 4 == 3 && b - a > 0.5 * width;
         if it % 4 == 3 {
@@ -216,7 +220,7 @@ fn illinois_until<F: FnMut(f64) -> f64>(
         let same_side = (pushed == -1 && crossed) || (pushed == 1 && !crossed);
         push = if same_side { 2.0 * push } else { 1.0 };
     }
-    b
+    (a, b)
 }
 
 /// The root in `(a, b)` of the cubic Hermite interpolant of a guard with values `ga`, `gb` of
@@ -489,7 +493,8 @@ impl Detector {
                         && ge.abs() <= self.noise_at_x(sys, ev, te, p)
                     {
                         // Moving towards zero and stopping within round-off of it: a touch.
-                        self.found[pos] = Some(Crossing { t: te, sigma: g0.signum(), touch: true });
+                        self.found[pos] =
+                            Some(Crossing { t: te, sigma: g0.signum(), touch: true, t_pre: te });
                         continue;
                     } else if let Some(sigma) = crossing_sign(dir, ge, g1) {
                         bracket = Some((te, ge, 0.0, t1, g1, dg1, sigma));
@@ -503,10 +508,10 @@ impl Detector {
             }
             if let Some((a, ga, da, b, gb, db, sigma)) = bracket {
                 let first = hermite_root(a, ga, da, b, gb, db);
-                let t = illinois(a, ga, b, gb, sigma, first, |t| {
+                let (t_pre, t) = illinois(a, ga, b, gb, sigma, first, |t| {
                     self.guard_on_dense(sys, mode, ne, pos, t, dense, p)
                 });
-                self.found[pos] = Some(Crossing { t, sigma, touch: false });
+                self.found[pos] = Some(Crossing { t, sigma, touch: false, t_pre });
             }
         }
     }
@@ -573,15 +578,17 @@ mod tests {
     #[test]
     fn illinois_finds_root_to_adjacent_floats() {
         // cos has a root at pi/2, falling.
-        let t = illinois(1.0, 1f64.cos(), 2.0, 2f64.cos(), 1.0, None, f64::cos);
+        let (t_pre, t) = illinois(1.0, 1f64.cos(), 2.0, 2f64.cos(), 1.0, None, f64::cos);
         assert!((t - std::f64::consts::FRAC_PI_2).abs() <= 4.0 * EPS * 2.0, "{t}");
         assert!(t.cos() <= 0.0);
+        // The bracket's other end (where a flow switch reads the old flow) is strictly before.
+        assert!(t_pre.cos() > 0.0 && t - t_pre <= 4.0 * EPS * 2.0, "{t_pre} {t}");
     }
 
     #[test]
     fn illinois_returns_crossed_side_for_rising() {
         let f = |t: f64| t * t * t - 0.3;
-        let t = illinois(0.0, f(0.0), 1.0, f(1.0), -1.0, None, f);
+        let (_, t) = illinois(0.0, f(0.0), 1.0, f(1.0), -1.0, None, f);
         assert!(f(t) >= 0.0);
         assert!((t - 0.3f64.cbrt()).abs() < 1e-15, "{t}");
     }
@@ -590,7 +597,7 @@ mod tests {
     fn illinois_handles_exact_zero_at_right_end() {
         // Root exactly at 0.5, bracket end exactly on it: must still narrow to 0.5.
         let f = |t: f64| 0.5 - t;
-        let t = illinois(0.0, 0.5, 1.0, -0.5, 1.0, None, f);
+        let (_, t) = illinois(0.0, 0.5, 1.0, -0.5, 1.0, None, f);
         assert_eq!(t, 0.5);
     }
 
@@ -599,7 +606,7 @@ mod tests {
         // A linear function is found by the first secant; closing the bracket around it must not
         // fall back to some 50 bisections.
         let mut calls = 0;
-        let t = illinois(1.349, 1.11, 1.782, -3.13, 1.0, None, |t| {
+        let (_, t) = illinois(1.349, 1.11, 1.782, -3.13, 1.0, None, |t| {
             calls += 1;
             (1.462_936_596_793_766 - t) * 7.3
         });
@@ -611,7 +618,7 @@ mod tests {
             let wobble = ((t.to_bits() % 7) as f64 - 3.0) * 1e-14;
             (0.75 - t) + wobble
         };
-        let t = illinois(0.0, noisy(0.0), 1.0, noisy(1.0), 1.0, None, |t| {
+        let (_, t) = illinois(0.0, noisy(0.0), 1.0, noisy(1.0), 1.0, None, |t| {
             calls += 1;
             noisy(t)
         });
@@ -636,7 +643,7 @@ mod tests {
         // A first estimate on the root closes the bracket in a few evaluations (about ten
         // without it, see the evaluation counts above).
         let mut calls = 0;
-        let t = illinois(0.2, y(0.2), 0.9, y(0.9), 1.0, Some(first), |t| {
+        let (_, t) = illinois(0.2, y(0.2), 0.9, y(0.9), 1.0, Some(first), |t| {
             calls += 1;
             y(t)
         });

@@ -10,12 +10,18 @@
 //! - for a stop event the total derivative of the final state `R(t_e, x(t_e), p)` is
 //!   `R_x (S- + f- dt_e/dp) + R_p + R_t dt_e/dp`.
 //!
+//! A flow switch (`apply_switch`) is the same jump with `R` the identity, `f-` and `f+` read just
+//! before and just past the switch (the flow itself jumps there, not the mode).
+//!
 //! Grazing: when `|d| <= graze_tol (|g_x| |f-| + |g_t|)` (Euclidean norms; the factor never below
 //! 1e-8) the crossing is tangential, `dt_e/dp` does not exist and dividing by `d` would produce
 //! huge or NaN numbers.
 
 use super::events::{dot, norm};
 use super::system::HybridSystem;
+
+/// A time and the state at that time.
+pub(crate) type TimedState<'a> = (f64, &'a [f64]);
 
 /// Relative crossing speed below which an event always counts as grazing.
 const MIN_RELATIVE_SPEED: f64 = 1e-8;
@@ -84,24 +90,7 @@ impl Jump {
     ) -> JumpOutcome {
         let (n, m) = (self.n, self.m);
         sys.flow(mode_old, t, x, p, &mut self.f_minus);
-        let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
-        let d = dot(&self.gx, &self.f_minus) + gt;
-        let scale = norm(&self.gx) * norm(&self.f_minus) + gt.abs();
-        // A NaN speed also counts as grazing (the comparison is false for NaN). Below a relative
-        // speed of about sqrt(eps) the located time itself is unreliable (its error is the
-        // guard's round-off divided by d), so even `graze_tol = 0` does not go below that.
-        let crossing_fast_enough = d.abs() > graze_tol.max(MIN_RELATIVE_SPEED) * scale;
-        let grazing = !crossing_fast_enough;
-        for j in 0..m {
-            self.dte[j] = if grazing {
-                // No time correction: S is carried on as if the event time were fixed, the
-                // one-sided limit that keeps the numbers finite. The caller marks every later
-                // gradient as not meaningful, so this S is never reported as a derivative.
-                0.0
-            } else {
-                -(dot(&self.gx, &s[j * n..(j + 1) * n]) + self.gp[j]) / d
-            };
-        }
+        let outcome = self.event_time_gradient(sys, ev, t, x, s, p, graze_tol);
         sys.reset(ev, t, x, p, &mut self.x_plus);
         sys.reset_jac(ev, t, x, p, &mut self.rx, &mut self.rp, &mut self.rt);
         sys.flow(mode_new, t, &self.x_plus, p, &mut self.f_plus);
@@ -124,6 +113,72 @@ impl Jump {
         }
         x.copy_from_slice(&self.x_plus);
         s.copy_from_slice(&self.s_plus);
+        outcome
+    }
+
+    /// Applies the flow switch `ev` (an implicit event: no reset, no mode change) at time `t`,
+    /// where the state is `x`: `sides` are a time and state just before the switch, where the
+    /// flow is `f-`, and just past it, where it is `f+`. Only `s` changes:
+    /// `S+ = S- + (f- - f+) dt_e/dp`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn apply_switch<S: HybridSystem + ?Sized>(
+        &mut self,
+        sys: &S,
+        ev: usize,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        ((t_pre, x_pre), (t_post, x_post)): (TimedState, TimedState),
+        s: &mut [f64],
+        p: &[f64],
+        graze_tol: f64,
+    ) -> JumpOutcome {
+        let n = self.n;
+        sys.flow(mode, t_pre, x_pre, p, &mut self.f_minus);
+        let outcome = self.event_time_gradient(sys, ev, t, x, s, p, graze_tol);
+        sys.flow(mode, t_post, x_post, p, &mut self.f_plus);
+        for (j, &dte) in self.dte.iter().enumerate() {
+            for ((s, f_minus), f_plus) in
+                s[j * n..(j + 1) * n].iter_mut().zip(&self.f_minus).zip(&self.f_plus)
+            {
+                *s += (f_minus - f_plus) * dte;
+            }
+        }
+        outcome
+    }
+
+    /// The crossing speed `d = g_x f- + g_t` (with `f-` already in `f_minus`) and `dt_e/dp` into
+    /// `dte` (zero when grazing).
+    #[allow(clippy::too_many_arguments)]
+    fn event_time_gradient<S: HybridSystem + ?Sized>(
+        &mut self,
+        sys: &S,
+        ev: usize,
+        t: f64,
+        x: &[f64],
+        s: &[f64],
+        p: &[f64],
+        graze_tol: f64,
+    ) -> JumpOutcome {
+        let n = self.n;
+        let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
+        let d = dot(&self.gx, &self.f_minus) + gt;
+        let scale = norm(&self.gx) * norm(&self.f_minus) + gt.abs();
+        // A NaN speed also counts as grazing (the comparison is false for NaN). Below a relative
+        // speed of about sqrt(eps) the located time itself is unreliable (its error is the
+        // guard's round-off divided by d), so even `graze_tol = 0` does not go below that.
+        let crossing_fast_enough = d.abs() > graze_tol.max(MIN_RELATIVE_SPEED) * scale;
+        let grazing = !crossing_fast_enough;
+        for (j, dte) in self.dte.iter_mut().enumerate() {
+            *dte = if grazing {
+                // No time correction: S is carried on as if the event time were fixed, the
+                // one-sided limit that keeps the numbers finite. The caller marks every later
+                // gradient as not meaningful, so this S is never reported as a derivative.
+                0.0
+            } else {
+                -(dot(&self.gx, &s[j * n..(j + 1) * n]) + self.gp[j]) / d
+            };
+        }
         JumpOutcome { denominator: d, scale, grazing }
     }
 }

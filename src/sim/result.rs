@@ -34,6 +34,10 @@ pub enum SimWarning {
     /// The guard was crossed (or touched) at a speed too small for its time gradient to exist;
     /// this event's and all later gradients are `None`.
     Grazing { event: usize, name: Arc<str>, time: f64, denominator: f64, scale: f64 },
+    /// A flow switch was crossed at the instant of a declared event that had already changed the
+    /// state or the mode, so the flow before the switch is not known; all later gradients are
+    /// `None`.
+    SwitchAtEvent { name: Arc<str>, time: f64 },
 }
 
 impl fmt::Display for SimWarning {
@@ -43,6 +47,11 @@ impl fmt::Display for SimWarning {
                 f,
                 "event `{name}` grazes its guard at t = {time} (crossing speed {denominator:e}, \
                  scale {scale:e}): gradients from here on are not meaningful"
+            ),
+            SimWarning::SwitchAtEvent { name, time } => write!(
+                f,
+                "`{name}` was crossed at t = {time} together with an event that changed the state \
+                 or the mode: gradients from here on are not meaningful"
             ),
         }
     }
@@ -115,6 +124,8 @@ pub struct SimStats {
     /// Right-hand side (`flow_sens`) evaluations by the stepper.
     pub rhs_calls: usize,
     pub events: usize,
+    /// Flow switches crossed (implicit events, not in `events`).
+    pub switches: usize,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]

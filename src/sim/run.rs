@@ -31,6 +31,9 @@ const EPS: f64 = f64::EPSILON;
 /// estimate is 4.1e-3 and the flight 0.72 long); no shipped model rejects more steps with it.
 const AFTER_SWITCH_GROWTH: f64 = 10.0;
 const AFTER_RESET_GROWTH: f64 = 1000.0;
+/// Trial points, at 1, 2, 4, ... floating-point spacings past a flow switch's located time,
+/// for one where its guard is strictly past zero (there the flow is the new branch's).
+const SWITCH_SIDE_TRIES: usize = 40;
 /// Rejections in a row with a non-finite trial state before the run gives up on shrinking.
 const MAX_NONFINITE_REJECTS: usize = 30;
 
@@ -67,6 +70,8 @@ struct Workspace {
     fired: Vec<(usize, f64, f64)>,
     /// The output Jacobians `y_x`, `y_p`, `y_t` at the final state.
     output_jac: (Vec<f64>, Vec<f64>, Vec<f64>),
+    /// The states on either side of a flow switch.
+    x_sides: (Vec<f64>, Vec<f64>),
 }
 
 impl<'a, S: HybridSystem + ?Sized> Simulator<'a, S> {
@@ -89,6 +94,7 @@ impl<'a, S: HybridSystem + ?Sized> Simulator<'a, S> {
                 let k = info.n_outputs();
                 (vec![0.0; k * n], vec![0.0; k * m], vec![0.0; k])
             },
+            x_sides: (vec![0.0; n], vec![0.0; n]),
         };
         Ok(Simulator { sys, opts: opts.clone(), work })
     }
@@ -198,6 +204,7 @@ struct Driver<'a, S: HybridSystem + ?Sized> {
     stop_total: Option<(Vec<f64>, Vec<f64>)>,
     fired: &'a mut Vec<(usize, f64, f64)>,
     output_jac: &'a mut (Vec<f64>, Vec<f64>, Vec<f64>),
+    x_sides: &'a mut (Vec<f64>, Vec<f64>),
 }
 
 impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
@@ -209,7 +216,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
         work: &'a mut Workspace,
     ) -> Self {
         let (n, m) = (info.n_states(), info.n_grad());
-        let Workspace { rk, dense, det, jump, fired, output_jac } = work;
+        let Workspace { rk, dense, det, jump, fired, output_jac, x_sides } = work;
         rk.reset(opts.t_start);
         sys.initial_state(p, &mut rk.y[..n]);
         sys.initial_sens(p, &mut rk.y[n..]);
@@ -237,6 +244,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
             stop_total: None,
             fired,
             output_jac,
+            x_sides,
         }
     }
 
@@ -444,6 +452,10 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
                 continue;
             }
             let einfo = &self.info.events[ev];
+            if einfo.implicit {
+                self.cross_switch(ev, pos, crossing);
+                continue;
+            }
             let mode_before = self.mode;
             let mode_after = einfo.target_mode.unwrap_or(mode_before);
             let out = self.jump.apply(
@@ -490,6 +502,53 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
             }
         }
         None
+    }
+
+    /// Crosses the flow switch `ev` (at position `pos` of the mode's events) located at
+    /// `crossing`; the state is already at the group's time. The sensitivities take the jump of
+    /// the flow, read on the interpolant at the last time found before the switch and at the
+    /// first time strictly past it (on the switch itself an `if` or `sign` may still give the
+    /// old branch or neither). When a declared event of the same group has already fired, the
+    /// state before the switch is not on the interpolant any more: the gradients are then marked
+    /// as not meaningful instead.
+    fn cross_switch(&mut self, ev: usize, pos: usize, crossing: Crossing) {
+        let (n, t) = (self.n, self.rk.t);
+        let name = self.info.events[ev].name.clone();
+        self.stats.switches += 1;
+        if !self.fired.is_empty() {
+            if self.sens_valid {
+                self.sens_valid = false;
+                self.warnings.push(SimWarning::SwitchAtEvent { name, time: t });
+            }
+            return;
+        }
+        let (x_pre, x_post) = &mut *self.x_sides;
+        self.dense.eval(crossing.t_pre, x_pre);
+        let mut t_post = t;
+        let mut gap = 0.0;
+        for _ in 0..SWITCH_SIDE_TRIES {
+            self.dense.eval(t_post, x_post);
+            let g = self.det.guard_now(self.sys, self.mode, pos, t_post, x_post, self.p);
+            if crossing.sigma * g < 0.0 {
+                break;
+            }
+            gap = if gap == 0.0 { t_post.next_up() - t_post } else { 2.0 * gap };
+            t_post = t + gap;
+        }
+        let (x, s) = self.rk.y.split_at_mut(n);
+        let sides = ((crossing.t_pre, &x_pre[..]), (t_post, &x_post[..]));
+        let out =
+            self.jump.apply_switch(self.sys, ev, self.mode, t, x, sides, s, self.p, self.opts.graze_tol);
+        if out.grazing && self.sens_valid {
+            self.sens_valid = false;
+            self.warnings.push(SimWarning::Grazing {
+                event: ev,
+                name,
+                time: t,
+                denominator: out.denominator,
+                scale: out.scale,
+            });
+        }
     }
 
     /// Marks the events of the group just fired that bounced: their reset turned the guard

@@ -41,6 +41,10 @@ pub struct EventInfo {
     pub target_mode: Option<usize>,
     pub is_stop: bool,
     pub has_condition: bool,
+    /// A flow switch (`sema::switches`): where the mode's flow jumps. Located like an event; at
+    /// it the state is kept, the sensitivities jump by `(f- - f+) dt/dp` with the flow evaluated
+    /// on each side, and nothing is recorded as an event.
+    pub implicit: bool,
 }
 
 /// The static shape of a compiled hybrid model.

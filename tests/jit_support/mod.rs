@@ -98,6 +98,7 @@ pub fn ball_info(grad_params: Vec<usize>) -> SystemInfo {
             target_mode: None,
             is_stop: false,
             has_condition: true,
+            implicit: false,
         }],
         initial_mode: 0,
     }

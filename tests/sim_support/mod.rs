@@ -40,6 +40,7 @@ impl Ball {
             target_mode: None,
             is_stop: floor_stop,
             has_condition: false,
+            implicit: false,
         }];
         let mut mode_events = vec![0];
         if ceiling.is_some() {
@@ -49,6 +50,7 @@ impl Ball {
                 target_mode: None,
                 is_stop: false,
                 has_condition: true,
+                implicit: false,
             });
             mode_events.push(1);
         }
@@ -178,6 +180,7 @@ impl Thermostat {
             target_mode: Some(target),
             is_stop: false,
             has_condition: false,
+            implicit: false,
         };
         Thermostat {
             info: SystemInfo {
@@ -285,6 +288,7 @@ impl Counter {
             target_mode: None,
             is_stop: false,
             has_condition: false,
+            implicit: false,
         };
         Counter {
             info: SystemInfo {
@@ -407,6 +411,7 @@ impl Oscillator {
                     target_mode: None,
                     is_stop: false,
                     has_condition: false,
+                    implicit: false,
                 }],
                 initial_mode: 0,
             },

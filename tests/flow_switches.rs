@@ -1,0 +1,125 @@
+//! Flows that jump (`if` and `sign` of the time or the state): the switch is located like an event
+//! and the sensitivities take the saltation jump `(f- - f+) dt/dp` there, so the gradients match
+//! the closed forms. Without it they are silently wrong: in `rising_state_switch` the reported
+//! dx/dp would be 1 instead of 2. Values and gradients to relative 1e-8 at rtol 1e-10.
+
+mod cli_support;
+
+use approx::assert_relative_eq;
+use cli_support::hybc;
+use hybc::codegen::{compile, CompileOptions};
+use hybc::lower::{lower, system_info};
+use hybc::sema::ParamIdx;
+use hybc::sim::{run, SimOptions, SimResult};
+
+const TOL: f64 = 1e-8;
+
+/// Runs `src` to `t_end` with gradients for every parameter and the parameter values `p`.
+fn simulate(src: &str, p: &[f64], t_end: f64) -> SimResult {
+    let model = hybc::check_source(src).expect("model checks");
+    let grad: Vec<ParamIdx> = (0..model.params.len() as u32).map(ParamIdx).collect();
+    let compiled =
+        compile(&lower(&model), system_info(&model, &grad), &CompileOptions::default()).expect("compiles");
+    let opts = SimOptions { t_end, rtol: 1e-10, atol: 1e-12, ..SimOptions::default() };
+    run(&compiled, p, &opts).expect("runs")
+}
+
+/// The final value of the only state and its gradient.
+fn final_x(r: &SimResult) -> (f64, Vec<f64>) {
+    let f = &r.final_state;
+    (f.state[0], f.dstate.clone().expect("gradients"))
+}
+
+#[test]
+fn rising_state_switch() {
+    // x' = 1 until x = 1 at t* = 1 - p, then 2: x(T) = 2 T - 1 + 2 p, dx/dp = 2.
+    let src = "model s\nparam p = 0.5\nstate x = p\nder(x) = if x < 1 then 1 else 2\n";
+    for p in [0.3, 0.5, 0.8] {
+        let r = simulate(src, &[p], 2.0);
+        let (x, dx) = final_x(&r);
+        assert_relative_eq!(x, 3.0 + 2.0 * p, max_relative = TOL);
+        assert_relative_eq!(dx[0], 2.0, max_relative = TOL);
+        assert!(r.events.is_empty(), "a flow switch is not an event: {:?}", r.events);
+        assert_eq!(r.stats.switches, 1);
+    }
+}
+
+#[test]
+fn falling_state_switch_with_parameters_on_both_sides() {
+    // x' = -a until x = 1 at t* = (p - 1) / a, then -b: x(T) = 1 - b (T - t*).
+    let src = "model s\nparam p = 2\nparam a = 1\nparam b = 3\nstate x = p\n\
+               der(x) = if x > 1 then -a else -b\n";
+    let t_end = 2.0;
+    for (p, a, b) in [(2.0, 1.0, 3.0), (1.5, 2.0, 0.5)] {
+        let r = simulate(src, &[p, a, b], t_end);
+        let (x, dx) = final_x(&r);
+        let ts = (p - 1.0) / a;
+        assert_relative_eq!(x, 1.0 - b * (t_end - ts), max_relative = TOL);
+        assert_relative_eq!(dx[0], b / a, max_relative = TOL);
+        assert_relative_eq!(dx[1], -b * (p - 1.0) / (a * a), max_relative = TOL);
+        assert_relative_eq!(dx[2], -(t_end - ts), max_relative = TOL);
+    }
+}
+
+#[test]
+fn time_switch_through_sign() {
+    // x' = k sign(t - tau): x(T) = x0 + k (T - 2 tau). On the switch itself sign is 0, neither
+    // branch: the flow after it is read strictly past it.
+    let src = "model s\nparam k = 1.5\nparam tau = 0.7\nparam x0 = 2\nstate x = x0\n\
+               der(x) = k * sign(t - tau)\n";
+    let (k, tau, x0, t_end) = (1.5, 0.7, 2.0, 1.2);
+    let r = simulate(src, &[k, tau, x0], t_end);
+    let (x, dx) = final_x(&r);
+    assert_relative_eq!(x, x0 + k * (t_end - 2.0 * tau), max_relative = TOL);
+    assert_relative_eq!(dx[0], t_end - 2.0 * tau, max_relative = TOL);
+    assert_relative_eq!(dx[1], -2.0 * k, max_relative = TOL);
+    assert_relative_eq!(dx[2], 1.0, max_relative = TOL);
+}
+
+#[test]
+fn continuous_kinks_and_parameter_switches_are_not_switches() {
+    // min, max and abs keep the flow continuous (no jump in the sensitivities); a condition on
+    // parameters alone never changes during a run.
+    let src = "model s\nparam p = 1\nstate x = 1\n\
+               der(x) = min(max(t - 0.2, 0), 1) + abs(x - 2) + (if p > 0 then 1 else 2)\n";
+    let r = simulate(src, &[1.0], 1.0);
+    assert_eq!(r.stats.switches, 0);
+    let out = hybc(&["check", "models/engine_redline.hyb"]);
+    assert!(!String::from_utf8_lossy(&out.stdout).contains("flow switch"));
+}
+
+#[test]
+fn check_lists_switches_apart_from_events_and_json_counts_them() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("s.hyb");
+    std::fs::write(&path, "model s\nparam p = 0.5\nstate x = p\nder(x) = if x < 1 then 1 else 2\n")
+        .expect("write model");
+    let path = path.to_str().expect("utf-8");
+    let out = hybc(&["check", path]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("0 events"), "{text}");
+    assert!(text.contains("flow switch of mode main: at x - 1 = 0"), "{text}");
+    let out = hybc(&["run", path, "--grad", "p", "--format", "json"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    assert_eq!(json["stats"]["switches"], 1);
+    assert_eq!(json["events"].as_array().map(Vec::len), Some(0));
+    // A flow switch is not an event a fit can target.
+    let out = hybc(&["fit", path, "--free", "p", "--target", "flow switch of mode main#1=0.5"]);
+    assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+#[test]
+fn switch_at_the_instant_of_an_event_that_moved_the_state_voids_the_gradients() {
+    // At t = 1 the declared event moves x, and the flow switches: the flow before the switch is
+    // not known at the moved state, so no gradient is given rather than a guessed one.
+    let src = "model s\nparam p = 1\nstate x = p\nder(x) = if t < 1 then 1 else 2\n\
+               event kick when t >= 1 {\n    x := x + 1\n}\n";
+    let r = simulate(src, &[1.0], 2.0);
+    assert_eq!(r.events.len(), 1);
+    assert_eq!(r.stats.switches, 1);
+    assert!(r.final_state.dstate.is_none());
+    let warning = r.warnings.first().map(ToString::to_string).unwrap_or_default();
+    assert!(warning.contains("together with an event"), "{warning}");
+    // The state itself is still right: x(2) = p + 1 + 1 + 2.
+    assert_relative_eq!(r.final_state.state[0], 5.0, max_relative = TOL);
+}
