@@ -8,7 +8,7 @@
 
 use super::dense::Dense;
 use super::events::{Crossing, Detector};
-use super::jump::Jump;
+use super::jump::{Jump, JumpOutcome};
 use super::options::{Method, SimOptions, TrajectoryRequest};
 use super::result::{
     EventRecord, FinalState, SimError, SimResult, SimStats, SimWarning, StopReason, TrajectoryRow,
@@ -451,7 +451,9 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
             if !self.sys.condition(ev, t, x, self.p) {
                 continue;
             }
-            let einfo = &self.info.events[ev];
+            // Through the `&'a SystemInfo` itself, so that it does not hold `self` borrowed.
+            let info: &'a SystemInfo = self.info;
+            let einfo = &info.events[ev];
             if einfo.implicit {
                 self.cross_switch(ev, pos, crossing);
                 continue;
@@ -471,14 +473,7 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
                 einfo.is_stop,
             );
             if out.grazing {
-                self.sens_valid = false;
-                self.warnings.push(SimWarning::Grazing {
-                    event: ev,
-                    name: einfo.name.clone(),
-                    time: t,
-                    denominator: out.denominator,
-                    scale: out.scale,
-                });
+                self.note_grazing(ev, t, out);
             }
             self.events.push(EventRecord {
                 index: self.events.len(),
@@ -513,11 +508,11 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
     /// as not meaningful instead.
     fn cross_switch(&mut self, ev: usize, pos: usize, crossing: Crossing) {
         let (n, t) = (self.n, self.rk.t);
-        let name = self.info.events[ev].name.clone();
         self.stats.switches += 1;
         if !self.fired.is_empty() {
             if self.sens_valid {
                 self.sens_valid = false;
+                let name = self.info.events[ev].name.clone();
                 self.warnings.push(SimWarning::SwitchAtEvent { name, time: t });
             }
             return;
@@ -539,16 +534,21 @@ impl<'a, S: HybridSystem + ?Sized> Driver<'a, S> {
         let sides = ((crossing.t_pre, &x_pre[..]), (t_post, &x_post[..]));
         let out =
             self.jump.apply_switch(self.sys, ev, self.mode, t, x, sides, s, self.p, self.opts.graze_tol);
-        if out.grazing && self.sens_valid {
-            self.sens_valid = false;
-            self.warnings.push(SimWarning::Grazing {
-                event: ev,
-                name,
-                time: t,
-                denominator: out.denominator,
-                scale: out.scale,
-            });
+        if out.grazing {
+            self.note_grazing(ev, t, out);
         }
+    }
+
+    /// A grazing crossing of event `ev` at `t`: no gradient from here on, and a warning.
+    fn note_grazing(&mut self, ev: usize, t: f64, out: JumpOutcome) {
+        self.sens_valid = false;
+        self.warnings.push(SimWarning::Grazing {
+            event: ev,
+            name: self.info.events[ev].name.clone(),
+            time: t,
+            denominator: out.denominator,
+            scale: out.scale,
+        });
     }
 
     /// Marks the events of the group just fired that bounced: their reset turned the guard
