@@ -1,9 +1,34 @@
 //! hybc: a compiler for hybrid dynamical models with exact gradients through events.
 //!
-//! Pipeline: `syntax` (text -> AST) -> `sema` (AST -> checked model) -> `expr` (model functions
-//! and their symbolic derivatives as a DAG) -> `codegen` (DAG -> native kernels) -> `sim`
-//! (event-locating integrator with sensitivities).
+//! The front door ([`Model`], [`Compiled`], [`Params`], [`Run`], [`Error`]):
+//!
+//! ```no_run
+//! use hybc::{Error, Model};
+//!
+//! fn main() -> Result<(), Error> {
+//!     let model = Model::from_file("models/ball.hyb")?;
+//!     let compiled = model.compile(&["e", "h0"])?;
+//!     let mut params = model.params();
+//!     params.set("e", 0.9)?;
+//!     let run = compiled.simulate(&params, &model.sim_options())?;
+//!     println!("{:?} {:?}", run.output("energy"), run.doutput("energy", "e"));
+//!     Ok(())
+//! }
+//! ```
+//!
+//! Pipeline behind it: `syntax` (text -> AST) -> `sema` (AST -> checked model) -> `expr` (model
+//! functions and their symbolic derivatives as a DAG) -> `codegen` (DAG -> native kernels) ->
+//! `sim` (event-locating integrator with sensitivities).
+//!
+//! Cargo features: `cli` (the `hybc` command: clap, indicatif; implies `plot`) and `plot` (SVG and
+//! PNG figures: plotters), both on by default. Without them the library needs neither.
 
+// All `unsafe` is in `codegen` (calling the JIT's code) and in `sim::rk`'s stage sums (a CPU
+// feature dispatch and checked-once block loads); each allows it where it stands.
+#![deny(unsafe_code)]
+
+mod api;
+#[cfg(feature = "cli")]
 pub mod cli;
 pub mod codegen;
 pub mod diag;
@@ -11,12 +36,16 @@ pub mod expr;
 pub mod fit;
 pub mod gradcheck;
 pub mod lower;
+#[cfg(feature = "plot")]
 pub mod plot;
 pub mod report;
 pub mod sema;
 pub mod sim;
 pub mod sweep;
 pub mod syntax;
+
+pub use api::{Compiled, Error, Model, ModelError, ParamError, Params, Run, Simulator, MAX_MODEL_BYTES};
+pub use sim::{Method, SimOptions, StopReason, TrajectoryRequest};
 
 use diag::Diagnostic;
 

@@ -14,8 +14,8 @@ pub struct CheckArgs {
 
 pub fn run(args: &CheckArgs) -> ExitCode {
     match load_model(&args.model.file) {
-        Ok((model, _)) => {
-            super::print_out(&summary(&model));
+        Ok(model) => {
+            super::print_out(&summary(model.checked()));
             ExitCode::SUCCESS
         }
         Err(code) => code,

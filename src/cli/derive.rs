@@ -18,29 +18,30 @@ pub struct DeriveArgs {
 }
 
 pub fn run(args: &DeriveArgs) -> ExitCode {
-    let (model, _) = match load_model(&args.model.file) {
-        Ok(loaded) => loaded,
+    let model = match load_model(&args.model.file) {
+        Ok(model) => model,
         Err(code) => return code,
     };
     let wrt = match parse_param_list(&model, &args.wrt, "--wrt") {
         Ok(wrt) => wrt,
         Err(message) => return usage_error(&message),
     };
+    let checked = model.checked();
     let mode = match &args.mode {
         None => None,
-        Some(name) => match model.mode_index(name) {
+        Some(name) => match checked.mode_index(name) {
             Some(m) => Some(m),
             None => {
-                let names: Vec<&str> = model.modes.iter().map(|m| m.name.as_str()).collect();
+                let names: Vec<&str> = checked.modes.iter().map(|m| m.name.as_str()).collect();
                 return usage_error(&format!(
                     "--mode: model `{}` has no mode `{name}`; its modes are {}",
-                    model.name,
+                    checked.name,
                     names.join(", ")
                 ));
             }
         },
     };
-    let funcs = lower(&model);
-    super::print_out(&derive_report(&model, &funcs, &wrt, mode));
+    let funcs = lower(checked);
+    super::print_out(&derive_report(checked, &funcs, &wrt, mode));
     ExitCode::SUCCESS
 }

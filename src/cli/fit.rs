@@ -8,13 +8,10 @@ use clap::ValueEnum;
 
 use super::run::{parameter_values, positive, sim_options, SimFlags};
 use super::{
-    load_model, parse_param_list, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_MODEL_ERROR,
-    EXIT_SIM_STOPPED,
+    compile_model, load_model, parse_param_list, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED,
 };
-use crate::codegen::{self, CompileOptions};
 use crate::fit::{self, Bounds, FitError, FitOptions, FitProblem, FitReport, Target};
-use crate::lower::{lower, system_info};
-use crate::sema::Model;
+use crate::Model;
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum Format {
@@ -56,8 +53,8 @@ pub struct FitArgs {
 }
 
 pub fn run(args: &FitArgs) -> ExitCode {
-    let (model, _) = match load_model(&args.model.file) {
-        Ok(loaded) => loaded,
+    let model = match load_model(&args.model.file) {
+        Ok(model) => model,
         Err(code) => return code,
     };
     match fit_model(&model, args) {
@@ -83,10 +80,14 @@ fn fit_model(model: &Model, args: &FitArgs) -> Result<ExitCode, String> {
     if free.is_empty() {
         return Err("--free: name at least one parameter to fit".to_string());
     }
-    let start = parameter_values(model, &args.set)?;
+    let start = parameter_values(model, &args.set)?.values().to_vec();
     let sim = sim_options(model, &args.sim)?;
     let options = fit_options(args)?;
-    let info = system_info(model, &free);
+    let compiled = match compile_model(model, &free) {
+        Ok(c) => c,
+        Err(code) => return Ok(code),
+    };
+    let info = compiled.info().clone();
     let targets = args
         .targets
         .iter()
@@ -100,19 +101,10 @@ fn fit_model(model: &Model, args: &FitArgs) -> Result<ExitCode, String> {
             targets.len()
         );
     }
-    let bounds = free.iter().map(|p| Bounds::from_range(model.params[p.0 as usize].range)).collect();
+    let bounds =
+        free.iter().map(|p| Bounds::from_range(model.checked().params[p.0 as usize].range)).collect();
 
-    let started = Instant::now();
-    let compiled = match codegen::compile(&lower(model), info.clone(), &CompileOptions::default()) {
-        Ok(c) => c,
-        Err(e) => {
-            eprintln!("error: could not compile `{}`: {e}", model.name);
-            return Ok(ExitCode::from(EXIT_MODEL_ERROR));
-        }
-    };
-    let compile_seconds = started.elapsed().as_secs_f64();
-
-    let problem = FitProblem { system: &compiled, start, bounds, targets, sim };
+    let problem = FitProblem { system: compiled.native(), start, bounds, targets, sim };
     let started = Instant::now();
     let result = match fit::fit(&problem, &options) {
         Ok(result) => result,
@@ -123,12 +115,12 @@ fn fit_model(model: &Model, args: &FitArgs) -> Result<ExitCode, String> {
         Err(e) => return Err(e.to_string()),
     };
     let report = FitReport {
-        model: model.name.clone(),
+        model: model.name().to_string(),
         info,
         targets: problem.targets,
         options,
         result,
-        compile_seconds,
+        compile_seconds: compiled.compile_seconds(),
         fit_seconds: started.elapsed().as_secs_f64(),
     };
     match args.format {

@@ -12,7 +12,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-use crate::sema::{Model, ParamIdx};
+use crate::sema::ParamIdx;
 
 /// hybc: a compiler for hybrid dynamical models with exact gradients through events.
 #[derive(Debug, Parser)]
@@ -63,22 +63,40 @@ pub fn main() -> ExitCode {
     }
 }
 
-/// A model file read and checked, or the exit code after its errors were printed.
-pub(crate) fn load_model(path: &Path) -> Result<(Model, String), ExitCode> {
-    let source = match std::fs::read(path) {
-        Ok(bytes) => String::from_utf8_lossy(&bytes).into_owned(),
-        Err(e) => {
-            eprintln!("error: cannot read `{}`: {e}", path.display());
-            return Err(ExitCode::from(EXIT_USAGE_ERROR));
-        }
-    };
-    match crate::check_source(&source) {
-        Ok(model) => Ok((model, source)),
-        Err(e) => {
-            eprint!("{}", e.render(&path.display().to_string(), &source));
+/// A model file read and checked through the front door, or the exit code after its errors were
+/// printed (diagnostics for a bad model, a usage error for an unreadable file).
+pub(crate) fn load_model(path: &Path) -> Result<crate::Model, ExitCode> {
+    match crate::Model::from_file(path) {
+        Ok(model) => Ok(model),
+        Err(crate::Error::Model(e)) => {
+            eprint!("{e}");
             Err(ExitCode::from(EXIT_MODEL_ERROR))
         }
+        Err(e) => {
+            eprintln!("error: {}", error_chain(&e));
+            Err(ExitCode::from(EXIT_USAGE_ERROR))
+        }
     }
+}
+
+/// An error and its sources, joined by `: ` (`cannot read `x.hyb`: No such file or directory`).
+pub(crate) fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut source = e.source();
+    while let Some(s) = source {
+        text.push_str(&format!(": {s}"));
+        source = s.source();
+    }
+    text
+}
+
+/// Compiles `model` with gradients for `grad`, or prints why not and returns exit code 1.
+pub(crate) fn compile_model(model: &crate::Model, grad: &[ParamIdx]) -> Result<crate::Compiled, ExitCode> {
+    let names: Vec<&str> = grad.iter().map(|p| model.checked().params[p.0 as usize].name.as_str()).collect();
+    model.compile(&names).map_err(|e| {
+        eprintln!("error: {}", error_chain(&e));
+        ExitCode::from(EXIT_MODEL_ERROR)
+    })
 }
 
 #[derive(Debug, Clone, clap::Args)]
@@ -94,32 +112,23 @@ pub(crate) fn usage_error(message: &str) -> ExitCode {
 }
 
 /// Parses a comma-separated list of parameter names, or `all`, for the flag `flag`.
-pub(crate) fn parse_param_list(model: &Model, list: &str, flag: &str) -> Result<Vec<ParamIdx>, String> {
+pub(crate) fn parse_param_list(
+    model: &crate::Model,
+    list: &str,
+    flag: &str,
+) -> Result<Vec<ParamIdx>, String> {
     if list.trim() == "all" {
-        return Ok((0..model.params.len()).map(|i| ParamIdx(i as u32)).collect());
+        return Ok((0..model.checked().params.len()).map(|i| ParamIdx(i as u32)).collect());
     }
     let mut out: Vec<ParamIdx> = Vec::new();
     for name in list.split(',').map(str::trim).filter(|n| !n.is_empty()) {
         match model.param_index(name) {
-            Some(p) if out.contains(&p) => return Err(format!("{flag}: `{name}` is named twice")),
-            Some(p) => out.push(p),
-            None => return Err(unknown_param(model, name, flag)),
+            Ok(p) if out.contains(&p) => return Err(format!("{flag}: `{name}` is named twice")),
+            Ok(p) => out.push(p),
+            Err(e) => return Err(format!("{flag}: {e}")),
         }
     }
     Ok(out)
-}
-
-/// "unknown parameter" with the model's parameters listed, for any flag that names one.
-pub(crate) fn unknown_param(model: &Model, name: &str, flag: &str) -> String {
-    let names: Vec<&str> = model.params.iter().map(|p| p.name.as_str()).collect();
-    let hint = crate::sema::closest_name(name, names.iter().copied())
-        .map(|s| format!(" (did you mean `{s}`?)"))
-        .unwrap_or_default();
-    format!(
-        "{flag}: model `{}` has no parameter `{name}`{hint}; its parameters are {}",
-        model.name,
-        names.join(", ")
-    )
 }
 
 /// Writes `text` to stdout. A closed pipe (`hybc run ... | head`) is not an error worth a panic:

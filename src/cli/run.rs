@@ -4,18 +4,15 @@
 use std::io::Write as _;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::Instant;
 
 use clap::ValueEnum;
 
-use super::EXIT_GOAL_NOT_MET;
-use super::{load_model, parse_param_list, unknown_param, usage_error, ModelArg, EXIT_SIM_STOPPED};
-use crate::codegen::{self, CompileOptions};
+use super::{compile_model, error_chain, load_model, parse_param_list, usage_error, ModelArg};
+use super::{EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
 use crate::gradcheck::{self, CheckOptions};
-use crate::lower::{lower, system_info};
 use crate::report::{num, RunReport};
-use crate::sema::Model;
-use crate::sim::{self, HybridSystem, Method, SimOptions, TrajectoryRequest};
+use crate::sim::{HybridSystem, Method, SimOptions, TrajectoryRequest};
+use crate::{Model, Params};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum MethodArg {
@@ -100,8 +97,8 @@ pub struct RunArgs {
 }
 
 pub fn run(args: &RunArgs) -> ExitCode {
-    let (model, _) = match load_model(&args.model.file) {
-        Ok(loaded) => loaded,
+    let model = match load_model(&args.model.file) {
+        Ok(model) => model,
         Err(code) => return code,
     };
     match run_model(&model, args) {
@@ -110,32 +107,30 @@ pub fn run(args: &RunArgs) -> ExitCode {
     }
 }
 
-/// Parameter values: the defaults with every `--set P=VALUE` applied and range-checked.
-pub(crate) fn parameter_values(model: &Model, sets: &[String]) -> Result<Vec<f64>, String> {
-    let mut p: Vec<f64> = model.params.iter().map(|p| p.default).collect();
+/// Parameter values: the defaults with every `--set P=VALUE` applied and range-checked; a
+/// parameter set twice is a usage error (the second value would silently win).
+pub(crate) fn parameter_values(model: &Model, sets: &[String]) -> Result<Params, String> {
+    let mut params = model.params();
+    let mut seen: Vec<&str> = Vec::new();
     for s in sets {
         let Some((name, value)) = s.split_once('=') else {
             return Err(format!("--set: expected P=VALUE, found `{s}`"));
         };
         let name = name.trim();
-        let Some(idx) = model.param_index(name) else {
-            return Err(unknown_param(model, name, "--set"));
-        };
+        model.param_index(name).map_err(|e| format!("--set: {e}"))?;
+        if seen.contains(&name) {
+            return Err(format!("--set: `{name}` is set twice"));
+        }
+        seen.push(name);
         let value: f64 = value
             .trim()
             .parse()
             .ok()
             .filter(|v: &f64| v.is_finite())
             .ok_or_else(|| format!("--set: `{}` is not a finite number", value.trim()))?;
-        let param = &model.params[idx.0 as usize];
-        if let Some((lo, hi)) = param.range {
-            if !(lo..=hi).contains(&value) {
-                return Err(format!("--set: {name} = {value} is outside its range [{lo}, {hi}]"));
-            }
-        }
-        p[idx.0 as usize] = value;
+        params.set(name, value).map_err(|e| format!("--set: {e}"))?;
     }
-    Ok(p)
+    Ok(params)
 }
 
 pub(crate) fn positive(name: &str, v: f64) -> Result<f64, String> {
@@ -146,17 +141,18 @@ pub(crate) fn positive(name: &str, v: f64) -> Result<f64, String> {
     }
 }
 
-/// Simulation options from the flags, falling back on the model's `simulate` defaults; no
-/// trajectory.
+/// Simulation options: the flags over the model's `simulate` line over the run defaults
+/// (`Model::sim_options`); no trajectory.
 pub(crate) fn sim_options(model: &Model, args: &SimFlags) -> Result<SimOptions, String> {
-    let rtol = positive("--rtol", args.rtol.or(model.simulate.rtol).unwrap_or(1e-8))?;
+    let base = model.sim_options();
+    let rtol = positive("--rtol", args.rtol.unwrap_or(base.rtol))?;
     if rtol >= 1.0 {
         return Err(format!("--rtol: expected a number below 1, found {rtol}"));
     }
     Ok(SimOptions {
-        t_end: positive("--t-end", args.t_end.or(model.simulate.t_end).unwrap_or(10.0))?,
+        t_end: positive("--t-end", args.t_end.unwrap_or(base.t_end))?,
         rtol,
-        atol: positive("--atol", args.atol.or(model.simulate.atol).unwrap_or(1e-10))?,
+        atol: positive("--atol", args.atol.unwrap_or(base.atol))?,
         method: match args.method {
             MethodArg::Auto => Method::Auto,
             MethodArg::Dopri5 => Method::Dopri5,
@@ -165,7 +161,7 @@ pub(crate) fn sim_options(model: &Model, args: &SimFlags) -> Result<SimOptions, 
         max_events: args.max_events,
         graze_tol: positive("--graze-tol", args.graze_tol)?,
         sens_error_control: !args.no_sens_error_control,
-        ..SimOptions::default()
+        ..base
     })
 }
 
@@ -183,38 +179,20 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         Some(list) => parse_param_list(model, list, "--grad")?,
         None => Vec::new(),
     };
-    let p = parameter_values(model, &args.set)?;
+    let params = parameter_values(model, &args.set)?;
     let mut opts = sim_options(model, &args.sim)?;
     opts.trajectory = trajectory_request(args)?;
     plot_trajectory(args, &mut opts)?;
     let check_opts = check_options(&opts, args)?;
 
-    let started = Instant::now();
-    let funcs = lower(model);
-    let info = system_info(model, &grad);
-    let compiled = match codegen::compile(&funcs, info.clone(), &CompileOptions::default()) {
+    let compiled = match compile_model(model, &grad) {
         Ok(c) => c,
-        Err(e) => {
-            eprintln!("error: could not compile `{}`: {e}", model.name);
-            return Ok(ExitCode::from(super::EXIT_MODEL_ERROR));
-        }
+        Err(code) => return Ok(code),
     };
-    let compile_seconds = started.elapsed().as_secs_f64();
-    let started = Instant::now();
-    let result = sim::run(&compiled, &p, &opts).map_err(|e| e.to_string())?;
-    let run_seconds = started.elapsed().as_secs_f64();
-
-    let report = RunReport {
-        model: model.name.clone(),
-        t_end: opts.t_end,
-        info,
-        params: p,
-        result,
-        compile_seconds,
-        run_seconds,
-    };
+    let run = compiled.simulate(&params, &opts).map_err(|e| error_chain(&e))?;
+    let report = run.report();
     if let Some(path) = &args.trajectory {
-        if let Err(e) = write_trajectory(path, &report, &compiled) {
+        if let Err(e) = write_trajectory(path, &report, compiled.native()) {
             return Err(format!("--trajectory: cannot write `{}`: {e}", path.display()));
         }
     }
@@ -234,7 +212,7 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
     }
     let check = match check_opts {
         Some(check_opts) => Some(
-            gradcheck::check(&compiled, &report.params, &opts, &report.result, &check_opts)
+            gradcheck::check(compiled.native(), &report.params, &opts, &report.result, &check_opts)
                 .map_err(|e| e.to_string())?,
         ),
         None => None,

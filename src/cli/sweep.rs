@@ -10,13 +10,13 @@ use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::run::{parameter_values, sim_options, SimFlags};
-use super::{load_model, parse_param_list, unknown_param, usage_error, ModelArg, EXIT_SIM_STOPPED};
-use crate::codegen::{self, CompileOptions, CompiledModel};
-use crate::lower::{lower, system_info};
+use super::{compile_model, load_model, parse_param_list, usage_error, ModelArg, EXIT_SIM_STOPPED};
+use crate::codegen::CompiledModel;
 use crate::plot::{self, SweepFigure};
-use crate::sema::{Model, ParamIdx};
-use crate::sim::{HybridSystem as _, SimOptions, StopReason};
+use crate::sema::ParamIdx;
+use crate::sim::{SimOptions, StopReason};
 use crate::sweep::{self, AxisSpec, Columns, Format, PointResult};
+use crate::{Compiled, Model};
 
 /// More points than this would not fit in memory on an ordinary machine (each point keeps its
 /// whole result until the rows are written); a larger sweep is a usage error, not an abort.
@@ -79,8 +79,8 @@ pub struct SweepArgs {
 }
 
 pub fn run(args: &SweepArgs) -> ExitCode {
-    let (model, _) = match load_model(&args.model.file) {
-        Ok(loaded) => loaded,
+    let model = match load_model(&args.model.file) {
+        Ok(model) => model,
         Err(code) => return code,
     };
     match sweep_model(&model, args) {
@@ -91,14 +91,12 @@ pub fn run(args: &SweepArgs) -> ExitCode {
 
 /// The points of the sweep and the varied parameters, in flag order.
 fn points(model: &Model, args: &SweepArgs) -> Result<(Vec<Vec<f64>>, Vec<usize>), String> {
-    let base = parameter_values(model, &args.set)?;
+    let base = parameter_values(model, &args.set)?.values().to_vec();
+    let checked = model.checked();
     let mut specs: Vec<(usize, AxisSpec, &str)> = Vec::new();
     for text in &args.vary {
         let spec = sweep::parse_vary(text).map_err(|e| format!("--vary: {e}"))?;
-        let Some(idx) = model.param_index(&spec.name) else {
-            return Err(unknown_param(model, &spec.name, "--vary"));
-        };
-        let idx = idx.0 as usize;
+        let idx = model.param_index(&spec.name).map_err(|e| format!("--vary: {e}"))?.0 as usize;
         if specs.iter().any(|s| s.0 == idx) {
             return Err(format!("--vary: `{}` is varied twice", spec.name));
         }
@@ -108,11 +106,11 @@ fn points(model: &Model, args: &SweepArgs) -> Result<(Vec<Vec<f64>>, Vec<usize>)
         }
         specs.push((idx, spec.axis, text));
     }
-    let range_of = |idx: usize| model.params[idx].range;
+    let range_of = |idx: usize| checked.params[idx].range;
     let in_range = |idx: usize, v: f64| -> Result<f64, String> {
         match range_of(idx) {
             Some((lo, hi)) if !(lo..=hi).contains(&v) => {
-                Err(format!("--vary: {} = {v} is outside its range [{lo}, {hi}]", model.params[idx].name))
+                Err(format!("--vary: {} = {v} is outside its range [{lo}, {hi}]", checked.params[idx].name))
             }
             _ => Ok(v),
         }
@@ -123,7 +121,7 @@ fn points(model: &Model, args: &SweepArgs) -> Result<(Vec<Vec<f64>>, Vec<usize>)
                 return Err(format!("--samples: expected 1 to {MAX_POINTS} points, found {n}"));
             }
             let ranges: Vec<(usize, f64, f64)> = if specs.is_empty() {
-                (0..model.params.len()).filter_map(|i| range_of(i).map(|(lo, hi)| (i, lo, hi))).collect()
+                (0..checked.params.len()).filter_map(|i| range_of(i).map(|(lo, hi)| (i, lo, hi))).collect()
             } else {
                 specs
                     .iter()
@@ -145,7 +143,7 @@ fn points(model: &Model, args: &SweepArgs) -> Result<(Vec<Vec<f64>>, Vec<usize>)
                 return Err(format!(
                     "--samples: model `{}` declares no parameter range; name the parameters to sample \
                      with --vary P=LO:HI",
-                    model.name
+                    model.name()
                 ));
             }
             let varied = ranges.iter().map(|r| r.0).collect();
@@ -190,13 +188,6 @@ fn points(model: &Model, args: &SweepArgs) -> Result<(Vec<Vec<f64>>, Vec<usize>)
             Ok((sweep::full_grid(&base, &axes), varied))
         }
     }
-}
-
-fn compile(model: &Model, grad: &[ParamIdx]) -> Result<CompiledModel, ExitCode> {
-    codegen::compile(&lower(model), system_info(model, grad), &CompileOptions::default()).map_err(|e| {
-        eprintln!("error: could not compile `{}`: {e}", model.name);
-        ExitCode::from(super::EXIT_MODEL_ERROR)
-    })
 }
 
 /// Runs the points with a progress bar on stderr when stderr is a terminal.
@@ -244,11 +235,11 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
         None => Box::new(std::io::BufWriter::new(std::io::stdout().lock())),
     };
 
-    let compiled = match compile(model, &grad) {
+    let compiled = match compile_model(model, &grad) {
         Ok(c) => c,
         Err(code) => return Ok(code),
     };
-    let results = run_with_progress(&compiled, &points, &opts, args.threads)?;
+    let results = run_with_progress(compiled.native(), &points, &opts, args.threads)?;
     let info = compiled.info();
     let columns = Columns::new(info, opts.t_end, args.events, grad.len());
     let format = match args.format {
@@ -297,7 +288,7 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
 #[allow(clippy::too_many_arguments)]
 fn plot_sweep(
     model: &Model,
-    compiled: &CompiledModel,
+    compiled: &Compiled,
     grad: &[ParamIdx],
     points: &[Vec<f64>],
     results: &[PointResult],
@@ -310,7 +301,7 @@ fn plot_sweep(
     let info = compiled.info();
     let mut figure = SweepFigure::new("", info, param, points, results, varied.len() == 1);
     let shown = figure.series.first().map_or(0, |s| s.points.len());
-    figure.title = format!("{}: final values against {}", model.name, info.param_names[param]);
+    figure.title = format!("{}: final values against {}", model.name(), info.param_names[param]);
     if shown < points.len() {
         figure.title += &format!(" ({} of {} points; the others ended early)", shown, points.len());
     }
@@ -320,13 +311,10 @@ fn plot_sweep(
         let at_results: Vec<PointResult> = at.iter().map(|&i| results[i].clone()).collect();
         figure.add_tangents(info, param, &at_points, &at_results)
     } else {
-        let with_param = codegen::compile(
-            &lower(model),
-            system_info(model, &[ParamIdx(param as u32)]),
-            &CompileOptions::default(),
-        )
-        .map_err(|e| format!("--plot: could not compile `{}` for the tangents: {e}", model.name))?;
-        let at_results = sweep::run_points(&with_param, &at_points, opts, threads, &|| ())
+        let with_param = model
+            .compile(&[info.param_names[param].as_str()])
+            .map_err(|e| format!("--plot: {}", super::error_chain(&e)))?;
+        let at_results = sweep::run_points(with_param.native(), &at_points, opts, threads, &|| ())
             .map_err(|e| format!("--threads: {e}"))?;
         figure.add_tangents(with_param.info(), param, &at_points, &at_results)
     };

@@ -6,6 +6,7 @@
 //! `lower` turns a plan into IR, one `translate_*` method per node kind; `runtime` holds the host
 //! wrappers for transcendental functions; `compiled` owns the JIT module and calls the kernels.
 
+#[allow(unsafe_code)]
 mod compiled;
 mod lower;
 mod plan;

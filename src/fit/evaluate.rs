@@ -70,11 +70,12 @@ impl fmt::Display for Rejection {
 /// Runs the simulator's model at parameters `p` (all of them) and reads the targets. A fit keeps
 /// one `Simulator` for all its evaluations, so its scratch buffers are allocated once.
 pub fn evaluate<S: HybridSystem + ?Sized>(
-    simulator: &mut Simulator<'_, S>,
+    simulator: &mut Simulator<&S>,
     p: &[f64],
     targets: &[Target],
 ) -> Result<Evaluation, Rejection> {
-    let info = simulator.system().info();
+    let sys: &S = simulator.handle();
+    let info = sys.info();
     let result = simulator.run(p).map_err(|e| Rejection::RunStopped { message: e.to_string() })?;
     let opts = simulator.options();
     let f = &result.final_state;

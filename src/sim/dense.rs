@@ -10,7 +10,8 @@
 //! Dormand-Prince 5(4) has one correction (4th-order accurate), DOP853 four, built from three extra
 //! stages (7th-order accurate). Because of the Hermite part, `P'` matches `f` at both ends.
 
-use super::rk::{centred_sum, Rk};
+use super::rk::Rk;
+use super::sums::centred_sum;
 use super::tableau::DenseKind;
 
 /// Most coefficient vectors of any method (DOP853; Dopri5 uses 5).

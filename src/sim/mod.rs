@@ -12,10 +12,11 @@ mod options;
 mod result;
 mod rk;
 mod run;
+mod sums;
 pub mod system;
 mod tableau;
 
 pub use options::*;
 pub use result::*;
-pub use run::{run, Simulator};
+pub use run::{run, Simulator, SystemRef};
 pub use system::*;

@@ -69,13 +69,15 @@ pub struct SimOptions {
     pub trajectory: TrajectoryRequest,
 }
 
+/// The run defaults, the one set the CLI and the library share: a model's `simulate` line
+/// overrides `t_end`, `rtol` and `atol` (`Model::sim_options`), flags override both.
 impl Default for SimOptions {
     fn default() -> Self {
         SimOptions {
             t_start: 0.0,
-            t_end: 1.0,
-            rtol: 1e-6,
-            atol: 1e-9,
+            t_end: 10.0,
+            rtol: 1e-8,
+            atol: 1e-10,
             method: Method::Auto,
             max_events: 10_000,
             max_steps: 1_000_000,

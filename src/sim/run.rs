@@ -54,10 +54,34 @@ pub fn run<S: HybridSystem + ?Sized>(sys: &S, p: &[f64], opts: &SimOptions) -> R
 /// scratch buffers kept between runs: a run then allocates only what its result holds.
 /// Runs are independent: the same parameters give bit-for-bit the same result, whatever ran
 /// before. One `Simulator` per thread (it is `Send` when the system is `Sync`).
-pub struct Simulator<'a, S: HybridSystem + ?Sized> {
-    sys: &'a S,
+pub struct Simulator<H: SystemRef> {
+    sys: H,
     opts: SimOptions,
     work: Workspace,
+}
+
+/// What a [`Simulator`] holds its model by: a reference, an `Arc`, a `Box`, anything that
+/// dereferences to a [`HybridSystem`]. An owned handle (`Arc<CompiledModel>`) makes an owned
+/// simulator that a thread or a Python object can keep.
+pub trait SystemRef {
+    type System: HybridSystem + ?Sized;
+    fn system(&self) -> &Self::System;
+}
+
+impl<D: std::ops::Deref> SystemRef for D
+where
+    D::Target: HybridSystem,
+{
+    type System = D::Target;
+    fn system(&self) -> &D::Target {
+        self
+    }
+}
+
+impl<H: SystemRef> std::fmt::Debug for Simulator<H> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Simulator").field("opts", &self.opts).finish_non_exhaustive()
+    }
 }
 
 /// Scratch state of the driver, sized by the model and the options.
@@ -74,11 +98,11 @@ struct Workspace {
     x_sides: (Vec<f64>, Vec<f64>),
 }
 
-impl<'a, S: HybridSystem + ?Sized> Simulator<'a, S> {
+impl<H: SystemRef> Simulator<H> {
     /// Checks the model's shape and the options (an `Err` for an inconsistent shape or an
     /// invalid option) and allocates the scratch buffers.
-    pub fn new(sys: &'a S, opts: &SimOptions) -> Result<Self, SimError> {
-        let info = sys.info();
+    pub fn new(sys: H, opts: &SimOptions) -> Result<Self, SimError> {
+        let info = sys.system().info();
         validate(info, opts)?;
         let (n, m) = (info.n_states(), info.n_grad());
         let nz = n * (1 + m);
@@ -101,9 +125,10 @@ impl<'a, S: HybridSystem + ?Sized> Simulator<'a, S> {
 
     /// Simulates with parameters `p` (all of them, `n_params` long; an `Err` otherwise).
     pub fn run(&mut self, p: &[f64]) -> Result<SimResult, SimError> {
-        let info = self.sys.info();
+        let sys = self.sys.system();
+        let info = sys.info();
         check_params(info, p)?;
-        Ok(Driver::new(self.sys, info, p, &self.opts, &mut self.work).run())
+        Ok(Driver::new(sys, info, p, &self.opts, &mut self.work).run())
     }
 
     pub fn options(&self) -> &SimOptions {
@@ -111,8 +136,13 @@ impl<'a, S: HybridSystem + ?Sized> Simulator<'a, S> {
     }
 
     /// The model this simulator runs.
-    pub fn system(&self) -> &'a S {
-        self.sys
+    pub fn system(&self) -> &H::System {
+        self.sys.system()
+    }
+
+    /// The handle the model is held by (for `Simulator<&S>`, the reference itself).
+    pub fn handle(&self) -> &H {
+        &self.sys
     }
 }
 

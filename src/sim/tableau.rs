@@ -513,7 +513,7 @@ mod tests {
         let all: Vec<(usize, f64)> =
             t.e.stages().iter().copied().zip(t.e.weights().iter().copied()).collect();
         assert_eq!(all, rows.e.iter().copied().enumerate().collect::<Vec<_>>());
-        // The stepper sums these rows centred on the first stage (`rk::centred_sum`), which is
+        // The stepper sums these rows centred on the first stage (`sums::centred_sum`), which is
         // exact only because their weights sum to zero (an estimator of `b - b_hat`; a dense
         // correction that vanishes when every stage derivative is the same).
         let zero_sum = |row: &[f64], what: &str| {

@@ -1,0 +1,67 @@
+//! The front door's one error type, joining the stages' errors.
+
+use std::path::PathBuf;
+
+use crate::codegen::CodegenError;
+use crate::sim::SimError;
+use crate::FrontendError;
+
+/// Everything the library's front door can refuse. The messages are complete sentences for a
+/// user: a model error renders its diagnostics (file:line:column, the line, a caret).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// The model text has syntax or semantic errors.
+    #[error("{0}")]
+    Model(#[from] ModelError),
+    /// A model file could not be read.
+    #[error("cannot read `{}`", path.display())]
+    Read {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A model file is larger than [`MAX_MODEL_BYTES`](super::MAX_MODEL_BYTES).
+    #[error("`{}` is larger than {limit} bytes; model files are limited to that size", path.display())]
+    TooLarge { path: PathBuf, limit: u64 },
+    /// A parameter name or value was refused.
+    #[error(transparent)]
+    Param(#[from] ParamError),
+    /// The model could not be compiled to native code.
+    #[error("could not compile model `{model}`")]
+    Compile {
+        model: String,
+        #[source]
+        source: CodegenError,
+    },
+    /// The simulation options, or the parameter vector's length, were refused before running.
+    #[error(transparent)]
+    Sim(#[from] SimError),
+}
+
+/// A model text that does not parse or check, with its diagnostics rendered against the source.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{rendered}")]
+pub struct ModelError {
+    /// The errors as the stages found them, in source order.
+    pub errors: FrontendError,
+    /// The diagnostics rendered as text (file:line:column, the line, a caret), one after another.
+    pub rendered: String,
+}
+
+/// A parameter name or value that a model refuses.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ParamError {
+    #[error("model `{model}` has no parameter `{name}`{}; its parameters are {}",
+        hint.as_ref().map(|h| format!(" (did you mean `{h}`?)")).unwrap_or_default(), known.join(", "))]
+    Unknown { model: String, name: String, hint: Option<String>, known: Vec<String> },
+    #[error("{name} = {value} is not a finite number")]
+    NotFinite { name: String, value: f64 },
+    #[error("{name} = {value} is outside its range [{lo}, {hi}]")]
+    OutOfRange { name: String, value: f64, lo: f64, hi: f64 },
+    #[error("parameter `{name}` is named twice")]
+    Duplicate { name: String },
+    #[error("the parameter values are for model `{found}`, not `{expected}`")]
+    OtherModel { expected: String, found: String },
+}

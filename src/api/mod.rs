@@ -1,0 +1,23 @@
+//! The library's front door: text in, runs out, with one set of defaults.
+//!
+//! ```text
+//! Model::parse(text) --compile(grad)--> Compiled --simulate(params, opts)--> Run
+//!                                           \--simulator(opts)--> Simulator (reused, owned)
+//! ```
+//!
+//! Every type here is owned and cheap to clone (the checked model and the native code are shared
+//! through `Arc`s), so a `Compiled` can move into a thread, a thread pool or a Python object.
+//! This module only composes the stages (`syntax`, `sema`, `lower`, `codegen`, `sim`); it adds no
+//! numerics of its own. The CLI, sweeps, fits and gradient checks go through it.
+
+mod compiled;
+mod error;
+mod model;
+mod params;
+mod run;
+
+pub use compiled::{Compiled, Simulator};
+pub use error::{Error, ModelError, ParamError};
+pub use model::{Model, MAX_MODEL_BYTES};
+pub use params::Params;
+pub use run::Run;

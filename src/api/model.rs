@@ -1,0 +1,161 @@
+//! A checked model: parsed, names resolved, ready to compile.
+
+use std::io::Read as _;
+use std::path::Path;
+use std::sync::Arc;
+
+use super::{Compiled, Error, ModelError, ParamError, Params};
+use crate::codegen::CompileOptions;
+use crate::sema::{self, ParamIdx};
+use crate::sim::SimOptions;
+
+/// The largest model file [`Model::from_file`] reads: far beyond any hand-written model (the
+/// shipped ones are under 3 KB; a generated 10,000-state chain is about 400 KB), small enough that
+/// a wrong path (`/dev/zero`, a log file) is refused before it fills memory.
+pub const MAX_MODEL_BYTES: u64 = 64 << 20;
+
+/// A model text that parsed and checked. Cheap to clone (shared).
+#[derive(Clone, Debug)]
+pub struct Model {
+    inner: Arc<ModelInner>,
+}
+
+#[derive(Debug)]
+struct ModelInner {
+    checked: sema::Model,
+    source: String,
+    file_name: String,
+}
+
+impl Model {
+    /// Parses and checks `text`. Diagnostics name the file `model.hyb`; see [`Self::parse_named`].
+    pub fn parse(text: &str) -> Result<Model, Error> {
+        Model::parse_named(text, "model.hyb")
+    }
+
+    /// Parses and checks `text`, naming `file_name` in every diagnostic.
+    pub fn parse_named(text: &str, file_name: &str) -> Result<Model, Error> {
+        match crate::check_source(text) {
+            Ok(checked) => Ok(Model {
+                inner: Arc::new(ModelInner {
+                    checked,
+                    source: text.to_string(),
+                    file_name: file_name.to_string(),
+                }),
+            }),
+            Err(errors) => {
+                let rendered = errors.render(file_name, text);
+                Err(ModelError { errors, rendered }.into())
+            }
+        }
+    }
+
+    /// Reads (at most [`MAX_MODEL_BYTES`]), parses and checks a model file; diagnostics name the
+    /// path as given. Bytes that are not UTF-8 are replaced (and then reported where they stand).
+    pub fn from_file(path: impl AsRef<Path>) -> Result<Model, Error> {
+        let path = path.as_ref();
+        let read_error = |source| Error::Read { path: path.to_path_buf(), source };
+        let file = std::fs::File::open(path).map_err(read_error)?;
+        let mut bytes = Vec::new();
+        file.take(MAX_MODEL_BYTES + 1).read_to_end(&mut bytes).map_err(read_error)?;
+        if bytes.len() as u64 > MAX_MODEL_BYTES {
+            return Err(Error::TooLarge { path: path.to_path_buf(), limit: MAX_MODEL_BYTES });
+        }
+        Model::parse_named(&String::from_utf8_lossy(&bytes), &path.display().to_string())
+    }
+
+    /// The model's name (`model NAME`).
+    pub fn name(&self) -> &str {
+        &self.inner.checked.name
+    }
+
+    /// The checked model, for the stages behind the front door.
+    pub fn checked(&self) -> &sema::Model {
+        &self.inner.checked
+    }
+
+    /// The text the model was parsed from.
+    pub fn source(&self) -> &str {
+        &self.inner.source
+    }
+
+    /// The file name its diagnostics use.
+    pub fn file_name(&self) -> &str {
+        &self.inner.file_name
+    }
+
+    /// The parameters at their declared defaults.
+    pub fn params(&self) -> Params {
+        Params::defaults(self.clone())
+    }
+
+    /// Parameter names in declaration order.
+    pub fn param_names(&self) -> impl Iterator<Item = &str> {
+        self.inner.checked.params.iter().map(|p| p.name.as_str())
+    }
+
+    /// State names in declaration order.
+    pub fn state_names(&self) -> impl Iterator<Item = &str> {
+        self.inner.checked.states.iter().map(|s| s.name.as_str())
+    }
+
+    /// Output names in declaration order.
+    pub fn output_names(&self) -> impl Iterator<Item = &str> {
+        self.inner.checked.outputs.iter().map(|o| o.name.as_str())
+    }
+
+    /// The options of a run: the model's `simulate` line over the run defaults
+    /// ([`SimOptions::default`]), as `hybc run` uses them without flags.
+    pub fn sim_options(&self) -> SimOptions {
+        let defaults = SimOptions::default();
+        let sim = &self.inner.checked.simulate;
+        SimOptions {
+            t_end: sim.t_end.unwrap_or(defaults.t_end),
+            rtol: sim.rtol.unwrap_or(defaults.rtol),
+            atol: sim.atol.unwrap_or(defaults.atol),
+            ..defaults
+        }
+    }
+
+    /// The index of parameter `name`, or an error that lists the model's parameters.
+    pub fn param_index(&self, name: &str) -> Result<ParamIdx, ParamError> {
+        self.inner.checked.param_index(name).ok_or_else(|| self.unknown_param(name))
+    }
+
+    /// "no parameter `name`", with the closest name and the list of parameters.
+    pub(crate) fn unknown_param(&self, name: &str) -> ParamError {
+        let known: Vec<String> = self.param_names().map(String::from).collect();
+        let hint = sema::closest_name(name, known.iter().map(String::as_str));
+        ParamError::Unknown { model: self.name().to_string(), name: name.to_string(), hint, known }
+    }
+
+    /// Compiles the model to native code with gradients with respect to `grad` (parameter
+    /// names, in the order of the sensitivity columns; empty for no gradients).
+    pub fn compile<S: AsRef<str>>(&self, grad: &[S]) -> Result<Compiled, Error> {
+        self.compile_with(grad, &CompileOptions::default())
+    }
+
+    /// [`Self::compile`] with explicit code-generation options.
+    pub fn compile_with<S: AsRef<str>>(&self, grad: &[S], opts: &CompileOptions) -> Result<Compiled, Error> {
+        let mut indices: Vec<ParamIdx> = Vec::with_capacity(grad.len());
+        for name in grad {
+            let idx = self.param_index(name.as_ref())?;
+            if indices.contains(&idx) {
+                return Err(ParamError::Duplicate { name: name.as_ref().to_string() }.into());
+            }
+            indices.push(idx);
+        }
+        Compiled::new(self.clone(), &indices, opts)
+    }
+
+    /// [`Self::compile`] with gradients with respect to every parameter.
+    pub fn compile_all(&self) -> Result<Compiled, Error> {
+        let names: Vec<&str> = self.param_names().collect();
+        self.compile(&names)
+    }
+
+    /// Whether `other` is this very model (the same parse, or a clone of it).
+    pub(crate) fn same(&self, other: &Model) -> bool {
+        Arc::ptr_eq(&self.inner, &other.inner)
+    }
+}

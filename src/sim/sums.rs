@@ -1,0 +1,136 @@
+//! Stage 5 (sim): the weighted sums of Runge-Kutta stages that every step, error estimate and
+//! dense output is made of, in blocks of eight (then four) components so each stage block is read
+//! once. Knows only the stage layout (`nz`-long blocks) and [`Terms`]; nothing of methods or models.
+//!
+//! The one place in `sim` with `unsafe`: the AVX build of the sums behind a run-time CPU check,
+//! and block loads checked once per tableau row instead of once per term.
+#![allow(unsafe_code)]
+
+use super::tableau::Terms;
+
+/// `out_i = init(i) + sum_j (scale w_j) k_{j,i}` for the first `out.len()` components, summed in
+/// ascending stage order over the nonzero weights `w` of one tableau row (`k` holds the stages as
+/// blocks of `nz`). Blocks of eight (then four) components are summed in registers, so each stage
+/// block is read once, `out` written once, and the index arithmetic and bounds checks are paid
+/// per block rather than per component.
+#[inline(always)]
+pub(crate) fn stage_sum<I: Fn(usize) -> f64>(
+    k: &[f64],
+    nz: usize,
+    terms: &Terms,
+    scale: f64,
+    init: I,
+    out: &mut [f64],
+) {
+    sum_blocks::<false, I>(k, nz, terms, scale, init, out)
+}
+
+/// `out_i = sum_j w_j (k_{j,i} - k_{0,i})` for a row whose weights sum to zero (the error
+/// estimators and the dense-output corrections): equal to `sum_j w_j k_{j,i}` in exact
+/// arithmetic, but the part of the derivative common to all stages cancels before it is
+/// weighted instead of after. Where the derivative hardly changes over a step (tight
+/// tolerances, nearly polynomial solutions) the plain sum leaves round-off of size
+/// `eps |f| max |w_j|` in the error estimate, which at rtol 1e-10 can exceed the true error and
+/// hold the step size down (on the bouncing ball, whose flights every pair integrates exactly).
+#[inline(always)]
+pub(crate) fn centred_sum(k: &[f64], nz: usize, terms: &Terms, out: &mut [f64]) {
+    sum_blocks::<true, _>(k, nz, terms, 1.0, |_| 0.0, out)
+}
+
+#[inline(always)]
+fn sum_blocks<const CENTRED: bool, I: Fn(usize) -> f64>(
+    k: &[f64],
+    nz: usize,
+    terms: &Terms,
+    scale: f64,
+    init: I,
+    out: &mut [f64],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU supports AVX (checked just above).
+        unsafe { sum_blocks_avx::<CENTRED, I>(k, nz, terms, scale, init, out) };
+        return;
+    }
+    sum_blocks_portable::<CENTRED, I>(k, nz, terms, scale, init, out)
+}
+
+/// [`sum_blocks_portable`] compiled for AVX: the blocks of eight components are then summed in
+/// two 4-wide registers instead of four 2-wide ones. Only the vector width changes (no fused
+/// multiply-add, same order of operations), so the results are bit for bit those of the
+/// baseline code. Measured: a bouncing-ball run (nz = 8) 3% faster.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+fn sum_blocks_avx<const CENTRED: bool, I: Fn(usize) -> f64>(
+    k: &[f64],
+    nz: usize,
+    terms: &Terms,
+    scale: f64,
+    init: I,
+    out: &mut [f64],
+) {
+    sum_blocks_portable::<CENTRED, I>(k, nz, terms, scale, init, out)
+}
+
+#[inline(always)]
+fn sum_blocks_portable<const CENTRED: bool, I: Fn(usize) -> f64>(
+    k: &[f64],
+    nz: usize,
+    terms: &Terms,
+    scale: f64,
+    init: I,
+    out: &mut [f64],
+) {
+    // Checked once per row instead of per term (the per-term checks took 3% of a
+    // bouncing-ball run): every block `sum_block` reads lies in `k`, since each stage is at most
+    // the last (they ascend, `Terms`' invariant) and each block ends by `nz` within its stage.
+    let stages_end = (terms.last_stage() + 1).checked_mul(nz);
+    assert!(out.len() <= nz && stages_end.is_some_and(|end| end <= k.len()), "stage sum outside the stages");
+    let mut i0 = 0;
+    while i0 + 8 <= out.len() {
+        // SAFETY: `i0 + 8 <= out.len()`, with the check above.
+        unsafe { sum_block::<8, CENTRED, I>(k, nz, terms, scale, &init, i0, &mut out[i0..i0 + 8]) };
+        i0 += 8;
+    }
+    if i0 + 4 <= out.len() {
+        // SAFETY: `i0 + 4 <= out.len()`, with the check above.
+        unsafe { sum_block::<4, CENTRED, I>(k, nz, terms, scale, &init, i0, &mut out[i0..i0 + 4]) };
+        i0 += 4;
+    }
+    for (i, o) in out.iter_mut().enumerate().skip(i0) {
+        let mut acc = init(i);
+        let base = if CENTRED { k[i] } else { 0.0 };
+        for (&j, &w) in terms.stages().iter().zip(terms.weights()) {
+            acc += scale * w * (k[j * nz + i] - base);
+        }
+        *o = acc;
+    }
+}
+
+/// Components `i0..i0 + W` of [`stage_sum`] or (`CENTRED`) [`centred_sum`].
+///
+/// # Safety
+/// `k[j * nz + i0..j * nz + i0 + W]` must be in bounds for every stage `j` of `terms`: the
+/// caller checks `i0 + W <= nz` and `(terms.last_stage() + 1) * nz <= k.len()`.
+#[inline(always)]
+unsafe fn sum_block<const W: usize, const CENTRED: bool, I: Fn(usize) -> f64>(
+    k: &[f64],
+    nz: usize,
+    terms: &Terms,
+    scale: f64,
+    init: &I,
+    i0: usize,
+    out: &mut [f64],
+) {
+    let mut acc: [f64; W] = std::array::from_fn(|l| init(i0 + l));
+    let base: [f64; W] = if CENTRED { k[i0..i0 + W].try_into().expect("a block of W") } else { [0.0; W] };
+    for (&j, &w) in terms.stages().iter().zip(terms.weights()) {
+        let sw = scale * w;
+        // SAFETY: in bounds by the caller's contract; `[f64; W]` has the alignment of `f64`.
+        let kj: &[f64; W] = unsafe { &*k.as_ptr().add(j * nz + i0).cast::<[f64; W]>() };
+        for ((a, kv), b) in acc.iter_mut().zip(kj).zip(&base) {
+            *a += sw * (kv - b);
+        }
+    }
+    out.copy_from_slice(&acc);
+}
