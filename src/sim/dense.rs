@@ -10,16 +10,17 @@
 //! Dormand-Prince 5(4) has one correction (4th-order accurate), DOP853 four, built from three extra
 //! stages (7th-order accurate). Because of the Hermite part, `P'` matches `f` at both ends.
 
-use super::rk::Rk;
+use super::stepper::Interpolant;
 use super::sums::centred_sum;
-use super::tableau::DenseKind;
+use super::tableau::{DenseKind, Tableau};
 
 /// Most coefficient vectors of any method (DOP853; Dopri5 uses 5).
 const MAX_COEF: usize = 8;
 
-pub(crate) struct Dense {
-    pub t0: f64,
-    pub h: f64,
+/// The dense output of one explicit Runge-Kutta step (an [`Interpolant`]).
+pub struct Dense {
+    pub(crate) t0: f64,
+    pub(crate) h: f64,
     nz: usize,
     n_coef: usize,
     /// Component-major: the coefficients of component `i` are `r[i * MAX_COEF..][..n_coef]`, so
@@ -30,36 +31,31 @@ pub(crate) struct Dense {
 }
 
 impl Dense {
-    pub fn new(nz: usize) -> Dense {
+    pub(crate) fn new(nz: usize) -> Dense {
         // Until the first build the interpolant is the zero constant, never an out-of-range read.
         Dense { t0: 0.0, h: 0.0, nz, n_coef: 1, r: vec![0.0; MAX_COEF * nz], row: vec![0.0; nz] }
     }
 
-    /// Builds the interpolant of the last attempt of `rk` (before `rk.accept()`: `rk.y` is the
-    /// start point, `rk.y_new` the end). DOP853 evaluates its three extra stages here.
-    pub fn build<F: FnMut(f64, &[f64], &mut [f64])>(&mut self, rk: &mut Rk, rhs: &mut F) {
+    /// Builds the interpolant of a step of size `h` from `(t0, y0)` to `y1` with the stage
+    /// derivatives `k` (all of them, DOP853's three extra stages included).
+    pub(crate) fn build(&mut self, tab: &Tableau, t0: f64, h: f64, y0: &[f64], y1: &[f64], k: &[f64]) {
         let nz = self.nz;
-        let h = rk.h;
-        let tab = rk.tab;
-        if tab.all_stages > tab.stages {
-            rk.eval_stages(tab.stages, tab.all_stages, h, rhs);
-        }
-        self.t0 = rk.t;
+        self.t0 = t0;
         self.h = h;
         self.n_coef = match tab.dense {
             DenseKind::Dopri5 => 5,
             DenseKind::Dop853 => 8,
         };
-        let f0 = &rk.k[..nz];
-        let f1 = &rk.k[(tab.stages - 1) * nz..tab.stages * nz];
-        let ends = rk.y.iter().zip(&rk.y_new).zip(f0.iter().zip(f1));
+        let f0 = &k[..nz];
+        let f1 = &k[(tab.stages - 1) * nz..tab.stages * nz];
+        let ends = y0.iter().zip(y1).zip(f0.iter().zip(f1));
         for (r, ((&y0, &y1), (&f0, &f1))) in self.r.chunks_exact_mut(MAX_COEF).zip(ends) {
             let ydiff = y1 - y0;
             let bspl = h * f0 - ydiff;
             r[..4].copy_from_slice(&[y0, ydiff, bspl, ydiff - h * f1 - bspl]);
         }
         for (row, d) in tab.d.iter().enumerate() {
-            centred_sum(&rk.k, nz, d, &mut self.row);
+            centred_sum(k, nz, d, &mut self.row);
             for (r, v) in self.r.chunks_exact_mut(MAX_COEF).zip(&self.row) {
                 r[4 + row] = h * v;
             }
@@ -123,21 +119,38 @@ impl Dense {
     }
 }
 
+impl Interpolant for Dense {
+    fn t0(&self) -> f64 {
+        self.t0
+    }
+    fn h(&self) -> f64 {
+        self.h
+    }
+    #[inline]
+    fn eval(&self, t: f64, out: &mut [f64]) {
+        Dense::eval(self, t, out)
+    }
+    #[inline]
+    fn eval_deriv(&self, t: f64, out: &mut [f64]) {
+        Dense::eval_deriv(self, t, out)
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    use super::super::rk::Rk;
+    use super::super::stepper::Stepper;
     use super::super::tableau::{Tableau, DOP853, DOPRI5};
-    use super::*;
 
     /// One step of y' = cos t (y = sin t) and the interpolant inside it, value and derivative.
     fn interpolation_error(tab: &'static Tableau, h: f64) -> (f64, f64) {
         let mut rk = Rk::new(tab, 1, 1, 1e-8, 1e-8);
         let mut rhs = |t: f64, _y: &[f64], dy: &mut [f64]| dy[0] = t.cos();
-        rk.t = 0.3;
-        rk.y[0] = 0.3f64.sin();
-        rk.restart(&mut rhs);
-        rk.attempt(h, &mut rhs);
-        let mut dense = Dense::new(1);
-        dense.build(&mut rk, &mut rhs);
+        let y0 = [0.3f64.sin()];
+        rk.restart(0.3, &y0, &mut rhs);
+        rk.attempt(0.3, &y0, h, &mut rhs);
+        rk.build_interpolant(0.3, &y0, &mut rhs);
+        let dense = rk.interpolant();
         let (mut ev, mut ed) = (0.0f64, 0.0f64);
         for i in 0..=10 {
             let t = 0.3 + h * i as f64 / 10.0;

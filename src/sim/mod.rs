@@ -1,22 +1,36 @@
 //! Stage 5: the event-locating integrator with forward sensitivities. Depends only on the
 //! [`HybridSystem`] trait, never on Cranelift.
 //!
-//! Code map: `options` (what to ask), `tableau` + `rk` (adaptive Runge-Kutta stepping),
-//! `dense` (interpolation inside a step), `events` (detection and root finding), `jump` (event
-//! time gradients and saltation), `run` (the driver), `result` (what a run reports).
+//! Code map: `options` (what to ask); `stepper` (the seam any method implements), `tableau`,
+//! `sums`, `rk` and `dense` (the explicit Runge-Kutta pairs and their interpolants);
+//! `integrator` (the state of a run and its `step`), `breakpoints` (times landed on exactly),
+//! `events` (detection), `roots` (root finding), `jump` (event-time gradients and saltation),
+//! `zeno` (accumulating events), `recorder` (trajectories through an observer); `run` (a run
+//! from start to end, the reusable `Simulator`), `result` (what a run reports).
 
+mod breakpoints;
 mod dense;
 mod events;
+mod integrator;
 mod jump;
 mod options;
+mod recorder;
 mod result;
 mod rk;
+mod roots;
 mod run;
+mod stepper;
 mod sums;
 pub mod system;
 mod tableau;
+mod zeno;
 
+pub use dense::Dense;
+pub use integrator::{Integrator, StepOutcome};
 pub use options::*;
+pub use recorder::{NoRecorder, Point, PointKind, Recorder, TrajectoryRecorder};
 pub use result::*;
+pub use rk::Rk;
 pub use run::{run, Simulator, SystemRef};
+pub use stepper::{Interpolant, Rhs, Stepper};
 pub use system::*;

@@ -1,7 +1,7 @@
-//! Stage 5 (sim): one adaptive explicit Runge-Kutta stepper over a flat vector `z`, with its
-//! error norm, step-size controller and initial step estimate. Knows nothing of modes, events or
-//! sensitivities: the driver hands it a right-hand side closure and says which leading
-//! components enter the error norm.
+//! Stage 5 (sim): the adaptive explicit Runge-Kutta pairs (Dormand-Prince 5(4), DOP853) as a
+//! [`Stepper`]: error norm, step-size controller, initial step estimate and dense output. Knows
+//! nothing of modes, events or sensitivities: the integrator hands it a right-hand side and says
+//! which leading components enter the error norm.
 //!
 //! Error norm: `err = sqrt(mean_i (e_i / sc_i)^2)` over the controlled components with
 //! `sc_i = atol + rtol * max(|z_i|, |z_new_i|)`; a step is accepted when `err <= 1`. DOP853
@@ -18,6 +18,8 @@
 //! scaled norm, `h0 = 0.01 d0 / d1`; one explicit Euler step gives `d2 = |f(z0 + h0 f0) - f0| / h0`
 //! and `h1 = (0.01 / max(d1, d2))^(1/q)`; the estimate is `min(100 h0, h1)`.
 
+use super::dense::Dense;
+use super::stepper::{Rhs, Stepper};
 use super::sums::{centred_sum, stage_sum};
 #[cfg(doc)]
 use super::tableau::Control;
@@ -25,23 +27,23 @@ use super::tableau::Tableau;
 
 const SAFETY: f64 = 0.9;
 
-pub(crate) struct Rk {
-    pub tab: &'static Tableau,
+/// An explicit Runge-Kutta pair with its controller and dense output (a [`Stepper`]).
+pub struct Rk {
+    pub(crate) tab: &'static Tableau,
     /// Length of the integrated vector.
-    pub nz: usize,
+    pub(crate) nz: usize,
     /// The leading `n_err` components enter the error norm.
-    pub n_err: usize,
-    pub rtol: f64,
-    pub atol: f64,
-    /// Stage derivatives, `all_stages` blocks of `nz`; block 0 is `f(t, y)`, block
-    /// `stages - 1` is `f(t + h, y_new)` after an attempt.
-    pub k: Vec<f64>,
-    pub t: f64,
-    pub y: Vec<f64>,
+    pub(crate) n_err: usize,
+    pub(crate) rtol: f64,
+    pub(crate) atol: f64,
+    /// Stage derivatives, `all_stages` blocks of `nz`; block 0 is `f(t, y)` at the start point,
+    /// block `stages - 1` is `f(t + h, y_new)` after an attempt.
+    pub(crate) k: Vec<f64>,
     /// The last attempted step and its result.
-    pub h: f64,
-    pub y_new: Vec<f64>,
-    pub ytmp: Vec<f64>,
+    pub(crate) h: f64,
+    pub(crate) y_new: Vec<f64>,
+    pub(crate) ytmp: Vec<f64>,
+    dense: Dense,
     /// The error estimates of the last attempt (5th- and 3rd-order for DOP853).
     err5: Vec<f64>,
     err3: Vec<f64>,
@@ -49,11 +51,11 @@ pub(crate) struct Rk {
     err_prev_beta: f64,
     /// `1e-10^(-alpha)` and `1e-4^beta`: the controller's powers at the floors of `err`.
     floors: (f64, f64),
-    pub rhs_calls: usize,
+    pub(crate) rhs_calls: usize,
 }
 
 impl Rk {
-    pub fn new(tab: &'static Tableau, nz: usize, n_err: usize, rtol: f64, atol: f64) -> Rk {
+    pub(crate) fn new(tab: &'static Tableau, nz: usize, n_err: usize, rtol: f64, atol: f64) -> Rk {
         Rk {
             tab,
             nz,
@@ -61,11 +63,10 @@ impl Rk {
             rtol,
             atol,
             k: vec![0.0; tab.all_stages * nz],
-            t: 0.0,
-            y: vec![0.0; nz],
             h: 0.0,
             y_new: vec![0.0; nz],
             ytmp: vec![0.0; nz],
+            dense: Dense::new(nz),
             err5: vec![0.0; n_err],
             err3: vec![0.0; n_err],
             err_prev_beta: 0.0,
@@ -77,73 +78,36 @@ impl Rk {
         }
     }
 
-    /// Forgets everything of an earlier run (the buffers are overwritten before they are read):
-    /// a run on a reused stepper is bit-for-bit a run on a new one.
-    pub fn reset(&mut self, t: f64) {
-        self.t = t;
-        self.h = 0.0;
-        self.rhs_calls = 0;
-        self.err_prev_beta = self.floors.1;
-    }
-
-    /// Sets `k[0] = f(t, y)` after the caller has placed a new start point in `t`, `y` (at the
-    /// beginning and after every event) and forgets the controller's memory.
-    pub fn restart<F: FnMut(f64, &[f64], &mut [f64])>(&mut self, rhs: &mut F) {
-        let nz = self.nz;
-        rhs(self.t, &self.y, &mut self.k[..nz]);
-        self.rhs_calls += 1;
-        self.err_prev_beta = self.floors.1;
-    }
-
     /// Stage `i`'s input `ytmp = y + h sum_j a_ij k_j`.
-    fn stage_input(&mut self, i: usize, h: f64) {
-        let y = &self.y;
+    fn stage_input(&mut self, y: &[f64], i: usize, h: f64) {
         stage_sum(&self.k, self.nz, &self.tab.a[i], h, |c| y[c], &mut self.ytmp);
     }
 
     /// Evaluates stages `from..to` with step `h` from `(t, y)`.
-    pub fn eval_stages<F: FnMut(f64, &[f64], &mut [f64])>(
+    pub(crate) fn eval_stages<R: Rhs>(
         &mut self,
+        t: f64,
+        y: &[f64],
         from: usize,
         to: usize,
         h: f64,
-        rhs: &mut F,
+        rhs: &mut R,
     ) {
         let nz = self.nz;
         for i in from..to {
-            self.stage_input(i, h);
-            let ti = self.t + self.tab.c[i] * h;
-            rhs(ti, &self.ytmp, &mut self.k[i * nz..(i + 1) * nz]);
+            self.stage_input(y, i, h);
+            let ti = t + self.tab.c[i] * h;
+            rhs.eval(ti, &self.ytmp, &mut self.k[i * nz..(i + 1) * nz]);
             self.rhs_calls += 1;
         }
     }
 
-    /// Attempts one step of size `h`; fills `y_new` and the FSAL stage and returns the scaled
-    /// error (infinite when anything is not finite, so the step is rejected).
-    pub fn attempt<F: FnMut(f64, &[f64], &mut [f64])>(&mut self, h: f64, rhs: &mut F) -> f64 {
-        let s = self.tab.stages;
-        self.h = h;
-        // The last stage's input is y + h sum b_j k_j = y_new (its row equals b).
-        self.eval_stages(1, s - 1, h, rhs);
-        self.stage_input(s - 1, h);
-        self.y_new.copy_from_slice(&self.ytmp);
-        let nz = self.nz;
-        rhs(self.t + h, &self.y_new, &mut self.k[(s - 1) * nz..s * nz]);
-        self.rhs_calls += 1;
-        let err = self.error(h);
-        if err.is_finite() && all_finite(&self.y_new) {
-            err
-        } else {
-            f64::INFINITY
-        }
-    }
-
-    fn error(&mut self, h: f64) -> f64 {
+    fn error(&mut self, y: &[f64], h: f64) -> f64 {
         let ne = self.n_err;
         centred_sum(&self.k, self.nz, &self.tab.e, &mut self.err5[..ne]);
         let mut sum5 = 0.0;
         let mut sum3 = 0.0;
-        let scales = self.y[..ne].iter().zip(&self.y_new[..ne]);
+        let scales = y[..ne].iter().zip(&self.y_new[..ne]);
         match &self.tab.e3 {
             Some(e3) => {
                 centred_sum(&self.k, self.nz, e3, &mut self.err3[..ne]);
@@ -175,9 +139,70 @@ impl Rk {
             (sum5 / n).sqrt()
         }
     }
+}
+
+impl Stepper for Rk {
+    type Interpolant = Dense;
+
+    /// Forgets everything of an earlier run (the buffers are overwritten before they are read):
+    /// a run on a reused stepper is bit-for-bit a run on a new one.
+    fn reset(&mut self) {
+        self.h = 0.0;
+        self.rhs_calls = 0;
+        self.err_prev_beta = self.floors.1;
+    }
+
+    /// Sets `k[0] = f(t, y)` and forgets the controller's memory.
+    fn restart<R: Rhs>(&mut self, t: f64, y: &[f64], rhs: &mut R) {
+        let nz = self.nz;
+        rhs.eval(t, y, &mut self.k[..nz]);
+        self.rhs_calls += 1;
+        self.err_prev_beta = self.floors.1;
+    }
+
+    fn start_derivative(&self) -> &[f64] {
+        &self.k[..self.nz]
+    }
+
+    /// Fills `y_new` and the FSAL stage and returns the scaled error (infinite when anything is
+    /// not finite, so the step is rejected).
+    fn attempt<R: Rhs>(&mut self, t: f64, y: &[f64], h: f64, rhs: &mut R) -> f64 {
+        let s = self.tab.stages;
+        self.h = h;
+        // The last stage's input is y + h sum b_j k_j = y_new (its row equals b).
+        self.eval_stages(t, y, 1, s - 1, h, rhs);
+        self.stage_input(y, s - 1, h);
+        self.y_new.copy_from_slice(&self.ytmp);
+        let nz = self.nz;
+        rhs.eval(t + h, &self.y_new, &mut self.k[(s - 1) * nz..s * nz]);
+        self.rhs_calls += 1;
+        let err = self.error(y, h);
+        if err.is_finite() && all_finite(&self.y_new) {
+            err
+        } else {
+            f64::INFINITY
+        }
+    }
+
+    /// DOP853 evaluates its three extra stages here.
+    fn build_interpolant<R: Rhs>(&mut self, t0: f64, y: &[f64], rhs: &mut R) {
+        let tab = self.tab;
+        if tab.all_stages > tab.stages {
+            self.eval_stages(t0, y, tab.stages, tab.all_stages, self.h, rhs);
+        }
+        self.dense.build(tab, t0, self.h, y, &self.y_new, &self.k);
+    }
+
+    fn interpolant(&self) -> &Dense {
+        &self.dense
+    }
+
+    fn rhs_calls(&self) -> usize {
+        self.rhs_calls
+    }
 
     /// Next step size after an accepted step with error `err`; updates the controller memory.
-    pub fn grow(&mut self, err: f64) -> f64 {
+    fn grow(&mut self, err: f64) -> f64 {
         let (alpha, beta) = controller_exponents(self.tab);
         // Both powers are often at their floors (tiny errors), which are computed once; otherwise
         // they share the error's logarithm: one `ln` and two `exp` cost less than two `powf`
@@ -197,37 +222,39 @@ impl Rk {
     }
 
     /// Smaller step size after a rejected step with error `err` (infinite: by the smallest factor).
-    pub fn shrink(&self, err: f64) -> f64 {
+    fn shrink(&self, err: f64) -> f64 {
         let q = self.tab.order as f64;
         let fac_min = self.tab.control.fac_min;
         let fac = if err.is_finite() { SAFETY * err.powf(-1.0 / q) } else { fac_min };
         self.h * fac.clamp(fac_min, 1.0)
     }
 
-    /// Moves to the end of the last attempted step (FSAL: the end derivative becomes `k[0]`).
-    pub fn accept(&mut self) {
+    /// FSAL: the end derivative becomes `k[0]`, the start derivative of the next step.
+    fn accept(&mut self, z: &mut [f64]) {
         let nz = self.nz;
         let s = self.tab.stages;
-        self.t += self.h;
-        self.y.copy_from_slice(&self.y_new);
+        z.copy_from_slice(&self.y_new);
         self.k.copy_within((s - 1) * nz..s * nz, 0);
     }
 
-    /// The end derivative `f(t + h, y_new)` of the last attempt.
-    pub fn f_new(&self) -> &[f64] {
+    fn end_state(&self) -> &[f64] {
+        &self.y_new
+    }
+
+    fn end_derivative(&self) -> &[f64] {
         let s = self.tab.stages;
         &self.k[(s - 1) * self.nz..s * self.nz]
     }
 
     /// Hairer's initial step estimate from `(t, y)` with `k[0] = f(t, y)`, capped by `h_max`.
     /// Uses stage block 1 and `ytmp` as scratch.
-    pub fn initial_step<F: FnMut(f64, &[f64], &mut [f64])>(&mut self, h_max: f64, rhs: &mut F) -> f64 {
+    fn initial_step<R: Rhs>(&mut self, t: f64, y: &[f64], h_max: f64, rhs: &mut R) -> f64 {
         let nz = self.nz;
         let mut d0 = 0.0;
         let mut d1 = 0.0;
         // The scales' reciprocals, kept for `d2` in `err5` (scratch: every attempt overwrites it).
         let ne = self.n_err;
-        for ((inv, &y), &f) in self.err5[..ne].iter_mut().zip(&self.y[..ne]).zip(&self.k[..ne]) {
+        for ((inv, &y), &f) in self.err5[..ne].iter_mut().zip(&y[..ne]).zip(&self.k[..ne]) {
             *inv = 1.0 / (self.atol + self.rtol * y.abs());
             d0 += (y * *inv).powi(2);
             d1 += (f * *inv).powi(2);
@@ -236,11 +263,11 @@ impl Rk {
         let (d0, d1) = ((d0 / n).sqrt(), (d1 / n).sqrt());
         let mut h0 = if d0 < 1e-5 || d1 < 1e-5 { 1e-6 } else { 0.01 * d0 / d1 };
         h0 = h0.min(h_max);
-        for i in 0..nz {
-            self.ytmp[i] = self.y[i] + h0 * self.k[i];
+        for ((tmp, &y), &f) in self.ytmp.iter_mut().zip(&y[..nz]).zip(&self.k[..nz]) {
+            *tmp = y + h0 * f;
         }
         let (k0, rest) = self.k.split_at_mut(nz);
-        rhs(self.t + h0, &self.ytmp, &mut rest[..nz]);
+        rhs.eval(t + h0, &self.ytmp, &mut rest[..nz]);
         self.rhs_calls += 1;
         let mut d2 = 0.0;
         for ((inv, f1), f0) in self.err5[..ne].iter().zip(&rest[..ne]).zip(&k0[..ne]) {
@@ -310,24 +337,25 @@ mod tests {
     /// y = 0.5 (cos t + sin t) + (y0 - 0.5) e^-t.
     fn integrate(tab: &'static Tableau, rtol: f64) -> (f64, usize) {
         let mut rk = Rk::new(tab, 1, 1, rtol, rtol * 1e-2);
-        rk.y[0] = 2.0;
+        let (mut t, mut y) = (0.0, [2.0]);
         let mut rhs = |t: f64, y: &[f64], dy: &mut [f64]| dy[0] = -y[0] + t.cos();
-        rk.restart(&mut rhs);
-        let mut h = rk.initial_step(f64::INFINITY, &mut rhs);
+        rk.restart(t, &y, &mut rhs);
+        let mut h = rk.initial_step(t, &y, f64::INFINITY, &mut rhs);
         let mut steps = 0;
-        while rk.t < 2.0 {
-            let h_try = h.min(2.0 - rk.t);
-            let err = rk.attempt(h_try, &mut rhs);
+        while t < 2.0 {
+            let h_try = h.min(2.0 - t);
+            let err = rk.attempt(t, &y, h_try, &mut rhs);
             if err <= 1.0 {
                 h = rk.grow(err);
-                rk.accept();
+                rk.accept(&mut y);
+                t += h_try;
                 steps += 1;
             } else {
                 h = rk.shrink(err);
             }
         }
         let exact = 0.5 * (2f64.cos() + 2f64.sin()) + 1.5 * (-2f64).exp();
-        ((rk.y[0] - exact).abs(), steps)
+        ((y[0] - exact).abs(), steps)
     }
 
     #[test]
@@ -341,8 +369,8 @@ mod tests {
                 calls += 1;
                 dy[0] = if calls == 2 { f64::INFINITY } else { 1.0 };
             };
-            rk.restart(&mut rhs);
-            assert_eq!(rk.attempt(0.1, &mut rhs), f64::INFINITY, "order {}", tab.order);
+            rk.restart(0.0, &[0.0], &mut rhs);
+            assert_eq!(rk.attempt(0.0, &[0.0], 0.1, &mut rhs), f64::INFINITY, "order {}", tab.order);
         }
         assert!(all_finite(&[1.0; 19]) && !all_finite(&[1.0, f64::NAN]) && !all_finite(&[f64::INFINITY; 9]));
     }

@@ -1,0 +1,122 @@
+//! Stage 5 (sim): what a run records besides its result, through an observer: the
+//! [`Recorder`] is told of the start, every accepted step, both sides of every event group and
+//! the dense-output samples it asks for. The built-in [`TrajectoryRecorder`] keeps rows for
+//! `SimOptions::trajectory`; other recorders (a plot feed, an adjoint tape) implement the trait.
+
+use super::options::TrajectoryRequest;
+use super::result::TrajectoryRow;
+
+/// Where a recorded point comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PointKind {
+    /// The initial point.
+    Start,
+    /// The end of an accepted step.
+    Step,
+    /// The state at an event instant, before the group fires.
+    BeforeEvents,
+    /// The state after an event group.
+    AfterEvents,
+    /// A time asked for through [`Recorder::next_sample`], from the dense output.
+    Sample,
+}
+
+/// One point of the trajectory. `s` holds the sensitivities, column per parameter.
+#[derive(Clone, Copy, Debug)]
+pub struct Point<'a> {
+    pub kind: PointKind,
+    pub t: f64,
+    pub mode: usize,
+    pub x: &'a [f64],
+    pub s: &'a [f64],
+    pub outputs: &'a [f64],
+}
+
+/// An observer of a run.
+pub trait Recorder {
+    /// Whether the recorder wants anything; when false the integrator does no recording work at
+    /// all (no outputs computed, no dense output built for samples).
+    fn is_active(&self) -> bool {
+        true
+    }
+    /// Whether points of this kind are wanted (samples excepted: see `next_sample`).
+    fn wants(&self, kind: PointKind) -> bool;
+    /// The next time at which a sample from the dense output is wanted, if any. Each
+    /// [`PointKind::Sample`] point recorded moves it on.
+    fn next_sample(&self) -> Option<f64> {
+        None
+    }
+    fn record(&mut self, point: &Point<'_>);
+}
+
+/// Records nothing.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoRecorder;
+
+impl Recorder for NoRecorder {
+    fn is_active(&self) -> bool {
+        false
+    }
+    fn wants(&self, _kind: PointKind) -> bool {
+        false
+    }
+    fn record(&mut self, _point: &Point<'_>) {}
+}
+
+/// The rows of [`TrajectoryRequest`]: every step (the start, every accepted step end, both sides
+/// of every event group), or samples every `dt` from the start on the dense output.
+#[derive(Clone, Debug)]
+pub struct TrajectoryRecorder {
+    request: TrajectoryRequest,
+    t_start: f64,
+    next_sample: usize,
+    rows: Vec<TrajectoryRow>,
+}
+
+impl TrajectoryRecorder {
+    pub fn new(request: TrajectoryRequest, t_start: f64) -> TrajectoryRecorder {
+        TrajectoryRecorder { request, t_start, next_sample: 0, rows: Vec::new() }
+    }
+
+    /// The rows recorded, `None` when no trajectory was asked for.
+    pub fn into_rows(self) -> Option<Vec<TrajectoryRow>> {
+        match self.request {
+            TrajectoryRequest::None => None,
+            _ => Some(self.rows),
+        }
+    }
+}
+
+impl Recorder for TrajectoryRecorder {
+    fn is_active(&self) -> bool {
+        self.request != TrajectoryRequest::None
+    }
+
+    fn wants(&self, kind: PointKind) -> bool {
+        match self.request {
+            TrajectoryRequest::None => false,
+            TrajectoryRequest::Steps => kind != PointKind::Sample,
+            TrajectoryRequest::Sample(_) => kind == PointKind::Sample,
+        }
+    }
+
+    fn next_sample(&self) -> Option<f64> {
+        match self.request {
+            TrajectoryRequest::Sample(dt) => Some(self.t_start + self.next_sample as f64 * dt),
+            _ => None,
+        }
+    }
+
+    fn record(&mut self, p: &Point<'_>) {
+        if p.kind == PointKind::Sample {
+            self.next_sample += 1;
+        }
+        self.rows.push(TrajectoryRow {
+            t: p.t,
+            mode: p.mode,
+            x: p.x.to_vec(),
+            s: p.s.to_vec(),
+            outputs: p.outputs.to_vec(),
+        });
+    }
+}

@@ -1,0 +1,76 @@
+//! Stage 5 (sim): the seam between the integrator and a time-stepping method. A [`Stepper`]
+//! attempts steps under its own error control, gives the dense interpolant of its last attempt and
+//! restarts after a jump; the integrator (`integrator.rs`) owns the state `(t, z, mode)` and does
+//! everything hybrid: event detection, location, resets, saltation, Zeno, recording. So a new
+//! method (an implicit Rosenbrock method for stiff models, say) implements this trait and nothing
+//! of event handling changes.
+//!
+//! The integrated vector is `z = [x, S]`: the states and their sensitivities, column per
+//! parameter. Which leading components enter the error norm is the stepper's construction
+//! argument.
+
+/// The right-hand side `dz = F(t, z)` a stepper integrates: the current mode's flow with its
+/// sensitivity equations. Any `FnMut(f64, &[f64], &mut [f64])` is one.
+///
+/// An implicit method will also need the Jacobian of the flow; it will arrive here as a provided
+/// method, so explicit methods stay unchanged.
+pub trait Rhs {
+    fn eval(&mut self, t: f64, z: &[f64], dz: &mut [f64]);
+}
+
+impl<F: FnMut(f64, &[f64], &mut [f64])> Rhs for F {
+    #[inline(always)]
+    fn eval(&mut self, t: f64, z: &[f64], dz: &mut [f64]) {
+        self(t, z, dz)
+    }
+}
+
+/// The dense output of one step `[t0, t0 + h]`: values and time derivatives of every component.
+pub trait Interpolant {
+    fn t0(&self) -> f64;
+    fn h(&self) -> f64;
+    /// Values of the first `out.len()` components at `t`.
+    fn eval(&self, t: f64, out: &mut [f64]);
+    /// Time derivatives of the first `out.len()` components at `t`.
+    fn eval_deriv(&self, t: f64, out: &mut [f64]);
+}
+
+/// A time-stepping method with error control and dense output.
+///
+/// The protocol, as the integrator drives it: `restart` at the start and after every jump, then
+/// `initial_step`; then repeatedly `attempt`, followed by `shrink` (rejected) or `grow` and, once
+/// the integrator has looked at the end point and possibly `build_interpolant`, either `accept`
+/// (the step stands) or `restart` at a point inside it (an event cut it short).
+pub trait Stepper {
+    type Interpolant: Interpolant;
+
+    /// Forgets an earlier run entirely (statistics included).
+    fn reset(&mut self);
+    /// A new start point `(t, z)`: evaluates what the method keeps of it (the derivative there)
+    /// and forgets the step-size controller's memory, which was learnt before a jump.
+    fn restart<R: Rhs>(&mut self, t: f64, z: &[f64], rhs: &mut R);
+    /// The derivative `F(t, z)` at the current start point.
+    fn start_derivative(&self) -> &[f64];
+    /// A first step size from the current start point `(t, z)`, at most `h_max`.
+    fn initial_step<R: Rhs>(&mut self, t: f64, z: &[f64], h_max: f64, rhs: &mut R) -> f64;
+    /// Attempts a step of size `h` from `(t, z)` (`z` is the start point given to `restart` or
+    /// the last `accept`). Returns the scaled error: `<= 1` accepts; infinite when anything was
+    /// not finite.
+    fn attempt<R: Rhs>(&mut self, t: f64, z: &[f64], h: f64, rhs: &mut R) -> f64;
+    /// The end state of the last attempt.
+    fn end_state(&self) -> &[f64];
+    /// The derivative at the end state of the last attempt.
+    fn end_derivative(&self) -> &[f64];
+    /// After an accepted attempt with error `err`: the next step size; updates the controller.
+    fn grow(&mut self, err: f64) -> f64;
+    /// After a rejected attempt with error `err`: a smaller step size.
+    fn shrink(&self, err: f64) -> f64;
+    /// Builds the dense output of the last attempt, which started at `(t0, z)`.
+    fn build_interpolant<R: Rhs>(&mut self, t0: f64, z: &[f64], rhs: &mut R);
+    /// The dense output built last.
+    fn interpolant(&self) -> &Self::Interpolant;
+    /// Moves to the end of the last attempt: writes its end state into `z`.
+    fn accept(&mut self, z: &mut [f64]);
+    /// Right-hand side evaluations since the last `reset`.
+    fn rhs_calls(&self) -> usize;
+}
