@@ -8,13 +8,11 @@
 //! from the first product, so `-0.0` there may come out as `+0.0`; those entries are compared
 //! with `==`.
 
-mod jit_support;
-
+use crate::support::hand_functions::same;
 use hybc::codegen::{CompileOptions, CompiledModel};
 use hybc::lower::{lower, system_info, Interpreter};
 use hybc::sema::ParamIdx;
 use hybc::sim::HybridSystem;
-use jit_support::same;
 use proptest::prelude::*;
 
 /// A small deterministic generator (xorshift64*), so failures reproduce.
@@ -235,7 +233,7 @@ fn model_text() -> impl Strategy<Value = String> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+    #![proptest_config(crate::support::proptest_config(48))]
 
     /// Random well-formed models of random sizes through the whole pipeline: the JIT agrees with
     /// the interpreter on every method, bit for bit.

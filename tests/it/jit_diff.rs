@@ -4,12 +4,10 @@
 //! evaluator's own `apply_*`, so results must agree bit for bit (all NaNs count as equal: Rust
 //! leaves NaN payloads unspecified).
 
-mod jit_support;
-
+use crate::support::hand_functions::{output_only, same};
 use hybc::codegen::{CompileOptions, CompiledModel};
 use hybc::expr::{apply_binary, apply_select, apply_unary, eval, BinaryOp, ExprId, ExprStore, Node, UnaryOp};
 use hybc::sim::HybridSystem;
-use jit_support::{output_only, same};
 use proptest::prelude::*;
 
 const UNARY: [UnaryOp; 16] = UnaryOp::ALL;
@@ -131,7 +129,7 @@ impl RandomDag {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 96, ..ProptestConfig::default() })]
+    #![proptest_config(crate::support::proptest_config(96))]
 
     #[test]
     fn random_dags_match_the_evaluator_bit_for_bit(

@@ -3,10 +3,8 @@
 //! the closed forms. Without it they are silently wrong: in `rising_state_switch` the reported
 //! dx/dp would be 1 instead of 2. Values and gradients to relative 1e-8 at rtol 1e-10.
 
-mod cli_support;
-
+use crate::support::cli::hybc;
 use approx::assert_relative_eq;
-use cli_support::hybc;
 use hybc::codegen::{compile, CompileOptions};
 use hybc::lower::{lower, system_info};
 use hybc::sema::ParamIdx;

@@ -9,9 +9,7 @@
 //! method of order >= 2 integrates exactly, so its errors sit at round-off at every tolerance; the
 //! test asserts exactly that. `--nocapture` prints the errors (README, Accuracy).
 
-mod closed_support;
-
-use closed_support::{ball_reference, derivative, thermostat_reference, Compiled, Reference};
+use crate::support::reference::{ball_reference, derivative, thermostat_reference, Compiled, Reference};
 use hybc::sim::SimResult;
 
 const RTOLS: [f64; 4] = [1e-6, 1e-8, 1e-10, 1e-12];

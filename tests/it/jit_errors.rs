@@ -2,11 +2,9 @@
 //! native code exists: shapes that disagree with `SystemInfo`, indices out of range, unsorted
 //! sparse entries, bad gradient parameter lists.
 
-mod jit_support;
-
+use crate::support::hand_functions::{ball, ball_info, mat, vec_, E, G};
 use hybc::codegen::{CodegenError, CompileOptions, CompiledModel};
 use hybc::expr::Node;
-use jit_support::{ball, ball_info, mat, vec_, E, G};
 
 fn compile(
     funcs: hybc::expr::ModelFunctions,

@@ -4,13 +4,13 @@
 use proptest::prelude::*;
 
 const MODELS: [&str; 7] = [
-    include_str!("../models/ball.hyb"),
-    include_str!("../models/tilted_ball.hyb"),
-    include_str!("../models/thermostat.hyb"),
-    include_str!("../models/dosing.hyb"),
-    include_str!("../models/pendulum_wall.hyb"),
-    include_str!("../models/hopper.hyb"),
-    include_str!("../models/engine_redline.hyb"),
+    include_str!("../../models/ball.hyb"),
+    include_str!("../../models/tilted_ball.hyb"),
+    include_str!("../../models/thermostat.hyb"),
+    include_str!("../../models/dosing.hyb"),
+    include_str!("../../models/pendulum_wall.hyb"),
+    include_str!("../../models/hopper.hyb"),
+    include_str!("../../models/engine_redline.hyb"),
 ];
 
 /// Characters that matter to the grammar, so that mutations reach deep into the parser.
@@ -65,7 +65,7 @@ fn mutation() -> impl Strategy<Value = Mutation> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 400, ..ProptestConfig::default() })]
+    #![proptest_config(crate::support::proptest_config(400))]
 
     #[test]
     fn arbitrary_bytes_never_panic(bytes in prop::collection::vec(any::<u8>(), 0..300)) {

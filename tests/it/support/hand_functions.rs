@@ -1,8 +1,6 @@
 //! Test support for the JIT tests: hand-built model functions (no parser, no lowering) and the
 //! `SystemInfo` that goes with them. Knows only the public `expr` and `sim` contracts.
 
-#![allow(dead_code)]
-
 use hybc::expr::{
     BinaryOp, EventFunctions, ExprId, ExprStore, ModeFunctions, ModelFunctions, Node, SparseMat, SparseVec,
     UnaryOp,

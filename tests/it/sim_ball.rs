@@ -2,10 +2,8 @@
 //! /work/shared/reference/closed-forms.md (bounce times, event-time gradients, energy and its
 //! gradient, state sensitivities after a bounce, Zeno accumulation point, stop events).
 
-mod sim_support;
-
+use crate::support::hand_systems::{close, Ball};
 use hybc::sim::{run, Method, SimError, SimOptions, StopReason, TrajectoryRequest};
-use sim_support::{close, Ball};
 
 const G: f64 = 9.81;
 const E: f64 = 0.8;

@@ -12,8 +12,6 @@ use hybc::expr::{
 };
 use proptest::prelude::*;
 
-mod common;
-
 #[derive(Clone, Debug)]
 enum Tree {
     State(u32),
@@ -125,13 +123,13 @@ fn var() -> impl Strategy<Value = Var> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 2000, max_global_rejects: 200_000, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { max_global_rejects: 200_000, ..crate::support::proptest_config(2000) })]
 
     #[test]
     fn derivative_matches_central_difference(t in tree(), at in point(), wrt in var()) {
         let mut raw = ExprStore::new();
         let r = build_raw(&mut raw, &t);
-        prop_assume!(common::is_smooth_at(&raw, r, at.t, &at.x, &at.p, 1e4));
+        prop_assume!(crate::support::expr::is_smooth_at(&raw, r, at.t, &at.x, &at.p, 1e4));
 
         let mut s = ExprStore::new();
         let e = build(&mut s, &t);

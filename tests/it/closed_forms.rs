@@ -11,9 +11,7 @@
 //! 1e-9 (a derivative that is exactly zero is reported as ~1e-12, not 0). `cargo test --test
 //! closed_forms -- --nocapture` prints the largest errors seen (README, Accuracy).
 
-mod closed_support;
-
-use closed_support::{
+use crate::support::reference::{
     ball_reference, derivative, mid_flight, thermostat_reference, Compiled, Errors, Reference, MAX_EVENTS,
 };
 use hybc::gradcheck::{check, CheckOptions};

@@ -3,8 +3,7 @@
 //! point is reported in its row while the sweep goes on, and that bad flags are usage errors.
 //! Closed forms (bouncing ball): ../shared/reference/closed-forms.md.
 
-mod cli_support;
-use cli_support::hybc;
+use crate::support::cli::hybc;
 
 use approx::assert_relative_eq;
 use hybc::codegen::{compile, CompileOptions, CompiledModel};
@@ -65,7 +64,7 @@ fn csv_fields(line: &str) -> Vec<String> {
 }
 
 fn ball(grad: &[u32]) -> (hybc::sema::Model, CompiledModel) {
-    let model = hybc::check_source(include_str!("../models/ball.hyb")).expect("ball checks");
+    let model = hybc::check_source(include_str!("../../models/ball.hyb")).expect("ball checks");
     let grad: Vec<ParamIdx> = grad.iter().map(|&j| ParamIdx(j)).collect();
     let compiled =
         compile(&lower(&model), system_info(&model, &grad), &CompileOptions::default()).expect("compiles");

@@ -2,8 +2,7 @@
 //! model, fails on an absurd tolerance or a corrupted derivative, reports cusps instead of
 //! failing, and puts its result in the JSON report.
 
-mod cli_support;
-use cli_support::hybc;
+use crate::support::cli::hybc;
 
 use std::process::Output;
 

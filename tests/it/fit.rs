@@ -9,8 +9,7 @@
 //! compared at relative 1e-8: an error of 1e-9 in E moves e = (E / (g h0))^(1/8) by 1.3e-10, and the
 //! solver stops once its Gauss-Newton step is below xtol = 1e-10 relative.
 
-mod cli_support;
-use cli_support::hybc;
+use crate::support::cli::hybc;
 
 use std::process::Output;
 
@@ -27,7 +26,7 @@ use serde_json::Value;
 
 const G: f64 = 9.81;
 const T: f64 = 2.5;
-const BALL: &str = include_str!("../models/ball.hyb");
+const BALL: &str = include_str!("../../models/ball.hyb");
 
 /// Touchdown times before T (closed form).
 fn touchdowns(h0: f64, e: f64, t_end: f64) -> Vec<f64> {

@@ -2,7 +2,6 @@
 //! constructors, so rule tables stay one line each. `x`, `y` are states 0, 1; `p`, `q` are
 //! parameters 0, 1; `t` is time. Operators: `+ * / ^ -` (unary or binary), `< <= > >= and or
 //! not if`, and every function name.
-#![allow(dead_code)]
 
 use hybc::expr::{BinaryOp, ExprId, ExprStore, UnaryOp};
 

@@ -3,8 +3,7 @@
 //! point and the tangents; tangent slopes are the gradients (checked against central
 //! differences). Elements are counted by their colours, which `hybc::plot` exports.
 
-mod cli_support;
-use cli_support::hybc;
+use crate::support::cli::hybc;
 
 use std::path::PathBuf;
 
@@ -142,7 +141,7 @@ fn sweep_plot_marks_every_point_and_draws_tangents_with_or_without_grad() {
 
 #[test]
 fn tangent_slopes_are_central_differences_of_the_plotted_values() {
-    let model = hybc::check_source(include_str!("../models/ball.hyb")).expect("ball");
+    let model = hybc::check_source(include_str!("../../models/ball.hyb")).expect("ball");
     let funcs = lower(&model);
     // Differentiate h0 and e (in that order), so that the tangent must pick the right column.
     let grad = [ParamIdx(2), ParamIdx(1)];

@@ -2,11 +2,9 @@
 //! the array layouts of `sim::system`, zero-filling of sparse outputs, the length checks, and
 //! sharing one compiled model between threads.
 
-mod jit_support;
-
+use crate::support::hand_functions::{ball, ball_info, same, E, G, H0};
 use hybc::codegen::{CompileOptions, CompiledModel, OptLevel, RegAlloc};
 use hybc::sim::HybridSystem;
-use jit_support::{ball, ball_info, same, E, G, H0};
 
 const P: [f64; 3] = [9.81, 0.8, 10.0];
 

@@ -3,9 +3,7 @@
 //! Every derivative row is also checked by value against a central finite difference, so an
 //! expected text cannot silently encode a wrong derivative.
 
-mod common;
-
-use common::{params, read, states};
+use crate::support::expr::{params, read, states};
 use hybc::expr::{apply_binary, apply_unary, diff, eval_one, to_infix, BinaryOp, ExprStore, UnaryOp, Var};
 
 const X: [f64; 2] = [0.3, 0.7];

@@ -1,8 +1,7 @@
 //! `hybc run` end to end: the binary's JSON against the bouncing ball's closed form, exit codes,
 //! Zeno and grazing reports. Closed forms: ../shared/reference/closed-forms.md.
 
-mod cli_support;
-use cli_support::hybc;
+use crate::support::cli::hybc;
 
 use std::process::Output;
 use std::time::{Duration, Instant};

@@ -2,8 +2,6 @@
 //! test that every derivative entry `lower` produces (and every entry it leaves out as a
 //! structural zero) agrees with a central finite difference of the evaluator.
 
-mod common;
-
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::OnceLock;
@@ -121,7 +119,7 @@ fn all_rows(f: &ModelFunctions) -> Vec<Rows> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+    #![proptest_config(crate::support::proptest_config(200))]
 
     /// At a random point around each model's defaults (states near their initial values,
     /// parameters within 20% of their defaults, t in [0, 10]), every entry of every Jacobian
@@ -145,7 +143,7 @@ proptest! {
                 .collect();
             for group in all_rows(f) {
                 for (i, &row) in group.rows.iter().enumerate() {
-                    if !common::is_smooth_at(&f.store, row, t, &x, &p, 1e8) {
+                    if !crate::support::expr::is_smooth_at(&f.store, row, t, &x, &p, 1e8) {
                         continue;
                     }
                     for &var in &vars {

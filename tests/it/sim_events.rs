@@ -2,10 +2,8 @@
 //! mode switching against a closed form (thermostat), simultaneous events in declaration order,
 //! no re-firing at the same instant and no firing when starting on a guard.
 
-mod sim_support;
-
+use crate::support::hand_systems::{close, Ball, Counter, Oscillator, Thermostat};
 use hybc::sim::{run, Method, SimOptions, SimWarning, StopReason, TrajectoryRequest};
-use sim_support::{close, Ball, Counter, Oscillator, Thermostat};
 
 #[test]
 fn short_hop_through_a_ceiling_within_one_step_is_caught() {

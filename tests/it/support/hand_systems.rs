@@ -1,6 +1,5 @@
 //! Integrator tests: hand-written `HybridSystem` implementations whose functions and Jacobians
 //! are computed by hand, so that the integrator is tested without the parser, DAG or JIT.
-#![allow(dead_code)]
 
 use hybc::sim::{Direction, EventInfo, HybridSystem, ModeInfo, SystemInfo};
 

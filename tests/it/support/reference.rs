@@ -2,7 +2,6 @@
 //! differentiated, run it by parameter name, differentiate a reference computation by
 //! Richardson-extrapolated central differences, and compare with stated tolerances while
 //! recording the largest error seen (printed with `--nocapture` for the README's Accuracy section).
-#![allow(dead_code)]
 
 use hybc::codegen::{compile, CompileOptions, CompiledModel};
 use hybc::lower::{lower, system_info};

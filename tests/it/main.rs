@@ -1,0 +1,28 @@
+//! hybc's integration tests, built as one crate so that hybc, Cranelift and plotters are linked
+//! into one test binary: one module per area, the helpers they share in `support`. `cargo test`
+//! runs everything; `cargo test --test it closed_forms` runs one module (any name filter works).
+
+mod support;
+
+mod check_grad;
+mod cli_run;
+mod closed_forms;
+mod convergence;
+mod derive_snapshots;
+mod expr_growth;
+mod expr_props;
+mod expr_rules;
+mod fit;
+mod flow_switches;
+mod frontend;
+mod frontend_props;
+mod jit_ball;
+mod jit_diff;
+mod jit_errors;
+mod jit_models;
+mod plot;
+mod run_gradients;
+mod sim_ball;
+mod sim_events;
+mod sweep;
+mod tutorial;

@@ -1,0 +1,23 @@
+//! Helpers shared by the test modules.
+
+pub mod cli;
+pub mod expr;
+pub mod hand_functions;
+pub mod hand_systems;
+pub mod reference;
+
+use proptest::test_runner::{Config, FailurePersistence, FileFailurePersistence};
+
+/// Proptest's settings for this crate with `cases` random cases. A failing case is kept next to
+/// the test's source file as `<file>.proptest-regressions` (`tests/it/expr_props.rs` ->
+/// `tests/it/expr_props.proptest-regressions`) and re-run first from then on. Proptest's default
+/// (`SourceParallel`) would put it in `tests/proptest-regressions/expr_props.txt`, beside this
+/// crate, since `tests/it` has a `main.rs`. `PROPTEST_DISABLE_FAILURE_PERSISTENCE` still turns
+/// persistence off.
+pub fn proptest_config(cases: u32) -> Config {
+    let default = Config::default();
+    let failure_persistence = default.failure_persistence.as_ref().map(|_| {
+        Box::new(FileFailurePersistence::WithSource("proptest-regressions")) as Box<dyn FailurePersistence>
+    });
+    Config { cases, failure_persistence, ..default }
+}
