@@ -24,7 +24,7 @@ pub struct RunReport {
 impl RunReport {
     /// Whether the run ended as asked (at `t_end` or a `stop` event) rather than early.
     pub fn is_complete(&self) -> bool {
-        matches!(self.result.stopped_by, StopReason::TEnd | StopReason::Event { .. })
+        self.result.stopped_by.is_complete()
     }
 
     fn grad_names(&self) -> Vec<&str> {
@@ -57,23 +57,11 @@ impl RunReport {
         }
     }
 
-    /// A message for a run that stopped early (Zeno or a fault).
+    /// A message for a run that stopped early (Zeno, max events, stuck, a fault), naming the
+    /// time, the mode and the states.
     pub fn failure(&self) -> Option<String> {
-        let f = &self.result.final_state;
-        let state: Vec<String> =
-            self.info.state_names.iter().zip(&f.state).map(|(n, v)| format!("{n} = {}", num(*v))).collect();
-        match &self.result.stopped_by {
-            StopReason::TEnd | StopReason::Event { .. } => None,
-            StopReason::Zeno { time, event, count, accumulation } => Some(format!(
-                "Zeno behaviour: event `{}` fired {count} times, the last at t = {time}; events \
-                 accumulate{} (mode {}, state {})",
-                self.info.events.get(*event).map(|e| &*e.name).unwrap_or("?"),
-                accumulation.map(|a| format!(" near t = {a:.10}")).unwrap_or_default(),
-                self.mode_name(f.mode),
-                state.join(", "),
-            )),
-            StopReason::Fault { error } => Some(format!("simulation failed: {error}")),
-        }
+        let r = &self.result;
+        r.stopped_by.describe(&self.info, &r.events, &r.final_state)
     }
 
     /// The JSON object documented in the README.
@@ -114,12 +102,7 @@ impl RunReport {
             fin["dstate_total"] = self.named_rows(&self.info.state_names, &f.dstate_total);
             fin["doutputs_total"] = self.named_rows(&self.info.output_names, &f.doutputs_total);
         }
-        let stopped_by = match &r.stopped_by {
-            StopReason::TEnd => json!("t_end"),
-            StopReason::Event { name, .. } => json!(name),
-            StopReason::Zeno { .. } => json!("zeno"),
-            StopReason::Fault { .. } => json!("fault"),
-        };
+        let stopped_by = json!(r.stopped_by.name());
         let mut warnings: Vec<String> = r.warnings.iter().map(|w| w.to_string()).collect();
         warnings.extend(self.failure());
         json!({
@@ -214,22 +197,5 @@ impl RunReport {
 
 /// A number with ten significant digits, without trailing zeros.
 pub fn num(v: f64) -> String {
-    if v == 0.0 {
-        return "0".to_string(); // also for -0.0, which says nothing a reader needs
-    }
-    if !v.is_finite() {
-        return format!("{v}");
-    }
-    let a = v.abs();
-    if (1e-4..1e7).contains(&a) {
-        let decimals = (9 - a.log10().floor() as i32).max(0) as usize;
-        let s = format!("{v:.decimals$}");
-        if s.contains('.') {
-            s.trim_end_matches('0').trim_end_matches('.').to_string()
-        } else {
-            s
-        }
-    } else {
-        format!("{v:.9e}")
-    }
+    crate::sim::short(v)
 }

@@ -93,9 +93,11 @@ impl CompiledModel {
     /// compiled for `info.grad_params` only; all parameter values stay run-time inputs.
     pub fn compile(
         funcs: &ModelFunctions,
-        info: SystemInfo,
+        mut info: SystemInfo,
         opts: &CompileOptions,
     ) -> Result<CompiledModel, CodegenError> {
+        // The events' guard shapes and contact flags come from the same functions as the code.
+        crate::lower::classify_events(funcs, &mut info);
         let plan = plan_model(funcs, &info)?;
         let parts = plan.try_map(|k| Ok::<_, CodegenError>((k.name.clone(), k.parts(opts.max_part_size))))?;
         let largest = parts.iter().flat_map(|(_, p)| p).map(KernelPlan::size).max().unwrap_or(0);

@@ -84,7 +84,7 @@ pub fn evaluate<S: HybridSystem + ?Sized>(
     let finals = match &result.stopped_by {
         StopReason::TEnd => Finals { dstate: &f.dstate, doutputs: &f.doutputs },
         StopReason::Event { .. } => Finals { dstate: &f.dstate_total, doutputs: &f.doutputs_total },
-        StopReason::Zeno { .. } | StopReason::Fault { .. } => {
+        _ => {
             return Err(Rejection::RunStopped { message: failure(&result, info, p, opts) });
         }
     };

@@ -79,7 +79,8 @@ impl Interpreter {
     /// Prepares the tapes of every function. `info` must describe the same model as `funcs`;
     /// its `grad_params` select and order the `_p` columns (entries of other parameters are
     /// dropped).
-    pub fn new(funcs: ModelFunctions, info: SystemInfo) -> Interpreter {
+    pub fn new(funcs: ModelFunctions, mut info: SystemInfo) -> Interpreter {
+        super::classify_events(&funcs, &mut info);
         let store = &funcs.store;
         let n = funcs.n_states as usize;
         let n_out = funcs.outputs.len();

@@ -6,10 +6,12 @@
 //! that do not simplify to the constant 0 are stored. One [`Differentiator`] is shared by the
 //! whole model so Jacobian entries share structure with each other and with the functions.
 
+mod events;
 mod interp;
 mod report;
 mod single;
 
+pub use events::classify_events;
 pub use interp::Interpreter;
 pub use report::derive_report;
 pub use single::show_expr;
@@ -122,6 +124,10 @@ pub fn system_info(model: &Model, grad_params: &[sema::ParamIdx]) -> SystemInfo 
                 is_stop: e.is_stop,
                 has_condition: e.condition.is_some(),
                 implicit: e.implicit,
+                // Filled from the lowered functions by `classify_events` (the compiled model and
+                // the interpreter call it); until then the cautious defaults.
+                guard: sim::GuardShape::Nonlinear,
+                contact: false,
             })
             .collect(),
         initial_mode: model.initial_mode.0 as usize,

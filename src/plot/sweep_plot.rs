@@ -46,7 +46,7 @@ fn quantities<'r>(info: &SystemInfo, r: &'r SimResult) -> Option<(&'r [f64], Opt
     let by_event = match r.stopped_by {
         StopReason::TEnd => false,
         StopReason::Event { .. } => true,
-        StopReason::Zeno { .. } | StopReason::Fault { .. } => return None,
+        _ => return None,
     };
     Some(if info.n_outputs() > 0 {
         (&f.outputs, if by_event { f.doutputs_total.as_deref() } else { f.doutputs.as_deref() })

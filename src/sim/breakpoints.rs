@@ -17,6 +17,17 @@ impl Breakpoints {
         self.next = 0;
     }
 
+    /// Adds a time to land on (before `sort`).
+    pub fn add(&mut self, t: f64) {
+        self.times.push(t);
+    }
+
+    /// Orders the times after the last `add`.
+    pub fn sort(&mut self) {
+        self.times.sort_by(f64::total_cmp);
+        self.times.dedup();
+    }
+
     /// The first breakpoint strictly after `t` (`t_end` itself when `t` is at or past it). The
     /// ones at or before `t` are consumed.
     pub fn next_after(&mut self, t: f64) -> f64 {

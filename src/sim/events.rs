@@ -1,28 +1,46 @@
-//! Stage 5 (sim): event detection inside one accepted step and root finding on the dense output.
-//! Knows the `HybridSystem` guard functions and the interpolant; knows nothing of resets,
-//! sensitivities' jumps or the step loop.
+//! Stage 5 (sim): event detection inside one accepted step, and the choice of the events that fire
+//! next. Knows the `HybridSystem` guard functions, the stepper's interpolant and stage derivatives;
+//! knows nothing of resets, sensitivities' jumps or the step loop. The rules it implements are
+//! written down in docs/language.md ("When events fire").
 //!
-//! Detection for every event of the current mode, given guard values `g0`, `g1` and guard speeds
-//! `g' = g_x f + g_t` at the step ends:
-//! - if `g'` changes sign, the guard has an extremum inside; it is located as the root of the
-//!   guard's derivative along the interpolant (`g_x P'(t) + g_t`), so a guard that crosses and
-//!   comes back within one step (a short hop) is still seen;
-//! - the points `t0 [, t_ext], t1` are scanned in order for the first pair that goes from the
-//!   pre-crossing side (strictly: `g > 0` for falling, `g < 0` for rising) to the crossed side
-//!   (`g <= 0`, resp. `g >= 0`). Requiring the strict pre-crossing side is what stops an event
-//!   from re-firing at the instant it fired (its guard sits at zero, or just past it) and from
-//!   firing at the start when the state starts on the guard;
-//! - an extremum that stops within round-off of zero on the pre-crossing side counts as touching:
-//!   the event is placed at the extremum (the caller will flag it grazing);
-//! - the crossing is then located by the Illinois variant of regula falsi (with a bisection
-//!   safeguard) to adjacent floating-point numbers, returning the end of the final bracket that
-//!   is on the crossed side.
+//! Per step, every guard of the mode is sampled: its value and speed `g' = g_x f + g_t` at both
+//! ends, and
+//! - for a guard affine in the time and the state, its speed at every interior stage of the step
+//!   (the stage derivatives are there anyway): each sign change of the speed is an extremum of the
+//!   guard, located on the dense output;
+//! - for any other guard, its value and speed at two interior points of the dense output, which
+//!   also check that the step resolves the guard (`check_resolution`: the step is rejected when
+//!   the cubic through the end values and speeds misses them), plus the extrema between samples.
+//!
+//! The samples and extrema are scanned in time order for the first pair that goes from the
+//! pre-crossing side (strictly: `g > 0` for falling, `g < 0` for rising) to the crossed side
+//! (`g <= 0`, resp. `g >= 0`); an extremum that stops within round-off of zero coming from the
+//! pre-crossing side is a touch. Only brackets are found per guard; `select` then locates the
+//! earliest crossing first (Illinois regula falsi to adjacent floating-point numbers) and the
+//! others only when they have crossed by then, so a step costs time linear in the number of
+//! guards however many are pending in it.
+//!
+//! Round-off bounds are per component: `16 eps (sum_i |g_x,i x_i| + |g_t t|)` for a guard value
+//! and `16 eps (sum_i |g_x,i f_i| + |g_t|)` for its speed, so a large state the guard does not
+//! read changes nothing.
 
 use super::roots::{extremum_time, hermite_root, illinois};
-use super::stepper::Interpolant;
-use super::system::{Direction, HybridSystem, SystemInfo};
+use super::stepper::{Interpolant, Stepper};
+use super::system::{Direction, GuardShape, HybridSystem, SystemInfo};
 
 const EPS: f64 = f64::EPSILON;
+/// The two interior sample points of a step, in units of the step, for guards that are not
+/// affine: the interior nodes of four-point Gauss-Lobatto, `(5 -/+ sqrt 5) / 10`. Irrational, so
+/// a periodic guard cannot hide behind a step that is a rational multiple of its period.
+const INTERIOR: [f64; 2] = [0.276_393_202_250_021, 0.723_606_797_749_979];
+/// A nonlinear guard is resolved by a step when the cubic through its end values and speeds
+/// predicts its interior samples to within this fraction of its variation over the step.
+const RESOLUTION: f64 = 0.125;
+/// The cubic's largest error over a step against its error at [`INTERIOR`]: `(s (1 - s))^2` peaks
+/// at 1/16 and is 0.04 there.
+const ERROR_SPREAD: f64 = 1.5625;
+/// Bisection steps to the boundary where a guard stops being finite (to about 1e-9 of the step).
+const NAN_BISECTIONS: usize = 30;
 
 /// A crossing located in the current step.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -35,28 +53,88 @@ pub(crate) struct Crossing {
     /// The last time found on the pre-crossing side (next to `t`; `t` itself for a touch): where
     /// a flow switch reads the flow from before its jump.
     pub t_pre: f64,
+    /// Fired at the step's start because the state was on the guard there and the flow carried it
+    /// to the crossed side (the start of a run, or a reset onto the guard).
+    pub on_guard: bool,
+}
+
+/// What the scan of one guard found in the current step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Finding {
+    Nothing,
+    /// A crossing between `a` and `b` (`sigma * g` positive at `a`, not at `b`), with the guard's
+    /// values and speeds there (a speed of 0 at an extremum).
+    Bracket {
+        a: f64,
+        ga: f64,
+        da: f64,
+        b: f64,
+        gb: f64,
+        db: f64,
+        sigma: f64,
+    },
+    /// Already located (a touch, a crossing at the step's start).
+    Located(Crossing),
+    /// The guard stops being finite at `t` before crossing zero.
+    NotFinite {
+        t: f64,
+    },
+    /// A contact left on its guard by its own reset was carried into the crossed side.
+    Stuck,
+}
+
+/// A guard within round-off of zero at the start of a step, to be decided by the step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Pending {
+    None,
+    /// On the guard at the start of the run or after a reset moved it there, with no clear speed:
+    /// fires at the step's start if the step carries it to the crossed side.
+    OnGuard,
+    /// A contact its own reset left on its guard with no clear speed: stuck if the step carries it
+    /// to the crossed side.
+    Contact,
+}
+
+/// A guard value with its time and speed, in a step's scan.
+#[derive(Clone, Copy, Debug)]
+struct Sample {
+    t: f64,
+    g: f64,
+    dg: f64,
+    extremum: bool,
 }
 
 pub(crate) struct Detector {
+    /// Per position in the current mode's event list: values, speeds and round-off bounds at the
+    /// step's start (`0`) and end (`1`).
     pub g0: Vec<f64>,
     pub dg0: Vec<f64>,
+    pub noise0: Vec<f64>,
+    pub speed_noise0: Vec<f64>,
     pub g1: Vec<f64>,
     pub dg1: Vec<f64>,
-    /// Per position in the mode's event list.
-    pub found: Vec<Option<Crossing>>,
-    gtmp: Vec<f64>,
-    gx: Vec<f64>,
-    gp: Vec<f64>,
-    x: Vec<f64>,
-    dx: Vec<f64>,
-    /// Events (id and crossing) that fire together at `t_fire`, in declaration order.
+    noise1: Vec<f64>,
+    speed_noise1: Vec<f64>,
+    /// Sign changes of an affine guard's speed over the step's stages and ends.
+    speed_changes: Vec<u8>,
+    /// Nonlinear guards: values and speeds at the [`INTERIOR`] points of the step.
+    interior: [(Vec<f64>, Vec<f64>); 2],
+    pub pending: Vec<Pending>,
+    /// Per position: what the current step's scan found.
+    pub found: Vec<Finding>,
+    /// Events (id and crossing) that fire together at the selected time, in declaration order.
     pub group: Vec<(usize, Crossing)>,
     /// Per position: the pre-crossing sign of an event whose reset sent its guard back (a
     /// bounce) while the guard has not yet been strictly on that side again (see
     /// [`Detector::penetrated`]).
     bounced: Vec<Option<f64>>,
-    /// Round-off size of `g1` per position.
-    noise1: Vec<f64>,
+    gtmp: Vec<f64>,
+    gx: Vec<f64>,
+    gp: Vec<f64>,
+    x: Vec<f64>,
+    dx: Vec<f64>,
+    samples: Vec<Sample>,
+    located: Vec<(usize, Crossing)>,
 }
 
 /// Whether the guard went from its pre-crossing side at `ga` to the crossed side at `gb`;
@@ -98,30 +176,84 @@ fn allows(dir: Direction, sigma: f64) -> bool {
     }
 }
 
+/// The side of zero a guard value beyond its round-off `noise` is on: `Some(true)` crossed,
+/// `Some(false)` pre-crossing, `None` within round-off. For `Either` both sides are both.
+pub(crate) fn clear_side(dir: Direction, g: f64, noise: f64) -> Option<bool> {
+    // A NaN guard is on no side.
+    if g.is_nan() || g.abs() <= noise {
+        return None;
+    }
+    Some(match dir {
+        Direction::Falling => g < 0.0,
+        Direction::Rising => g > 0.0,
+        Direction::Either => true,
+    })
+}
+
+/// Whether a guard on zero moving at `speed` (beyond `noise`) moves to its crossed side, and
+/// from which pre-crossing sign; `None` when the speed is round-off or moves it back.
+pub(crate) fn moves_across(dir: Direction, speed: f64, noise: f64) -> Option<f64> {
+    if speed.is_nan() || speed.abs() <= noise {
+        return None;
+    }
+    let sigma = -speed.signum();
+    allows(dir, sigma).then_some(sigma)
+}
+
+/// Number of sign changes in a sequence, zeros skipped.
+fn sign_changes(values: impl Iterator<Item = f64>) -> u8 {
+    let mut last = 0.0f64;
+    let mut changes = 0u8;
+    for v in values {
+        if v != 0.0 && !v.is_nan() {
+            if last != 0.0 && v.signum() != last.signum() {
+                changes = changes.saturating_add(1);
+            }
+            last = v;
+        }
+    }
+    changes
+}
+
+/// `16 eps (sum_i |a_i b_i| + |c d|)`: the round-off bound of `a . b + c d` computed in floating
+/// point, per component.
+fn round_off(a: &[f64], b: &[f64], c: f64, d: f64) -> f64 {
+    16.0 * EPS * (a.iter().zip(b).map(|(a, b)| (a * b).abs()).sum::<f64>() + (c * d).abs())
+}
+
 impl Detector {
     pub fn new(info: &SystemInfo, nx: usize, m: usize) -> Detector {
         let ne = info.modes.iter().map(|md| md.events.len()).max().unwrap_or(0);
+        let per_event = || vec![0.0; ne];
         Detector {
-            g0: vec![0.0; ne],
-            dg0: vec![0.0; ne],
-            g1: vec![0.0; ne],
-            dg1: vec![0.0; ne],
-            found: vec![None; ne],
-            gtmp: vec![0.0; ne],
+            g0: per_event(),
+            dg0: per_event(),
+            noise0: per_event(),
+            speed_noise0: per_event(),
+            g1: per_event(),
+            dg1: per_event(),
+            noise1: per_event(),
+            speed_noise1: per_event(),
+            speed_changes: vec![0; ne],
+            interior: [(per_event(), per_event()), (per_event(), per_event())],
+            pending: vec![Pending::None; ne],
+            found: vec![Finding::Nothing; ne],
+            group: Vec::with_capacity(ne),
+            bounced: vec![None; ne],
+            gtmp: per_event(),
             gx: vec![0.0; nx],
             gp: vec![0.0; m],
             x: vec![0.0; nx],
             dx: vec![0.0; nx],
-            group: Vec::with_capacity(ne),
-            bounced: vec![None; ne],
-            noise1: vec![0.0; ne],
+            samples: Vec::new(),
+            located: Vec::new(),
         }
     }
 
-    /// Guard values and speeds at a step end `(t, x)` with flow `f` into `g0`/`dg0` (`end`
-    /// false) or `g1`/`dg1` (`end` true).
+    /// Guard values, speeds and round-off bounds at a step's start `(t, x)` with flow `f` (after
+    /// a restart), into `g0`, `dg0`, ...
     #[allow(clippy::too_many_arguments)]
-    pub fn eval_point<S: HybridSystem + ?Sized>(
+    pub fn eval_start<S: HybridSystem + ?Sized>(
         &mut self,
         sys: &S,
         info: &SystemInfo,
@@ -130,25 +262,57 @@ impl Detector {
         x: &[f64],
         f: &[f64],
         p: &[f64],
-        end: bool,
     ) {
         let evs = &info.modes[mode].events;
         let ne = evs.len();
-        let (g, dg) = if end { (&mut self.g1, &mut self.dg1) } else { (&mut self.g0, &mut self.dg0) };
-        sys.guards(mode, t, x, p, &mut g[..ne]);
+        sys.guards(mode, t, x, p, &mut self.g0[..ne]);
         for (pos, &ev) in evs.iter().enumerate() {
             let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
-            dg[pos] = dot(&self.gx, f) + gt;
-            // Only a bounced event's guard is compared with its round-off (`penetrated`).
-            if end && self.bounced[pos].is_some() {
-                self.noise1[pos] = 16.0 * EPS * (norm(&self.gx) * norm(x) + gt.abs() * t.abs());
-            }
+            self.dg0[pos] = dot(&self.gx, f) + gt;
+            self.noise0[pos] = round_off(&self.gx, x, gt, t);
+            self.speed_noise0[pos] = round_off(&self.gx, f, gt, 1.0);
         }
     }
 
-    /// Forgets every bounce (at the start of a run and after every event group).
+    /// Guard values, speeds and round-off bounds at the end of the stepper's last attempt, which
+    /// ends at `t`; for affine guards also the sign changes of their speed over the step's stages.
+    #[allow(clippy::too_many_arguments)]
+    pub fn eval_end<S: HybridSystem + ?Sized, St: Stepper>(
+        &mut self,
+        sys: &S,
+        info: &SystemInfo,
+        mode: usize,
+        t: f64,
+        stepper: &St,
+        n: usize,
+        p: &[f64],
+    ) {
+        let (x, f) = (&stepper.end_state()[..n], &stepper.end_derivative()[..n]);
+        let evs = &info.modes[mode].events;
+        let ne = evs.len();
+        sys.guards(mode, t, x, p, &mut self.g1[..ne]);
+        for (pos, &ev) in evs.iter().enumerate() {
+            let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
+            let speed = dot(&self.gx, f) + gt;
+            self.dg1[pos] = speed;
+            self.noise1[pos] = round_off(&self.gx, x, gt, t);
+            self.speed_noise1[pos] = round_off(&self.gx, f, gt, 1.0);
+            self.speed_changes[pos] = if info.events[ev].guard == GuardShape::Affine {
+                // `g_x` and `g_t` are constants: the speed at each stage is one dot product.
+                let gx = &self.gx;
+                let stages =
+                    (0..stepper.interior_stages()).map(|k| dot(gx, &stepper.interior_stage(k).1[..n]) + gt);
+                sign_changes(std::iter::once(self.dg0[pos]).chain(stages).chain(std::iter::once(speed)))
+            } else {
+                0
+            };
+        }
+    }
+
+    /// Forgets every bounce and pending decision (at the start of a run and after every instant).
     pub fn clear_bounces(&mut self) {
         self.bounced.fill(None);
+        self.pending.fill(Pending::None);
     }
 
     /// Records that the event at `pos` (in the current mode) just fired from the side of sign
@@ -184,16 +348,93 @@ impl Detector {
     pub fn advance(&mut self) {
         std::mem::swap(&mut self.g0, &mut self.g1);
         std::mem::swap(&mut self.dg0, &mut self.dg1);
+        std::mem::swap(&mut self.noise0, &mut self.noise1);
+        std::mem::swap(&mut self.speed_noise0, &mut self.speed_noise1);
+        // A guard decided by this step is no longer pending.
+        for (pos, pending) in self.pending.iter_mut().enumerate() {
+            if *pending != Pending::None && self.g0[pos].abs() > self.noise0[pos] {
+                *pending = Pending::None;
+            }
+        }
     }
 
-    /// Whether any event of the mode may cross in the step (then the dense output is needed).
-    pub fn may_cross(&self, info: &SystemInfo, mode: usize) -> bool {
+    /// Whether the step needs its dense output for the events: a guard that changes sign, may
+    /// hide a crossing behind an extremum, is not affine, is pending or is not finite.
+    pub fn needs_dense(&self, info: &SystemInfo, mode: usize) -> bool {
         info.modes[mode].events.iter().enumerate().any(|(pos, &ev)| {
-            let dir = info.events[ev].direction;
+            let einfo = &info.events[ev];
             let (g0, g1) = (self.g0[pos], self.g1[pos]);
-            crossing_sign(dir, g0, g1).is_some()
-                || extremum_may_cross(dir, g0, g1, self.dg0[pos], self.dg1[pos])
+            einfo.guard == GuardShape::Nonlinear
+                || !g1.is_finite()
+                || self.pending[pos] != Pending::None
+                || self.speed_changes[pos] >= 2
+                || crossing_sign(einfo.direction, g0, g1).is_some()
+                || extremum_may_cross(einfo.direction, g0, g1, self.dg0[pos], self.dg1[pos])
         })
+    }
+
+    /// How well the step `[t0, t0 + h]` of `dense` resolves the guards of the mode that are not
+    /// affine (see the module documentation), sampling them at the interior points for the scan:
+    /// whether all are resolved, and the factor the step size may change by for the least
+    /// resolved one (the guards take part in step-size control).
+    pub fn check_resolution<S: HybridSystem + ?Sized, I: Interpolant>(
+        &mut self,
+        sys: &S,
+        info: &SystemInfo,
+        mode: usize,
+        dense: &I,
+        p: &[f64],
+    ) -> GuardControl {
+        let mut control = GuardControl { resolved: true, factor: f64::INFINITY };
+        let evs = &info.modes[mode].events;
+        if !evs.iter().any(|&ev| info.events[ev].guard == GuardShape::Nonlinear) {
+            return control;
+        }
+        let ne = evs.len();
+        let (t0, h) = (dense.t0(), dense.h());
+        for (k, &s) in INTERIOR.iter().enumerate() {
+            let t = t0 + s * h;
+            dense.eval(t, &mut self.x);
+            sys.guards(mode, t, &self.x, p, &mut self.interior[k].0[..ne]);
+            dense.eval_deriv(t, &mut self.dx);
+            for (pos, &ev) in evs.iter().enumerate() {
+                if info.events[ev].guard == GuardShape::Nonlinear {
+                    let gt = sys.guard_grad(ev, t, &self.x, p, &mut self.gx, &mut self.gp);
+                    self.interior[k].1[pos] = dot(&self.gx, &self.dx) + gt;
+                }
+            }
+        }
+        for (pos, &ev) in evs.iter().enumerate() {
+            if info.events[ev].guard != GuardShape::Nonlinear {
+                continue;
+            }
+            let (g0, g1) = (self.g0[pos], self.g1[pos]);
+            let (m0, m1) = (h * self.dg0[pos], h * self.dg1[pos]);
+            let inner = [self.interior[0].0[pos], self.interior[1].0[pos]];
+            if !(g0.is_finite() && g1.is_finite() && m0.is_finite() && m1.is_finite())
+                || inner.iter().any(|g| !g.is_finite())
+            {
+                // Left to the scan, which finds where the guard stops being finite.
+                continue;
+            }
+            let cubic = |s: f64| {
+                let (c2, c3) = (3.0 * (g1 - g0) - 2.0 * m0 - m1, 2.0 * (g0 - g1) + m0 + m1);
+                ((c3 * s + c2) * s + m0) * s + g0
+            };
+            let miss = INTERIOR.iter().zip(inner).map(|(&s, g)| (g - cubic(s)).abs()).fold(0.0, f64::max);
+            let variation =
+                inner.iter().chain([&g1]).map(|g| (g - g0).abs()).fold(m0.abs().max(m1.abs()), f64::max);
+            let allowed = RESOLUTION * variation + self.noise0[pos].max(self.noise1[pos]);
+            let miss = ERROR_SPREAD * miss;
+            if miss > allowed {
+                control.resolved = false;
+            }
+            // The miss shrinks like h^4 and the variation like h once the step resolves the
+            // guard's shape: the cube root of their ratio; far from that, a quarter.
+            let factor = if miss > 4.0 * allowed { 0.25 } else { 0.9 * (allowed / miss).cbrt() };
+            control.factor = control.factor.min(factor);
+        }
+        control
     }
 
     /// One guard of `mode` at an explicit state.
@@ -211,6 +452,20 @@ impl Detector {
         self.gtmp[pos]
     }
 
+    /// Every guard of `mode` at `t` on the interpolant, into `gtmp`.
+    fn guards_on_dense<S: HybridSystem + ?Sized, I: Interpolant>(
+        &mut self,
+        sys: &S,
+        mode: usize,
+        ne: usize,
+        t: f64,
+        dense: &I,
+        p: &[f64],
+    ) {
+        dense.eval(t, &mut self.x);
+        sys.guards(mode, t, &self.x, p, &mut self.gtmp[..ne]);
+    }
+
     #[allow(clippy::too_many_arguments)]
     fn guard_on_dense<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
@@ -222,8 +477,7 @@ impl Detector {
         dense: &I,
         p: &[f64],
     ) -> f64 {
-        dense.eval(t, &mut self.x);
-        sys.guards(mode, t, &self.x, p, &mut self.gtmp[..ne]);
+        self.guards_on_dense(sys, mode, ne, t, dense, p);
         self.gtmp[pos]
     }
 
@@ -242,82 +496,237 @@ impl Detector {
         dot(&self.gx, &self.dx) + gt
     }
 
-    /// The round-off size of the guard value at `(t, self.x)`: called right after
+    /// The round-off bound of the guard value at `(t, self.x)`: called right after
     /// [`Self::guard_on_dense`] at `t`, whose interpolated state is still in `self.x`.
     fn noise_at_x<S: HybridSystem + ?Sized>(&mut self, sys: &S, ev: usize, t: f64, p: &[f64]) -> f64 {
         let gt = sys.guard_grad(ev, t, &self.x, p, &mut self.gx, &mut self.gp);
-        16.0 * EPS * (norm(&self.gx) * norm(&self.x) + gt.abs() * t.abs())
+        round_off(&self.gx, &self.x, gt, t)
     }
 
-    /// Locates the first crossing of every event of `mode` in the step `[t0, t1]` described by
-    /// `dense`, into `found`.
-    pub fn locate<S: HybridSystem + ?Sized, I: Interpolant>(
+    /// Scans every guard of `mode` over the step of `dense` (the stepper's last attempt, whose
+    /// stages give the affine guards' speeds) into `found`. The step ends at `t1` exactly (a
+    /// breakpoint it landed on; `t0 + h` may round elsewhere).
+    #[allow(clippy::too_many_arguments)]
+    pub fn scan<S: HybridSystem + ?Sized, St: Stepper>(
         &mut self,
         sys: &S,
         info: &SystemInfo,
         mode: usize,
+        stepper: &St,
+        n: usize,
+        p: &[f64],
+        t1: f64,
+    ) {
+        let dense = stepper.interpolant();
+        let evs = &info.modes[mode].events;
+        let ne = evs.len();
+        let t0 = dense.t0();
+        for (pos, &ev) in evs.iter().enumerate() {
+            let einfo = &info.events[ev];
+            let dir = einfo.direction;
+            let (g0, g1, dg0, dg1) = (self.g0[pos], self.g1[pos], self.dg0[pos], self.dg1[pos]);
+            self.samples.clear();
+            self.samples.push(Sample { t: t0, g: g0, dg: dg0, extremum: false });
+            match einfo.guard {
+                GuardShape::Nonlinear => {
+                    for (k, &s) in INTERIOR.iter().enumerate() {
+                        let (g, dg) = (self.interior[k].0[pos], self.interior[k].1[pos]);
+                        self.samples.push(Sample { t: t0 + s * dense.h(), g, dg, extremum: false });
+                    }
+                    self.samples.push(Sample { t: t1, g: g1, dg: dg1, extremum: false });
+                    self.add_extrema_between_samples(sys, ev, mode, ne, pos, dense, p);
+                }
+                _ if self.speed_changes[pos] >= 2 => {
+                    self.samples.push(Sample { t: t1, g: g1, dg: dg1, extremum: false });
+                    self.add_extrema_between_stages(sys, ev, mode, ne, pos, stepper, n, p);
+                }
+                _ => {
+                    // At most one extremum, where the end speeds differ: searched only when it
+                    // can hide a crossing.
+                    if extremum_may_cross(dir, g0, g1, dg0, dg1) {
+                        let te =
+                            extremum_time(t0, dg0, t1, dg1, |t| self.speed_on_dense(sys, ev, t, dense, p));
+                        if te > t0 && te < t1 {
+                            let ge = self.guard_on_dense(sys, mode, ne, pos, te, dense, p);
+                            self.samples.push(Sample { t: te, g: ge, dg: 0.0, extremum: true });
+                        }
+                    }
+                    self.samples.push(Sample { t: t1, g: g1, dg: dg1, extremum: false });
+                }
+            }
+            self.found[pos] = self.scan_samples(sys, dir, ev, mode, ne, pos, dense, p);
+        }
+    }
+
+    /// For a nonlinear guard: the extrema between consecutive samples whose speeds differ in sign.
+    #[allow(clippy::too_many_arguments)]
+    fn add_extrema_between_samples<S: HybridSystem + ?Sized, I: Interpolant>(
+        &mut self,
+        sys: &S,
+        ev: usize,
+        mode: usize,
+        ne: usize,
+        pos: usize,
         dense: &I,
         p: &[f64],
     ) {
-        let evs = &info.modes[mode].events;
-        let ne = evs.len();
-        let (t0, t1) = (dense.t0(), dense.t0() + dense.h());
-        for (pos, &ev) in evs.iter().enumerate() {
-            self.found[pos] = None;
-            let dir = info.events[ev].direction;
-            let (g0, g1) = (self.g0[pos], self.g1[pos]);
-            // The extremum, when the guard speed changes sign and a crossing could hide there.
-            let mut ext = None;
-            if extremum_may_cross(dir, g0, g1, self.dg0[pos], self.dg1[pos]) {
-                let te = extremum_time(t0, self.dg0[pos], t1, self.dg1[pos], |t| {
+        let count = self.samples.len();
+        for k in 0..count - 1 {
+            let (a, b) = (self.samples[k], self.samples[k + 1]);
+            if a.dg * b.dg < 0.0 {
+                let te = extremum_time(a.t, a.dg, b.t, b.dg, |t| self.speed_on_dense(sys, ev, t, dense, p));
+                if te > a.t && te < b.t {
+                    let ge = self.guard_on_dense(sys, mode, ne, pos, te, dense, p);
+                    self.samples.push(Sample { t: te, g: ge, dg: 0.0, extremum: true });
+                }
+            }
+        }
+        self.samples.sort_by(|a, b| a.t.total_cmp(&b.t));
+    }
+
+    /// For an affine guard whose speed changes sign more than the ends show: the extrema between
+    /// consecutive stages (in time order) whose speeds differ in sign.
+    #[allow(clippy::too_many_arguments)]
+    fn add_extrema_between_stages<S: HybridSystem + ?Sized, St: Stepper>(
+        &mut self,
+        sys: &S,
+        ev: usize,
+        mode: usize,
+        ne: usize,
+        pos: usize,
+        stepper: &St,
+        n: usize,
+        p: &[f64],
+    ) {
+        let dense = stepper.interpolant();
+        let (t0, h) = (dense.t0(), dense.h());
+        // The step's end (exactly: a landed breakpoint), pushed as the second sample.
+        let t1 = self.samples[1].t;
+        // The speed at each stage, with `g_x` and `g_t` from any point (they are constants).
+        let gt = sys.guard_grad(ev, t0, &self.x, p, &mut self.gx, &mut self.gp);
+        let mut prev = (t0, self.dg0[pos]);
+        let stages = stepper.interior_stages();
+        for k in 0..=stages {
+            let next = if k < stages {
+                let (c, f) = stepper.interior_stage(k);
+                (t0 + c * h, dot(&self.gx, &f[..n]) + gt)
+            } else {
+                (t1, self.dg1[pos])
+            };
+            if prev.1 * next.1 < 0.0 && next.0 > prev.0 {
+                let te = extremum_time(prev.0, prev.1, next.0, next.1, |t| {
                     self.speed_on_dense(sys, ev, t, dense, p)
                 });
                 if te > t0 && te < t1 {
                     let ge = self.guard_on_dense(sys, mode, ne, pos, te, dense, p);
-                    ext = Some((te, ge));
+                    self.samples.push(Sample { t: te, g: ge, dg: 0.0, extremum: true });
                 }
             }
-            // Brackets carry the guard speeds at their ends for the Hermite first estimate
-            // (zero at an extremum).
-            let (dg0, dg1) = (self.dg0[pos], self.dg1[pos]);
-            let mut bracket = None;
-            match ext {
-                Some((te, ge)) => {
-                    if let Some(sigma) = crossing_sign(dir, g0, ge) {
-                        bracket = Some((t0, g0, dg0, te, ge, 0.0, sigma));
-                    } else if allows(dir, g0.signum())
-                        && g0 != 0.0
-                        && self.dg0[pos] * g0 < 0.0
-                        && ge.abs() <= self.noise_at_x(sys, ev, te, p)
-                    {
-                        // Moving towards zero and stopping within round-off of it: a touch.
-                        self.found[pos] =
-                            Some(Crossing { t: te, sigma: g0.signum(), touch: true, t_pre: te });
-                        continue;
-                    } else if let Some(sigma) = crossing_sign(dir, ge, g1) {
-                        bracket = Some((te, ge, 0.0, t1, g1, dg1, sigma));
-                    }
-                }
-                None => {
-                    if let Some(sigma) = crossing_sign(dir, g0, g1) {
-                        bracket = Some((t0, g0, dg0, t1, g1, dg1, sigma));
-                    }
-                }
-            }
-            if let Some((a, ga, da, b, gb, db, sigma)) = bracket {
-                let first = hermite_root(a, ga, da, b, gb, db);
-                let (t_pre, t) = illinois(a, ga, b, gb, sigma, first, |t| {
-                    self.guard_on_dense(sys, mode, ne, pos, t, dense, p)
-                });
-                self.found[pos] = Some(Crossing { t, sigma, touch: false, t_pre });
+            if next.1 != 0.0 {
+                prev = next;
             }
         }
+        self.samples.sort_by(|a, b| a.t.total_cmp(&b.t));
     }
 
-    /// Chooses the events that fire next: the earliest located crossing whose condition holds on
-    /// the interpolated state there, together with every other such crossing within a few
-    /// round-offs of it. Fills `group` (declaration order) and returns the firing time, the
-    /// latest of the group's times so that every guard in it has crossed.
+    /// The first crossing, touch, pending decision or non-finite guard in the samples of one
+    /// guard, in time order.
+    #[allow(clippy::too_many_arguments)]
+    fn scan_samples<S: HybridSystem + ?Sized, I: Interpolant>(
+        &mut self,
+        sys: &S,
+        dir: Direction,
+        ev: usize,
+        mode: usize,
+        ne: usize,
+        pos: usize,
+        dense: &I,
+        p: &[f64],
+    ) -> Finding {
+        if self.pending[pos] != Pending::None {
+            // The first sample beyond round-off decides a guard that started on zero.
+            let decided = self.samples[1..]
+                .iter()
+                .find_map(|s| clear_side(dir, s.g, self.noise0[pos].max(self.noise1[pos])));
+            match (decided, self.pending[pos]) {
+                (Some(true), Pending::OnGuard) => {
+                    let t0 = self.samples[0].t;
+                    let sigma = -self.samples[1..].iter().find(|s| s.g != 0.0).map_or(1.0, |s| s.g.signum());
+                    return Finding::Located(Crossing {
+                        t: t0,
+                        sigma,
+                        touch: false,
+                        t_pre: t0,
+                        on_guard: true,
+                    });
+                }
+                (Some(true), Pending::Contact) => return Finding::Stuck,
+                (Some(false), _) => self.pending[pos] = Pending::None,
+                _ => {}
+            }
+        }
+        for k in 0..self.samples.len() - 1 {
+            let (a, b) = (self.samples[k], self.samples[k + 1]);
+            if b.g.is_nan() || b.g.is_infinite() {
+                return self.before_not_finite(sys, dir, mode, ne, pos, a, b, dense, p);
+            }
+            if let Some(sigma) = crossing_sign(dir, a.g, b.g) {
+                return Finding::Bracket { a: a.t, ga: a.g, da: a.dg, b: b.t, gb: b.g, db: b.dg, sigma };
+            }
+            // Moving towards zero and stopping within round-off of it: a touch.
+            if b.extremum && allows(dir, a.g.signum()) && a.g != 0.0 && a.dg * a.g < 0.0 {
+                self.guard_on_dense(sys, mode, ne, pos, b.t, dense, p);
+                if b.g.abs() <= self.noise_at_x(sys, ev, b.t, p) {
+                    let c =
+                        Crossing { t: b.t, sigma: a.g.signum(), touch: true, t_pre: b.t, on_guard: false };
+                    return Finding::Located(c);
+                }
+            }
+        }
+        Finding::Nothing
+    }
+
+    /// The guard is finite at `a` and not at `b`: the crossing before the boundary, if any,
+    /// else where the guard stops being finite.
+    #[allow(clippy::too_many_arguments)]
+    fn before_not_finite<S: HybridSystem + ?Sized, I: Interpolant>(
+        &mut self,
+        sys: &S,
+        dir: Direction,
+        mode: usize,
+        ne: usize,
+        pos: usize,
+        a: Sample,
+        b: Sample,
+        dense: &I,
+        p: &[f64],
+    ) -> Finding {
+        let (mut lo, mut glo, mut hi) = (a.t, a.g, b.t);
+        for _ in 0..NAN_BISECTIONS {
+            let mid = 0.5 * (lo + hi);
+            if !(mid > lo && mid < hi) {
+                break;
+            }
+            let g = self.guard_on_dense(sys, mode, ne, pos, mid, dense, p);
+            if let Some(sigma) = crossing_sign(dir, a.g, g) {
+                return Finding::Bracket { a: a.t, ga: a.g, da: a.dg, b: mid, gb: g, db: f64::NAN, sigma };
+            }
+            if g.is_finite() {
+                (lo, glo) = (mid, g);
+            } else {
+                hi = mid;
+            }
+        }
+        let _ = glo;
+        Finding::NotFinite { t: hi }
+    }
+
+    /// Chooses the events that fire next from `found`: the earliest crossing whose condition
+    /// holds on the interpolated state there, with every other crossing at the same time to the
+    /// resolution of `t` (four floating-point spacings). The earliest is located first, the others
+    /// only if they have crossed by then. Fills `group` (declaration order) and returns the firing
+    /// time, the latest of the group's times so that every guard in it has crossed, or the
+    /// earliest non-finite guard (position and time) when it comes first.
     pub fn select<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
         sys: &S,
@@ -325,48 +734,141 @@ impl Detector {
         mode: usize,
         dense: &I,
         p: &[f64],
-    ) -> Option<f64> {
+    ) -> Selection {
         let evs = &info.modes[mode].events;
-        let mut t_min = f64::INFINITY;
-        for (pos, &ev) in evs.iter().enumerate() {
-            if let Some(c) = self.found[pos] {
-                let holds = !info.events[ev].has_condition || {
-                    dense.eval(c.t, &mut self.x);
-                    sys.condition(ev, c.t, &self.x, p)
-                };
-                if holds {
-                    t_min = t_min.min(c.t);
-                } else {
-                    self.found[pos] = None;
-                }
-            }
-        }
-        if !t_min.is_finite() {
-            return None;
-        }
-        let tol = 64.0 * EPS * (t_min.abs() + dense.h().abs());
+        let ne = evs.len();
+        self.located.clear();
         self.group.clear();
-        let mut t_fire = t_min;
-        for (pos, &ev) in evs.iter().enumerate() {
-            if let Some(c) = self.found[pos] {
-                if c.t <= t_min + tol {
-                    self.group.push((ev, c));
-                    t_fire = t_fire.max(c.t);
-                } else {
-                    self.found[pos] = None;
+        let mut not_finite: Option<(usize, f64)> = None;
+        // Candidates by their first estimate: the Hermite root of a bracket, a located time.
+        loop {
+            let mut best: Option<(usize, f64)> = None;
+            for (pos, finding) in self.found.iter().enumerate().take(ne) {
+                let estimate = match *finding {
+                    Finding::Bracket { a, ga, da, b, gb, db, .. } => {
+                        hermite_root(a, ga, da, b, gb, db).unwrap_or(0.5 * (a + b))
+                    }
+                    Finding::Located(c) => c.t,
+                    Finding::NotFinite { t } => {
+                        if not_finite.is_none_or(|(_, tn)| t < tn) {
+                            not_finite = Some((pos, t));
+                        }
+                        continue;
+                    }
+                    Finding::Nothing | Finding::Stuck => continue,
+                };
+                if best.is_none_or(|(_, e)| estimate < e) {
+                    best = Some((pos, estimate));
+                }
+            }
+            let Some((pos, _)) = best else { break };
+            let crossing = self.locate(sys, mode, ne, pos, dense, p);
+            self.found[pos] = Finding::Nothing;
+            let ev = evs[pos];
+            let holds = !info.events[ev].has_condition || {
+                dense.eval(crossing.t, &mut self.x);
+                sys.condition(ev, crossing.t, &self.x, p)
+            };
+            if !holds {
+                continue;
+            }
+            self.located.push((pos, crossing));
+            // Every bracket that has crossed by this time is located too (it may be earlier).
+            self.guards_on_dense(sys, mode, ne, crossing.t, dense, p);
+            for other in 0..ne {
+                if let Finding::Bracket { a, ga, da, sigma, .. } = self.found[other] {
+                    let g = self.gtmp[other];
+                    if a < crossing.t && sigma * g <= 0.0 {
+                        self.found[other] =
+                            Finding::Bracket { a, ga, da, b: crossing.t, gb: g, db: f64::NAN, sigma };
+                    } else {
+                        self.found[other] = Finding::Nothing;
+                    }
+                }
+                if let Finding::Located(c) = self.found[other] {
+                    if c.t > crossing.t {
+                        self.found[other] = Finding::Nothing;
+                    }
                 }
             }
         }
-        Some(t_fire)
+        let Some(t_min) = self.located.iter().map(|(_, c)| c.t).reduce(f64::min) else {
+            return match not_finite {
+                Some((pos, t)) => Selection::NotFinite { pos, t },
+                None => Selection::Nothing,
+            };
+        };
+        if let Some((pos, t)) = not_finite {
+            if t <= t_min {
+                return Selection::NotFinite { pos, t };
+            }
+        }
+        let resolution = 4.0 * (t_min.next_up() - t_min);
+        let mut t_fire = t_min;
+        self.located.sort_by_key(|&(pos, _)| pos);
+        for &(pos, c) in &self.located {
+            if c.t <= t_min + resolution {
+                self.group.push((evs[pos], c));
+                t_fire = t_fire.max(c.t);
+            }
+        }
+        Selection::Fire(t_fire)
     }
+
+    /// Locates the crossing of the guard at `pos` found by the scan.
+    fn locate<S: HybridSystem + ?Sized, I: Interpolant>(
+        &mut self,
+        sys: &S,
+        mode: usize,
+        ne: usize,
+        pos: usize,
+        dense: &I,
+        p: &[f64],
+    ) -> Crossing {
+        match self.found[pos] {
+            Finding::Located(c) => c,
+            Finding::Bracket { a, ga, da, b, gb, db, sigma } => {
+                let first = hermite_root(a, ga, da, b, gb, db);
+                let (t_pre, t) = illinois(a, ga, b, gb, sigma, first, |t| {
+                    self.guard_on_dense(sys, mode, ne, pos, t, dense, p)
+                });
+                Crossing { t, sigma, touch: false, t_pre, on_guard: false }
+            }
+            Finding::Nothing | Finding::NotFinite { .. } | Finding::Stuck => {
+                unreachable!("only brackets and located crossings are selected")
+            }
+        }
+    }
+
+    /// The position of a contact found stuck by the scan, if any.
+    pub fn stuck(&self, ne: usize) -> Option<usize> {
+        self.found[..ne].iter().position(|f| *f == Finding::Stuck)
+    }
+}
+
+/// How a step resolves the nonlinear guards: [`Detector::check_resolution`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct GuardControl {
+    pub resolved: bool,
+    /// The factor the step size may change by (infinite when no guard limits it).
+    pub factor: f64,
+}
+
+/// What [`Detector::select`] chose.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Selection {
+    Nothing,
+    /// The events in `group` fire at this time.
+    Fire(f64),
+    /// The guard at this position stops being finite at `t`, before any crossing.
+    NotFinite {
+        pos: usize,
+        t: f64,
+    },
 }
 
 pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
-}
-
-pub(crate) fn norm(a: &[f64]) -> f64 {
-    dot(a, a).sqrt()
 }
 
 #[cfg(test)]
@@ -399,5 +901,26 @@ mod tests {
         assert_eq!(crossing_sign(Direction::Rising, 1.0, -1.0), None);
         assert_eq!(crossing_sign(Direction::Either, 1.0, -1.0), Some(1.0));
         assert_eq!(crossing_sign(Direction::Either, -1.0, 2.0), Some(-1.0));
+    }
+
+    #[test]
+    fn sign_changes_skip_zeros_and_count_each_change() {
+        assert_eq!(sign_changes([0.0, -1.0, -2.0].into_iter()), 0);
+        assert_eq!(sign_changes([1.0, 0.0, -1.0, 2.0].into_iter()), 2);
+        assert_eq!(sign_changes([1.0, f64::NAN, 1.0].into_iter()), 0);
+    }
+
+    #[test]
+    fn round_off_is_per_component() {
+        // An unrelated state of 1e10 the guard does not read (g_x = 0 there) adds nothing.
+        assert_eq!(round_off(&[1.0, 0.0], &[1e-6, 1e10], 0.0, 0.0), 16.0 * EPS * 1e-6);
+    }
+
+    #[test]
+    fn a_guard_on_zero_moves_across_only_with_a_clear_speed_towards_its_crossed_side() {
+        assert_eq!(moves_across(Direction::Rising, 1.0, 1e-15), Some(-1.0));
+        assert_eq!(moves_across(Direction::Rising, -1.0, 1e-15), None);
+        assert_eq!(moves_across(Direction::Falling, -1e-20, 1e-15), None);
+        assert_eq!(moves_across(Direction::Either, 2.0, 0.0), Some(-1.0));
     }
 }

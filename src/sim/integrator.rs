@@ -11,14 +11,14 @@
 //! Knows nothing of Cranelift, expressions or the model's text.
 
 use super::breakpoints::Breakpoints;
-use super::events::{Crossing, Detector};
+use super::events::{clear_side, moves_across, Crossing, Detector, Pending, Selection};
 use super::jump::{Jump, JumpOutcome};
 use super::options::SimOptions;
 use super::recorder::{Point, PointKind, Recorder};
 use super::result::{EventRecord, FinalState, SimError, SimResult, SimStats, SimWarning, StopReason};
 use super::rk::Rk;
 use super::stepper::{Interpolant, Stepper};
-use super::system::{HybridSystem, SystemInfo};
+use super::system::{GuardShape, HybridSystem, SystemInfo};
 use super::zeno;
 
 const EPS: f64 = f64::EPSILON;
@@ -40,6 +40,14 @@ const AFTER_RESET_GROWTH: f64 = 1000.0;
 const SWITCH_SIDE_TRIES: usize = 40;
 /// Rejections in a row with a non-finite trial state before the run gives up on shrinking.
 const MAX_NONFINITE_REJECTS: usize = 30;
+/// A step this short relative to `max(|t|, 1)` is taken even when a nonlinear guard is not
+/// resolved by it, with the guard checked at its samples only: a guard with a kink (`abs`, `min`,
+/// `max`) is not resolved by a cubic however short the step.
+const GUARD_RESOLUTION_FLOOR: f64 = 1e-9;
+/// Growth of the step size allowed by a resolved nonlinear guard, per step.
+const GUARD_GROWTH: f64 = 4.0;
+/// Rounds of cascading events at one instant before the run stops as stuck.
+pub(crate) const MAX_CASCADE_ROUNDS: usize = 100;
 
 /// What one [`Integrator::step`] did.
 #[derive(Clone, Debug, PartialEq)]
@@ -72,6 +80,10 @@ pub(crate) struct Workspace<St: Stepper = Rk> {
     pub(crate) x_sides: (Vec<f64>, Vec<f64>),
     /// Outputs and an interpolated `z` for recorded points.
     pub(crate) record_buf: (Vec<f64>, Vec<f64>),
+    /// The state before a round of events at one instant, and the guards there.
+    pub(crate) before: (Vec<f64>, Vec<f64>),
+    /// `dt/dp` of the instant being fired (the first event's), for cascading events.
+    pub(crate) instant_dte: Vec<f64>,
 }
 
 /// The flow of `mode` with its sensitivities as one right-hand side over `z = [x, S]`.
@@ -108,11 +120,18 @@ pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = R
     output_jac: &'a mut (Vec<f64>, Vec<f64>, Vec<f64>),
     x_sides: &'a mut (Vec<f64>, Vec<f64>),
     record_buf: &'a mut (Vec<f64>, Vec<f64>),
+    before: &'a mut (Vec<f64>, Vec<f64>),
+    instant_dte: &'a mut Vec<f64>,
     recorder: &'a mut R,
     /// The step size the next attempt tries.
     h: f64,
     attempts: usize,
     nonfinite_rejects: usize,
+    /// A group prepared at the current instant (events that start on their guard), fired by the
+    /// next `step` before any integration.
+    immediate: bool,
+    /// Whether `instant_dte` holds the current instant's `dt/dp`, and its crossing speed.
+    instant: Option<f64>,
     events: Vec<EventRecord>,
     warnings: Vec<SimWarning>,
     /// False once a grazing event has made the sensitivities meaningless.
@@ -136,7 +155,19 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     ) -> Self {
         let info = sys.info();
         let (n, m) = (info.n_states(), info.n_grad());
-        let Workspace { stepper, det, jump, breakpoints, z, fired, output_jac, x_sides, record_buf } = work;
+        let Workspace {
+            stepper,
+            det,
+            jump,
+            breakpoints,
+            z,
+            fired,
+            output_jac,
+            x_sides,
+            record_buf,
+            before,
+            instant_dte,
+        } = work;
         stepper.reset();
         breakpoints.reset(opts.t_end);
         sys.initial_state(p, &mut z[..n]);
@@ -159,10 +190,14 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             output_jac,
             x_sides,
             record_buf,
+            before,
+            instant_dte,
             recorder,
             h: 0.0,
             attempts: 0,
             nonfinite_rejects: 0,
+            immediate: false,
+            instant: None,
             events: Vec::new(),
             warnings: Vec::new(),
             sens_valid: true,
@@ -174,12 +209,74 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             it.done = Some(it.fault_nonfinite());
             return it;
         }
+        it.add_time_events();
         it.h = it.restart();
         // A reused detector may remember bounces of an earlier run.
         it.det.clear_bounces();
         it.record(PointKind::Start);
         it.record_due_samples_at_current_point();
+        it.start_on_guards();
         it
+    }
+
+    /// Time events (`t >= expression of parameters`) land on their time exactly: their times in
+    /// `(t_start, t_end)` become breakpoints.
+    fn add_time_events(&mut self) {
+        let n = self.n;
+        for mode in 0..self.info.modes.len() {
+            let evs = &self.info.modes[mode].events;
+            if !evs.iter().any(|&ev| self.info.events[ev].guard == GuardShape::Time) {
+                continue;
+            }
+            // A time event's guard is `slope t + c`: its value at t = 0 is `c`.
+            let ne = evs.len();
+            let (gx, g) = &mut *self.before;
+            g.resize(ne, 0.0);
+            gx.resize(n, 0.0);
+            self.instant_dte.resize(self.m, 0.0);
+            self.sys.guards(mode, 0.0, &self.z[..n], self.p, &mut g[..ne]);
+            for (pos, &ev) in evs.iter().enumerate() {
+                if self.info.events[ev].guard != GuardShape::Time {
+                    continue;
+                }
+                let slope =
+                    self.sys.guard_grad(ev, 0.0, &self.z[..n], self.p, &mut gx[..n], self.instant_dte);
+                let t_event = -g[pos] / slope;
+                if t_event > self.opts.t_start && t_event < self.opts.t_end {
+                    self.breakpoints.add(t_event);
+                }
+            }
+        }
+        self.breakpoints.sort();
+    }
+
+    /// Events whose guard the run starts on, with the flow carrying it to the crossed side, fire
+    /// at the start (the first `step`); with no clear speed the first step decides.
+    fn start_on_guards(&mut self) {
+        if self.done.is_some() {
+            return;
+        }
+        self.det.group.clear();
+        let (t, n) = (self.t, self.n);
+        let evs = &self.info.modes[self.mode].events;
+        for (pos, &ev) in evs.iter().enumerate() {
+            let einfo = &self.info.events[ev];
+            if einfo.implicit || self.det.g0[pos].is_nan() || self.det.g0[pos].abs() > self.det.noise0[pos] {
+                continue;
+            }
+            match moves_across(einfo.direction, self.det.dg0[pos], self.det.speed_noise0[pos]) {
+                Some(sigma) if self.sys.condition(ev, t, &self.z[..n], self.p) => {
+                    let c = Crossing { t, sigma, touch: false, t_pre: t, on_guard: true };
+                    self.det.group.push((ev, c));
+                }
+                Some(_) => {}
+                None if self.det.dg0[pos].abs() <= self.det.speed_noise0[pos] => {
+                    self.det.pending[pos] = Pending::OnGuard;
+                }
+                None => {}
+            }
+        }
+        self.immediate = !self.det.group.is_empty();
     }
 
     /// The current time.
@@ -220,6 +317,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     }
 
     fn advance(&mut self) -> StepOutcome {
+        if self.immediate {
+            self.immediate = false;
+            let estimate = self.h;
+            self.record(PointKind::BeforeEvents);
+            return self.fire_instant(estimate);
+        }
         let t_end = self.opts.t_end;
         if self.t >= t_end {
             return StepOutcome::Done(StopReason::TEnd);
@@ -264,38 +367,45 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             return StepOutcome::Rejected;
         }
         self.nonfinite_rejects = 0;
-        let h_next = self.stepper.grow(err);
-        self.stats.steps += 1;
         let t1 = if lands { t_land } else { t0 + h_try };
         let n = self.n;
-        self.det.eval_point(
-            self.sys,
-            self.info,
-            self.mode,
-            t1,
-            &self.stepper.end_state()[..n],
-            &self.stepper.end_derivative()[..n],
-            self.p,
-            true,
-        );
-        let may_cross = self.det.may_cross(self.info, self.mode);
+        self.det.eval_end(self.sys, self.info, self.mode, t1, &*self.stepper, n, self.p);
+        let for_events = self.det.needs_dense(self.info, self.mode);
         let sample_due = self.sample_due(t1);
-        if may_cross || sample_due {
+        if for_events || sample_due {
             self.stepper.build_interpolant(t0, self.z, &mut rhs);
         }
-        let fire = if may_cross {
-            let dense = self.stepper.interpolant();
-            self.det.locate(self.sys, self.info, self.mode, dense, self.p);
-            self.det.select(self.sys, self.info, self.mode, dense, self.p)
+        let mut guard_factor = f64::INFINITY;
+        if for_events {
+            let control =
+                self.det.check_resolution(self.sys, self.info, self.mode, self.stepper.interpolant(), self.p);
+            if !control.resolved && h_try > GUARD_RESOLUTION_FLOOR * t0.abs().max(1.0) {
+                // A guard not resolved by the step: shorter, as for an error estimate.
+                self.stats.rejected += 1;
+                self.h = h_try * control.factor.min(0.9);
+                return StepOutcome::Rejected;
+            }
+            if control.factor.is_finite() {
+                guard_factor = control.factor.min(GUARD_GROWTH);
+            }
+        }
+        let h_next = self.stepper.grow(err).min(h_try * guard_factor);
+        self.stats.steps += 1;
+        let selection = if for_events {
+            self.det.scan(self.sys, self.info, self.mode, &*self.stepper, n, self.p, t1);
+            if let Some(pos) = self.det.stuck(self.info.modes[self.mode].events.len()) {
+                return StepOutcome::Done(self.stuck_on_guard(self.info.modes[self.mode].events[pos]));
+            }
+            self.det.select(self.sys, self.info, self.mode, self.stepper.interpolant(), self.p)
         } else {
-            None
+            Selection::Nothing
         };
-        match fire {
-            None if self.det.penetrated().is_some() => {
+        match selection {
+            Selection::Nothing if self.det.penetrated().is_some() => {
                 // Stop where the last bounce left the state (the step is not taken).
                 StepOutcome::Done(zeno::stop(&self.events))
             }
-            None => {
+            Selection::Nothing => {
                 if sample_due {
                     self.record_samples(t1);
                 }
@@ -306,32 +416,157 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 self.h = h_next;
                 StepOutcome::Accepted
             }
-            Some(t_fire) => {
-                let mode_before = self.mode;
+            Selection::NotFinite { pos, t } => {
+                if sample_due || self.sample_due(t) {
+                    self.record_samples(t);
+                }
+                self.stepper.interpolant().eval(t, self.z);
+                self.t = t;
+                let event = self.info.events[self.info.modes[self.mode].events[pos]].name.clone();
+                let error = SimError::GuardNotFinite { event, t, mode: self.mode, state: self.fault_state() };
+                StepOutcome::Done(StopReason::Fault { error })
+            }
+            Selection::Fire(t_fire) => {
                 if sample_due || self.sample_due(t_fire) {
                     self.record_samples(t_fire);
                 }
                 self.stepper.interpolant().eval(t_fire, self.z);
                 self.t = t_fire;
                 self.record(PointKind::BeforeEvents);
-                let first = self.events.len();
-                if let Some(stop) = self.fire_group() {
-                    return StepOutcome::Done(stop);
-                }
-                self.record(PointKind::AfterEvents);
-                if let Some(stop) = zeno::check(&self.events, self.opts) {
-                    return StepOutcome::Done(stop);
-                }
-                if self.z.iter().any(|v| !v.is_finite()) {
-                    return StepOutcome::Done(self.fault_nonfinite());
-                }
-                let estimate = self.restart();
-                self.note_bounces();
-                let growth = if self.mode == mode_before { AFTER_RESET_GROWTH } else { AFTER_SWITCH_GROWTH };
-                self.h = self.continue_step(h_next, estimate, growth);
-                StepOutcome::Fired { first, count: self.events.len() - first }
+                self.fire_instant(h_next)
             }
         }
+    }
+
+    /// Fires the group selected at the current instant, then the events that cascade from it
+    /// (rounds at the same instant), and applies the rules that follow an instant: contacts left
+    /// on their guard, bounces, guards reset onto zero, `max_events`, Zeno. `h_next` is the
+    /// controller's proposal from the step that led here.
+    fn fire_instant(&mut self, h_next: f64) -> StepOutcome {
+        let n = self.n;
+        let first = self.events.len();
+        let mode_before = self.mode;
+        self.instant = None;
+        self.fired.clear();
+        self.before.0.clear();
+        self.before.0.extend_from_slice(&self.z[..n]);
+        let mut rounds = 0;
+        let mut estimate;
+        let mut reset_onto: Vec<usize> = Vec::new();
+        loop {
+            if let Some(stop) = self.fire_group(rounds > 0) {
+                return StepOutcome::Done(stop);
+            }
+            if self.z[..n].iter().any(|v| !v.is_finite()) {
+                return StepOutcome::Done(self.fault_nonfinite());
+            }
+            estimate = self.restart();
+            reset_onto.clear();
+            if !self.cascade(&mut reset_onto) {
+                break;
+            }
+            rounds += 1;
+            if rounds > MAX_CASCADE_ROUNDS {
+                let ev = self.det.group.first().map_or(0, |&(ev, _)| ev);
+                return StepOutcome::Done(StopReason::Stuck {
+                    time: self.t,
+                    event: ev,
+                    name: self.info.events[ev].name.clone(),
+                    rounds: MAX_CASCADE_ROUNDS,
+                });
+            }
+            self.before.0.clear();
+            self.before.0.extend_from_slice(&self.z[..n]);
+        }
+        self.record(PointKind::AfterEvents);
+        if self.events.len() >= self.opts.max_events {
+            return StepOutcome::Done(StopReason::MaxEvents { time: self.t, count: self.events.len() });
+        }
+        if let Some(stop) = zeno::accumulating(&self.events) {
+            return StepOutcome::Done(stop);
+        }
+        if let Some(stop) = self.after_instant(&reset_onto) {
+            return StepOutcome::Done(stop);
+        }
+        let growth = if self.mode == mode_before { AFTER_RESET_GROWTH } else { AFTER_SWITCH_GROWTH };
+        self.h = self.continue_step(h_next, estimate, growth);
+        StepOutcome::Fired { first, count: self.events.len() - first }
+    }
+
+    /// After a round of events (`before.0` holds the state before it, the detector the guards
+    /// after it): the events whose guard the round moved from strictly its pre-crossing side to
+    /// its crossed side, or onto zero with the flow carrying it across, fill the next group (the
+    /// next round at this instant). Guards moved onto zero with no clear speed go to
+    /// `reset_onto`, for the next step to decide. Returns whether there is a next round.
+    fn cascade(&mut self, reset_onto: &mut Vec<usize>) -> bool {
+        let (t, n) = (self.t, self.n);
+        let evs = &self.info.modes[self.mode].events;
+        let ne = evs.len();
+        let (x_before, g_before) = &mut *self.before;
+        g_before.resize(ne, 0.0);
+        self.sys.guards(self.mode, t, x_before, self.p, &mut g_before[..ne]);
+        self.det.group.clear();
+        for (pos, &ev) in evs.iter().enumerate() {
+            let einfo = &self.info.events[ev];
+            let (dir, noise) = (einfo.direction, self.det.noise0[pos]);
+            if einfo.implicit || clear_side(dir, g_before[pos], noise) != Some(false) {
+                continue;
+            }
+            let after = self.det.g0[pos];
+            let sigma = match clear_side(dir, after, noise) {
+                Some(true) => g_before[pos].signum(),
+                Some(false) => continue,
+                None => match moves_across(dir, self.det.dg0[pos], self.det.speed_noise0[pos]) {
+                    Some(sigma) => sigma,
+                    None => {
+                        if self.det.dg0[pos].abs() <= self.det.speed_noise0[pos] {
+                            reset_onto.push(pos);
+                        }
+                        continue;
+                    }
+                },
+            };
+            if self.sys.condition(ev, t, &self.z[..n], self.p) {
+                self.det.group.push((ev, Crossing { t, sigma, touch: false, t_pre: t, on_guard: true }));
+            }
+        }
+        !self.det.group.is_empty()
+    }
+
+    /// The rules after an instant: a contact that fired and is left on its guard is stuck when
+    /// the flow carries it across (or pending when the speed is round-off), a reset that reversed
+    /// a guard's speed is a bounce watched for penetration, guards reset onto zero are pending.
+    fn after_instant(&mut self, reset_onto: &[usize]) -> Option<StopReason> {
+        self.det.clear_bounces();
+        for &pos in reset_onto {
+            self.det.pending[pos] = Pending::OnGuard;
+        }
+        let evs = &self.info.modes[self.mode].events;
+        for &(ev, sigma, speed_before) in self.fired.iter() {
+            let Some(pos) = evs.iter().position(|&e| e == ev) else { continue };
+            let einfo = &self.info.events[ev];
+            // Within round-off, or within what locating the crossing to adjacent floats leaves
+            // (the speed before the event times a few spacings of `t`).
+            let located = 4.0 * speed_before.abs() * (self.t.abs().next_up() - self.t.abs());
+            let on_guard = self.det.g0[pos].abs() <= self.det.noise0[pos] + located;
+            if einfo.contact && on_guard {
+                let (speed, noise) = (self.det.dg0[pos], self.det.speed_noise0[pos]);
+                if moves_across(einfo.direction, speed, noise).is_some() {
+                    return Some(self.stuck_on_guard(ev));
+                }
+                if speed.abs() <= noise {
+                    self.det.pending[pos] = Pending::Contact;
+                    continue;
+                }
+            }
+            self.det.note_bounce(pos, sigma, speed_before);
+        }
+        None
+    }
+
+    /// A contact stuck on its guard at the current instant.
+    fn stuck_on_guard(&self, ev: usize) -> StopReason {
+        StopReason::Stuck { time: self.t, event: ev, name: self.info.events[ev].name.clone(), rounds: 0 }
     }
 
     fn fault_state(&self) -> Vec<f64> {
@@ -344,7 +579,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let mut rhs = rhs_for(self.sys, self.p, self.n, self.mode);
         self.stepper.restart(self.t, self.z, &mut rhs);
         let n = self.n;
-        self.det.eval_point(
+        self.det.eval_start(
             self.sys,
             self.info,
             self.mode,
@@ -352,7 +587,6 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             &self.z[..n],
             &self.stepper.start_derivative()[..n],
             self.p,
-            false,
         );
         self.stepper.initial_step(self.t, self.z, self.opts.h_max, &mut rhs)
     }
@@ -378,11 +612,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     }
 
     /// Fires the selected events at the current point in declaration order, each seeing the
-    /// state the previous one left. Returns a stop reason for a stop event.
-    fn fire_group(&mut self) -> Option<StopReason> {
+    /// state the previous one left; `cascade` for a round after the first at this instant (its
+    /// events take the instant's `dt/dp`). Returns a stop reason for a stop event.
+    fn fire_group(&mut self, cascade: bool) -> Option<StopReason> {
         let (n, t) = (self.n, self.t);
         let group_len = self.det.group.len();
-        self.fired.clear();
+        let declared_before = self.fired.len();
         for gi in 0..group_len {
             let (ev, crossing): (usize, Crossing) = self.det.group[gi];
             let Some(pos) = self.info.modes[self.mode].events.iter().position(|&e| e == ev) else {
@@ -390,7 +625,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 continue;
             };
             let (x, s) = self.z.split_at_mut(n);
-            if !crossing.touch {
+            if !(crossing.touch || crossing.on_guard) {
                 let g = self.det.guard_now(self.sys, self.mode, pos, t, x, self.p);
                 if crossing.sigma * g > 0.0 {
                     // An earlier reset moved the state back before this guard.
@@ -404,11 +639,15 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             let info: &'a SystemInfo = self.info;
             let einfo = &info.events[ev];
             if einfo.implicit {
-                self.cross_switch(ev, pos, crossing);
+                self.cross_switch(ev, pos, crossing, self.fired.len() > declared_before || cascade);
                 continue;
             }
             let mode_before = self.mode;
             let mode_after = einfo.target_mode.unwrap_or(mode_before);
+            let given = match self.instant {
+                Some(speed) if cascade => Some((&self.instant_dte[..], speed)),
+                _ => None,
+            };
             let out = self.jump.apply(
                 self.sys,
                 ev,
@@ -420,7 +659,13 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 self.p,
                 self.opts.graze_tol,
                 einfo.is_stop,
+                given,
             );
+            if self.instant.is_none() && !cascade {
+                self.instant = Some(out.denominator);
+                self.instant_dte.clear();
+                self.instant_dte.extend_from_slice(&self.jump.dte);
+            }
             if out.grazing {
                 self.note_grazing(ev, t, out);
             }
@@ -455,10 +700,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// old branch or neither). When a declared event of the same group has already fired, the
     /// state before the switch is not on the interpolant any more: the gradients are then marked
     /// as not meaningful instead.
-    fn cross_switch(&mut self, ev: usize, pos: usize, crossing: Crossing) {
+    fn cross_switch(&mut self, ev: usize, pos: usize, crossing: Crossing, after_an_event: bool) {
         let (n, t) = (self.n, self.t);
         self.stats.switches += 1;
-        if !self.fired.is_empty() {
+        if after_an_event || crossing.on_guard {
             if self.sens_valid {
                 self.sens_valid = false;
                 let name = self.info.events[ev].name.clone();
@@ -499,18 +744,6 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             denominator: out.denominator,
             scale: out.scale,
         });
-    }
-
-    /// Marks the events of the group just fired that bounced: their reset turned the guard
-    /// speed around (`g0`, `dg0` are the post-event values after `restart`).
-    fn note_bounces(&mut self) {
-        self.det.clear_bounces();
-        let events = &self.info.modes[self.mode].events;
-        for &(ev, sigma, speed_before) in self.fired.iter() {
-            if let Some(pos) = events.iter().position(|&e| e == ev) {
-                self.det.note_bounce(pos, sigma, speed_before);
-            }
-        }
     }
 
     /// Whether the recorder wants a sample from the dense output of the step ending at `t_seg_end`.

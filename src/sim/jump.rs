@@ -17,11 +17,15 @@
 //! 1e-8) the crossing is tangential, `dt_e/dp` does not exist and dividing by `d` would produce
 //! huge or NaN numbers.
 
-use super::events::{dot, norm};
+use super::events::dot;
 use super::system::HybridSystem;
 
 /// A time and the state at that time.
 pub(crate) type TimedState<'a> = (f64, &'a [f64]);
+
+fn norm(a: &[f64]) -> f64 {
+    dot(a, a).sqrt()
+}
 
 /// Relative crossing speed below which an event always counts as grazing.
 const MIN_RELATIVE_SPEED: f64 = 1e-8;
@@ -73,7 +77,10 @@ impl Jump {
     }
 
     /// Applies event `ev` at time `t` to `x` and `s` in place, switching from `mode_old` to
-    /// `mode_new`.
+    /// `mode_new`. With `given`, the event takes that `dt/dp` and crossing speed instead of its
+    /// own guard's: an event that cascades from another at the same instant moves with that
+    /// instant (its guard was jumped across by a reset, not crossed by the flow), and composing
+    /// the saltation jumps with one `dt/dp` is exact.
     #[allow(clippy::too_many_arguments)]
     pub fn apply<S: HybridSystem + ?Sized>(
         &mut self,
@@ -87,10 +94,17 @@ impl Jump {
         p: &[f64],
         graze_tol: f64,
         want_total: bool,
+        given: Option<(&[f64], f64)>,
     ) -> JumpOutcome {
         let (n, m) = (self.n, self.m);
         sys.flow(mode_old, t, x, p, &mut self.f_minus);
-        let outcome = self.event_time_gradient(sys, ev, t, x, s, p, graze_tol);
+        let outcome = match given {
+            Some((dte, speed)) => {
+                self.dte.copy_from_slice(dte);
+                JumpOutcome { denominator: speed, scale: 0.0, grazing: false }
+            }
+            None => self.event_time_gradient(sys, ev, t, x, s, p, graze_tol),
+        };
         sys.reset(ev, t, x, p, &mut self.x_plus);
         sys.reset_jac(ev, t, x, p, &mut self.rx, &mut self.rp, &mut self.rt);
         sys.flow(mode_new, t, &self.x_plus, p, &mut self.f_plus);

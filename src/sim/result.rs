@@ -10,6 +10,8 @@ use serde::Serialize;
 use std::fmt;
 use std::sync::Arc;
 
+use super::system::SystemInfo;
+
 /// Errors of a simulation: bad input (returned by `run`) and runtime faults (carried by
 /// [`StopReason::Fault`] next to everything computed before them).
 #[derive(Clone, Debug, PartialEq, thiserror::Error, Serialize)]
@@ -26,6 +28,67 @@ pub enum SimError {
     TooManySteps { t: f64, max_steps: usize, mode: usize, state: Vec<f64> },
     #[error("non-finite state at t = {t} in mode {mode}: {state:?}")]
     NonFinite { t: f64, mode: usize, state: Vec<f64> },
+    #[error("the guard of event `{event}` stops being finite at t = {t} in mode {mode}, state {state:?}")]
+    GuardNotFinite { event: Arc<str>, t: f64, mode: usize, state: Vec<f64> },
+    #[error("rtol {rtol} is below what double precision can resolve (at least {floor:e})")]
+    ToleranceTooSmall { rtol: f64, floor: f64 },
+}
+
+impl SimError {
+    /// The message with the mode and the states named (the `Display` form has only indices).
+    pub fn describe(&self, info: &SystemInfo) -> String {
+        let at = |t: f64, mode: usize, state: &[f64]| {
+            format!("at t = {t} in mode {}, state {}", mode_name(info, mode), named_state(info, state))
+        };
+        match self {
+            SimError::StepTooSmall { t, h, mode, state } => {
+                format!("step size underflow (h = {h:e}) {}", at(*t, *mode, state))
+            }
+            SimError::TooManySteps { t, max_steps, mode, state } => {
+                format!("more than {max_steps} steps {}", at(*t, *mode, state))
+            }
+            SimError::NonFinite { t, mode, state } => format!("non-finite state {}", at(*t, *mode, state)),
+            SimError::GuardNotFinite { event, t, mode, state } => format!(
+                "the guard of event `{event}` stops being finite {}: whether it crosses zero beyond that cannot be told",
+                at(*t, *mode, state)
+            ),
+            other => other.to_string(),
+        }
+    }
+}
+
+/// `name = value` for every state.
+pub(crate) fn named_state(info: &SystemInfo, state: &[f64]) -> String {
+    let pairs: Vec<String> =
+        info.state_names.iter().zip(state).map(|(n, v)| format!("{n} = {}", short(*v))).collect();
+    pairs.join(", ")
+}
+
+fn mode_name(info: &SystemInfo, mode: usize) -> &str {
+    info.modes.get(mode).map_or("?", |m| m.name.as_str())
+}
+
+/// A number with ten significant digits, without trailing zeros: the form every message and
+/// table of hybc prints numbers in.
+pub fn short(v: f64) -> String {
+    if v == 0.0 {
+        return "0".to_string(); // also for -0.0, which says nothing a reader needs
+    }
+    if !v.is_finite() {
+        return format!("{v}");
+    }
+    let a = v.abs();
+    if (1e-4..1e7).contains(&a) {
+        let decimals = (9 - a.log10().floor() as i32).max(0) as usize;
+        let s = format!("{v:.decimals$}");
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
+    } else {
+        format!("{v:.9e}")
+    }
 }
 
 /// Non-fatal findings.
@@ -95,6 +158,7 @@ pub struct FinalState {
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
+#[non_exhaustive]
 pub enum StopReason {
     /// Reached `t_end`.
     TEnd,
@@ -103,7 +167,8 @@ pub enum StopReason {
         event: usize,
         name: Arc<str>,
     },
-    /// Too many events in a short window, or `max_events`.
+    /// Events accumulate towards a point: a bounce too small to resolve, or intervals shrinking
+    /// geometrically to below the resolution of time.
     Zeno {
         time: f64,
         event: usize,
@@ -111,9 +176,88 @@ pub enum StopReason {
         /// Geometric extrapolation of the last inter-event intervals, when they shrink.
         accumulation: Option<f64>,
     },
+    /// `max_events` events have fired.
+    MaxEvents {
+        time: f64,
+        count: usize,
+    },
+    /// The state cannot leave an event's guard: a contact whose reset leaves the state on its
+    /// guard with the flow carrying it through again, or events that keep firing at one instant.
+    Stuck {
+        time: f64,
+        event: usize,
+        name: Arc<str>,
+        /// Cascade rounds at this instant (0 when the contact is stuck on its guard).
+        rounds: usize,
+    },
     Fault {
         error: SimError,
     },
+}
+
+impl StopReason {
+    /// Whether the run ended as asked: at `t_end` or a `stop` event.
+    pub fn is_complete(&self) -> bool {
+        matches!(self, StopReason::TEnd | StopReason::Event { .. })
+    }
+
+    /// The name the JSON contract and the sweep's `status` use: `t_end`, the stop event's name,
+    /// `zeno`, `max_events`, `stuck` or `fault`.
+    pub fn name(&self) -> &str {
+        match self {
+            StopReason::TEnd => "t_end",
+            StopReason::Event { name, .. } => name,
+            StopReason::Zeno { .. } => "zeno",
+            StopReason::MaxEvents { .. } => "max_events",
+            StopReason::Stuck { .. } => "stuck",
+            StopReason::Fault { .. } => "fault",
+        }
+    }
+
+    /// Why a run that ended early ended, with time, mode and state named; `None` for a complete
+    /// run.
+    pub fn describe(
+        &self,
+        info: &SystemInfo,
+        events: &[EventRecord],
+        final_state: &FinalState,
+    ) -> Option<String> {
+        let where_ = || {
+            format!(
+                "mode {}, state {}",
+                mode_name(info, final_state.mode),
+                named_state(info, &final_state.state)
+            )
+        };
+        let event_name = |e: usize| info.events.get(e).map_or("?", |e| &*e.name).to_string();
+        Some(match self {
+            StopReason::TEnd | StopReason::Event { .. } => return None,
+            StopReason::Zeno { time, event, count, accumulation } => format!(
+                "Zeno behaviour: event `{}` fired {count} times, the last at t = {time}; events \
+                 accumulate{} ({})",
+                event_name(*event),
+                accumulation.map(|a| format!(" near t = {a:.10}")).unwrap_or_default(),
+                where_(),
+            ),
+            StopReason::MaxEvents { time, count } => format!(
+                "reached --max-events {count} at t = {time} (the last event `{}`; {}); raise --max-events to go on",
+                events.last().map_or("?", |e| &*e.name),
+                where_(),
+            ),
+            StopReason::Stuck { time, name, rounds: 0, .. } => format!(
+                "stuck on the guard of event `{name}` at t = {time} ({}): its reset leaves the state on the \
+                 guard and the flow carries it through again; if the contact should hold, switch to a mode \
+                 where it does (`-> resting`, with a flow that keeps the guard at zero)",
+                where_(),
+            ),
+            StopReason::Stuck { time, name, rounds, .. } => format!(
+                "events keep firing at t = {time}: {rounds} rounds of cascading events, the last `{name}` ({}); \
+                 their resets keep moving the state across each other's guards",
+                where_(),
+            ),
+            StopReason::Fault { error } => format!("simulation failed: {}", error.describe(info)),
+        })
+    }
 }
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]

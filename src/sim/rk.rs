@@ -44,6 +44,8 @@ pub struct Rk {
     pub(crate) y_new: Vec<f64>,
     pub(crate) ytmp: Vec<f64>,
     dense: Dense,
+    /// The stages strictly inside a step (`0 < c < 1`), by ascending `c`.
+    interior: Vec<usize>,
     /// The error estimates of the last attempt (5th- and 3rd-order for DOP853).
     err5: Vec<f64>,
     err3: Vec<f64>,
@@ -67,6 +69,12 @@ impl Rk {
             y_new: vec![0.0; nz],
             ytmp: vec![0.0; nz],
             dense: Dense::new(nz),
+            interior: {
+                let mut stages: Vec<usize> =
+                    (1..tab.stages).filter(|&i| tab.c[i] > 0.0 && tab.c[i] < 1.0).collect();
+                stages.sort_by(|&a, &b| tab.c[a].total_cmp(&tab.c[b]));
+                stages
+            },
             err5: vec![0.0; n_err],
             err3: vec![0.0; n_err],
             err_prev_beta: 0.0,
@@ -201,6 +209,15 @@ impl Stepper for Rk {
         self.rhs_calls
     }
 
+    fn interior_stages(&self) -> usize {
+        self.interior.len()
+    }
+
+    fn interior_stage(&self, k: usize) -> (f64, &[f64]) {
+        let i = self.interior[k];
+        (self.tab.c[i], &self.k[i * self.nz..(i + 1) * self.nz])
+    }
+
     /// Next step size after an accepted step with error `err`; updates the controller memory.
     fn grow(&mut self, err: f64) -> f64 {
         let (alpha, beta) = controller_exponents(self.tab);
@@ -261,7 +278,11 @@ impl Stepper for Rk {
         }
         let n = self.n_err.max(1) as f64;
         let (d0, d1) = ((d0 / n).sqrt(), (d1 / n).sqrt());
-        let mut h0 = if d0 < 1e-5 || d1 < 1e-5 { 1e-6 } else { 0.01 * d0 / d1 };
+        // Hairer takes 1e-6 for a state at zero (d0 < 1e-5); a state that is not zero but still
+        // within its tolerance of it (d0 < 1: 1e-13 after an event with atol 1e-10) is no better
+        // a scale, and 1% of it gave a first step at the resolution of `t` (a relay flipping at
+        // x = 0 stopped on a step size underflow), so it gets 1e-6 too.
+        let mut h0 = if d0 < 1.0 || d1 < 1e-5 { 1e-6 } else { 0.01 * d0 / d1 };
         h0 = h0.min(h_max);
         for ((tmp, &y), &f) in self.ytmp.iter_mut().zip(&y[..nz]).zip(&self.k[..nz]) {
             *tmp = y + h0 * f;

@@ -45,6 +45,25 @@ pub struct EventInfo {
     /// it the state is kept, the sensitivities jump by `(f- - f+) dt/dp` with the flow evaluated
     /// on each side, and nothing is recorded as an event.
     pub implicit: bool,
+    /// How the guard depends on time and the state, which decides how its crossings are searched.
+    pub guard: GuardShape,
+    /// Whether the reset acts on the guard's motion: it assigns a state that the guard or its
+    /// speed `g_x f + g_t` reads (a bounce, a stop). Such an event that leaves the state on its
+    /// guard with the flow carrying it through again is stuck, not a fresh crossing.
+    pub contact: bool,
+}
+
+/// The shape of a guard along a trajectory, from its symbolic derivatives.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GuardShape {
+    /// Anything else: checked at interior points of every step, and the step shortened until the
+    /// guard is resolved (see `docs/language.md`, when events fire).
+    Nonlinear,
+    /// `g_x` and `g_t` are constants: the guard's speed is sampled at every stage of a step.
+    Affine,
+    /// `g = c t + d(p)`: a time event, landed on exactly as a breakpoint.
+    Time,
 }
 
 /// The static shape of a compiled hybrid model.

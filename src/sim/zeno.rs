@@ -1,23 +1,33 @@
 //! Stage 5 (sim): Zeno behaviour, events that accumulate: when a run counts as Zeno and where the
 //! events accumulate. Reads the run's event record only; knows nothing of steps or guards.
 
-use super::options::SimOptions;
 use super::result::{EventRecord, StopReason};
 
-/// Zeno: `max_events` in total, or `zeno_events` events inside the window
-/// `zeno_window * max(|t_end - t_start|, 1)` ending at the last event.
-pub(crate) fn check(events: &[EventRecord], opts: &SimOptions) -> Option<StopReason> {
-    let count = events.len();
-    let last = events.last()?;
-    let span = (opts.t_end - opts.t_start).abs().max(1.0);
-    let window = opts.zeno_window * span;
-    let in_window = events.iter().rev().take_while(|e| e.time >= last.time - window).count();
-    let too_many = count >= opts.max_events;
-    let crowded = opts.zeno_events > 0 && in_window >= opts.zeno_events;
-    if !(too_many || crowded) {
+/// Intervals between the last events that must each shrink before a run counts as
+/// accumulating without a bounce too small to resolve.
+const SHRINKING_INTERVALS: usize = 10;
+/// Accumulation is reported once the estimated remaining time to the accumulation point is below
+/// this fraction of `max(|t*|, 1)`: closer events than that are not told apart from one instant
+/// by an f64 time plus the location tolerance.
+const ACCUMULATION_RESOLUTION: f64 = 1e-9;
+
+/// Zeno detected from the event times alone: the last [`SHRINKING_INTERVALS`] intervals each
+/// shorter than the one before, and the extrapolated accumulation point closer than
+/// [`ACCUMULATION_RESOLUTION`] (relative). Events at one instant (a cascade) are not Zeno, nor
+/// are many events over a long time (that is `max_events`).
+pub(crate) fn accumulating(events: &[EventRecord]) -> Option<StopReason> {
+    let k = events.len();
+    if k < SHRINKING_INTERVALS + 2 {
         return None;
     }
-    Some(stop(events))
+    let times: Vec<f64> = events[k - SHRINKING_INTERVALS - 2..].iter().map(|e| e.time).collect();
+    let shrinking = times.windows(3).all(|w| {
+        let (d1, d2) = (w[1] - w[0], w[2] - w[1]);
+        d2 > 0.0 && d2 < d1
+    });
+    let t_star = accumulation(events)?;
+    let last = events[k - 1].time;
+    (shrinking && t_star - last <= ACCUMULATION_RESOLUTION * t_star.abs().max(1.0)).then(|| stop(events))
 }
 
 /// The Zeno stop at the last event, with the accumulation point estimated from the last

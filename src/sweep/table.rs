@@ -114,11 +114,7 @@ impl<'a> Columns<'a> {
 
     fn result_cells(&self, params: &[f64], r: &SimResult, row: &mut Vec<Cell>) {
         let (n, k, m) = (self.info.n_states(), self.info.n_outputs(), self.info.n_grad());
-        let status = match r.stopped_by {
-            StopReason::TEnd | StopReason::Event { .. } => "ok",
-            StopReason::Zeno { .. } => "zeno",
-            StopReason::Fault { .. } => "fault",
-        };
+        let status = if r.stopped_by.is_complete() { "ok" } else { r.stopped_by.name() };
         let complete = status == "ok";
         row.push(Cell::Text(status.into()));
         row.push(Cell::Count(r.events.len()));

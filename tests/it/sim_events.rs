@@ -158,13 +158,17 @@ fn simultaneous_events_fire_in_declaration_order_once() {
 }
 
 #[test]
-fn starting_on_a_guard_does_not_fire() {
-    let o = SimOptions { t_end: 1.0, ..SimOptions::default() };
-    // x starts exactly at zero and moves to the crossed side: the guard was never strictly
-    // positive, so nothing fires.
+fn starting_on_a_guard_moving_across_fires_at_the_start() {
+    let o = SimOptions { t_end: 1.0, rtol: 1e-6, atol: 1e-9, ..SimOptions::default() };
+    // x starts exactly at zero and the flow moves it to the crossed side: both events fire at
+    // t = 0, in declaration order (c = (0 + 1) * 10). t_e = x0 / a, so dt_e/da = -x0 / a^2 = 0.
     let r = run(&Counter::new(0.0), &[1.0], &o).expect("valid");
-    assert!(r.events.is_empty());
-    assert_eq!(r.final_state.state[1], 0.0);
+    let fired: Vec<(&str, f64)> = r.events.iter().map(|e| (&*e.name, e.time)).collect();
+    assert_eq!(fired, [("A", 0.0), ("B", 0.0)]);
+    assert_eq!(r.final_state.state[1], 10.0);
+    for ev in &r.events {
+        assert_eq!(ev.dtime.as_ref().unwrap()[0], 0.0);
+    }
 }
 
 #[test]

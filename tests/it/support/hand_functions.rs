@@ -5,7 +5,7 @@ use hybc::expr::{
     BinaryOp, EventFunctions, ExprId, ExprStore, ModeFunctions, ModelFunctions, Node, SparseMat, SparseVec,
     UnaryOp,
 };
-use hybc::sim::{Direction, EventInfo, ModeInfo, SystemInfo};
+use hybc::sim::{Direction, EventInfo, GuardShape, ModeInfo, SystemInfo};
 
 pub fn c(s: &mut ExprStore, v: f64) -> ExprId {
     s.intern(Node::constant(v))
@@ -97,6 +97,8 @@ pub fn ball_info(grad_params: Vec<usize>) -> SystemInfo {
             is_stop: false,
             has_condition: true,
             implicit: false,
+            guard: GuardShape::Affine,
+            contact: true,
         }],
         initial_mode: 0,
     }

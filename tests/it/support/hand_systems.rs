@@ -1,7 +1,7 @@
 //! Integrator tests: hand-written `HybridSystem` implementations whose functions and Jacobians
 //! are computed by hand, so that the integrator is tested without the parser, DAG or JIT.
 
-use hybc::sim::{Direction, EventInfo, HybridSystem, ModeInfo, SystemInfo};
+use hybc::sim::{Direction, EventInfo, GuardShape, HybridSystem, ModeInfo, SystemInfo};
 
 fn names(v: &[&str]) -> Vec<String> {
     v.iter().map(|s| s.to_string()).collect()
@@ -40,6 +40,8 @@ impl Ball {
             is_stop: floor_stop,
             has_condition: false,
             implicit: false,
+            guard: GuardShape::Affine,
+            contact: true,
         }];
         let mut mode_events = vec![0];
         if ceiling.is_some() {
@@ -50,6 +52,8 @@ impl Ball {
                 is_stop: false,
                 has_condition: true,
                 implicit: false,
+                guard: GuardShape::Affine,
+                contact: true,
             });
             mode_events.push(1);
         }
@@ -180,6 +184,8 @@ impl Thermostat {
             is_stop: false,
             has_condition: false,
             implicit: false,
+            guard: GuardShape::Affine,
+            contact: false,
         };
         Thermostat {
             info: SystemInfo {
@@ -288,6 +294,8 @@ impl Counter {
             is_stop: false,
             has_condition: false,
             implicit: false,
+            guard: GuardShape::Affine,
+            contact: false,
         };
         Counter {
             info: SystemInfo {
@@ -411,6 +419,8 @@ impl Oscillator {
                     is_stop: false,
                     has_condition: false,
                     implicit: false,
+                    guard: GuardShape::Affine,
+                    contact: false,
                 }],
                 initial_mode: 0,
             },

@@ -1,0 +1,218 @@
+//! When events fire (docs/language.md, "When events fire"): one test per rule, each against an
+//! exact count or a closed form, through the library's front door. The models are written out
+//! here so that each test says everything it assumes.
+
+use approx::assert_relative_eq;
+use hybc::sim::StopReason;
+use hybc::{Model, Run, SimOptions};
+
+/// Compiles `text` with gradients for `grad` and runs it at its defaults with `opts` over the
+/// model's `simulate` line.
+fn run(text: &str, grad: &[&str], opts: impl FnOnce(&mut SimOptions)) -> Run {
+    let model = Model::parse(text).unwrap_or_else(|e| panic!("{e}"));
+    let compiled = model.compile(grad).expect("compiles");
+    let mut o = model.sim_options();
+    opts(&mut o);
+    compiled.simulate(&model.params(), &o).expect("valid options")
+}
+
+fn times(r: &Run) -> Vec<f64> {
+    r.events().iter().map(|e| e.time).collect()
+}
+
+#[test]
+fn a_guard_crossing_zero_many_times_in_one_step_is_seen_every_time() {
+    // theta = 0.1 + w t is integrated exactly, so the error control alone takes huge steps;
+    // sin(theta) passes zero at theta = k pi: 31 times in 10 s for w = 9.8.
+    let r = run(
+        "model shaft\nparam w = 9.8\nstate theta = 0.1\nder(theta) = w\nevent pass when sin(theta) crosses 0\n",
+        &["w"],
+        |o| o.t_end = 10.0,
+    );
+    let want: Vec<f64> =
+        (1..).map(|k| (k as f64 * std::f64::consts::PI - 0.1) / 9.8).take_while(|&t| t <= 10.0).collect();
+    assert_eq!(want.len(), 31);
+    assert_eq!(r.events().len(), 31, "{:?}", times(&r));
+    for (k, (ev, t)) in r.events().iter().zip(&want).enumerate() {
+        assert_relative_eq!(ev.time, *t, max_relative = 1e-12);
+        // t_k = (k pi - 0.1) / w: dt_k/dw = -t_k / w.
+        assert_relative_eq!(ev.dtime.as_ref().expect("a gradient")[0], -t / 9.8, max_relative = 1e-8);
+        let _ = k;
+    }
+}
+
+#[test]
+fn a_time_guard_on_an_exact_flow_fires_every_period() {
+    // sin(20 t) >= 0.5 rises through zero at 20 t = pi/6 + 2 pi k: 32 times in 10 s.
+    let r = run("model tick\nstate x = 0\nder(x) = 1\nevent tick when sin(20 * t) >= 0.5\n", &[], |o| {
+        o.t_end = 10.0
+    });
+    let want: Vec<f64> = (0..)
+        .map(|k| (std::f64::consts::FRAC_PI_6 + 2.0 * std::f64::consts::PI * k as f64) / 20.0)
+        .take_while(|&t| t <= 10.0)
+        .collect();
+    assert_eq!(want.len(), 32);
+    assert_eq!(r.events().len(), 32);
+    for (ev, t) in r.events().iter().zip(&want) {
+        assert_relative_eq!(ev.time, *t, max_relative = 1e-12);
+    }
+}
+
+#[test]
+fn a_flow_switch_pulsing_within_steps_integrates_every_pulse() {
+    // der(x) = 1 while sin(20 t) > 0.9: 32 pulses of (pi - 2 asin 0.9) / 20 each in 10 s, and
+    // dx(10)/dw = sum over pulses of d(pulse end - pulse start)/dw = -(pulse length)/w each.
+    let text = "model pulse\nparam w = 20\nstate x = 0\nder(x) = if sin(w * t) > 0.9 then 1 else 0\n";
+    let r = run(text, &["w"], |o| {
+        o.t_end = 10.0;
+        o.rtol = 1e-10;
+        o.atol = 1e-12;
+    });
+    let pulse = (std::f64::consts::PI - 2.0 * 0.9f64.asin()) / 20.0;
+    assert_eq!(r.result().stats.switches, 64);
+    assert_relative_eq!(r.state("x").unwrap(), 32.0 * pulse, max_relative = 1e-8);
+    // Pulse k spans (asin 0.9 + 2 pi k, pi - asin 0.9 + 2 pi k) / w, length (pi - 2 asin 0.9) / w.
+    assert_relative_eq!(r.dstate("x", "w").unwrap(), -32.0 * pulse / 20.0, max_relative = 1e-6);
+}
+
+#[test]
+fn a_guard_that_becomes_nan_fires_before_and_is_reported_after() {
+    // x = 1 - t: the alarm log(x) <= -3 fires at t = 1 - e^-3; after t = 1 the guard is NaN, and
+    // the run stops there with a fault naming the guard, the time and the state.
+    let r =
+        run("model tank\nstate x = 1\nder(x) = -1\nevent alarm when log(x) <= -3\n", &[], |o| o.t_end = 2.0);
+    assert_eq!(r.events().len(), 1);
+    assert_relative_eq!(r.events()[0].time, 1.0 - (-3f64).exp(), max_relative = 1e-12);
+    let StopReason::Fault { error } = r.stopped_by() else { panic!("{:?}", r.stopped_by()) };
+    let message = error.describe(r.compiled().info());
+    assert!(message.contains("guard of event `alarm`") && message.contains("state x = "), "{message}");
+    assert!((r.final_time() - 1.0).abs() < 1e-8, "{}", r.final_time());
+}
+
+const BALL: &str = "model ball\nparam g = 9.81\nparam e = 0.8\nparam h0 = 1\nstate y = h0\nstate v = 0\n\
+                    der(y) = v\nder(v) = -g\nevent touchdown when y <= 0 {\n    v := -e * v\n}\n";
+
+#[test]
+fn a_ball_dropped_from_the_floor_is_stuck_not_falling_through() {
+    let text = BALL.replace("param h0 = 1", "param h0 = 0");
+    let r = run(&text, &["e"], |o| o.t_end = 2.5);
+    assert!(matches!(r.stopped_by(), StopReason::Stuck { rounds: 0, .. }), "{:?}", r.stopped_by());
+    assert_eq!(r.final_time(), 0.0);
+    assert!(r.state("y").unwrap() >= -1e-15);
+    let message = r.report().failure().expect("a message");
+    assert!(
+        message.contains("stuck on the guard of event `touchdown`") && message.contains("y = "),
+        "{message}"
+    );
+}
+
+#[test]
+fn a_perfectly_inelastic_ball_stays_at_the_floor() {
+    // v := 0 leaves the ball on its guard with gravity carrying it through: stuck at the first
+    // touchdown, t = sqrt(2 h0 / g), never below the floor.
+    let text = BALL.replace("v := -e * v", "v := 0");
+    let r = run(&text, &["h0"], |o| o.t_end = 2.5);
+    assert!(matches!(r.stopped_by(), StopReason::Stuck { .. }), "{:?}", r.stopped_by());
+    assert_relative_eq!(r.final_time(), (2.0 / 9.81f64).sqrt(), max_relative = 1e-12);
+    assert!(r.state("y").unwrap() > -1e-12, "{:?}", r.state("y"));
+}
+
+#[test]
+fn a_dose_at_the_start_is_given_at_the_start() {
+    // t >= t0 with t0 = 0: the guard starts on zero and moves across, so the dose is given at 0
+    // and x(1) = e^-1; dt/dt0 = 1.
+    let text =
+        "model dose\nparam t0 = 0\nstate x = 0\nder(x) = -x\nevent dose when t >= t0 {\n    x := x + 1\n}\n";
+    let r = run(text, &["t0"], |o| o.t_end = 1.0);
+    assert_eq!(times(&r), [0.0]);
+    assert_eq!(r.devent_time(0, "t0"), Some(1.0));
+    assert_relative_eq!(r.state("x").unwrap(), (-1f64).exp(), max_relative = 1e-9);
+}
+
+#[test]
+fn a_reset_that_moves_the_state_across_another_guard_fires_it_at_the_same_instant() {
+    // `first` at t1 = 1/a moves y from t1 to t1 + 5, across `second`'s guard y - 3: `second`
+    // cascades at t1 and x := 10 x. Then x(T) = 10 + a (T - t1) = 9 + a T, so dx(T)/da = T: the
+    // cascaded jump takes the instant's dt/da = -1/a^2 (its own guard's would give T + 9/a).
+    let text = "model cascade\nparam a = 1\nstate x = 0\nstate y = 0\nder(x) = a\nder(y) = 1\n\
+                event first when x >= 1 {\n    y := y + 5\n}\nevent second when y >= 3 {\n    x := 10 * x\n}\n";
+    for a in [1.0, 0.8] {
+        let model = Model::parse(text).expect("parses");
+        let compiled = model.compile(&["a"]).expect("compiles");
+        let mut opts = model.sim_options();
+        opts.t_end = 2.0;
+        opts.rtol = 1e-10;
+        opts.atol = 1e-12;
+        let params = model.params().with("a", a).expect("a value");
+        let r = compiled.simulate(&params, &opts).expect("runs");
+        let fired: Vec<(&str, f64)> = r.events().iter().map(|e| (&*e.name, e.time)).collect();
+        assert_eq!(fired.len(), 2);
+        assert_eq!((fired[0].0, fired[1].0), ("first", "second"));
+        assert_eq!(fired[0].1, fired[1].1);
+        assert_relative_eq!(fired[0].1, 1.0 / a, max_relative = 1e-12);
+        assert_relative_eq!(r.devent_time(1, "a").unwrap(), -1.0 / (a * a), max_relative = 1e-9);
+        assert_relative_eq!(r.state("x").unwrap(), 9.0 + 2.0 * a, max_relative = 1e-9);
+        assert_relative_eq!(r.dstate("x", "a").unwrap(), 2.0, max_relative = 1e-9);
+        assert!(r.dstate("y", "a").unwrap().abs() < 1e-12);
+    }
+}
+
+#[test]
+fn a_large_state_the_guard_does_not_read_invents_no_event() {
+    // y = (t - 0.5)^2 + 1e-6 never reaches zero; `big` = 1e10 is read by nothing. A round-off
+    // bound from the whole state's norm (16 eps 1e10 = 3.6e-5) would count the minimum as a touch.
+    let text = "model far\nstate y = 0.250001\nstate v = -1\nstate big = 1e10\nder(y) = v\nder(v) = 2\nder(big) = 0\n\
+                event touch when y <= 0\n";
+    let r = run(text, &[], |o| o.t_end = 2.0);
+    assert!(r.events().is_empty(), "{:?}", times(&r));
+    assert!(r.is_complete());
+}
+
+#[test]
+fn events_microseconds_apart_late_in_time_fire_in_time_order_at_their_times() {
+    // Time events land on their times exactly, whatever the step; 1e9 + 1e-5 and 1e9 + 2e-5 are
+    // 84 and 168 floating-point spacings after 1e9.
+    let text = "model late\nstate x = 0\nder(x) = 0\nevent a when t >= 1e9\nevent b when t >= 1e9 + 2e-5 {\n    x := x + 1\n}\n\
+                event c when t >= 1e9 + 1e-5 {\n    x := 10 * x\n}\n";
+    let r = run(text, &[], |o| o.t_end = 2e9);
+    let fired: Vec<(&str, f64)> = r.events().iter().map(|e| (&*e.name, e.time)).collect();
+    assert_eq!(fired, [("a", 1e9), ("c", 1e9 + 1e-5), ("b", 1e9 + 2e-5)]);
+    assert_eq!(r.state("x"), Some(1.0));
+}
+
+#[test]
+fn ten_events_at_one_instant_are_a_group_not_zeno() {
+    let mut text = String::from("model ten\nstate x = 0\nder(x) = 1\n");
+    for k in 1..=10 {
+        text.push_str(&format!("event e{k} when x >= 1\n"));
+    }
+    let r = run(&text, &[], |o| o.t_end = 2.0);
+    assert!(r.is_complete(), "{:?}", r.stopped_by());
+    let names: Vec<String> = r.events().iter().map(|e| e.name.to_string()).collect();
+    assert_eq!(names, (1..=10).map(|k| format!("e{k}")).collect::<Vec<_>>());
+    assert!(r.events().iter().all(|e| e.time == r.events()[0].time));
+}
+
+#[test]
+fn many_events_over_a_long_horizon_end_at_max_events_not_zeno() {
+    // A relay flipping every 0.5 s, run to 1e9 s: 10,000 events take it to t = 5000.
+    let text = "model relay\nstate x = 0\ninitial mode up {\n    der(x) = 1\n    event top when x >= 0.5 -> down\n}\n\
+                mode down {\n    der(x) = -1\n    event bottom when x <= 0 -> up\n}\n";
+    let r = run(text, &[], |o| o.t_end = 1e9);
+    let StopReason::MaxEvents { time, count } = *r.stopped_by() else { panic!("{:?}", r.stopped_by()) };
+    assert_eq!(count, 10_000);
+    assert_relative_eq!(time, 5000.0, max_relative = 1e-9);
+    let message = r.report().failure().expect("a message");
+    assert!(message.starts_with("reached --max-events 10000 at t = 5000"), "{message}");
+}
+
+#[test]
+fn the_ball_run_without_end_stops_as_zeno_at_its_accumulation_point() {
+    let r = run(BALL, &[], |o| o.t_end = 1e308);
+    let StopReason::Zeno { accumulation, .. } = *r.stopped_by() else { panic!("{:?}", r.stopped_by()) };
+    // t* = t1 + 2 e v1 / (g (1 - e)) with t1 = sqrt(2 h0 / g), v1 = g t1.
+    let t1 = (2.0f64 / 9.81).sqrt();
+    let t_star = t1 + 2.0 * 0.8 * 9.81 * t1 / (9.81 * 0.2);
+    assert!((accumulation.expect("an estimate") - t_star).abs() < 1e-6, "{accumulation:?} vs {t_star}");
+    assert!((t_star - 4.0637127689).abs() < 1e-9);
+}
