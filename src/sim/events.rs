@@ -200,19 +200,27 @@ pub(crate) fn moves_across(dir: Direction, speed: f64, noise: f64) -> Option<f64
     allows(dir, sigma).then_some(sigma)
 }
 
-/// Number of sign changes in a sequence, zeros skipped.
-fn sign_changes(values: impl Iterator<Item = f64>) -> u8 {
-    let mut last = 0.0f64;
-    let mut changes = 0u8;
-    for v in values {
+/// Counts the sign changes of a sequence pushed value by value, zeros (and NaN) skipped.
+struct SignChanges {
+    last: f64,
+    changes: u8,
+}
+
+impl SignChanges {
+    fn new(first: f64) -> SignChanges {
+        let mut counter = SignChanges { last: 0.0, changes: 0 };
+        counter.push(first);
+        counter
+    }
+
+    fn push(&mut self, v: f64) {
         if v != 0.0 && !v.is_nan() {
-            if last != 0.0 && v.signum() != last.signum() {
-                changes = changes.saturating_add(1);
+            if self.last != 0.0 && v.signum() != self.last.signum() {
+                self.changes = self.changes.saturating_add(1);
             }
-            last = v;
+            self.last = v;
         }
     }
-    changes
 }
 
 /// `16 eps (sum_i |a_i b_i| + |c d|)`: the round-off bound of `a . b + c d` computed in floating
@@ -295,14 +303,27 @@ impl Detector {
             let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
             let speed = dot(&self.gx, f) + gt;
             self.dg1[pos] = speed;
-            self.noise1[pos] = round_off(&self.gx, x, gt, t);
-            self.speed_noise1[pos] = round_off(&self.gx, f, gt, 1.0);
-            self.speed_changes[pos] = if info.events[ev].guard == GuardShape::Affine {
-                // `g_x` and `g_t` are constants: the speed at each stage is one dot product.
+            let shape = info.events[ev].guard;
+            // The round-off bounds matter only where a guard's closeness to zero is judged.
+            if shape == GuardShape::Nonlinear
+                || self.pending[pos] != Pending::None
+                || self.bounced[pos].is_some()
+            {
+                self.noise1[pos] = round_off(&self.gx, x, gt, t);
+                self.speed_noise1[pos] = round_off(&self.gx, f, gt, 1.0);
+            } else {
+                self.noise1[pos] = 0.0;
+                self.speed_noise1[pos] = 0.0;
+            }
+            self.speed_changes[pos] = if shape == GuardShape::Affine {
+                // `g_x` and `g_t` are constants: the speed at a stage is one dot product.
+                let mut counter = SignChanges::new(self.dg0[pos]);
                 let gx = &self.gx;
-                let stages =
-                    (0..stepper.interior_stages()).map(|k| dot(gx, &stepper.interior_stage(k).1[..n]) + gt);
-                sign_changes(std::iter::once(self.dg0[pos]).chain(stages).chain(std::iter::once(speed)))
+                stepper.visit_interior(|_, f| {
+                    counter.push(gx.iter().zip(f).fold(gt, |acc, (a, b)| acc + a * b))
+                });
+                counter.push(speed);
+                counter.changes
             } else {
                 0
             };
@@ -602,28 +623,22 @@ impl Detector {
         let (t0, h) = (dense.t0(), dense.h());
         // The step's end (exactly: a landed breakpoint), pushed as the second sample.
         let t1 = self.samples[1].t;
-        // The speed at each stage, with `g_x` and `g_t` from any point (they are constants).
+        // The speed at each sampled stage, with `g_x` and `g_t` from any point (they are
+        // constants), then at the end.
         let gt = sys.guard_grad(ev, t0, &self.x, p, &mut self.gx, &mut self.gp);
-        let mut prev = (t0, self.dg0[pos]);
-        let stages = stepper.interior_stages();
-        for k in 0..=stages {
-            let next = if k < stages {
-                let (c, f) = stepper.interior_stage(k);
-                (t0 + c * h, dot(&self.gx, &f[..n]) + gt)
-            } else {
-                (t1, self.dg1[pos])
-            };
-            if prev.1 * next.1 < 0.0 && next.0 > prev.0 {
-                let te = extremum_time(prev.0, prev.1, next.0, next.1, |t| {
-                    self.speed_on_dense(sys, ev, t, dense, p)
-                });
+        let mut speeds: Vec<(f64, f64)> = vec![(t0, self.dg0[pos])];
+        let gx = &self.gx;
+        stepper.visit_interior(|c, f| speeds.push((t0 + c * h, dot(gx, &f[..n]) + gt)));
+        speeds.push((t1, self.dg1[pos]));
+        speeds.retain(|&(_, s)| s != 0.0);
+        for pair in speeds.windows(2) {
+            let ((ta, sa), (tb, sb)) = (pair[0], pair[1]);
+            if sa * sb < 0.0 && tb > ta {
+                let te = extremum_time(ta, sa, tb, sb, |t| self.speed_on_dense(sys, ev, t, dense, p));
                 if te > t0 && te < t1 {
                     let ge = self.guard_on_dense(sys, mode, ne, pos, te, dense, p);
                     self.samples.push(Sample { t: te, g: ge, dg: 0.0, extremum: true });
                 }
-            }
-            if next.1 != 0.0 {
-                prev = next;
             }
         }
         self.samples.sort_by(|a, b| a.t.total_cmp(&b.t));
@@ -739,6 +754,29 @@ impl Detector {
         let ne = evs.len();
         self.located.clear();
         self.group.clear();
+        // The common case, one finding: no ordering to do.
+        let mut findings =
+            self.found[..ne].iter().enumerate().filter(|(_, f)| !matches!(f, Finding::Nothing));
+        if let (Some((pos, &finding)), None) = (findings.next(), findings.next()) {
+            match finding {
+                Finding::Bracket { .. } | Finding::Located(_) => {
+                    let crossing = self.locate(sys, mode, ne, pos, dense, p);
+                    self.found[pos] = Finding::Nothing;
+                    let ev = evs[pos];
+                    let holds = !info.events[ev].has_condition || {
+                        dense.eval(crossing.t, &mut self.x);
+                        sys.condition(ev, crossing.t, &self.x, p)
+                    };
+                    if !holds {
+                        return Selection::Nothing;
+                    }
+                    self.group.push((ev, crossing));
+                    return Selection::Fire(crossing.t);
+                }
+                Finding::NotFinite { t } => return Selection::NotFinite { pos, t },
+                Finding::Nothing | Finding::Stuck => return Selection::Nothing,
+            }
+        }
         let mut not_finite: Option<(usize, f64)> = None;
         // Candidates by their first estimate: the Hermite root of a bracket, a located time.
         loop {
@@ -774,7 +812,9 @@ impl Detector {
             }
             self.located.push((pos, crossing));
             // Every bracket that has crossed by this time is located too (it may be earlier).
-            self.guards_on_dense(sys, mode, ne, crossing.t, dense, p);
+            if self.found[..ne].iter().any(|f| matches!(f, Finding::Bracket { .. })) {
+                self.guards_on_dense(sys, mode, ne, crossing.t, dense, p);
+            }
             for other in 0..ne {
                 if let Finding::Bracket { a, ga, da, sigma, .. } = self.found[other] {
                     let g = self.gtmp[other];
@@ -905,9 +945,14 @@ mod tests {
 
     #[test]
     fn sign_changes_skip_zeros_and_count_each_change() {
-        assert_eq!(sign_changes([0.0, -1.0, -2.0].into_iter()), 0);
-        assert_eq!(sign_changes([1.0, 0.0, -1.0, 2.0].into_iter()), 2);
-        assert_eq!(sign_changes([1.0, f64::NAN, 1.0].into_iter()), 0);
+        let count = |values: &[f64]| {
+            let mut counter = SignChanges::new(values[0]);
+            values[1..].iter().for_each(|&v| counter.push(v));
+            counter.changes
+        };
+        assert_eq!(count(&[0.0, -1.0, -2.0]), 0);
+        assert_eq!(count(&[1.0, 0.0, -1.0, 2.0]), 2);
+        assert_eq!(count(&[1.0, f64::NAN, 1.0]), 0);
     }
 
     #[test]

@@ -502,10 +502,16 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let (t, n) = (self.t, self.n);
         let evs = &self.info.modes[self.mode].events;
         let ne = evs.len();
+        self.det.group.clear();
+        // The events that just fired were at their crossing before the round, never strictly on
+        // their pre-crossing side: when they are all the mode has, nothing can cascade.
+        let fired_now = &self.fired;
+        if evs.iter().all(|ev| fired_now.iter().any(|f| f.0 == *ev)) {
+            return false;
+        }
         let (x_before, g_before) = &mut *self.before;
         g_before.resize(ne, 0.0);
         self.sys.guards(self.mode, t, x_before, self.p, &mut g_before[..ne]);
-        self.det.group.clear();
         for (pos, &ev) in evs.iter().enumerate() {
             let einfo = &self.info.events[ev];
             let (dir, noise) = (einfo.direction, self.det.noise0[pos]);

@@ -44,7 +44,8 @@ pub struct Rk {
     pub(crate) y_new: Vec<f64>,
     pub(crate) ytmp: Vec<f64>,
     dense: Dense,
-    /// The stages strictly inside a step (`0 < c < 1`), by ascending `c`.
+    /// The stages nearest a quarter, a half and three quarters of a step, by ascending `c`: where
+    /// a guard's speed is sampled.
     interior: Vec<usize>,
     /// The error estimates of the last attempt (5th- and 3rd-order for DOP853).
     err5: Vec<f64>,
@@ -70,9 +71,19 @@ impl Rk {
             ytmp: vec![0.0; nz],
             dense: Dense::new(nz),
             interior: {
-                let mut stages: Vec<usize> =
+                let inside: Vec<usize> =
                     (1..tab.stages).filter(|&i| tab.c[i] > 0.0 && tab.c[i] < 1.0).collect();
+                let mut stages: Vec<usize> = [0.25, 0.5, 0.75]
+                    .iter()
+                    .filter_map(|&at| {
+                        inside
+                            .iter()
+                            .copied()
+                            .min_by(|&a, &b| (tab.c[a] - at).abs().total_cmp(&(tab.c[b] - at).abs()))
+                    })
+                    .collect();
                 stages.sort_by(|&a, &b| tab.c[a].total_cmp(&tab.c[b]));
+                stages.dedup();
                 stages
             },
             err5: vec![0.0; n_err],
@@ -209,13 +220,10 @@ impl Stepper for Rk {
         self.rhs_calls
     }
 
-    fn interior_stages(&self) -> usize {
-        self.interior.len()
-    }
-
-    fn interior_stage(&self, k: usize) -> (f64, &[f64]) {
-        let i = self.interior[k];
-        (self.tab.c[i], &self.k[i * self.nz..(i + 1) * self.nz])
+    fn visit_interior<V: FnMut(f64, &[f64])>(&self, mut visit: V) {
+        for &i in &self.interior {
+            visit(self.tab.c[i], &self.k[i * self.nz..(i + 1) * self.nz]);
+        }
     }
 
     /// Next step size after an accepted step with error `err`; updates the controller memory.

@@ -73,9 +73,9 @@ pub trait Stepper {
     fn accept(&mut self, z: &mut [f64]);
     /// Right-hand side evaluations since the last `reset`.
     fn rhs_calls(&self) -> usize;
-    /// How many derivatives at interior points of the last attempt the method kept (its stages).
-    fn interior_stages(&self) -> usize;
-    /// The `k`-th of them in time order: the point's position in the step (in `(0, 1)`) and the
-    /// derivative there (an approximation of the method's order, good for sampling signs).
-    fn interior_stage(&self, k: usize) -> (f64, &[f64]);
+    /// Calls `visit` with derivatives at a few interior points of the last attempt, in time
+    /// order: the point's position in the step (in `(0, 1)`) and the derivative there (an
+    /// approximation of the method's order, good for sampling the signs of a guard's speed). An
+    /// explicit method has them for free in its stages.
+    fn visit_interior<V: FnMut(f64, &[f64])>(&self, visit: V);
 }
