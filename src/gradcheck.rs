@@ -272,6 +272,13 @@ impl<S: HybridSystem + ?Sized> Differences<'_, S> {
                 ));
                 break;
             };
+            if dtime[self.j].is_nan() {
+                self.out.notes.push(format!(
+                    "event #{k} ({}) at t = {}: its time gradient does not exist (a grazing crossing before or at it); not checked",
+                    e.name, e.time
+                ));
+                continue;
+            }
             let label = format!("time of event #{k} ({})", e.name);
             self.compare_one(label, dtime[self.j], minus.events[k].time, plus.events[k].time);
         }
@@ -306,6 +313,11 @@ impl<S: HybridSystem + ?Sized> Differences<'_, S> {
     }
 
     fn compare_one(&mut self, quantity: String, reported: f64, at_minus: f64, at_plus: f64) {
+        if reported.is_nan() {
+            // The derivative does not exist (it depends on a grazing crossing): nothing to compare.
+            self.out.notes.push(format!("{quantity}: its derivative does not exist; not checked"));
+            return;
+        }
         let central = (at_plus - at_minus) / (2.0 * self.step);
         let size = at_minus.abs().max(at_plus.abs());
         let resolution = (self.opts.atol + self.opts.rtol * size) / self.step;

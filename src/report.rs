@@ -39,7 +39,9 @@ impl RunReport {
     fn by_param(&self, a: &[f64], rows: usize, i: usize) -> Value {
         let mut m = Map::new();
         for (j, name) in self.grad_names().into_iter().enumerate() {
-            m.insert(name.to_string(), json!(a[j * rows + i]));
+            // A derivative that does not exist is NaN in the result and `null` here.
+            let d = a[j * rows + i];
+            m.insert(name.to_string(), if d.is_nan() { Value::Null } else { json!(d) });
         }
         Value::Object(m)
     }
@@ -149,7 +151,7 @@ impl RunReport {
             let (before, after) = (self.mode_name(e.mode_before), self.mode_name(e.mode_after));
             let mode = if before == after { before.to_string() } else { format!("{before} -> {after}") };
             let d: String = match &e.dtime {
-                Some(d) => d.iter().map(|v| format!("  {:>18}", num(*v))).collect(),
+                Some(d) => d.iter().map(|v| format!("  {:>18}", grad_text(*v))).collect(),
                 None => grad.iter().map(|_| format!("  {:>18}", "-")).collect(),
             };
             let flag = if e.grazing { format!("  GRAZING (d = {:e})", e.denominator) } else { String::new() };
@@ -162,9 +164,9 @@ impl RunReport {
         let rows = |out: &mut String, names: &[String], v: &[f64], d: &Option<Vec<f64>>| {
             for (i, (n, x)) in names.iter().zip(v).enumerate() {
                 let ds: String = match d {
-                    Some(d) => {
-                        (0..grad.len()).map(|j| format!("  {:>18}", num(d[j * names.len() + i]))).collect()
-                    }
+                    Some(d) => (0..grad.len())
+                        .map(|j| format!("  {:>18}", grad_text(d[j * names.len() + i])))
+                        .collect(),
                     None => grad.iter().map(|_| format!("  {:>18}", "-")).collect(),
                 };
                 let _ = writeln!(out, "  {n:<14}  {:>18}{ds}", num(*x));
@@ -192,6 +194,15 @@ impl RunReport {
             self.run_seconds * 1e6
         );
         out
+    }
+}
+
+/// A derivative as the table prints it: `-` where it does not exist (NaN).
+fn grad_text(v: f64) -> String {
+    if v.is_nan() {
+        "-".to_string()
+    } else {
+        num(v)
     }
 }
 

@@ -99,7 +99,7 @@ impl Run {
     /// `d t_k / d param` of the `k`-th event (0-based).
     pub fn devent_time(&self, k: usize, param: &str) -> Option<f64> {
         let j = self.grad_column(param)?;
-        self.result.events.get(k)?.dtime.as_ref().map(|d| d[j])
+        self.result.events.get(k)?.dtime.as_ref().map(|d| d[j]).filter(|d| !d.is_nan())
     }
 
     /// The raw result (layouts in `sim::result`).
@@ -146,6 +146,7 @@ impl Run {
     fn column(&self, names: &[String], name: &str, param: &str, values: Option<&[f64]>) -> Option<f64> {
         let i = names.iter().position(|s| s == name)?;
         let j = self.grad_column(param)?;
-        values.map(|v| v[j * names.len() + i])
+        // A derivative that does not exist is NaN in the result.
+        values.map(|v| v[j * names.len() + i]).filter(|d| !d.is_nan())
     }
 }

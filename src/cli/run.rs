@@ -46,8 +46,10 @@ pub(crate) struct SimFlags {
     /// Stop (as Zeno behaviour) after this many events.
     #[arg(long, default_value_t = 10_000)]
     max_events: usize,
-    /// A crossing slower than this fraction of its scale is flagged as grazing.
-    #[arg(long, default_value_t = 1e-3)]
+    /// A crossing is grazing (no time gradient) when |g''| delta / d^2 reaches this, with d the
+    /// crossing speed, g'' the guard's curvature and delta its accuracy at the tolerances; near-grazing
+    /// (gradient kept, with a warning) when it reaches its square.
+    #[arg(long, default_value_t = SimOptions::default().graze_tol)]
     graze_tol: f64,
     /// Leave the sensitivities out of the step-size error control (faster, gradients less
     /// accurate).

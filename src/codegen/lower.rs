@@ -82,6 +82,7 @@ pub(crate) fn define_kernel(
             loads: HashMap::new(),
             consts: HashMap::new(),
             imported: HashMap::new(),
+            finite: HashMap::new(),
         };
         let r = tr.translate_plan(plan);
         // A half-built function cannot be finalized (its block has no terminator); on error it
@@ -161,6 +162,8 @@ struct Translator<'a, 'f> {
     loads: HashMap<(Input, u32), Value>,
     consts: HashMap<u64, Value>,
     imported: HashMap<Callee, FuncRef>,
+    /// Jacobian entries known to be finite at every finite input (or not).
+    finite: HashMap<ExprId, bool>,
 }
 
 impl Translator<'_, '_> {
@@ -379,6 +382,22 @@ impl Translator<'_, '_> {
 
     /// Recipe: one entry of `f_x S + f_p`: multiply-accumulate over the structurally non-zero
     /// `f_x` entries of the row in ascending column order, then add the `f_p` entry last.
+    /// `c s`, and `0` where `s` is exactly 0 when the Jacobian entry `c` can be infinite or NaN at
+    /// a finite state: a sensitivity that is zero stays unaffected by a singular derivative (the
+    /// drag `c hypot(vx, vy) vx` of a body at rest has the derivative 0/0 in `vx` there, and a
+    /// parameter that has not acted yet has zero sensitivities).
+    fn translate_sens_product(&mut self, c: ExprId, s: Value) -> Value {
+        let value = self.value(c);
+        let product = self.b.ins().fmul(value, s);
+        let store = self.store;
+        if *self.finite.entry(c).or_insert_with(|| crate::expr::finite_at_finite_inputs(store, c)) {
+            return product;
+        }
+        let zero = self.constant(0.0f64.to_bits());
+        let is_zero = self.b.ins().fcmp(FloatCC::Equal, s, zero);
+        self.b.ins().select(is_zero, zero, product)
+    }
+
     fn translate_sens_dot(
         &mut self,
         products: &[(ExprId, u32)],
@@ -389,16 +408,16 @@ impl Translator<'_, '_> {
         let mut acc: Option<Value> = None;
         for &(a, s_index) in products {
             let s = self.translate_load(Input::S, s_index)?;
-            acc = Some(match (acc, self.negated(a)) {
-                (Some(sum), Some(c)) => {
-                    let term = self.b.ins().fmul(self.values[&c], s);
-                    self.b.ins().fsub(sum, term)
-                }
-                (Some(sum), None) => {
-                    let term = self.b.ins().fmul(self.values[&a], s);
-                    self.b.ins().fadd(sum, term)
-                }
-                (None, _) => self.b.ins().fmul(self.values[&a], s),
+            let (factor, negated) = match self.negated(a) {
+                Some(c) => (c, true),
+                None => (a, false),
+            };
+            let term = self.translate_sens_product(factor, s);
+            acc = Some(match (acc, negated) {
+                (Some(sum), true) => self.b.ins().fsub(sum, term),
+                (Some(sum), false) => self.b.ins().fadd(sum, term),
+                (None, true) => self.b.ins().fneg(term),
+                (None, false) => term,
             });
         }
         if let Some(bias) = bias {

@@ -4,6 +4,7 @@
 pub mod diff;
 pub mod display;
 pub mod eval;
+pub mod finite;
 pub mod functions;
 pub mod node;
 pub mod simplify;
@@ -12,6 +13,7 @@ pub mod store;
 pub use diff::{diff, Differentiator, Var};
 pub use display::{to_infix, to_infix_group, Group};
 pub use eval::{apply_binary, apply_select, apply_unary, eval, eval_one, Tape};
+pub use finite::finite_at_finite_inputs;
 pub use functions::*;
 pub use node::*;
 pub use store::*;

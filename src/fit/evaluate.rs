@@ -130,15 +130,18 @@ fn read(
     observable: Observable,
 ) -> Result<(f64, Vec<f64>), Missing> {
     let f = &result.final_state;
-    let row = |d: &[f64], rows: usize, i: usize| (0..info.n_grad()).map(|j| d[j * rows + i]).collect();
+    let row =
+        |d: &[f64], rows: usize, i: usize| (0..info.n_grad()).map(|j| d[j * rows + i]).collect::<Vec<f64>>();
+    // A derivative that does not exist is NaN: the target then has no gradient.
+    let existing = |d: Vec<f64>| if d.iter().any(|v| v.is_nan()) { Err(Missing::Gradient) } else { Ok(d) };
     match observable {
         Observable::Output(i) => {
             let d = finals.doutputs.as_ref().ok_or(Missing::Gradient)?;
-            Ok((f.outputs[i], row(d, info.n_outputs(), i)))
+            Ok((f.outputs[i], existing(row(d, info.n_outputs(), i))?))
         }
         Observable::State(i) => {
             let d = finals.dstate.as_ref().ok_or(Missing::Gradient)?;
-            Ok((f.state[i], row(d, info.n_states(), i)))
+            Ok((f.state[i], existing(row(d, info.n_states(), i))?))
         }
         Observable::EventTime { name_event, occurrence } => {
             let name = &info.events[name_event].name;
@@ -146,7 +149,7 @@ fn read(
                 result.events.iter().filter(|e| info.events[e.event].name == *name).collect();
             let record = firings.get(occurrence - 1).ok_or(Missing::Event { fired: firings.len() })?;
             let d = record.dtime.as_ref().ok_or(Missing::Gradient)?;
-            Ok((record.time, d.clone()))
+            Ok((record.time, existing(d.clone())?))
         }
     }
 }

@@ -47,6 +47,8 @@ struct ModeKernels {
     flow_sens: Tape,
     /// `(row, column)` of each `f_x` entry in `flow_sens`.
     fx: Vec<(usize, usize)>,
+    /// Whether each `f_x` entry is finite at every finite input (`expr::finite_at_finite_inputs`).
+    fx_finite: Vec<bool>,
     /// `(row, sensitivity column)` of each `f_p` entry in `flow_sens`.
     fp: Vec<(usize, usize)>,
     guards: Tape,
@@ -114,8 +116,10 @@ impl Interpreter {
             .map(|(mode_idx, mode)| {
                 let mut roots = mode.flow.clone();
                 let mut fx = Vec::new();
+                let mut fx_finite = Vec::new();
                 for &(i, k, e) in &mode.flow_x.entries {
                     fx.push((i as usize, k as usize));
+                    fx_finite.push(crate::expr::finite_at_finite_inputs(store, e));
                     roots.push(e);
                 }
                 let mut fp = Vec::new();
@@ -136,6 +140,7 @@ impl Interpreter {
                     flow: Tape::new(store, &mode.flow),
                     flow_sens: Tape::new(store, &roots),
                     fx,
+                    fx_finite,
                     fp,
                     guards: Tape::new(store, &guard_roots),
                 }
@@ -219,9 +224,14 @@ impl HybridSystem for Interpreter {
         dx[..flow.len()].copy_from_slice(flow);
         // ds_j = f_x s_j + f_p[:, j] for every sensitivity column j.
         ds.fill(0.0);
+        // As the compiled kernels: a zero sensitivity annihilates a Jacobian entry that can be
+        // infinite or NaN at a finite state.
         for j in 0..self.info.n_grad() {
-            for (&(i, k), v) in m.fx.iter().zip(fx) {
-                ds[j * n + i] += v * s[j * n + k];
+            for ((&(i, k), v), &finite) in m.fx.iter().zip(fx).zip(&m.fx_finite) {
+                let sk = s[j * n + k];
+                if finite || sk != 0.0 {
+                    ds[j * n + i] += v * sk;
+                }
             }
         }
         for (&(i, j), v) in m.fp.iter().zip(fp) {

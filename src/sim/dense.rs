@@ -144,7 +144,7 @@ mod tests {
 
     /// One step of y' = cos t (y = sin t) and the interpolant inside it, value and derivative.
     fn interpolation_error(tab: &'static Tableau, h: f64) -> (f64, f64) {
-        let mut rk = Rk::new(tab, 1, 1, 1e-8, 1e-8);
+        let mut rk = Rk::new(tab, 1, 1, 1, 1e-8, 1e-8);
         let mut rhs = |t: f64, _y: &[f64], dy: &mut [f64]| dy[0] = t.cos();
         let y0 = [0.3f64.sin()];
         rk.restart(0.3, &y0, &mut rhs);

@@ -135,6 +135,8 @@ pub(crate) struct Detector {
     dx: Vec<f64>,
     samples: Vec<Sample>,
     located: Vec<(usize, Crossing)>,
+    /// The current step's start and end times (equal after a restart, before a step).
+    span: (f64, f64),
 }
 
 /// Whether the guard went from its pre-crossing side at `ga` to the crossed side at `gb`;
@@ -255,6 +257,7 @@ impl Detector {
             dx: vec![0.0; nx],
             samples: Vec::new(),
             located: Vec::new(),
+            span: (0.0, 0.0),
         }
     }
 
@@ -273,6 +276,7 @@ impl Detector {
     ) {
         let evs = &info.modes[mode].events;
         let ne = evs.len();
+        self.span = (t, t);
         sys.guards(mode, t, x, p, &mut self.g0[..ne]);
         for (pos, &ev) in evs.iter().enumerate() {
             let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
@@ -298,6 +302,7 @@ impl Detector {
         let (x, f) = (&stepper.end_state()[..n], &stepper.end_derivative()[..n]);
         let evs = &info.modes[mode].events;
         let ne = evs.len();
+        self.span.1 = t;
         sys.guards(mode, t, x, p, &mut self.g1[..ne]);
         for (pos, &ev) in evs.iter().enumerate() {
             let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
@@ -365,8 +370,16 @@ impl Detector {
         None
     }
 
+    /// The current step's ends with the speeds of the guard at `pos` there, `(t0, g'0, t1, g'1)`,
+    /// when the step has a width (not after a restart).
+    pub fn step_speeds(&self, pos: usize) -> Option<(f64, f64, f64, f64)> {
+        let (t0, t1) = self.span;
+        (t1 > t0).then(|| (t0, self.dg0[pos], t1, self.dg1[pos]))
+    }
+
     /// After a step without events the end values become the next step's start values.
     pub fn advance(&mut self) {
+        self.span.0 = self.span.1;
         std::mem::swap(&mut self.g0, &mut self.g1);
         std::mem::swap(&mut self.dg0, &mut self.dg1);
         std::mem::swap(&mut self.noise0, &mut self.noise1);

@@ -12,7 +12,7 @@
 
 use super::breakpoints::Breakpoints;
 use super::events::{clear_side, moves_across, Crossing, Detector, Pending, Selection};
-use super::jump::{Jump, JumpOutcome};
+use super::jump::{dot_nonzero, CrossingContext, Jump, JumpOutcome};
 use super::options::SimOptions;
 use super::recorder::{Point, PointKind, Recorder};
 use super::result::{EventRecord, FinalState, SimError, SimResult, SimStats, SimWarning, StopReason};
@@ -84,6 +84,14 @@ pub(crate) struct Workspace<St: Stepper = Rk> {
     pub(crate) before: (Vec<f64>, Vec<f64>),
     /// `dt/dp` of the instant being fired (the first event's), for cascading events.
     pub(crate) instant_dte: Vec<f64>,
+    /// Which sensitivities are known not to exist (NaN), for warning once about new ones.
+    pub(crate) void: Vec<bool>,
+}
+
+/// Derivatives as a result reports them: `None` when none exists (every entry NaN, and there is
+/// at least one), else every entry, NaN where that one does not exist.
+fn existing(d: &[f64]) -> Option<Vec<f64>> {
+    (d.is_empty() || d.iter().any(|v| !v.is_nan())).then(|| d.to_vec())
 }
 
 /// The flow of `mode` with its sensitivities as one right-hand side over `z = [x, S]`.
@@ -122,6 +130,7 @@ pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = R
     record_buf: &'a mut (Vec<f64>, Vec<f64>),
     before: &'a mut (Vec<f64>, Vec<f64>),
     instant_dte: &'a mut Vec<f64>,
+    void: &'a mut Vec<bool>,
     recorder: &'a mut R,
     /// The step size the next attempt tries.
     h: f64,
@@ -132,10 +141,10 @@ pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = R
     immediate: bool,
     /// Whether `instant_dte` holds the current instant's `dt/dp`, and its crossing speed.
     instant: Option<f64>,
+    /// The mode the last step integrated in (the detector's speeds belong to its guards).
+    step_mode: usize,
     events: Vec<EventRecord>,
     warnings: Vec<SimWarning>,
-    /// False once a grazing event has made the sensitivities meaningless.
-    sens_valid: bool,
     stats: SimStats,
     /// Total derivative of the final state and `dt/dp` of a stop event.
     stop_total: Option<(Vec<f64>, Vec<f64>)>,
@@ -167,11 +176,13 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             record_buf,
             before,
             instant_dte,
+            void,
         } = work;
         stepper.reset();
         breakpoints.reset(opts.t_end);
         sys.initial_state(p, &mut z[..n]);
         sys.initial_sens(p, &mut z[n..]);
+        void.fill(false);
         let mut it = Integrator {
             sys,
             info,
@@ -192,23 +203,26 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             record_buf,
             before,
             instant_dte,
+            void,
             recorder,
             h: 0.0,
             attempts: 0,
             nonfinite_rejects: 0,
             immediate: false,
             instant: None,
+            step_mode: info.initial_mode,
             events: Vec::new(),
             warnings: Vec::new(),
-            sens_valid: true,
             stats: SimStats::default(),
             stop_total: None,
             done: None,
         };
-        if it.z.iter().any(|v| !v.is_finite()) {
+        if it.z[..n].iter().any(|v| !v.is_finite()) {
             it.done = Some(it.fault_nonfinite());
             return it;
         }
+        let t0 = it.t;
+        it.note_new_voids(t0);
         it.add_time_events();
         it.h = it.restart();
         // A reused detector may remember bounces of an earlier run.
@@ -409,8 +423,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 if sample_due {
                     self.record_samples(t1);
                 }
+                let singular_at_start = self.stepper.masked() && self.start_derivative_not_finite();
                 self.stepper.accept(self.z);
                 self.t = t1;
+                if self.stepper.masked() {
+                    self.note_new_voids(if singular_at_start { t0 } else { t1 });
+                }
                 self.det.advance();
                 self.record(PointKind::Step);
                 self.h = h_next;
@@ -430,8 +448,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 if sample_due || self.sample_due(t_fire) {
                     self.record_samples(t_fire);
                 }
+                let singular_at_start = self.stepper.masked() && self.start_derivative_not_finite();
                 self.stepper.interpolant().eval(t_fire, self.z);
                 self.t = t_fire;
+                if self.stepper.masked() {
+                    self.note_new_voids(if singular_at_start { t0 } else { t_fire });
+                }
                 self.record(PointKind::BeforeEvents);
                 self.fire_instant(h_next)
             }
@@ -446,6 +468,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let n = self.n;
         let first = self.events.len();
         let mode_before = self.mode;
+        self.step_mode = self.mode;
         self.instant = None;
         self.fired.clear();
         self.before.0.clear();
@@ -479,6 +502,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             self.before.0.extend_from_slice(&self.z[..n]);
         }
         self.record(PointKind::AfterEvents);
+        for (void, s) in self.void.iter_mut().zip(&self.z[self.n..]) {
+            *void |= s.is_nan();
+        }
         if self.events.len() >= self.opts.max_events {
             return StepOutcome::Done(StopReason::MaxEvents { time: self.t, count: self.events.len() });
         }
@@ -630,6 +656,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 // An earlier event of the group switched to a mode without this event.
                 continue;
             };
+            let context = self.crossing_context(pos, crossing, self.mode == self.step_mode);
             let (x, s) = self.z.split_at_mut(n);
             if !(crossing.touch || crossing.on_guard) {
                 let g = self.det.guard_now(self.sys, self.mode, pos, t, x, self.p);
@@ -663,7 +690,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 x,
                 s,
                 self.p,
-                self.opts.graze_tol,
+                context,
                 einfo.is_stop,
                 given,
             );
@@ -672,9 +699,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 self.instant_dte.clear();
                 self.instant_dte.extend_from_slice(&self.jump.dte);
             }
-            if out.grazing {
-                self.note_grazing(ev, t, out);
-            }
+            self.note_conditioning(ev, t, out);
             self.events.push(EventRecord {
                 index: self.events.len(),
                 event: ev,
@@ -682,17 +707,16 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 time: t,
                 mode_before,
                 mode_after,
-                dtime: self.sens_valid.then(|| self.jump.dte.clone()),
+                dtime: existing(&self.jump.dte),
                 grazing: out.grazing,
                 denominator: out.denominator,
+                margin: out.margin,
             });
             self.stats.events += 1;
             self.fired.push((ev, crossing.sigma, out.denominator));
             self.mode = mode_after;
             if einfo.is_stop {
-                if self.sens_valid {
-                    self.stop_total = Some((self.jump.total.clone(), self.jump.dte.clone()));
-                }
+                self.stop_total = Some((self.jump.total.clone(), self.jump.dte.clone()));
                 return Some(StopReason::Event { event: ev, name: einfo.name.clone() });
             }
         }
@@ -710,13 +734,15 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let (n, t) = (self.n, self.t);
         self.stats.switches += 1;
         if after_an_event || crossing.on_guard {
-            if self.sens_valid {
-                self.sens_valid = false;
+            // The flow before the switch is not known: no sensitivity survives it.
+            if self.z[n..].iter().any(|v| !v.is_nan()) {
+                self.z[n..].fill(f64::NAN);
                 let name = self.info.events[ev].name.clone();
                 self.warnings.push(SimWarning::SwitchAtEvent { name, time: t });
             }
             return;
         }
+        let context = self.crossing_context(pos, crossing, true);
         let dense = self.stepper.interpolant();
         let (x_pre, x_post) = &mut *self.x_sides;
         dense.eval(crossing.t_pre, x_pre);
@@ -733,23 +759,71 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         }
         let (x, s) = self.z.split_at_mut(n);
         let sides = ((crossing.t_pre, &x_pre[..]), (t_post, &x_post[..]));
-        let out =
-            self.jump.apply_switch(self.sys, ev, self.mode, t, x, sides, s, self.p, self.opts.graze_tol);
-        if out.grazing {
-            self.note_grazing(ev, t, out);
+        let out = self.jump.apply_switch(self.sys, ev, self.mode, t, x, sides, s, self.p, context);
+        self.note_conditioning(ev, t, out);
+    }
+
+    /// Whether the derivative at the step's start has sensitivities that are not finite where the
+    /// sensitivities themselves are: the flow's derivative is singular right there.
+    fn start_derivative_not_finite(&self) -> bool {
+        let n = self.n;
+        let k0 = &self.stepper.start_derivative()[n..];
+        k0.iter().zip(&self.z[n..]).any(|(d, s)| !d.is_finite() && s.is_finite())
+    }
+
+    /// Sensitivities that are not finite at a finite state, and not yet known to be missing:
+    /// derivatives that do not exist (NaN from here on), with one warning naming the first and
+    /// the time `t` from which they are missing.
+    fn note_new_voids(&mut self, t: f64) {
+        let n = self.n;
+        let mut first: Option<usize> = None;
+        let mut count = 0;
+        for (k, (void, s)) in self.void.iter_mut().zip(&mut self.z[n..]).enumerate() {
+            if !s.is_finite() {
+                *s = f64::NAN;
+                if !*void {
+                    *void = true;
+                    count += 1;
+                    first.get_or_insert(k);
+                }
+            }
+        }
+        if let Some(k) = first {
+            let (j, i) = (k / n, k % n);
+            let param = &self.info.param_names[self.info.grad_params[j]];
+            self.warnings.push(SimWarning::NotDifferentiable {
+                time: t,
+                state: self.info.state_names[i].as_str().into(),
+                param: param.as_str().into(),
+                count,
+            });
         }
     }
 
-    /// A grazing crossing of event `ev` at `t`: no gradient from here on, and a warning.
-    fn note_grazing(&mut self, ev: usize, t: f64, out: JumpOutcome) {
-        self.sens_valid = false;
-        self.warnings.push(SimWarning::Grazing {
-            event: ev,
-            name: self.info.events[ev].name.clone(),
-            time: t,
-            denominator: out.denominator,
-            scale: out.scale,
-        });
+    /// What a jump needs to judge its crossing: the guard's curvature from the speeds over the
+    /// step the crossing was found in (none for a crossing at a step's start, or after a mode
+    /// switch in the group), and the run's tolerances.
+    fn crossing_context(&self, pos: usize, crossing: Crossing, same_mode: bool) -> CrossingContext {
+        let step = if same_mode && !crossing.on_guard { self.det.step_speeds(pos) } else { None };
+        let flow_jumps = self.info.events[self.info.modes[self.mode].events[pos]].implicit;
+        CrossingContext {
+            step,
+            flow_jumps,
+            rtol: self.opts.rtol,
+            atol: self.opts.atol,
+            graze_tol: self.opts.graze_tol,
+        }
+    }
+
+    /// A grazing or near-grazing crossing of event `ev` at `t`: a warning.
+    fn note_conditioning(&mut self, ev: usize, t: f64, out: JumpOutcome) {
+        let name = self.info.events[ev].name.clone();
+        if out.grazing {
+            let (denominator, conditioning) = (out.denominator, out.conditioning);
+            self.warnings.push(SimWarning::Grazing { event: ev, name, time: t, denominator, conditioning });
+        } else if let Some(margin) = out.margin {
+            self.warnings.push(SimWarning::NearGrazing { event: ev, name, time: t, margin });
+        }
     }
 
     /// Whether the recorder wants a sample from the dense output of the step ending at `t_seg_end`.
@@ -822,21 +896,22 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 for i in 0..k {
                     let row = &yx[i * n..(i + 1) * n];
                     let mut v = yp[j * k + i];
-                    v += row.iter().zip(&sens[j * n..(j + 1) * n]).map(|(a, b)| a * b).sum::<f64>();
+                    v += dot_nonzero(row, &sens[j * n..(j + 1) * n]);
                     if let Some(d) = dte {
-                        v += yt[i] * d[j];
+                        if yt[i] != 0.0 {
+                            v += yt[i] * d[j];
+                        }
                     }
                     out[j * k + i] = v;
                 }
             }
             out
         };
-        let (dstate, doutputs) =
-            if self.sens_valid { (Some(s.to_vec()), Some(chain(s, None))) } else { (None, None) };
+        let (dstate, doutputs) = (existing(s), existing(&chain(s, None)));
         let (dstate_total, doutputs_total) = match self.stop_total {
             Some((total, dte)) => {
                 let dy = chain(&total, Some(&dte));
-                (Some(total), Some(dy))
+                (existing(&total), existing(&dy))
             }
             None => (None, None),
         };

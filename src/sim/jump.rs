@@ -13,9 +13,18 @@
 //! A flow switch (`apply_switch`) is the same jump with `R` the identity, `f-` and `f+` read just
 //! before and just past the switch (the flow itself jumps there, not the mode).
 //!
-//! Grazing: when `|d| <= graze_tol (|g_x| |f-| + |g_t|)` (Euclidean norms; the factor never below
-//! 1e-8) the crossing is tangential, `dt_e/dp` does not exist and dividing by `d` would produce
-//! huge or NaN numbers.
+//! Grazing, from the crossing's conditioning (ARCHITECTURE.md, "Grazing"): near the crossing the
+//! guard along the solution is `d (t - t_e) + g'' (t - t_e)^2 / 2`, and the guard is known only to
+//! `delta = sum_i |g_x,i| (atol + rtol |x_i|)` plus its round-off (per component). The crossing is
+//! resolved when `d^2` is large against `|g''| delta`: with `kappa = |g''| delta / d^2`,
+//! - `kappa < graze_tol^2`: transversal, `dt_e/dp` exact;
+//! - `graze_tol^2 <= kappa < graze_tol`: near-grazing: exact, but valid only while parameter
+//!   changes move the guard's extremum, `d^2 / (2 |g''|)` from zero, by less: kept, with a warning;
+//! - `kappa >= graze_tol`, or `d` within round-off of zero: grazing, `dt_e/dp` does not exist.
+//!
+//! A derivative that does not exist is NaN in `dte` and in `S`, and it voids exactly what depends
+//! on it: every product below skips exact zeros, so `0 * NaN` is never formed and a reset that
+//! removes the dependence (`v := 0` into a mode with no flow) gives derivatives that exist.
 
 use super::events::dot;
 use super::system::HybridSystem;
@@ -23,12 +32,41 @@ use super::system::HybridSystem;
 /// A time and the state at that time.
 pub(crate) type TimedState<'a> = (f64, &'a [f64]);
 
-fn norm(a: &[f64]) -> f64 {
-    dot(a, a).sqrt()
+/// `sum_i a_i b_i` over the `a_i` that are not exactly zero: a missing derivative (NaN) in `b`
+/// reaches the sum only through a coefficient that is not zero.
+pub(crate) fn dot_nonzero(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).filter(|(a, _)| **a != 0.0).map(|(a, b)| a * b).sum()
 }
 
-/// Relative crossing speed below which an event always counts as grazing.
-const MIN_RELATIVE_SPEED: f64 = 1e-8;
+/// `a b`, or zero when `a` is exactly zero (whatever `b`, NaN included).
+fn times_nonzero(a: f64, b: f64) -> f64 {
+    if a == 0.0 {
+        0.0
+    } else {
+        a * b
+    }
+}
+
+/// `16 eps (sum_i |a_i b_i| + |c d|)`, as `events::round_off`.
+fn round_off(a: &[f64], b: &[f64], c: f64, d: f64) -> f64 {
+    16.0 * f64::EPSILON * (a.iter().zip(b).map(|(a, b)| (a * b).abs()).sum::<f64>() + (c * d).abs())
+}
+
+/// What the integrator tells a jump about its crossing and the run's tolerances.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct CrossingContext {
+    /// The step the crossing was found in, with the guard's speeds at its ends:
+    /// `(t0, g'0, t1, g'1)`, from which `|g''|` at the crossing is estimated as the larger secant
+    /// slope of the speed between the crossing and either end. `None` for a crossing at a step's
+    /// start (its curvature is then taken as 0).
+    pub step: Option<(f64, f64, f64, f64)>,
+    /// The flow jumps at this crossing (a flow switch): the speed after it belongs to the other
+    /// branch, so only the step's start enters the curvature.
+    pub flow_jumps: bool,
+    pub rtol: f64,
+    pub atol: f64,
+    pub graze_tol: f64,
+}
 
 pub(crate) struct Jump {
     n: usize,
@@ -52,8 +90,11 @@ pub(crate) struct Jump {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct JumpOutcome {
     pub denominator: f64,
-    pub scale: f64,
+    /// `kappa = |g''| delta / d^2` (see the module documentation).
+    pub conditioning: f64,
     pub grazing: bool,
+    /// For a near-grazing crossing: how far the guard's extremum is from zero.
+    pub margin: Option<f64>,
 }
 
 impl Jump {
@@ -92,7 +133,7 @@ impl Jump {
         x: &mut [f64],
         s: &mut [f64],
         p: &[f64],
-        graze_tol: f64,
+        context: CrossingContext,
         want_total: bool,
         given: Option<(&[f64], f64)>,
     ) -> JumpOutcome {
@@ -101,9 +142,9 @@ impl Jump {
         let outcome = match given {
             Some((dte, speed)) => {
                 self.dte.copy_from_slice(dte);
-                JumpOutcome { denominator: speed, scale: 0.0, grazing: false }
+                JumpOutcome { denominator: speed, conditioning: 0.0, grazing: false, margin: None }
             }
-            None => self.event_time_gradient(sys, ev, t, x, s, p, graze_tol),
+            None => self.event_time_gradient(sys, ev, t, x, s, p, context),
         };
         sys.reset(ev, t, x, p, &mut self.x_plus);
         sys.reset_jac(ev, t, x, p, &mut self.rx, &mut self.rp, &mut self.rt);
@@ -117,11 +158,12 @@ impl Jump {
             let sj = &s[j * n..(j + 1) * n];
             for i in 0..n {
                 let row = &self.rx[i * n..(i + 1) * n];
-                let rs = dot(row, sj);
-                self.s_plus[j * n + i] = rs + self.rp[j * n + i] + self.v[i] * self.dte[j];
+                let rs = dot_nonzero(row, sj);
+                self.s_plus[j * n + i] = rs + self.rp[j * n + i] + times_nonzero(self.v[i], self.dte[j]);
                 if want_total {
                     let rf = dot(row, &self.f_minus);
-                    self.total[j * n + i] = rs + self.rp[j * n + i] + (rf + self.rt[i]) * self.dte[j];
+                    self.total[j * n + i] =
+                        rs + self.rp[j * n + i] + times_nonzero(rf + self.rt[i], self.dte[j]);
                 }
             }
         }
@@ -145,24 +187,26 @@ impl Jump {
         ((t_pre, x_pre), (t_post, x_post)): (TimedState, TimedState),
         s: &mut [f64],
         p: &[f64],
-        graze_tol: f64,
+        context: CrossingContext,
     ) -> JumpOutcome {
         let n = self.n;
         sys.flow(mode, t_pre, x_pre, p, &mut self.f_minus);
-        let outcome = self.event_time_gradient(sys, ev, t, x, s, p, graze_tol);
+        let outcome = self.event_time_gradient(sys, ev, t, x, s, p, context);
         sys.flow(mode, t_post, x_post, p, &mut self.f_plus);
         for (j, &dte) in self.dte.iter().enumerate() {
             for ((s, f_minus), f_plus) in
                 s[j * n..(j + 1) * n].iter_mut().zip(&self.f_minus).zip(&self.f_plus)
             {
-                *s += (f_minus - f_plus) * dte;
+                *s += times_nonzero(f_minus - f_plus, dte);
             }
         }
         outcome
     }
 
-    /// The crossing speed `d = g_x f- + g_t` (with `f-` already in `f_minus`) and `dt_e/dp` into
-    /// `dte` (zero when grazing).
+    /// The crossing speed `d = g_x f- + g_t` (with `f-` already in `f_minus`), its conditioning,
+    /// and `dt_e/dp` into `dte`: NaN where it does not exist (a grazing crossing, or a missing
+    /// derivative in `S` that the guard reads), 0 where nothing moves the time (`g_x S + g_p` is
+    /// exactly 0 for that parameter, grazing or not).
     #[allow(clippy::too_many_arguments)]
     fn event_time_gradient<S: HybridSystem + ?Sized>(
         &mut self,
@@ -172,27 +216,44 @@ impl Jump {
         x: &[f64],
         s: &[f64],
         p: &[f64],
-        graze_tol: f64,
+        context: CrossingContext,
     ) -> JumpOutcome {
         let n = self.n;
         let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
         let d = dot(&self.gx, &self.f_minus) + gt;
-        let scale = norm(&self.gx) * norm(&self.f_minus) + gt.abs();
-        // A NaN speed also counts as grazing (the comparison is false for NaN). Below a relative
-        // speed of about sqrt(eps) the located time itself is unreliable (its error is the
-        // guard's round-off divided by d), so even `graze_tol = 0` does not go below that.
-        let crossing_fast_enough = d.abs() > graze_tol.max(MIN_RELATIVE_SPEED) * scale;
-        let grazing = !crossing_fast_enough;
+        let accuracy = self
+            .gx
+            .iter()
+            .zip(x)
+            .map(|(g, x)| g.abs() * (context.atol + context.rtol * x.abs()))
+            .sum::<f64>()
+            + round_off(&self.gx, x, gt, t);
+        let speed_noise = round_off(&self.gx, &self.f_minus, gt, 1.0);
+        let mut curvature = 0.0f64;
+        if let Some((t0, d0, t1, d1)) = context.step {
+            if t > t0 {
+                curvature = curvature.max((d - d0).abs() / (t - t0));
+            }
+            if t1 > t && !context.flow_jumps {
+                curvature = curvature.max((d1 - d).abs() / (t1 - t));
+            }
+        }
+        let conditioning = if d == 0.0 { f64::INFINITY } else { curvature * accuracy / (d * d) };
+        // A NaN speed or conditioning also counts as grazing (the comparisons are false for NaN).
+        let resolved = d.abs() > speed_noise && conditioning < context.graze_tol;
+        let grazing = !resolved;
+        let margin = (resolved && conditioning >= context.graze_tol * context.graze_tol)
+            .then(|| d * d / (2.0 * curvature));
         for (j, dte) in self.dte.iter_mut().enumerate() {
-            *dte = if grazing {
-                // No time correction: S is carried on as if the event time were fixed, the
-                // one-sided limit that keeps the numbers finite. The caller marks every later
-                // gradient as not meaningful, so this S is never reported as a derivative.
+            let numerator = dot_nonzero(&self.gx, &s[j * n..(j + 1) * n]) + self.gp[j];
+            *dte = if !grazing {
+                -numerator / d
+            } else if numerator == 0.0 {
                 0.0
             } else {
-                -(dot(&self.gx, &s[j * n..(j + 1) * n]) + self.gp[j]) / d
+                f64::NAN
             };
         }
-        JumpOutcome { denominator: d, scale, grazing }
+        JumpOutcome { denominator: d, conditioning, grazing, margin }
     }
 }

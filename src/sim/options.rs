@@ -53,9 +53,12 @@ pub struct SimOptions {
     pub max_events: usize,
     /// Largest number of attempted steps (accepted + rejected) before the run stops with a fault.
     pub max_steps: usize,
-    /// An event whose crossing speed `|g_x f + g_t|` is at most `graze_tol` times its scale
-    /// `|g_x| |f| + |g_t|` is grazing: its time gradient does not exist. Values below 1e-8 act
-    /// as 1e-8 (slower crossings cannot be located accurately in time).
+    /// A crossing is grazing (no time gradient) when its conditioning
+    /// `kappa = |g''| delta / d^2` is at least `graze_tol`, and near-grazing (gradient kept, with a
+    /// warning) when it is at least `graze_tol^2`: `d` is the crossing speed `g_x f + g_t`, `g''`
+    /// the guard's second derivative along the solution and `delta = sum_i |g_x,i| (atol + rtol
+    /// |x_i|)` the guard's accuracy at the tolerances (`sim::jump`). A crossing whose speed is
+    /// round-off is always grazing.
     pub graze_tol: f64,
     /// Whether sensitivities take part in the step-size error norm. Off is cheaper, but then the
     /// sensitivities' accuracy is only whatever the state's steps give them.
@@ -81,7 +84,7 @@ impl Default for SimOptions {
             method: Method::Auto,
             max_events: 10_000,
             max_steps: 1_000_000,
-            graze_tol: 1e-3,
+            graze_tol: 1e-2,
             sens_error_control: true,
             zeno_events: 10,
             zeno_window: 1e-7,

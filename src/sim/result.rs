@@ -94,27 +94,44 @@ pub fn short(v: f64) -> String {
 /// Non-fatal findings.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub enum SimWarning {
-    /// The guard was crossed (or touched) at a speed too small for its time gradient to exist;
-    /// this event's and all later gradients are `None`.
-    Grazing { event: usize, name: Arc<str>, time: f64, denominator: f64, scale: f64 },
+    /// The guard was crossed (or touched) too slowly for its time to be told apart from a touch
+    /// at the run's tolerances (`conditioning = |g''| delta / d^2 >= graze_tol`): its time gradient
+    /// does not exist, nor does any later derivative that depends on it.
+    Grazing { event: usize, name: Arc<str>, time: f64, denominator: f64, conditioning: f64 },
+    /// A crossing resolved by the tolerances but close to a touch: its gradients are exact but
+    /// hold only while parameter changes move the guard's extremum by less than `margin`.
+    NearGrazing { event: usize, name: Arc<str>, time: f64, margin: f64 },
     /// A flow switch was crossed at the instant of a declared event that had already changed the
-    /// state or the mode, so the flow before the switch is not known; all later gradients are
-    /// `None`.
+    /// state or the mode, so the flow before the switch is not known; no later derivative exists.
     SwitchAtEvent { name: Arc<str>, time: f64 },
+    /// The derivative `d state / d param` (and `count - 1` others) stopped existing at `time`:
+    /// the flow's derivative, or the initial state's, is not finite at a finite state there.
+    NotDifferentiable { time: f64, state: Arc<str>, param: Arc<str>, count: usize },
 }
 
 impl fmt::Display for SimWarning {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            SimWarning::Grazing { name, time, denominator, scale, .. } => write!(
+            SimWarning::Grazing { name, time, denominator, conditioning, .. } => write!(
                 f,
                 "event `{name}` grazes its guard at t = {time} (crossing speed {denominator:e}, \
-                 scale {scale:e}): gradients from here on are not meaningful"
+                 conditioning {conditioning:e}): derivatives that depend on its time do not exist"
+            ),
+            SimWarning::NearGrazing { name, time, margin, .. } => write!(
+                f,
+                "event `{name}` nearly grazes its guard at t = {time}: its gradients hold only while \
+                 parameter changes move the guard's extremum by less than {margin:e}"
             ),
             SimWarning::SwitchAtEvent { name, time } => write!(
                 f,
                 "`{name}` was crossed at t = {time} together with an event that changed the state \
-                 or the mode: gradients from here on are not meaningful"
+                 or the mode: no derivative exists from here on"
+            ),
+            SimWarning::NotDifferentiable { time, state, param, count } => write!(
+                f,
+                "d{state}/d{param}{} does not exist from t = {time} on: the flow's derivative is not \
+                 finite at the state there",
+                if *count > 1 { format!(" (and {} other derivatives)", count - 1) } else { String::new() }
             ),
         }
     }
@@ -131,11 +148,14 @@ pub struct EventRecord {
     pub time: f64,
     pub mode_before: usize,
     pub mode_after: usize,
-    /// `dt_e/dp_j` per grad parameter; `None` when grazing or after a grazing event.
+    /// `dt_e/dp_j` per grad parameter, NaN where it does not exist (a grazing event, or one whose
+    /// guard reads a derivative that does not exist); `None` when none exists.
     pub dtime: Option<Vec<f64>>,
     pub grazing: bool,
     /// Crossing speed `g_x f- + g_t` (the denominator of `dtime`).
     pub denominator: f64,
+    /// For a near-grazing crossing: the distance of the guard's extremum from zero.
+    pub margin: Option<f64>,
 }
 
 /// The state where the run stopped.
@@ -144,7 +164,8 @@ pub struct FinalState {
     pub time: f64,
     pub mode: usize,
     pub state: Vec<f64>,
-    /// Sensitivities at fixed time (n * m); `None` after a grazing event.
+    /// Sensitivities at fixed time (n * m), NaN where a derivative does not exist; `None` when
+    /// none exists.
     pub dstate: Option<Vec<f64>>,
     pub outputs: Vec<f64>,
     /// `y_x dstate + y_p` (k * m).

@@ -34,6 +34,10 @@ pub struct Rk {
     pub(crate) nz: usize,
     /// The leading `n_err` components enter the error norm.
     pub(crate) n_err: usize,
+    /// The leading `n_states` components are states (the rest sensitivities).
+    pub(crate) n_states: usize,
+    /// Whether the last attempt's error left out sensitivities that were not finite.
+    masked: bool,
     pub(crate) rtol: f64,
     pub(crate) atol: f64,
     /// Stage derivatives, `all_stages` blocks of `nz`; block 0 is `f(t, y)` at the start point,
@@ -58,11 +62,20 @@ pub struct Rk {
 }
 
 impl Rk {
-    pub(crate) fn new(tab: &'static Tableau, nz: usize, n_err: usize, rtol: f64, atol: f64) -> Rk {
+    pub(crate) fn new(
+        tab: &'static Tableau,
+        nz: usize,
+        n_states: usize,
+        n_err: usize,
+        rtol: f64,
+        atol: f64,
+    ) -> Rk {
         Rk {
             tab,
             nz,
             n_err,
+            n_states,
+            masked: false,
             rtol,
             atol,
             k: vec![0.0; tab.all_stages * nz],
@@ -121,16 +134,27 @@ impl Rk {
         }
     }
 
-    fn error(&mut self, y: &[f64], h: f64) -> f64 {
+    /// The scaled error of the last attempt from `y`. `MASKED` leaves out the sensitivities (the
+    /// components after the first `n_states`) that are not finite at either end or in the
+    /// estimate: derivatives that do not exist, which carry no error to control.
+    fn error<const MASKED: bool>(&mut self, y: &[f64], h: f64) -> f64 {
         let ne = self.n_err;
+        let n_states = self.n_states;
         centred_sum(&self.k, self.nz, &self.tab.e, &mut self.err5[..ne]);
         let mut sum5 = 0.0;
         let mut sum3 = 0.0;
+        let mut used = 0usize;
         let scales = y[..ne].iter().zip(&self.y_new[..ne]);
+        let skip =
+            |i: usize, values: [f64; 4]| MASKED && i >= n_states && values.iter().any(|v| !v.is_finite());
         match &self.tab.e3 {
             Some(e3) => {
                 centred_sum(&self.k, self.nz, e3, &mut self.err3[..ne]);
-                for ((y0, y1), (e5, e3)) in scales.zip(self.err5.iter().zip(&self.err3)) {
+                for (i, ((y0, y1), (e5, e3))) in scales.zip(self.err5.iter().zip(&self.err3)).enumerate() {
+                    if skip(i, [*y0, *y1, *e5, *e3]) {
+                        continue;
+                    }
+                    used += 1;
                     let h_sc = h / (self.atol + self.rtol * y0.abs().max(y1.abs()));
                     let (r5, r3) = (e5 * h_sc, e3 * h_sc);
                     sum5 += r5 * r5;
@@ -138,14 +162,18 @@ impl Rk {
                 }
             }
             None => {
-                for ((y0, y1), e5) in scales.zip(&self.err5) {
+                for (i, ((y0, y1), e5)) in scales.zip(&self.err5).enumerate() {
+                    if skip(i, [*y0, *y1, *e5, 0.0]) {
+                        continue;
+                    }
+                    used += 1;
                     let sc = self.atol + self.rtol * y0.abs().max(y1.abs());
                     let r5 = h * e5 / sc;
                     sum5 += r5 * r5;
                 }
             }
         }
-        let n = ne.max(1) as f64;
+        let n = if MASKED { used.max(1) } else { ne.max(1) } as f64;
         if self.tab.e3.is_some() {
             let den = sum5 + 0.01 * sum3;
             // A NaN estimate stays NaN (the step is rejected); only a zero one is zero.
@@ -195,8 +223,20 @@ impl Stepper for Rk {
         let nz = self.nz;
         rhs.eval(t + h, &self.y_new, &mut self.k[(s - 1) * nz..s * nz]);
         self.rhs_calls += 1;
-        let err = self.error(y, h);
+        let err = self.error::<false>(y, h);
+        self.masked = false;
         if err.is_finite() && all_finite(&self.y_new) {
+            return err;
+        }
+        // A state that is not finite rejects the step; a sensitivity that is not finite at a
+        // finite state is a derivative that does not exist (NaN from here on, see `sim::jump`),
+        // and the step is judged without it.
+        if !all_finite(&self.y_new[..self.n_states]) {
+            return f64::INFINITY;
+        }
+        self.masked = true;
+        let err = self.error::<true>(y, h);
+        if err.is_finite() {
             err
         } else {
             f64::INFINITY
@@ -218,6 +258,10 @@ impl Stepper for Rk {
 
     fn rhs_calls(&self) -> usize {
         self.rhs_calls
+    }
+
+    fn masked(&self) -> bool {
+        self.masked
     }
 
     fn visit_interior<V: FnMut(f64, &[f64])>(&self, mut visit: V) {
@@ -365,7 +409,7 @@ mod tests {
     /// Integrates y' = -y + cos t from 0 to 2 and compares with the closed form
     /// y = 0.5 (cos t + sin t) + (y0 - 0.5) e^-t.
     fn integrate(tab: &'static Tableau, rtol: f64) -> (f64, usize) {
-        let mut rk = Rk::new(tab, 1, 1, rtol, rtol * 1e-2);
+        let mut rk = Rk::new(tab, 1, 1, 1, rtol, rtol * 1e-2);
         let (mut t, mut y) = (0.0, [2.0]);
         let mut rhs = |t: f64, y: &[f64], dy: &mut [f64]| dy[0] = -y[0] + t.cos();
         rk.restart(t, &y, &mut rhs);
@@ -392,7 +436,7 @@ mod tests {
         // Stage 2 of both pairs has zero weight in `b` and in the error estimators, so `y_new` and
         // the weighted sums stay finite; an infinite derivative there must still reject the step.
         for tab in [&DOPRI5, &DOP853] {
-            let mut rk = Rk::new(tab, 1, 1, 1e-8, 1e-10);
+            let mut rk = Rk::new(tab, 1, 1, 1, 1e-8, 1e-10);
             let mut calls = 0;
             let mut rhs = |_t: f64, _y: &[f64], dy: &mut [f64]| {
                 calls += 1;

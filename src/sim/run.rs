@@ -72,7 +72,7 @@ impl<H: SystemRef> Simulator<H> {
         let n_err = if opts.sens_error_control { nz } else { n };
         let k = info.n_outputs();
         let work = Workspace {
-            stepper: Rk::new(tab, nz, n_err, opts.rtol, opts.atol),
+            stepper: Rk::new(tab, nz, n, n_err, opts.rtol, opts.atol),
             det: Detector::new(info, n, m),
             jump: Jump::new(n, m),
             breakpoints: Breakpoints::default(),
@@ -83,6 +83,7 @@ impl<H: SystemRef> Simulator<H> {
             record_buf: (vec![0.0; k], vec![0.0; nz]),
             before: (vec![0.0; n], Vec::new()),
             instant_dte: vec![0.0; m],
+            void: vec![false; n * m],
         };
         Ok(Simulator { sys, opts: opts.clone(), work })
     }

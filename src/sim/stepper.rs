@@ -73,6 +73,9 @@ pub trait Stepper {
     fn accept(&mut self, z: &mut [f64]);
     /// Right-hand side evaluations since the last `reset`.
     fn rhs_calls(&self) -> usize;
+    /// Whether the last attempt found sensitivities that are not finite at its finite end state
+    /// (and judged its error without them): derivatives that do not exist from there on.
+    fn masked(&self) -> bool;
     /// Calls `visit` with derivatives at a few interior points of the last attempt, in time
     /// order: the point's position in the step (in `(0, 1)`) and the derivative there (an
     /// approximation of the method's order, good for sampling the signs of a guard's speed). An

@@ -139,10 +139,10 @@ impl<'a> Columns<'a> {
         let (ds, dy) = if complete { (ds.as_deref(), dy.as_deref()) } else { (None, None) };
         debug_assert!(ds.is_none_or(|d| d.len() == n * m) && dy.is_none_or(|d| d.len() == k * m));
         for j in 0..self.shown_grad {
-            row.extend((0..n).map(|i| ds.map_or(Cell::Empty, |d| Cell::Num(d[j * n + i]))));
+            row.extend((0..n).map(|i| ds.map_or(Cell::Empty, |d| num_or_empty(d[j * n + i]))));
         }
         for j in 0..self.shown_grad {
-            row.extend((0..k).map(|i| dy.map_or(Cell::Empty, |d| Cell::Num(d[j * k + i]))));
+            row.extend((0..k).map(|i| dy.map_or(Cell::Empty, |d| num_or_empty(d[j * k + i]))));
         }
         row.push(match self.failure(params, r) {
             Some(message) => Cell::Text(message),
@@ -216,8 +216,17 @@ impl<'a> Columns<'a> {
 }
 
 /// `m` gradient cells from a column-per-parameter array with `rows` rows, row `i`.
+fn num_or_empty(d: f64) -> Cell {
+    if d.is_nan() {
+        Cell::Empty
+    } else {
+        Cell::Num(d)
+    }
+}
+
 fn grad_cells(a: Option<&[f64]>, rows: usize, i: usize, m: usize) -> Vec<Cell> {
-    (0..m).map(|j| a.map_or(Cell::Empty, |a| Cell::Num(a[j * rows + i]))).collect()
+    // A derivative that does not exist (NaN) is an empty cell, as a missing array is.
+    (0..m).map(|j| a.map_or(Cell::Empty, |a| num_or_empty(a[j * rows + i]))).collect()
 }
 
 /// The shortest text that reads back as exactly `v`, in scientific notation when plain digits

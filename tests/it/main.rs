@@ -17,6 +17,7 @@ mod fit;
 mod flow_switches;
 mod frontend;
 mod frontend_props;
+mod gradient_existence;
 mod jit_ball;
 mod jit_diff;
 mod jit_errors;

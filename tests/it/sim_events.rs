@@ -60,16 +60,23 @@ fn apex_exactly_touching_the_ceiling_is_flagged_grazing() {
         assert_eq!(&*ev.name, "ceiling", "ceiling {ceiling}");
         assert!((ev.time - 0.5).abs() < 1e-4, "{}", ev.time);
         assert!(ev.grazing);
-        assert!(ev.dtime.is_none());
+        // Parameters [g, e, h0]: the apex's time moves with g and h0, and those derivatives do
+        // not exist; e has not acted yet, so the touch's time does not depend on it at all.
+        let dt = ev.dtime.as_ref().expect("dt/de exists");
+        assert!(dt[0].is_nan() && dt[1] == 0.0 && dt[2].is_nan(), "{dt:?}");
         assert!(ev.denominator.is_finite() && ev.denominator.abs() < 1e-2);
         assert!(matches!(r.warnings[0], SimWarning::Grazing { event: 1, .. }));
         assert!(r.warnings[0].to_string().contains("grazes"));
-        // The ball comes back to the floor at t = 1; that event's gradient is gone too.
+        // The ball comes back to the floor at t = 1; its time's derivatives in g and h0 are gone
+        // too (they depend on the touch's), the one in e exists.
         assert_eq!(r.events.len(), 2);
         assert!((r.events[1].time - 1.0).abs() < 1e-4, "{}", r.events[1].time);
-        assert!(r.events[1].dtime.is_none());
+        let dt = r.events[1].dtime.as_ref().expect("dt/de exists");
+        assert!(dt[0].is_nan() && dt[1].is_finite() && dt[2].is_nan(), "{dt:?}");
         let f = &r.final_state;
-        assert!(f.dstate.is_none() && f.doutputs.is_none());
+        let (n, ds) = (2, f.dstate.as_ref().expect("the e column exists"));
+        assert!(ds[..n].iter().chain(&ds[2 * n..]).all(|v| v.is_nan()), "{ds:?}");
+        assert!(ds[n..2 * n].iter().all(|v| v.is_finite()), "{ds:?}");
         assert!(f.state.iter().chain(&f.outputs).all(|v| v.is_finite()));
         assert_eq!(r.stopped_by, StopReason::TEnd);
         let json = serde_json::to_string(&r).expect("serialisable");
