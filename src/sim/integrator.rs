@@ -477,6 +477,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let mut estimate;
         let mut reset_onto: Vec<usize> = Vec::new();
         loop {
+            let round_start = self.fired.len();
             if let Some(stop) = self.fire_group(rounds > 0) {
                 return StepOutcome::Done(stop);
             }
@@ -485,7 +486,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             }
             estimate = self.restart();
             reset_onto.clear();
-            if !self.cascade(&mut reset_onto) {
+            if !self.cascade(round_start, &mut reset_onto) {
                 break;
             }
             rounds += 1;
@@ -520,18 +521,18 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     }
 
     /// After a round of events (`before.0` holds the state before it, the detector the guards
-    /// after it): the events whose guard the round moved from strictly its pre-crossing side to
+    /// after it; the round's events are `fired[round_start..]`): the events whose guard the round moved from strictly its pre-crossing side to
     /// its crossed side, or onto zero with the flow carrying it across, fill the next group (the
     /// next round at this instant). Guards moved onto zero with no clear speed go to
     /// `reset_onto`, for the next step to decide. Returns whether there is a next round.
-    fn cascade(&mut self, reset_onto: &mut Vec<usize>) -> bool {
+    fn cascade(&mut self, round_start: usize, reset_onto: &mut Vec<usize>) -> bool {
         let (t, n) = (self.t, self.n);
         let evs = &self.info.modes[self.mode].events;
         let ne = evs.len();
         self.det.group.clear();
         // The events that just fired were at their crossing before the round, never strictly on
         // their pre-crossing side: when they are all the mode has, nothing can cascade.
-        let fired_now = &self.fired;
+        let fired_now = &self.fired[round_start..];
         if evs.iter().all(|ev| fired_now.iter().any(|f| f.0 == *ev)) {
             return false;
         }

@@ -140,9 +140,13 @@ impl Jump {
         let (n, m) = (self.n, self.m);
         sys.flow(mode_old, t, x, p, &mut self.f_minus);
         let outcome = match given {
-            Some((dte, speed)) => {
+            Some((dte, _)) => {
                 self.dte.copy_from_slice(dte);
-                JumpOutcome { denominator: speed, conditioning: 0.0, grazing: false, margin: None }
+                // The event's own crossing speed, for the record and the bounce rule; its time
+                // gradient is the instant's.
+                let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
+                let denominator = dot(&self.gx, &self.f_minus) + gt;
+                JumpOutcome { denominator, conditioning: 0.0, grazing: false, margin: None }
             }
             None => self.event_time_gradient(sys, ev, t, x, s, p, context),
         };

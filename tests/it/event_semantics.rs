@@ -216,3 +216,35 @@ fn the_ball_run_without_end_stops_as_zeno_at_its_accumulation_point() {
     assert!((accumulation.expect("an estimate") - t_star).abs() < 1e-6, "{accumulation:?} vs {t_star}");
     assert!((t_star - 4.0637127689).abs() < 1e-9);
 }
+
+#[test]
+fn a_reset_onto_another_guard_fires_it_when_the_flow_moves_it_across() {
+    // `first` at t = 1 puts y exactly on `second`'s guard, and y' = -1 carries it across: `second`
+    // fires at the same instant (with the instant's dt/dy0 = 0: its time is first's, t = x0 = 1).
+    let text = "model onto\nparam y0 = 5\nstate x = 0\nstate y = y0\nder(x) = 1\nder(y) = -1\n\
+                event first when x >= 1 {\n    y := 0\n}\nevent second when y <= 0 {\n    x := x + 10\n}\n";
+    let r = run(text, &["y0"], |o| o.t_end = 2.0);
+    let fired: Vec<&str> = r.events().iter().map(|e| &*e.name).collect();
+    assert_eq!(fired, ["first", "second"]);
+    assert_eq!(r.events()[0].time, r.events()[1].time);
+    assert_relative_eq!(r.events()[0].time, 1.0, max_relative = 1e-15);
+    assert_eq!(r.devent_time(1, "y0"), Some(0.0));
+    assert_relative_eq!(r.state("x").unwrap(), 12.0, max_relative = 1e-12);
+    assert_relative_eq!(r.state("y").unwrap(), -1.0, max_relative = 1e-12);
+}
+
+#[test]
+fn events_that_keep_cascading_at_one_instant_stop_the_run_as_stuck() {
+    // At t = 1 `start` sets s = 1, across `ping`'s guard; ping sets s = -1, across `pong`'s;
+    // pong sets it back to 1: an endless cascade at one instant, cut after 100 rounds.
+    let text = "model pingpong\nstate x = 0\nstate s = 0\nder(x) = 1\nder(s) = 0\n\
+                event start when x >= 1 {\n    s := 1\n}\nevent ping when s >= 0.5 {\n    s := -1\n}\n\
+                event pong when s <= -0.5 {\n    s := 1\n}\n";
+    let r = run(text, &[], |o| o.t_end = 2.0);
+    let StopReason::Stuck { time, rounds, .. } = *r.stopped_by() else { panic!("{:?}", r.stopped_by()) };
+    assert_eq!(rounds, 100);
+    assert_relative_eq!(time, 1.0, max_relative = 1e-15);
+    assert_eq!(r.events().len(), 101);
+    let message = r.report().failure().expect("a message");
+    assert!(message.contains("events keep firing at t = 1") && message.contains("100 rounds"), "{message}");
+}
