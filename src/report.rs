@@ -85,6 +85,7 @@ impl RunReport {
                     "mode_after": self.mode_name(e.mode_after),
                     "dtime": e.dtime.as_ref().map(|d| self.by_param(d, 1, 0)),
                     "grazing": e.grazing,
+                    "margin": e.margin,
                     "denominator": e.denominator,
                 })
             })
@@ -154,7 +155,11 @@ impl RunReport {
                 Some(d) => d.iter().map(|v| format!("  {:>18}", grad_text(*v))).collect(),
                 None => grad.iter().map(|_| format!("  {:>18}", "-")).collect(),
             };
-            let flag = if e.grazing { format!("  GRAZING (d = {:e})", e.denominator) } else { String::new() };
+            let flag = match (e.grazing, e.margin) {
+                (true, _) => format!("  GRAZING (d = {:e})", e.denominator),
+                (false, Some(margin)) => format!("  near-grazing (margin {margin:e})"),
+                (false, None) => String::new(),
+            };
             let _ =
                 writeln!(out, "  {:>4}  {:>18}  {:<14}  {:<22}{d}{flag}", e.index, num(e.time), e.name, mode);
         }
