@@ -276,6 +276,15 @@ impl HybridSystem for CompiledModel {
         }
     }
 
+    fn guard_speeds(&self, mode: usize, t: f64, x: &[f64], f: &[f64], p: &[f64], dg: &mut [f64]) {
+        match self.kernels.guard_speeds.get(mode) {
+            Some(k) => {
+                k.call(t, x, f, p, [dg, &mut [], &mut []]);
+            }
+            None => poison([dg, &mut [], &mut []]),
+        }
+    }
+
     fn guard_grad(&self, event: usize, t: f64, x: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) -> f64 {
         match self.kernels.guard_grad.get(event) {
             Some(k) => k.call(t, x, &[], p, [gx, gp, &mut []]).unwrap_or(f64::NAN),

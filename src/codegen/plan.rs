@@ -198,6 +198,8 @@ pub(crate) struct ModelKernels<K> {
     pub flow: Vec<K>,
     pub flow_sens: Vec<K>,
     pub guards: Vec<K>,
+    /// `g_x f + g_t` of every guard of the mode, with the flow `f` passed as the `s` input.
+    pub guard_speeds: Vec<K>,
     /// Per event.
     pub guard_grad: Vec<K>,
     pub condition: Vec<Option<K>>,
@@ -218,6 +220,7 @@ impl<K> ModelKernels<K> {
             .iter()
             .chain(&self.flow_sens)
             .chain(&self.guards)
+            .chain(&self.guard_speeds)
             .chain(&self.guard_grad)
             .chain(self.condition.iter().flatten())
             .chain(&self.reset)
@@ -231,6 +234,7 @@ impl<K> ModelKernels<K> {
             .iter_mut()
             .chain(&mut self.flow_sens)
             .chain(&mut self.guards)
+            .chain(&mut self.guard_speeds)
             .chain(&mut self.guard_grad)
             .chain(self.condition.iter_mut().flatten())
             .chain(&mut self.reset)
@@ -244,6 +248,7 @@ impl<K> ModelKernels<K> {
         let flow = all(&self.flow)?;
         let flow_sens = all(&self.flow_sens)?;
         let guards = all(&self.guards)?;
+        let guard_speeds = all(&self.guard_speeds)?;
         let guard_grad = all(&self.guard_grad)?;
         let reset = all(&self.reset)?;
         let reset_jac = all(&self.reset_jac)?;
@@ -256,6 +261,7 @@ impl<K> ModelKernels<K> {
             flow,
             flow_sens,
             guards,
+            guard_speeds,
             guard_grad,
             condition,
             reset,
@@ -292,6 +298,7 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
         flow: Vec::new(),
         flow_sens: Vec::new(),
         guards: Vec::new(),
+        guard_speeds: Vec::new(),
         guard_grad: Vec::new(),
         condition: Vec::new(),
         reset: Vec::new(),
@@ -335,12 +342,33 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
             format!("mode{mode_idx}_guards"),
             dims.lens(n, 0, [mode_info.events.len(), 0, 0]),
         );
+        let mut speeds = KernelPlan::new(
+            format!("mode{mode_idx}_guard_speeds"),
+            dims.lens(n, n, [mode_info.events.len(), 0, 0]),
+        );
         for (k, &ev) in mode_info.events.iter().enumerate() {
-            guards.write(0, k, Term::Expr(funcs.events[ev].guard))?;
+            let event = &funcs.events[ev];
+            guards.write(0, k, Term::Expr(event.guard))?;
+            // g_x f + g_t, the flow read from the `s` input: one dot product over the entries
+            // of g_x that are not structurally zero.
+            let products: Vec<(ExprId, u32)> = event
+                .guard_x
+                .entries
+                .iter()
+                .map(|&(i, e)| Ok((e, index_u32(&speeds.name, i as usize)?)))
+                .collect::<Result<_, CodegenError>>()?;
+            let bias = (funcs.store.node(event.guard_t).as_const() != Some(0.0)).then_some(event.guard_t);
+            let term = if products.is_empty() && bias.is_none() {
+                Term::Zero
+            } else {
+                Term::SensDot { products, bias }
+            };
+            speeds.write(0, k, term)?;
         }
         plan.flow.push(flow);
         plan.flow_sens.push(sens);
         plan.guards.push(guards);
+        plan.guard_speeds.push(speeds);
     }
 
     for (ev_idx, ev) in funcs.events.iter().enumerate() {

@@ -39,6 +39,10 @@ const RESOLUTION: f64 = 0.125;
 /// The cubic's largest error over a step against its error at [`INTERIOR`]: `(s (1 - s))^2` peaks
 /// at 1/16 and is 0.04 there.
 const ERROR_SPREAD: f64 = 1.5625;
+/// Up to this many guards in a mode, a step's end is evaluated guard by guard (one gradient each
+/// gives the speed and the stage speeds); above, by the speeds kernel, once for the end and once
+/// per sampled stage, whatever the number of guards.
+const FEW_GUARDS: usize = 4;
 /// Bisection steps to the boundary where a guard stops being finite (to about 1e-9 of the step).
 const NAN_BISECTIONS: usize = 30;
 
@@ -137,6 +141,17 @@ pub(crate) struct Detector {
     located: Vec<(usize, Crossing)>,
     /// The current step's start and end times (equal after a restart, before a step).
     span: (f64, f64),
+    /// Time, state and flow at the step's start and end, for round-off bounds asked for later.
+    at: [(f64, Vec<f64>, Vec<f64>); 2],
+    /// Sign changes of each guard's speed over the stages of the current step.
+    stage_signs: Vec<SignChanges>,
+    /// The positions the current step looks at closer (`mark_candidates`), and their first
+    /// estimates in `select`.
+    candidates: Vec<usize>,
+    estimates: Vec<f64>,
+    /// After `select`: the first estimate of the earliest crossing found in the step beyond the
+    /// ones that fire, if any.
+    pub next_crossing: Option<f64>,
 }
 
 /// Whether the guard went from its pre-crossing side at `ga` to the crossed side at `gb`;
@@ -203,6 +218,7 @@ pub(crate) fn moves_across(dir: Direction, speed: f64, noise: f64) -> Option<f64
 }
 
 /// Counts the sign changes of a sequence pushed value by value, zeros (and NaN) skipped.
+#[derive(Clone, Copy, Debug, Default)]
 struct SignChanges {
     last: f64,
     changes: u8,
@@ -258,11 +274,16 @@ impl Detector {
             samples: Vec::new(),
             located: Vec::new(),
             span: (0.0, 0.0),
+            at: [(0.0, vec![0.0; nx], vec![0.0; nx]), (0.0, vec![0.0; nx], vec![0.0; nx])],
+            stage_signs: vec![SignChanges::default(); ne],
+            candidates: Vec::with_capacity(ne),
+            estimates: Vec::with_capacity(ne),
+            next_crossing: None,
         }
     }
 
-    /// Guard values, speeds and round-off bounds at a step's start `(t, x)` with flow `f` (after
-    /// a restart), into `g0`, `dg0`, ...
+    /// Guard values and speeds at a step's start `(t, x)` with flow `f` (after a restart), into
+    /// `g0`, `dg0`; their round-off bounds are computed when asked for (`noise0`).
     #[allow(clippy::too_many_arguments)]
     pub fn eval_start<S: HybridSystem + ?Sized>(
         &mut self,
@@ -278,16 +299,48 @@ impl Detector {
         let ne = evs.len();
         self.span = (t, t);
         sys.guards(mode, t, x, p, &mut self.g0[..ne]);
-        for (pos, &ev) in evs.iter().enumerate() {
+        self.at[0].0 = t;
+        self.at[0].1.copy_from_slice(x);
+        self.at[0].2.copy_from_slice(f);
+        if ne <= FEW_GUARDS {
+            // Guard by guard, the round-off bounds at once (see `eval_end_each`).
+            for (pos, &ev) in evs.iter().enumerate() {
+                let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
+                self.dg0[pos] = dot(&self.gx, f) + gt;
+                self.noise0[pos] = round_off(&self.gx, x, gt, t);
+                self.speed_noise0[pos] = round_off(&self.gx, f, gt, 1.0);
+            }
+            return;
+        }
+        sys.guard_speeds(mode, t, x, f, p, &mut self.dg0[..ne]);
+        self.noise0[..ne].fill(f64::NAN);
+        self.speed_noise0[..ne].fill(f64::NAN);
+    }
+
+    /// The round-off bounds of the value and the speed of the guard at `pos` at the step's start
+    /// (`16 eps (sum_i |g_x,i x_i| + |g_t t|)` and `16 eps (sum_i |g_x,i f_i| + |g_t|)`), computed
+    /// on first use.
+    pub fn noise0<S: HybridSystem + ?Sized>(
+        &mut self,
+        sys: &S,
+        info: &SystemInfo,
+        mode: usize,
+        pos: usize,
+        p: &[f64],
+    ) -> (f64, f64) {
+        if self.noise0[pos].is_nan() {
+            let ev = info.modes[mode].events[pos];
+            let (t, x, f) = (self.at[0].0, &self.at[0].1, &self.at[0].2);
             let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
-            self.dg0[pos] = dot(&self.gx, f) + gt;
             self.noise0[pos] = round_off(&self.gx, x, gt, t);
             self.speed_noise0[pos] = round_off(&self.gx, f, gt, 1.0);
         }
+        (self.noise0[pos], self.speed_noise0[pos])
     }
 
-    /// Guard values, speeds and round-off bounds at the end of the stepper's last attempt, which
-    /// ends at `t`; for affine guards also the sign changes of their speed over the step's stages.
+    /// Guard values and speeds at the end of the stepper's last attempt, which ends at `t`, with
+    /// the round-off bounds of the guards whose closeness to zero this step judges; for affine
+    /// guards also the sign changes of their speed over the step's stages.
     #[allow(clippy::too_many_arguments)]
     pub fn eval_end<S: HybridSystem + ?Sized, St: Stepper>(
         &mut self,
@@ -304,12 +357,76 @@ impl Detector {
         let ne = evs.len();
         self.span.1 = t;
         sys.guards(mode, t, x, p, &mut self.g1[..ne]);
+        self.at[1].0 = t;
+        self.at[1].1.copy_from_slice(x);
+        self.at[1].2.copy_from_slice(f);
+        if ne <= FEW_GUARDS {
+            self.eval_end_each(sys, info, mode, t, stepper, n, p);
+            return;
+        }
+        sys.guard_speeds(mode, t, x, f, p, &mut self.dg1[..ne]);
+        let mut any_affine = false;
         for (pos, &ev) in evs.iter().enumerate() {
+            let shape = info.events[ev].guard;
+            any_affine |= shape == GuardShape::Affine;
+            // The round-off bounds matter only where a guard's closeness to zero is judged.
+            if shape == GuardShape::Nonlinear
+                || self.pending[pos] != Pending::None
+                || self.bounced[pos].is_some()
+            {
+                let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
+                self.noise1[pos] = round_off(&self.gx, x, gt, t);
+                self.speed_noise1[pos] = round_off(&self.gx, f, gt, 1.0);
+            } else {
+                self.noise1[pos] = f64::NAN;
+                self.speed_noise1[pos] = f64::NAN;
+            }
+            self.speed_changes[pos] = 0;
+        }
+        if !any_affine {
+            return;
+        }
+        // Affine guards: `g_x` and `g_t` are constants, so their speed at a stage is the speeds
+        // kernel at the stage's derivative (the state it is given does not matter to them).
+        for pos in 0..ne {
+            self.stage_signs[pos] = SignChanges::new(self.dg0[pos]);
+        }
+        let (signs, speeds) = (&mut self.stage_signs, &mut self.gtmp);
+        stepper.visit_interior(|_, k| {
+            sys.guard_speeds(mode, t, x, &k[..n], p, &mut speeds[..ne]);
+            for (sign, &speed) in signs.iter_mut().zip(&speeds[..ne]) {
+                sign.push(speed);
+            }
+        });
+        for (pos, &ev) in evs.iter().enumerate() {
+            if info.events[ev].guard == GuardShape::Affine {
+                let mut counter = self.stage_signs[pos];
+                counter.push(self.dg1[pos]);
+                self.speed_changes[pos] = counter.changes;
+            }
+        }
+    }
+
+    /// [`Self::eval_end`] for a mode with few guards, guard by guard: one gradient evaluation per
+    /// guard gives its speed, its round-off bounds and (affine) its speeds at the stages as dot
+    /// products, cheaper there than the speeds kernel called once per stage.
+    #[allow(clippy::too_many_arguments)]
+    fn eval_end_each<S: HybridSystem + ?Sized, St: Stepper>(
+        &mut self,
+        sys: &S,
+        info: &SystemInfo,
+        mode: usize,
+        t: f64,
+        stepper: &St,
+        n: usize,
+        p: &[f64],
+    ) {
+        let (x, f) = (&stepper.end_state()[..n], &stepper.end_derivative()[..n]);
+        for (pos, &ev) in info.modes[mode].events.iter().enumerate() {
             let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
             let speed = dot(&self.gx, f) + gt;
             self.dg1[pos] = speed;
             let shape = info.events[ev].guard;
-            // The round-off bounds matter only where a guard's closeness to zero is judged.
             if shape == GuardShape::Nonlinear
                 || self.pending[pos] != Pending::None
                 || self.bounced[pos].is_some()
@@ -317,15 +434,14 @@ impl Detector {
                 self.noise1[pos] = round_off(&self.gx, x, gt, t);
                 self.speed_noise1[pos] = round_off(&self.gx, f, gt, 1.0);
             } else {
-                self.noise1[pos] = 0.0;
-                self.speed_noise1[pos] = 0.0;
+                self.noise1[pos] = f64::NAN;
+                self.speed_noise1[pos] = f64::NAN;
             }
             self.speed_changes[pos] = if shape == GuardShape::Affine {
-                // `g_x` and `g_t` are constants: the speed at a stage is one dot product.
                 let mut counter = SignChanges::new(self.dg0[pos]);
                 let gx = &self.gx;
-                stepper.visit_interior(|_, f| {
-                    counter.push(gx.iter().zip(f).fold(gt, |acc, (a, b)| acc + a * b))
+                stepper.visit_interior(|_, k| {
+                    counter.push(gx.iter().zip(k).fold(gt, |acc, (a, b)| acc + a * b))
                 });
                 counter.push(speed);
                 counter.changes
@@ -384,6 +500,7 @@ impl Detector {
         std::mem::swap(&mut self.dg0, &mut self.dg1);
         std::mem::swap(&mut self.noise0, &mut self.noise1);
         std::mem::swap(&mut self.speed_noise0, &mut self.speed_noise1);
+        self.at.swap(0, 1);
         // A guard decided by this step is no longer pending.
         for (pos, pending) in self.pending.iter_mut().enumerate() {
             if *pending != Pending::None && self.g0[pos].abs() > self.noise0[pos] {
@@ -392,19 +509,25 @@ impl Detector {
         }
     }
 
-    /// Whether the step needs its dense output for the events: a guard that changes sign, may
-    /// hide a crossing behind an extremum, is not affine, is pending or is not finite.
-    pub fn needs_dense(&self, info: &SystemInfo, mode: usize) -> bool {
-        info.modes[mode].events.iter().enumerate().any(|(pos, &ev)| {
+    /// Marks the guards whose step needs a closer look (`candidates`): a guard that changes sign,
+    /// may hide a crossing behind an extremum, is not affine, is pending or is not finite. Returns
+    /// whether there is any (then the step needs its dense output for the events).
+    pub fn mark_candidates(&mut self, info: &SystemInfo, mode: usize) -> bool {
+        self.candidates.clear();
+        for (pos, &ev) in info.modes[mode].events.iter().enumerate() {
             let einfo = &info.events[ev];
             let (g0, g1) = (self.g0[pos], self.g1[pos]);
-            einfo.guard == GuardShape::Nonlinear
+            let look = einfo.guard == GuardShape::Nonlinear
                 || !g1.is_finite()
                 || self.pending[pos] != Pending::None
                 || self.speed_changes[pos] >= 2
                 || crossing_sign(einfo.direction, g0, g1).is_some()
-                || extremum_may_cross(einfo.direction, g0, g1, self.dg0[pos], self.dg1[pos])
-        })
+                || extremum_may_cross(einfo.direction, g0, g1, self.dg0[pos], self.dg1[pos]);
+            if look {
+                self.candidates.push(pos);
+            }
+        }
+        !self.candidates.is_empty()
     }
 
     /// How well the step `[t0, t0 + h]` of `dense` resolves the guards of the mode that are not
@@ -555,7 +678,9 @@ impl Detector {
         let evs = &info.modes[mode].events;
         let ne = evs.len();
         let t0 = dense.t0();
-        for (pos, &ev) in evs.iter().enumerate() {
+        for c in 0..self.candidates.len() {
+            let pos = self.candidates[c];
+            let ev = evs[pos];
             let einfo = &info.events[ev];
             let dir = einfo.direction;
             let (g0, g1, dg0, dg1) = (self.g0[pos], self.g1[pos], self.dg0[pos], self.dg1[pos]);
@@ -749,12 +874,13 @@ impl Detector {
         Finding::NotFinite { t: hi }
     }
 
-    /// Chooses the events that fire next from `found`: the earliest crossing whose condition
-    /// holds on the interpolated state there, with every other crossing at the same time to the
-    /// resolution of `t` (four floating-point spacings). The earliest is located first, the others
-    /// only if they have crossed by then. Fills `group` (declaration order) and returns the firing
-    /// time, the latest of the group's times so that every guard in it has crossed, or the
-    /// earliest non-finite guard (position and time) when it comes first.
+    /// Chooses the events that fire next from what the scan found: the earliest crossing whose
+    /// condition holds on the interpolated state there, with every other crossing at the same time
+    /// to the resolution of `t` (four floating-point spacings). The earliest by its first estimate
+    /// (the Hermite root of its bracket) is located first, the others only if they have crossed by
+    /// then. Fills `group` (declaration order) and returns the firing time, the latest of the
+    /// group's times so that every guard in it has crossed, or the earliest non-finite guard
+    /// (position and time) when it comes first. Leaves `found` empty again.
     pub fn select<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
         sys: &S,
@@ -767,12 +893,13 @@ impl Detector {
         let ne = evs.len();
         self.located.clear();
         self.group.clear();
-        // The common case, one finding: no ordering to do.
-        let mut findings =
-            self.found[..ne].iter().enumerate().filter(|(_, f)| !matches!(f, Finding::Nothing));
-        if let (Some((pos, &finding)), None) = (findings.next(), findings.next()) {
-            match finding {
+        self.next_crossing = None;
+        // The common case, one candidate: nothing to order.
+        if let [pos] = self.candidates[..] {
+            let finding = std::mem::replace(&mut self.found[pos], Finding::Nothing);
+            return match finding {
                 Finding::Bracket { .. } | Finding::Located(_) => {
+                    self.found[pos] = finding;
                     let crossing = self.locate(sys, mode, ne, pos, dense, p);
                     self.found[pos] = Finding::Nothing;
                     let ev = evs[pos];
@@ -780,41 +907,44 @@ impl Detector {
                         dense.eval(crossing.t, &mut self.x);
                         sys.condition(ev, crossing.t, &self.x, p)
                     };
-                    if !holds {
-                        return Selection::Nothing;
+                    if holds {
+                        self.group.push((ev, crossing));
+                        Selection::Fire(crossing.t)
+                    } else {
+                        Selection::Nothing
                     }
-                    self.group.push((ev, crossing));
-                    return Selection::Fire(crossing.t);
                 }
-                Finding::NotFinite { t } => return Selection::NotFinite { pos, t },
-                Finding::Nothing | Finding::Stuck => return Selection::Nothing,
-            }
+                Finding::NotFinite { t } => Selection::NotFinite { pos, t },
+                Finding::Nothing | Finding::Stuck => Selection::Nothing,
+            };
         }
         let mut not_finite: Option<(usize, f64)> = None;
-        // Candidates by their first estimate: the Hermite root of a bracket, a located time.
-        loop {
-            let mut best: Option<(usize, f64)> = None;
-            for (pos, finding) in self.found.iter().enumerate().take(ne) {
-                let estimate = match *finding {
-                    Finding::Bracket { a, ga, da, b, gb, db, .. } => {
-                        hermite_root(a, ga, da, b, gb, db).unwrap_or(0.5 * (a + b))
-                    }
-                    Finding::Located(c) => c.t,
-                    Finding::NotFinite { t } => {
-                        if not_finite.is_none_or(|(_, tn)| t < tn) {
-                            not_finite = Some((pos, t));
-                        }
-                        continue;
-                    }
-                    Finding::Nothing | Finding::Stuck => continue,
-                };
-                if best.is_none_or(|(_, e)| estimate < e) {
-                    best = Some((pos, estimate));
+        // Each candidate's first estimate, once.
+        self.estimates.clear();
+        for &pos in &self.candidates {
+            let estimate = match self.found[pos] {
+                Finding::Bracket { a, ga, da, b, gb, db, .. } => {
+                    hermite_root(a, ga, da, b, gb, db).unwrap_or(0.5 * (a + b))
                 }
-            }
-            let Some((pos, _)) = best else { break };
+                Finding::Located(c) => c.t,
+                Finding::NotFinite { t } => {
+                    if not_finite.is_none_or(|(_, tn)| t < tn) {
+                        not_finite = Some((pos, t));
+                    }
+                    f64::NAN
+                }
+                Finding::Nothing | Finding::Stuck => f64::NAN,
+            };
+            self.estimates.push(estimate);
+        }
+        loop {
+            let best = (0..self.candidates.len())
+                .filter(|&c| !self.estimates[c].is_nan())
+                .min_by(|&a, &b| self.estimates[a].total_cmp(&self.estimates[b]));
+            let Some(best) = best else { break };
+            self.estimates[best] = f64::NAN;
+            let pos = self.candidates[best];
             let crossing = self.locate(sys, mode, ne, pos, dense, p);
-            self.found[pos] = Finding::Nothing;
             let ev = evs[pos];
             let holds = !info.events[ev].has_condition || {
                 dense.eval(crossing.t, &mut self.x);
@@ -824,26 +954,40 @@ impl Detector {
                 continue;
             }
             self.located.push((pos, crossing));
-            // Every bracket that has crossed by this time is located too (it may be earlier).
-            if self.found[..ne].iter().any(|f| matches!(f, Finding::Bracket { .. })) {
+            // Every bracket left that has crossed by this time is located too (it may be
+            // earlier, its estimate notwithstanding); the others cross later and wait.
+            let others = (0..self.candidates.len()).any(|c| {
+                !self.estimates[c].is_nan()
+                    && matches!(self.found[self.candidates[c]], Finding::Bracket { .. })
+            });
+            if others {
                 self.guards_on_dense(sys, mode, ne, crossing.t, dense, p);
             }
-            for other in 0..ne {
-                if let Finding::Bracket { a, ga, da, sigma, .. } = self.found[other] {
-                    let g = self.gtmp[other];
-                    if a < crossing.t && sigma * g <= 0.0 {
-                        self.found[other] =
-                            Finding::Bracket { a, ga, da, b: crossing.t, gb: g, db: f64::NAN, sigma };
-                    } else {
-                        self.found[other] = Finding::Nothing;
-                    }
+            for c in 0..self.candidates.len() {
+                if self.estimates[c].is_nan() {
+                    continue;
                 }
-                if let Finding::Located(c) = self.found[other] {
-                    if c.t > crossing.t {
-                        self.found[other] = Finding::Nothing;
+                let other = self.candidates[c];
+                match self.found[other] {
+                    Finding::Bracket { a, ga, da, sigma, .. }
+                        if a < crossing.t && sigma * self.gtmp[other] <= 0.0 =>
+                    {
+                        let gb = self.gtmp[other];
+                        self.found[other] =
+                            Finding::Bracket { a, ga, da, b: crossing.t, gb, db: f64::NAN, sigma };
+                    }
+                    Finding::Located(c) if c.t <= crossing.t => {}
+                    _ => {
+                        // It crosses later: remembered as the next crossing's estimate.
+                        let later = self.estimates[c];
+                        self.next_crossing = Some(self.next_crossing.map_or(later, |t: f64| t.min(later)));
+                        self.estimates[c] = f64::NAN;
                     }
                 }
             }
+        }
+        for &pos in &self.candidates {
+            self.found[pos] = Finding::Nothing;
         }
         let Some(t_min) = self.located.iter().map(|(_, c)| c.t).reduce(f64::min) else {
             return match not_finite {
@@ -894,8 +1038,8 @@ impl Detector {
     }
 
     /// The position of a contact found stuck by the scan, if any.
-    pub fn stuck(&self, ne: usize) -> Option<usize> {
-        self.found[..ne].iter().position(|f| *f == Finding::Stuck)
+    pub fn stuck(&self) -> Option<usize> {
+        self.candidates.iter().copied().find(|&pos| self.found[pos] == Finding::Stuck)
     }
 }
 

@@ -44,6 +44,9 @@ const MAX_NONFINITE_REJECTS: usize = 30;
 /// resolved by it, with the guard checked at its samples only: a guard with a kink (`abs`, `min`,
 /// `max`) is not resolved by a cubic however short the step.
 const GUARD_RESOLUTION_FLOOR: f64 = 1e-9;
+/// After an instant, the next step reaches this far past the next crossing the last step saw
+/// (relative to the distance to it): past it despite the error of its estimate, not far beyond.
+const NEXT_CROSSING_REACH: f64 = 1.5;
 /// Growth of the step size allowed by a resolved nonlinear guard, per step.
 const GUARD_GROWTH: f64 = 4.0;
 /// Rounds of cascading events at one instant before the run stops as stuck.
@@ -275,16 +278,20 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let evs = &self.info.modes[self.mode].events;
         for (pos, &ev) in evs.iter().enumerate() {
             let einfo = &self.info.events[ev];
-            if einfo.implicit || self.det.g0[pos].is_nan() || self.det.g0[pos].abs() > self.det.noise0[pos] {
+            if einfo.implicit || self.det.g0[pos].is_nan() {
                 continue;
             }
-            match moves_across(einfo.direction, self.det.dg0[pos], self.det.speed_noise0[pos]) {
+            let (noise, speed_noise) = self.det.noise0(self.sys, self.info, self.mode, pos, self.p);
+            if self.det.g0[pos].abs() > noise {
+                continue;
+            }
+            match moves_across(einfo.direction, self.det.dg0[pos], speed_noise) {
                 Some(sigma) if self.sys.condition(ev, t, &self.z[..n], self.p) => {
                     let c = Crossing { t, sigma, touch: false, t_pre: t, on_guard: true };
                     self.det.group.push((ev, c));
                 }
                 Some(_) => {}
-                None if self.det.dg0[pos].abs() <= self.det.speed_noise0[pos] => {
+                None if self.det.dg0[pos].abs() <= speed_noise => {
                     self.det.pending[pos] = Pending::OnGuard;
                 }
                 None => {}
@@ -384,7 +391,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let t1 = if lands { t_land } else { t0 + h_try };
         let n = self.n;
         self.det.eval_end(self.sys, self.info, self.mode, t1, &*self.stepper, n, self.p);
-        let for_events = self.det.needs_dense(self.info, self.mode);
+        let for_events = self.det.mark_candidates(self.info, self.mode);
         let sample_due = self.sample_due(t1);
         if for_events || sample_due {
             self.stepper.build_interpolant(t0, self.z, &mut rhs);
@@ -407,7 +414,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         self.stats.steps += 1;
         let selection = if for_events {
             self.det.scan(self.sys, self.info, self.mode, &*self.stepper, n, self.p, t1);
-            if let Some(pos) = self.det.stuck(self.info.modes[self.mode].events.len()) {
+            if let Some(pos) = self.det.stuck() {
                 return StepOutcome::Done(self.stuck_on_guard(self.info.modes[self.mode].events[pos]));
             }
             self.det.select(self.sys, self.info, self.mode, self.stepper.interpolant(), self.p)
@@ -517,6 +524,14 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         }
         let growth = if self.mode == mode_before { AFTER_RESET_GROWTH } else { AFTER_SWITCH_GROWTH };
         self.h = self.continue_step(h_next, estimate, growth);
+        // The step that found this instant saw further crossings: the next step reaches just past
+        // the earliest of them rather than over all of them again (each would be bracketed and
+        // scanned only for the earliest to fire).
+        if let Some(t_next) =
+            self.det.next_crossing.take().filter(|&t| t > self.t && self.mode == mode_before)
+        {
+            self.h = self.h.min(NEXT_CROSSING_REACH * (t_next - self.t));
+        }
         StepOutcome::Fired { first, count: self.events.len() - first }
     }
 
@@ -541,18 +556,23 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         self.sys.guards(self.mode, t, x_before, self.p, &mut g_before[..ne]);
         for (pos, &ev) in evs.iter().enumerate() {
             let einfo = &self.info.events[ev];
-            let (dir, noise) = (einfo.direction, self.det.noise0[pos]);
-            if einfo.implicit || clear_side(dir, g_before[pos], noise) != Some(false) {
+            // A guard the round did not move cannot have been moved across.
+            if einfo.implicit || g_before[pos] == self.det.g0[pos] {
+                continue;
+            }
+            let dir = einfo.direction;
+            let (noise, speed_noise) = self.det.noise0(self.sys, self.info, self.mode, pos, self.p);
+            if clear_side(dir, g_before[pos], noise) != Some(false) {
                 continue;
             }
             let after = self.det.g0[pos];
             let sigma = match clear_side(dir, after, noise) {
                 Some(true) => g_before[pos].signum(),
                 Some(false) => continue,
-                None => match moves_across(dir, self.det.dg0[pos], self.det.speed_noise0[pos]) {
+                None => match moves_across(dir, self.det.dg0[pos], speed_noise) {
                     Some(sigma) => sigma,
                     None => {
-                        if self.det.dg0[pos].abs() <= self.det.speed_noise0[pos] {
+                        if self.det.dg0[pos].abs() <= speed_noise {
                             reset_onto.push(pos);
                         }
                         continue;
@@ -581,9 +601,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             // Within round-off, or within what locating the crossing to adjacent floats leaves
             // (the speed before the event times a few spacings of `t`).
             let located = 4.0 * speed_before.abs() * (self.t.abs().next_up() - self.t.abs());
-            let on_guard = self.det.g0[pos].abs() <= self.det.noise0[pos] + located;
+            let (noise, speed_noise) = self.det.noise0(self.sys, self.info, self.mode, pos, self.p);
+            let on_guard = self.det.g0[pos].abs() <= noise + located;
             if einfo.contact && on_guard {
-                let (speed, noise) = (self.det.dg0[pos], self.det.speed_noise0[pos]);
+                let (speed, noise) = (self.det.dg0[pos], speed_noise);
                 if moves_across(einfo.direction, speed, noise).is_some() {
                     return Some(self.stuck_on_guard(ev));
                 }

@@ -114,6 +114,19 @@ pub trait HybridSystem: Sync {
     fn flow_sens(&self, mode: usize, t: f64, x: &[f64], s: &[f64], p: &[f64], dx: &mut [f64], ds: &mut [f64]);
     /// Guards of every event active in `mode`, in the order of `ModeInfo::events`.
     fn guards(&self, mode: usize, t: f64, x: &[f64], p: &[f64], g: &mut [f64]);
+    /// Speeds `g_x f + g_t` of every guard active in `mode` (order of `ModeInfo::events`) along a
+    /// flow `f` (n) at `(t, x)`. The default evaluates `guard_grad` event by event; a compiled
+    /// model has one kernel for the whole mode.
+    #[allow(clippy::too_many_arguments)]
+    fn guard_speeds(&self, mode: usize, t: f64, x: &[f64], f: &[f64], p: &[f64], dg: &mut [f64]) {
+        let info = self.info();
+        let mut gx = vec![0.0; info.n_states()];
+        let mut gp = vec![0.0; info.n_grad()];
+        for (slot, &ev) in dg.iter_mut().zip(&info.modes[mode].events) {
+            let gt = self.guard_grad(ev, t, x, p, &mut gx, &mut gp);
+            *slot = gx.iter().zip(f).map(|(a, b)| a * b).sum::<f64>() + gt;
+        }
+    }
     /// Partial derivatives of one guard: `gx` (n), `gp` (m), returns `g_t`.
     fn guard_grad(&self, event: usize, t: f64, x: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) -> f64;
     /// Whether the enabling condition holds (true for events without one).

@@ -20,9 +20,8 @@ pub(crate) fn accumulating(events: &[EventRecord]) -> Option<StopReason> {
     if k < SHRINKING_INTERVALS + 2 {
         return None;
     }
-    let times: Vec<f64> = events[k - SHRINKING_INTERVALS - 2..].iter().map(|e| e.time).collect();
-    let shrinking = times.windows(3).all(|w| {
-        let (d1, d2) = (w[1] - w[0], w[2] - w[1]);
+    let shrinking = events[k - SHRINKING_INTERVALS - 2..].windows(3).all(|w| {
+        let (d1, d2) = (w[1].time - w[0].time, w[2].time - w[1].time);
         d2 > 0.0 && d2 < d1
     });
     let t_star = accumulation(events)?;
