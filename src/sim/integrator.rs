@@ -368,7 +368,14 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let h_resolvable = h_try > 8.0 * EPS * t0.abs() && h_try > 0.0;
         if !h_resolvable {
             return StepOutcome::Done(StopReason::Fault {
-                error: SimError::StepTooSmall { t: t0, h: h_try, mode: self.mode, state: self.fault_state() },
+                error: SimError::StepTooSmall {
+                    t: t0,
+                    h: h_try,
+                    mode: self.mode,
+                    state: self.fault_state(),
+                    rtol: self.opts.rtol,
+                    atol: self.opts.atol,
+                },
             });
         }
         self.attempts += 1;

@@ -49,7 +49,7 @@ pub struct SimOptions {
     pub rtol: f64,
     pub atol: f64,
     pub method: Method,
-    /// Largest number of events before the run stops as Zeno.
+    /// Largest number of events: the run stops with `StopReason::MaxEvents` when it is reached.
     pub max_events: usize,
     /// Largest number of attempted steps (accepted + rejected) before the run stops with a fault.
     pub max_steps: usize,
@@ -63,10 +63,6 @@ pub struct SimOptions {
     /// Whether sensitivities take part in the step-size error norm. Off is cheaper, but then the
     /// sensitivities' accuracy is only whatever the state's steps give them.
     pub sens_error_control: bool,
-    /// Zeno guard: `zeno_events` events inside a window of `zeno_window * max(|t_end - t_start|,
-    /// 1)` model time stop the run as Zeno.
-    pub zeno_events: usize,
-    pub zeno_window: f64,
     /// Optional cap on the step size (infinite by default).
     pub h_max: f64,
     pub trajectory: TrajectoryRequest,
@@ -86,8 +82,6 @@ impl Default for SimOptions {
             max_steps: 1_000_000,
             graze_tol: 1e-2,
             sens_error_control: true,
-            zeno_events: 10,
-            zeno_window: 1e-7,
             h_max: f64::INFINITY,
             trajectory: TrajectoryRequest::None,
         }

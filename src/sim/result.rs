@@ -22,15 +22,17 @@ pub enum SimError {
     InvalidOption { name: &'static str, value: f64 },
     #[error("model shape is inconsistent: {what} index {index} out of range (count {count})")]
     BadIndex { what: &'static str, index: usize, count: usize },
-    #[error("step size underflow at t = {t} (h = {h}) in mode {mode}, state {state:?}")]
-    StepTooSmall { t: f64, h: f64, mode: usize, state: Vec<f64> },
+    #[error("step size underflow at t = {t} (h = {h}) in mode {mode}, state {state:?}: rtol {rtol:e}, atol {atol:e} cannot be met there")]
+    StepTooSmall { t: f64, h: f64, mode: usize, state: Vec<f64>, rtol: f64, atol: f64 },
     #[error("more than {max_steps} steps at t = {t} in mode {mode}, state {state:?}")]
     TooManySteps { t: f64, max_steps: usize, mode: usize, state: Vec<f64> },
     #[error("non-finite state at t = {t} in mode {mode}: {state:?}")]
     NonFinite { t: f64, mode: usize, state: Vec<f64> },
     #[error("the guard of event `{event}` stops being finite at t = {t} in mode {mode}, state {state:?}")]
     GuardNotFinite { event: Arc<str>, t: f64, mode: usize, state: Vec<f64> },
-    #[error("rtol {rtol} is below what double precision can resolve (at least {floor:e})")]
+    #[error(
+        "rtol {rtol:e} cannot be met: below {floor:e} the error estimates are round-off in double precision"
+    )]
     ToleranceTooSmall { rtol: f64, floor: f64 },
 }
 
@@ -41,9 +43,11 @@ impl SimError {
             format!("at t = {t} in mode {}, state {}", mode_name(info, mode), named_state(info, state))
         };
         match self {
-            SimError::StepTooSmall { t, h, mode, state } => {
-                format!("step size underflow (h = {h:e}) {}", at(*t, *mode, state))
-            }
+            SimError::StepTooSmall { t, h, mode, state, rtol, atol } => format!(
+                "step size underflow (h = {h:e}) {}: the tolerances rtol {rtol:e}, atol {atol:e} cannot be met \
+                 there (a state at or near 0 takes atol as its scale; loosen them)",
+                at(*t, *mode, state)
+            ),
             SimError::TooManySteps { t, max_steps, mode, state } => {
                 format!("more than {max_steps} steps {}", at(*t, *mode, state))
             }

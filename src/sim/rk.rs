@@ -329,7 +329,20 @@ impl Stepper for Rk {
             d1 += (f * *inv).powi(2);
         }
         let n = self.n_err.max(1) as f64;
-        let (d0, d1) = ((d0 / n).sqrt(), (d1 / n).sqrt());
+        let (mut d0, mut d1) = ((d0 / n).sqrt(), (d1 / n).sqrt());
+        if !(d0.is_finite() && d1.is_finite()) {
+            // A tiny atol at a state or derivative of zero overflowed the squares (1e-300 is
+            // legal): the same norms, scaled by their largest term first.
+            let rms = |v: &[f64], inv: &[f64]| {
+                let big = v.iter().zip(inv).map(|(v, i)| (v * i).abs()).fold(0.0, f64::max);
+                if big == 0.0 || !big.is_finite() {
+                    return big;
+                }
+                big * (v.iter().zip(inv).map(|(v, i)| (v * i / big).powi(2)).sum::<f64>() / n).sqrt()
+            };
+            d0 = rms(&y[..ne], &self.err5[..ne]);
+            d1 = rms(&self.k[..ne], &self.err5[..ne]);
+        }
         // Hairer takes 1e-6 for a state at zero (d0 < 1e-5); a state that is not zero but still
         // within its tolerance of it (d0 < 1: 1e-13 after an event with atol 1e-10) is no better
         // a scale, and 1% of it gave a first step at the resolution of `t` (a relay flipping at

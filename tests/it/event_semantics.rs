@@ -248,3 +248,12 @@ fn events_that_keep_cascading_at_one_instant_stop_the_run_as_stuck() {
     let message = r.report().failure().expect("a message");
     assert!(message.contains("events keep firing at t = 1") && message.contains("100 rounds"), "{message}");
 }
+
+#[test]
+fn a_relative_tolerance_below_double_precision_is_refused_as_unattainable() {
+    let model = Model::parse(BALL).expect("parses");
+    let compiled = model.compile::<&str>(&[]).expect("compiles");
+    let opts = SimOptions { rtol: 1e-16, atol: 1e-300, ..model.sim_options() };
+    let err = compiled.simulate(&model.params(), &opts).expect_err("refused");
+    assert!(err.to_string().contains("rtol 1e-16 cannot be met"), "{err}");
+}
