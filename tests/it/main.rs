@@ -26,5 +26,6 @@ mod plot;
 mod run_gradients;
 mod sim_ball;
 mod sim_events;
+mod stress_events;
 mod sweep;
 mod tutorial;
