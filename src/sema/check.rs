@@ -14,6 +14,11 @@ use crate::syntax::Span;
 pub fn check(file: &ast::File) -> Result<Model, Vec<CheckError>> {
     let mut cx = Checker::default();
     let mut model = cx.check_file(file);
+    for event in &model.events {
+        if super::switches::jumps(&event.guard) {
+            cx.errors.push(CheckError::DiscontinuousGuard { event: event.name.clone(), span: event.span });
+        }
+    }
     if cx.errors.is_empty() {
         add_flow_switches(&mut model);
         Ok(model)

@@ -43,6 +43,8 @@ pub enum CheckError {
     UnknownSetting { name: String, span: Span },
     #[error("`{name} = {value}` is out of range")]
     BadSetting { name: String, value: f64, expected: &'static str, span: Span },
+    #[error("the guard of event `{event}` jumps where an `if` or `sign` in it switches")]
+    DiscontinuousGuard { event: String, span: Span },
 }
 
 impl CheckError {
@@ -67,7 +69,8 @@ impl CheckError {
             | InitNotConstant { span, .. }
             | EmptyModel { span, .. }
             | UnknownSetting { span, .. }
-            | BadSetting { span, .. } => *span,
+            | BadSetting { span, .. }
+            | DiscontinuousGuard { span, .. } => *span,
         }
     }
 
@@ -125,6 +128,17 @@ impl CheckError {
             EmptyModel { .. } => ("expected at least one `state NAME = ...`".to_string(), vec![]),
             UnknownSetting { .. } => ("expected `t_end`, `rtol` or `atol`".to_string(), vec![]),
             BadSetting { expected, .. } => (format!("expected {expected}"), vec![]),
+            DiscontinuousGuard { .. } => (
+                "expected a guard continuous in time and the state".to_string(),
+                vec![
+                    "a guard that jumps across zero has no crossing to locate and no crossing speed for its \
+                     gradient"
+                        .to_string(),
+                    "split the event, one per branch, each with a condition: \
+                     `event e when x - b <= 0 if x > a`"
+                        .to_string(),
+                ],
+            ),
         };
         Diagnostic { message: self.to_string(), span: self.span(), label, notes }
     }

@@ -49,6 +49,14 @@ pub(crate) fn add_flow_switches(model: &mut Model) {
     }
 }
 
+/// Whether `e` jumps somewhere in time or the state: it has an `if` comparison or a `sign`
+/// argument that moves with them (a guard like that is refused, see `check`).
+pub(crate) fn jumps(e: &Expr) -> bool {
+    let mut found = Vec::new();
+    collect(e, &mut found);
+    !found.is_empty()
+}
+
 /// The switch functions in `e` that move with time or state, without repeats.
 fn collect(e: &Expr, out: &mut Vec<Expr>) {
     match e {
