@@ -147,7 +147,13 @@ fn compare_model_text(name: &str, source: &str, rng: &mut Rng) {
 
 /// A random real expression over `names` using the whole language (operators, every function,
 /// `if` with `and`/`or`/`not`, `t` where `with_time`, `pi`), as .hyb text.
+/// A random expression of `names` (and `t` when `with_time`); with `jumps`, also `sign` and
+/// `if` (a guard may not have them where they move with the time or the state).
 fn expr_text(names: Vec<String>, with_time: bool) -> impl Strategy<Value = String> {
+    expr_text_with(names, with_time, true)
+}
+
+fn expr_text_with(names: Vec<String>, with_time: bool, jumps: bool) -> impl Strategy<Value = String> {
     let time = if with_time { "t" } else { "pi" };
     let leaf = prop_oneof![
         (-30i32..30).prop_map(|k| format!("{}", k as f64 / 4.0)),
@@ -155,29 +161,38 @@ fn expr_text(names: Vec<String>, with_time: bool) -> impl Strategy<Value = Strin
         Just(time.to_string()),
         Just("pi".to_string()),
     ];
-    leaf.prop_recursive(4, 24, 3, |inner| {
-        let unary = prop::sample::select(vec![
+    leaf.prop_recursive(4, 24, 3, move |inner| {
+        let mut unaries = vec![
             "sin", "cos", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "exp", "log", "sqrt", "abs",
-            "sign",
-        ]);
+        ];
+        if jumps {
+            unaries.push("sign");
+        }
+        let unary = prop::sample::select(unaries);
         let binary = prop::sample::select(vec!["atan2", "min", "max", "pow", "hypot"]);
         let op = prop::sample::select(vec!["+", "-", "*", "/", "^"]);
         let cmp = prop::sample::select(vec!["<", "<=", ">", ">="]);
-        prop_oneof![
-            (op, inner.clone(), inner.clone()).prop_map(|(o, a, b)| format!("({a} {o} {b})")),
-            inner.clone().prop_map(|a| format!("(-{a})")),
-            (unary, inner.clone()).prop_map(|(f, a)| format!("{f}({a})")),
-            (binary, inner.clone(), inner.clone()).prop_map(|(f, a, b)| format!("{f}({a}, {b})")),
-            (cmp.clone(), cmp, inner.clone(), inner.clone(), inner.clone(), inner.clone(), any::<u8>())
-                .prop_map(|(c1, c2, a, b, x, y, shape)| {
-                    let cond = match shape % 3 {
-                        0 => format!("{a} {c1} {b}"),
-                        1 => format!("{a} {c1} {b} and not ({x} {c2} {y})"),
-                        _ => format!("{a} {c1} {b} or {x} {c2} {y}"),
-                    };
-                    format!("(if {cond} then {x} else {y})")
-                }),
-        ]
+        let mut arms: Vec<BoxedStrategy<String>> = vec![
+            (op, inner.clone(), inner.clone()).prop_map(|(o, a, b)| format!("({a} {o} {b})")).boxed(),
+            inner.clone().prop_map(|a| format!("(-{a})")).boxed(),
+            (unary, inner.clone()).prop_map(|(f, a)| format!("{f}({a})")).boxed(),
+            (binary, inner.clone(), inner.clone()).prop_map(|(f, a, b)| format!("{f}({a}, {b})")).boxed(),
+        ];
+        if jumps {
+            arms.push(
+                (cmp.clone(), cmp, inner.clone(), inner.clone(), inner.clone(), inner.clone(), any::<u8>())
+                    .prop_map(|(c1, c2, a, b, x, y, shape)| {
+                        let cond = match shape % 3 {
+                            0 => format!("{a} {c1} {b}"),
+                            1 => format!("{a} {c1} {b} and not ({x} {c2} {y})"),
+                            _ => format!("{a} {c1} {b} or {x} {c2} {y}"),
+                        };
+                        format!("(if {cond} then {x} else {y})")
+                    })
+                    .boxed(),
+            );
+        }
+        prop::strategy::Union::new(arms)
     })
 }
 
@@ -192,12 +207,13 @@ fn model_text() -> impl Strategy<Value = String> {
         (
             prop::collection::vec(expr_text(params.clone(), false), n),
             prop::collection::vec(expr_text(all.clone(), true), n * modes),
-            prop::collection::vec(expr_text(all.clone(), true), modes * 2),
+            prop::collection::vec(expr_text_with(all.clone(), true, false), modes),
+            prop::collection::vec(expr_text(all.clone(), true), modes),
             prop::collection::vec(expr_text(all.clone(), true), n),
             expr_text(all, true),
             prop::collection::vec(-20i32..20, m),
         )
-            .prop_map(move |(inits, flows, guards, resets, output, defaults)| {
+            .prop_map(move |(inits, flows, guards, conditions, resets, output, defaults)| {
                 let mut s = String::from("model generated\n");
                 for (j, d) in defaults.iter().enumerate() {
                     s.push_str(&format!("param p{j} = {}\n", *d as f64 / 8.0));
@@ -220,7 +236,7 @@ fn model_text() -> impl Strategy<Value = String> {
                         (_, 0) => " -> b",
                         _ => " -> a",
                     };
-                    let (g, c) = (&guards[2 * mode], &guards[2 * mode + 1]);
+                    let (g, c) = (&guards[mode], &conditions[mode]);
                     s.push_str(&format!("event e{mode} when {g} crosses x0 if {c} > 0{target} {{\n"));
                     s.push_str(&format!("    x{} := {}\n", mode % n, resets[mode % n]));
                     s.push_str("}\n");
