@@ -1,45 +1,73 @@
-//! Gradient check: every derivative a run reports (event times, final state, outputs) against a
-//! central difference of the same system re-simulated at `p +/- h`, one parameter at a time. The
-//! library side of `hybc run --check-grad`: it takes any [`HybridSystem`] (the compiled model is
-//! reused as it is, never recompiled), returns plain data and does no IO.
+//! Gradient check: every derivative a run reports (event times, final state, outputs) against
+//! finite differences of the same system re-simulated near `p`, one parameter at a time, and the
+//! run's sequence of events against a re-run with other steps. The library side of
+//! `hybc run --check-grad`: it takes any [`HybridSystem`] (the compiled model is reused as it is,
+//! never recompiled), returns plain data and does no IO.
 //!
-//! What is compared, and how:
-//! - The step for parameter `p_j` is `h_j = rel_step * max(|p_j|, 1)`.
-//! - The discrepancy of a derivative `d` of a quantity `Q` against its central difference `c` is
-//!   `|d - c| / max(|d|, |c|, r, 0.01 |Q| / max(|p_j|, 1))`: relative to the derivative's own
-//!   size, but never below `r = (atol + rtol |Q|) / h`, the worst-case resolution of the
-//!   difference (tolerance-level noise in `Q` over the step), nor below 1% of the derivative's
-//!   natural scale. The last floor exists because a derivative that is zero (or tiny) has a
-//!   central difference made only of integration noise, which is not a gradient error: the
-//!   noise of a perturbed run that takes slightly different steps is measured at up to ~2e-8 of
-//!   the natural scale at rtol 1e-10 (dosing: d gut / d ke is exactly 0).
-//! - An event sequence that differs between `p - h`, `p` and `p + h` (a different count or different
-//!   events) is a cusp, not a failure: the events before the first difference are still checked,
-//!   the final state is not (it is not a smooth function of `p` across the cusp).
+//! The rules:
+//! - **Step** (`stencil.rs`): `h = rel_step |p|` (`rel_step = 1e-5` by default), relative to the
+//!   parameter, so that a capacitance of 1e-6 F is stepped by 1e-11 F. For `p = 0` the scale is
+//!   the width of the declared range `in [lo, hi]`; without a range it is 1, so `h = rel_step` in
+//!   the parameter's own units, and a note says so. The step is at most a quarter of the range,
+//!   and the points stay inside it: where `p - h` or `p + h` would leave it, the one-sided
+//!   second-order difference `(-3 Q(p) + 4 Q(p + h) - Q(p + 2h)) / 2h` (at the lower bound) or its
+//!   mirror `(3 Q(p) - 4 Q(p - h) + Q(p - 2h)) / 2h` (at the upper) replaces the central
+//!   `(Q(p + h) - Q(p - h)) / 2h`. All three have a truncation error `~h^2 Q'''` and cost two runs.
+//! - **Resolution** (`compare.rs`): each value `Q` a run computes carries noise
+//!   `floor + 16 eps |Q| + jump`. The floor is `atol` for a state or an output and `atol / |d|`
+//!   for an event time (the time its guard, crossing at speed `d`, takes to move by `atol`): what
+//!   the tolerances say is zero. `16 eps |Q|` is the round-off of its own magnitude. The jump is
+//!   what another sequence of steps can change `Q` by: 0 when the three runs of a difference took
+//!   the same steps (the same numbers of steps, rejections and right-hand-side calls: each step
+//!   size is then a smooth function of `p`, and so is each run's error, which cancels in the
+//!   difference); the tolerance `rtol |Q|` (`rtol |t - t_start|` for a time) when all three took
+//!   different steps; and when one run took other steps, the second difference
+//!   `|Q_0 - 2 Q_1 + Q_2|` of the three values (that jump plus `h^2 Q''`), or the tolerance if
+//!   smaller. A difference `sum_i w_i Q_i` (the weights above, over `h`) then resolves a
+//!   derivative only to `r = sum_i |w_i| noise_i`, about `noise / h`. A reported derivative `d`
+//!   whose difference `c` is within `r` of it never fails, `|d - c| <= r` says nothing about `d`;
+//!   when its relative discrepancy is above the tolerance it is listed as within noise. Example: a
+//!   projectile's height at the stop event where it lands is ~1e-15 (round-off), its difference
+//!   ~1e-10 (round-off over `h`), its total derivative exactly 0, and `r ~ atol / h`. Why not the
+//!   worst case `(atol + rtol |Q|) / h` everywhere: runs that take the same steps have errors that
+//!   cancel in a difference, and at a small parameter the worst case hides real errors (for the
+//!   tilted ball's slope `s = 0.1` at rtol 1e-10, `rtol t / h` is 1.2e-3 of `dt/ds`).
+//! - **Discrepancy**: `|d - c| / max(|d|, |c|)`. A derivative fails when its discrepancy is above
+//!   the tolerance and `|d - c| > r`; a non-finite difference of a finite derivative always fails.
+//! - **Event sequence** (`sequence.rs`): the system is re-run at `p` with a tenth of `rtol` and
+//!   `atol` and steps of at most `span / 100`, and both runs must have the same events in the same
+//!   order, the same count and the same end, with times within `sqrt(rtol) span` (far above the
+//!   integration error of a crossing, far below the shift of a missed or invented one). A
+//!   difference fails the check: the events change with the step size, so a crossing may be
+//!   missed or invented, which differences of runs with the same detector and nearly the same
+//!   steps cannot see. Not compared: events from the first grazing crossing on, the tail of a run
+//!   that ended early, and an extra event within the time tolerance of the end.
+//! - An event sequence that differs between the three points of a difference (a different count
+//!   or different events) is a cusp, not a failure: the events before the first difference are
+//!   still checked, the final state is not (it is not a smooth function of `p` across the cusp).
 //! - A grazing event has no gradient (`dtime` is `None` for it and every later event, and the final
-//!   state's sensitivities are `None`): those quantities are skipped with a note.
+//!   state's sensitivities are `None`): those quantities are skipped with a note, and so is a
+//!   single derivative that does not exist (NaN).
 //! - For a run ended by a `stop` event the final state is compared with the total derivatives
 //!   (`dstate_total`, `doutputs_total`), since the stopping time moves with `p`; a run that stopped
 //!   early (Zeno behaviour or a fault) has its final state skipped.
 
-use std::fmt::Write as _;
+mod compare;
+mod sequence;
+mod stencil;
+mod table;
 
 use serde::Serialize;
 
-use crate::report::num;
+use crate::sim::{HybridSystem, SimError, SimOptions, SimResult, Simulator, TrajectoryRequest};
 
-use crate::sim::{
-    EventRecord, HybridSystem, SimError, SimOptions, SimResult, Simulator, StopReason, TrajectoryRequest,
-};
-
-/// Derivatives smaller than this fraction of their natural scale `|Q| / max(|p_j|, 1)` are
-/// compared in absolute terms (see the module documentation).
-const NATURAL_FRACTION: f64 = 1e-2;
+pub use sequence::{EventCheck, STEPS_PER_SPAN, TIGHTER};
+pub use stencil::{stencil, Difference, Stencil};
 
 /// How the check is done.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct CheckOptions {
-    /// Relative step: `h_j = rel_step * max(|p_j|, 1)`.
+    /// Relative step: `h_j = rel_step |p_j|` (see the module documentation for `p_j = 0`).
     pub rel_step: f64,
     /// Largest accepted discrepancy (see the module documentation).
     pub tol: f64,
@@ -55,31 +83,35 @@ impl CheckOptions {
     /// truncation of the difference (`~h^2`). In a one-off sweep over the shipped models (steps
     /// 1e-4, 1e-5 and 1e-6 at rtol 1e-6 to 1e-12), 1e-5 gave the smallest worst discrepancy at
     /// rtol 1e-6, 1e-8 and 1e-10 (1e-4 is dominated by truncation, 1e-6 by noise) and was within
-    /// 10x of the best at 1e-12. Its worst discrepancies, printed by `tests/check_grad.rs`: 3e-4 at
-    /// rtol 1e-6, 6e-5 at 1e-8, 3e-6 at 1e-10 and 1e-12 (README, Accuracy). The default
-    /// tolerance sits well above those (more than 10x) and grows with `rtol`, because both the
-    /// reported derivatives and the differences are only as good as the integration.
+    /// 10x of the best at 1e-12. The default tolerance sits well above the worst discrepancies
+    /// of the shipped models (README, Accuracy) and grows with `rtol`, because both the reported
+    /// derivatives and the differences are only as good as the integration.
     pub fn for_rtol(rtol: f64) -> CheckOptions {
         CheckOptions { rel_step: 1e-5, tol: (1e5 * rtol).clamp(1e-4, 1e-2) }
     }
 }
 
-/// One reported derivative next to its central difference.
+/// One reported derivative next to its finite difference.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Comparison {
     /// What was differentiated: `time of event #3 (impact)`, `state y`, `output energy`.
     pub quantity: String,
     pub reported: f64,
+    /// The finite difference (central, or one-sided at a bound: [`ParamCheck::difference`]).
     pub central: f64,
+    /// `|reported - central| / max(|reported|, |central|)`.
     pub discrepancy: f64,
+    /// What the difference can resolve: a disagreement `|reported - central|` up to this is noise.
+    pub resolution: f64,
 }
 
-/// Where the event sequences of the three runs part.
+/// Where the event sequences of the three runs of a difference part.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Cusp {
     /// Position of the first event that differs (or is missing) between the runs.
     pub first_difference: usize,
-    /// Number of events at `p - h`, `p`, `p + h`.
+    /// Number of events at the difference's three points, ascending (`p - h`, `p`, `p + h` for a
+    /// central difference).
     pub events: [usize; 3],
     /// Whether the runs also ended differently (one stopped by `t_end`, another by Zeno, ...).
     pub ends_differ: bool,
@@ -91,14 +123,21 @@ pub struct ParamCheck {
     pub name: String,
     /// Index into all parameters.
     pub param: usize,
-    /// The step `h`.
+    /// The step `h` (0 when the parameter could not be varied).
     pub step: f64,
+    pub difference: Difference,
+    /// Steps (accepted and rejected) of the runs at the difference's three points, ascending.
+    pub steps: [usize; 3],
     /// Number of derivatives compared.
     pub checked: usize,
-    /// The comparison with the largest discrepancy, if any was made.
+    /// The comparison with the largest discrepancy, of those not within noise.
     pub worst: Option<Comparison>,
+    /// Comparisons whose discrepancy is above the tolerance but within what the differences
+    /// resolve: they do not fail.
+    pub within_noise: Vec<Comparison>,
     pub cusp: Option<Cusp>,
-    /// Why some quantities were not compared (grazing, a run that stopped early).
+    /// Why some quantities were not compared (grazing, a run that stopped early), and how the step
+    /// was chosen where that needs saying.
     pub notes: Vec<String>,
 }
 
@@ -113,89 +152,27 @@ impl ParamCheck {
 pub struct GradCheck {
     pub options: CheckOptions,
     pub params: Vec<ParamCheck>,
+    /// The run's events against a re-run at tighter tolerances and capped steps.
+    pub events: EventCheck,
 }
 
 impl GradCheck {
-    /// Whether every compared derivative is within the tolerance (cusps and skipped quantities do
-    /// not fail a check).
+    /// Whether every compared derivative is within the tolerance or within noise, and the events
+    /// do not change with the step size (cusps and skipped quantities do not fail a check).
     pub fn passed(&self) -> bool {
-        self.params.iter().all(|c| c.worst_discrepancy() <= self.options.tol)
+        self.failures().next().is_none() && self.events.is_consistent()
     }
 
     /// The parameters whose worst discrepancy exceeds the tolerance.
     pub fn failures(&self) -> impl Iterator<Item = &ParamCheck> {
         self.params.iter().filter(|c| c.worst_discrepancy() > self.options.tol)
     }
-
-    /// The table `hybc run --check-grad` prints: one row per parameter with its worst discrepancy
-    /// and where it occurred, then cusps and notes, then the verdict.
-    pub fn to_table(&self) -> String {
-        let mut out = String::new();
-        let _ = writeln!(
-            out,
-            "gradient check: central differences at p +/- h, h = {:.0e} max(|p|, 1), tolerance {:.0e}",
-            self.options.rel_step, self.options.tol
-        );
-        let _ = writeln!(
-            out,
-            "  {:<12}  {:>8}  {:>7}  {:>11}  {:>18}  {:>18}  worst at",
-            "parameter", "h", "checked", "discrepancy", "reported", "central"
-        );
-        for c in &self.params {
-            let flag = if c.worst_discrepancy() > self.options.tol { "  FAILED" } else { "" };
-            match &c.worst {
-                Some(w) => {
-                    let _ = writeln!(
-                        out,
-                        "  {:<12}  {:>8.1e}  {:>7}  {:>11.1e}  {:>18}  {:>18}  {}{flag}",
-                        c.name,
-                        c.step,
-                        c.checked,
-                        w.discrepancy,
-                        num(w.reported),
-                        num(w.central),
-                        w.quantity
-                    );
-                }
-                None => {
-                    let _ = writeln!(out, "  {:<12}  {:>8.1e}  {:>7}  {:>11}", c.name, c.step, 0, "-");
-                }
-            }
-        }
-        for c in &self.params {
-            if let Some(cusp) = &c.cusp {
-                let [m, n, p] = cusp.events;
-                let _ = writeln!(
-                    out,
-                    "  cusp in {}: {m}, {n}, {p} events at p - h, p, p + h; the sequences part at event \
-                     #{}{}: later events and the final state not checked",
-                    c.name,
-                    cusp.first_difference,
-                    if cusp.ends_differ { " and the runs end differently" } else { "" }
-                );
-            }
-            for note in &c.notes {
-                let _ = writeln!(out, "  note ({}): {note}", c.name);
-            }
-        }
-        let failed: Vec<&str> = self.failures().map(|c| c.name.as_str()).collect();
-        if failed.is_empty() {
-            let _ = writeln!(out, "gradient check passed");
-        } else {
-            let _ = writeln!(
-                out,
-                "gradient check FAILED: {} above the tolerance {:.0e}",
-                failed.join(", "),
-                self.options.tol
-            );
-        }
-        out
-    }
 }
 
-/// Checks every derivative in `nominal` (the result of `sim::run(sys, p, opts)`) against central
-/// differences of `sys` re-simulated at `p +/- h` with the same options (without a trajectory).
-/// Errors only when a perturbed run is rejected as input, which the nominal run was not.
+/// Checks every derivative in `nominal` (the result of `sim::run(sys, p, opts)`) against finite
+/// differences of `sys` re-simulated near `p` with the same options (without a trajectory), and
+/// its events against a re-run (module documentation). No parameter has a declared range: see
+/// [`check_within`]. Errors only when a run is rejected as input, which the nominal run was not.
 pub fn check(
     sys: &(impl HybridSystem + ?Sized),
     p: &[f64],
@@ -203,152 +180,70 @@ pub fn check(
     nominal: &SimResult,
     check: &CheckOptions,
 ) -> Result<GradCheck, SimError> {
+    check_within(sys, p, &[], opts, nominal, check)
+}
+
+/// [`check`] with the parameters' declared ranges (`ranges[i]` for parameter `i`, `None` or
+/// missing for none): the finite differences stay inside them.
+pub fn check_within(
+    sys: &(impl HybridSystem + ?Sized),
+    p: &[f64],
+    ranges: &[Option<(f64, f64)>],
+    opts: &SimOptions,
+    nominal: &SimResult,
+    check: &CheckOptions,
+) -> Result<GradCheck, SimError> {
     let info = sys.info();
     let opts = SimOptions { trajectory: TrajectoryRequest::None, ..opts.clone() };
+    let rerun_opts = sequence::rerun_options(&opts);
+    let rerun = Simulator::new(sys, &rerun_opts)?.run(p)?;
+    let events = sequence::compare(info, nominal, &rerun, &opts, &rerun_opts);
     let mut simulator = Simulator::new(sys, &opts)?;
     let mut params = Vec::with_capacity(info.n_grad());
     for (j, &param) in info.grad_params.iter().enumerate() {
-        let step = check.rel_step * p[param].abs().max(1.0);
-        let mut perturbed = |sign: f64| {
-            let mut q = p.to_vec();
-            q[param] += sign * step;
-            simulator.run(&q)
-        };
-        let (minus, plus) = (perturbed(-1.0)?, perturbed(1.0)?);
         let mut param_check = ParamCheck {
             name: info.param_names[param].clone(),
             param,
-            step,
+            step: 0.0,
+            difference: Difference::Central,
+            steps: [0; 3],
             checked: 0,
             worst: None,
+            within_noise: Vec::new(),
             cusp: None,
             notes: Vec::new(),
         };
-        Differences {
-            sys,
-            opts: &opts,
-            j,
-            step,
-            param_scale: p[param].abs().max(1.0),
-            out: &mut param_check,
-        }
-        .compare(nominal, &minus, &plus);
-        params.push(param_check);
-    }
-    Ok(GradCheck { options: *check, params })
-}
-
-/// The comparisons for one parameter (column `j` of every derivative array).
-struct Differences<'a, S: HybridSystem + ?Sized> {
-    sys: &'a S,
-    opts: &'a SimOptions,
-    j: usize,
-    step: f64,
-    /// `max(|p_j|, 1)`.
-    param_scale: f64,
-    out: &'a mut ParamCheck,
-}
-
-impl<S: HybridSystem + ?Sized> Differences<'_, S> {
-    fn compare(&mut self, nominal: &SimResult, minus: &SimResult, plus: &SimResult) {
-        let agree = common_events(&nominal.events, &minus.events, &plus.events);
-        let same_end = same_end(&nominal.stopped_by, &minus.stopped_by)
-            && same_end(&nominal.stopped_by, &plus.stopped_by);
-        let whole =
-            agree == nominal.events.len() && agree == minus.events.len() && agree == plus.events.len();
-        if !whole || !same_end {
-            self.out.cusp = Some(Cusp {
-                first_difference: agree,
-                events: [minus.events.len(), nominal.events.len(), plus.events.len()],
-                ends_differ: !same_end,
-            });
-        }
-        for k in 0..agree {
-            let e = &nominal.events[k];
-            let Some(dtime) = &e.dtime else {
-                self.out.notes.push(format!(
-                    "event #{k} ({}) grazes at t = {}: its gradient and all later ones do not exist; not checked",
-                    e.name, e.time
-                ));
-                break;
-            };
-            if dtime[self.j].is_nan() {
-                self.out.notes.push(format!(
-                    "event #{k} ({}) at t = {}: its time gradient does not exist (a grazing crossing before or at it); not checked",
-                    e.name, e.time
-                ));
+        let range = ranges.get(param).copied().flatten();
+        let stencil = match stencil(p[param], range, check.rel_step) {
+            Ok(s) => s,
+            Err(reason) => {
+                param_check.notes.push(format!("not checked: {reason}"));
+                params.push(param_check);
                 continue;
             }
-            let label = format!("time of event #{k} ({})", e.name);
-            self.compare_one(label, dtime[self.j], minus.events[k].time, plus.events[k].time);
-        }
-        if !whole || !same_end {
-            return;
-        }
-        let f = &nominal.final_state;
-        let (dstate, doutputs) = match &nominal.stopped_by {
-            StopReason::TEnd => (&f.dstate, &f.doutputs),
-            StopReason::Event { .. } => (&f.dstate_total, &f.doutputs_total),
-            _ => {
-                self.out.notes.push("the run stopped early: final state not checked".to_string());
-                return;
+        };
+        param_check.step = stencil.step;
+        param_check.difference = stencil.difference;
+        param_check.notes.extend(stencil.note.clone());
+        let mut perturbed: [Option<SimResult>; 3] = [None, None, None];
+        for (i, slot) in perturbed.iter_mut().enumerate() {
+            if i != stencil.nominal {
+                let mut q = p.to_vec();
+                q[param] = stencil.points[i];
+                *slot = Some(simulator.run(&q)?);
             }
-        };
-        // After a grazing event the sensitivities are `None` (already noted above).
-        let (Some(dstate), Some(doutputs), true) = (dstate, doutputs, f.dstate.is_some()) else {
-            return;
-        };
-        let info = self.sys.info();
-        let (n, k) = (info.n_states(), info.n_outputs());
-        for i in 0..n {
-            let label = format!("state {}", info.state_names[i]);
-            let (a, b) = (minus.final_state.state[i], plus.final_state.state[i]);
-            self.compare_one(label, dstate[self.j * n + i], a, b);
         }
-        for i in 0..k {
-            let label = format!("output {}", info.output_names[i]);
-            let (a, b) = (minus.final_state.outputs[i], plus.final_state.outputs[i]);
-            self.compare_one(label, doutputs[self.j * k + i], a, b);
+        let runs: [&SimResult; 3] = std::array::from_fn(|i| perturbed[i].as_ref().unwrap_or(nominal));
+        compare::Differences {
+            info,
+            j,
+            stencil: &stencil,
+            opts: &opts,
+            tol: check.tol,
+            out: &mut param_check,
         }
+        .compare(runs);
+        params.push(param_check);
     }
-
-    fn compare_one(&mut self, quantity: String, reported: f64, at_minus: f64, at_plus: f64) {
-        if reported.is_nan() {
-            // The derivative does not exist (it depends on a grazing crossing): nothing to compare.
-            self.out.notes.push(format!("{quantity}: its derivative does not exist; not checked"));
-            return;
-        }
-        let central = (at_plus - at_minus) / (2.0 * self.step);
-        let size = at_minus.abs().max(at_plus.abs());
-        let resolution = (self.opts.atol + self.opts.rtol * size) / self.step;
-        let natural = NATURAL_FRACTION * (size + self.opts.atol) / self.param_scale;
-        let scale = reported.abs().max(central.abs()).max(resolution).max(natural);
-        // NaN (a non-finite derivative or difference) must count as the worst possible.
-        let discrepancy = match (reported - central).abs() / scale {
-            d if d.is_nan() => f64::INFINITY,
-            d => d,
-        };
-        self.out.checked += 1;
-        if self.out.worst.as_ref().is_none_or(|w| discrepancy > w.discrepancy) {
-            self.out.worst = Some(Comparison { quantity, reported, central, discrepancy });
-        }
-    }
-}
-
-/// Length of the common prefix of the three event sequences (same event at each position).
-fn common_events(nominal: &[EventRecord], minus: &[EventRecord], plus: &[EventRecord]) -> usize {
-    nominal
-        .iter()
-        .zip(minus)
-        .zip(plus)
-        .take_while(|((a, b), c)| a.event == b.event && a.event == c.event)
-        .count()
-}
-
-/// Whether two runs ended the same way (the same kind of stop; the same stop event).
-fn same_end(a: &StopReason, b: &StopReason) -> bool {
-    match (a, b) {
-        (StopReason::Event { event: x, .. }, StopReason::Event { event: y, .. }) => x == y,
-        _ => std::mem::discriminant(a) == std::mem::discriminant(b),
-    }
+    Ok(GradCheck { options: *check, params, events })
 }

@@ -1,0 +1,107 @@
+//! Gradient check: the table `hybc run --check-grad` prints. Text only; no runs.
+
+use std::fmt::Write as _;
+
+use super::GradCheck;
+use crate::report::num;
+
+impl GradCheck {
+    /// One row per parameter with its worst discrepancy and where it occurred, then what was
+    /// within noise, cusps and notes, then the event-sequence check, then the verdict.
+    pub fn to_table(&self) -> String {
+        let mut out = String::new();
+        let tol = self.options.tol;
+        let _ = writeln!(
+            out,
+            "gradient check: finite differences with h = {:.0e} |p| (one-sided at a declared bound), \
+             tolerance {tol:.0e}",
+            self.options.rel_step
+        );
+        let _ = writeln!(
+            out,
+            "  {:<12}  {:>8}  {:<8}  {:>7}  {:>11}  {:>18}  {:>18}  worst at",
+            "parameter", "h", "stencil", "checked", "discrepancy", "reported", "difference"
+        );
+        for c in &self.params {
+            let flag = if c.worst_discrepancy() > tol { "  FAILED" } else { "" };
+            let head =
+                format!("  {:<12}  {:>8.1e}  {:<8}  {:>7}", c.name, c.step, c.difference.name(), c.checked);
+            let _ = match &c.worst {
+                Some(w) => writeln!(
+                    out,
+                    "{head}  {:>11.1e}  {:>18}  {:>18}  {}{flag}",
+                    w.discrepancy,
+                    num(w.reported),
+                    num(w.central),
+                    w.quantity
+                ),
+                None => writeln!(out, "{head}  {:>11}", "-"),
+            };
+        }
+        for c in &self.params {
+            if let Some(w) = c.within_noise.iter().max_by(|a, b| a.discrepancy.total_cmp(&b.discrepancy)) {
+                let more = c.within_noise.len() - 1;
+                let _ = writeln!(
+                    out,
+                    "  within noise ({}): {}: reported {}, difference {}, apart by {:.1e} <= the resolution \
+                     {:.1e} of the difference{}",
+                    c.name,
+                    w.quantity,
+                    num(w.reported),
+                    num(w.central),
+                    (w.reported - w.central).abs(),
+                    w.resolution,
+                    if more > 0 { format!(" (and {more} more)") } else { String::new() }
+                );
+            }
+            if let Some(cusp) = &c.cusp {
+                let [a, b, d] = cusp.events;
+                let [x, y, z] = c.difference.point_names();
+                let _ = writeln!(
+                    out,
+                    "  cusp in {}: {a}, {b}, {d} events at {x}, {y}, {z}; the sequences part at event \
+                     #{}{}: later events and the final state not checked",
+                    c.name,
+                    cusp.first_difference,
+                    if cusp.ends_differ { " and the runs end differently" } else { "" }
+                );
+            }
+            for note in &c.notes {
+                let _ = writeln!(out, "  note ({}): {note}", c.name);
+            }
+        }
+        let e = &self.events;
+        let rerun =
+            format!("re-run at rtol {:.0e}, atol {:.0e}, steps at most {:.2e}", e.rtol, e.atol, e.h_max);
+        let _ = match &e.difference {
+            None => writeln!(
+                out,
+                "event sequence: {} of {} events the same when {rerun} (times within {:.1e})",
+                e.compared, e.events[0], e.time_tol
+            ),
+            Some(d) => writeln!(
+                out,
+                "event sequence FAILED: the events change with the step size: a crossing may be missed \
+                 or invented ({rerun}): {d}"
+            ),
+        };
+        for note in &e.notes {
+            let _ = writeln!(out, "  note (events): {note}");
+        }
+        let mut failed: Vec<&str> = self.failures().map(|c| c.name.as_str()).collect();
+        if failed.is_empty() && e.is_consistent() {
+            let _ = writeln!(out, "gradient check passed");
+        } else {
+            let mut parts = Vec::new();
+            if !e.is_consistent() {
+                parts.push("the event sequence changes with the step size".to_string());
+            }
+            if !failed.is_empty() {
+                failed.dedup();
+                parts.push(format!("{} above the tolerance {tol:.0e}", failed.join(", ")));
+            }
+            let _ = writeln!(out, "gradient check FAILED: {}", parts.join("; "));
+        }
+        out
+    }
+}
