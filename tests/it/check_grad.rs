@@ -7,10 +7,10 @@ use crate::support::cli::hybc;
 use std::process::Output;
 
 use hybc::codegen::{compile, CompileOptions};
-use hybc::gradcheck::{check, CheckOptions};
+use hybc::gradcheck::{check, check_within, CheckOptions};
 use hybc::lower::{lower, system_info};
 use hybc::sema::ParamIdx;
-use hybc::sim::{run, SimOptions};
+use hybc::sim::{run, Direction, EventInfo, GuardShape, HybridSystem, ModeInfo, SimOptions, SystemInfo};
 use serde_json::Value;
 
 fn json_of(out: &Output) -> Value {
@@ -34,24 +34,47 @@ fn every_shipped_model_passes_its_gradient_check() {
         let params = check["params"].as_array().expect("check_grad.params");
         assert_eq!(params.len(), json["grad"].as_array().expect("grad").len(), "{path}");
         let tol = check["options"]["tol"].as_f64().expect("tol");
+        let mut worst: f64 = 0.0;
         for p in params {
             assert!(p["checked"].as_u64().expect("checked") > 0, "{path}: {p}");
             assert!(p["cusp"].is_null(), "{path}: {p}");
             let d = p["worst"]["discrepancy"].as_f64().expect("discrepancy");
             assert!(d <= tol, "{path}: {p}");
-            println!("{path} {}: worst discrepancy {d:.1e}", p["name"]);
+            worst = worst.max(d);
         }
+        // The events are the same when re-run at a tenth of the tolerances with capped steps.
+        let events = &check["events"];
+        assert!(events["difference"].is_null(), "{path}: {events}");
+        let n = json["events"].as_array().expect("events").len();
+        assert_eq!(events["compared"].as_u64(), Some(n as u64), "{path}: {events}");
+        println!("{path}: worst discrepancy {worst:.1e}");
     }
 }
 
 #[test]
-fn an_absurdly_tight_check_tolerance_fails_with_exit_code_4() {
-    let out = hybc(&["run", "models/ball.hyb", "--grad", "all", "--check-grad", "--check-tol", "1e-15"]);
+fn an_absurdly_tight_check_tolerance_fails_with_exit_code_4_where_the_differences_resolve() {
+    // The thermostat's differences resolve their own truncation error (~6e-8 of dT/dT_lo, far
+    // above the noise of T over h): a tolerance of 1e-15 fails them.
+    let out =
+        hybc(&["run", "models/thermostat.hyb", "--grad", "all", "--check-grad", "--check-tol", "1e-15"]);
     assert_eq!(out.status.code(), Some(4));
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(stdout.contains("gradient check FAILED"), "{stdout}");
+    assert!(stdout.contains("gradient check FAILED: T_lo, T_hi above the tolerance 1e-15"), "{stdout}");
     let help = hybc(&["run", "--help"]);
     assert!(String::from_utf8_lossy(&help.stdout).contains("4 --check-grad found a derivative"));
+    // The ball's flights are exact quadratics, so its differences disagree with its derivatives
+    // only by noise (atol and round-off over h): no tolerance can fail them, and what is above
+    // 1e-15 is listed as within noise.
+    let (code, json) = check_json("models/ball.hyb", &["--check-tol", "1e-15"]);
+    assert_eq!(code, Some(0), "{json}");
+    for p in json["check_grad"]["params"].as_array().unwrap() {
+        let noise = p["within_noise"].as_array().unwrap();
+        assert!(!noise.is_empty(), "{p}");
+        for c in noise {
+            let gap = (at(c, &["reported"]) - at(c, &["central"])).abs();
+            assert!(at(c, &["discrepancy"]) > 1e-15 && gap <= at(c, &["resolution"]), "{c}");
+        }
+    }
 }
 
 #[test]
@@ -114,6 +137,33 @@ fn a_corrupted_derivative_is_found() {
 }
 
 #[test]
+fn a_corrupted_derivative_is_found_at_loose_tolerances_and_small_parameters() {
+    // The noise floor must not blind the check: at rtol 1e-6 (tolerance 1e-2), dT(60)/dk of the
+    // thermostat (k = 0.1, h = 1e-6) off by 5% fails, while the true one passes.
+    let source =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/models/thermostat.hyb")).unwrap();
+    let model = hybc::check_source(&source).expect("valid");
+    let grad: Vec<ParamIdx> = (0..model.params.len()).map(|i| ParamIdx(i as u32)).collect();
+    let compiled =
+        compile(&lower(&model), system_info(&model, &grad), &CompileOptions::default()).expect("compiles");
+    let p: Vec<f64> = model.params.iter().map(|p| p.default).collect();
+    let opts = SimOptions { t_end: 60.0, rtol: 1e-6, atol: 1e-8, ..SimOptions::default() };
+    let nominal = run(&compiled, &p, &opts).expect("runs");
+    let defaults = CheckOptions::for_rtol(opts.rtol);
+    assert_eq!(defaults.tol, 1e-2);
+    let c = check(&compiled, &p, &opts, &nominal, &defaults).unwrap();
+    assert!(c.passed(), "{}", c.to_table());
+    assert_eq!(c.params[0].name, "k");
+    let mut bad = nominal.clone();
+    bad.final_state.dstate.as_mut().unwrap()[0] *= 1.05;
+    let c = check(&compiled, &p, &opts, &bad, &defaults).unwrap();
+    assert_eq!(c.failures().map(|f| f.name.as_str()).collect::<Vec<_>>(), ["k"], "{}", c.to_table());
+    let worst = c.params[0].worst.as_ref().unwrap();
+    assert_eq!(worst.quantity, "state T");
+    assert!((worst.reported - worst.central).abs() > 10.0 * worst.resolution, "{worst:?}");
+}
+
+#[test]
 fn grazing_and_zeno_runs_are_skipped_with_notes() {
     // The grazing ceiling: the ceiling is reached at p - h or p + h but not both, a cusp.
     let out =
@@ -154,8 +204,9 @@ fn check_flags_are_validated() {
 #[test]
 fn default_check_passes_every_model_from_rtol_1e_6_to_1e_12() {
     // The default step and tolerance (`CheckOptions::for_rtol`) must hold at every tolerance a
-    // user may pick, not only at the models' own; the worst discrepancies are printed for the
-    // README (`--nocapture`).
+    // user may pick, not only at the models' own, with the declared ranges as `hybc run` passes
+    // them; the worst discrepancies per model and tolerance are printed for the README
+    // (`cargo test --release --test it check_grad -- --nocapture`).
     let mut paths: Vec<_> = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/models"))
         .expect("models")
         .map(|e| e.expect("entry").path())
@@ -169,16 +220,291 @@ fn default_check_passes_every_model_from_rtol_1e_6_to_1e_12() {
         let compiled = compile(&lower(&model), system_info(&model, &grad), &CompileOptions::default())
             .expect("compiles");
         let p: Vec<f64> = model.params.iter().map(|p| p.default).collect();
+        let ranges: Vec<_> = model.params.iter().map(|p| p.range).collect();
+        let mut row = Vec::new();
         for (w, rtol) in worst.iter_mut().zip(rtols) {
             let t_end = model.simulate.t_end.expect("shipped models set t_end");
             let opts = SimOptions { t_end, rtol, atol: rtol * 1e-2, ..SimOptions::default() };
             let nominal = run(&compiled, &p, &opts).expect("runs");
-            let c = check(&compiled, &p, &opts, &nominal, &CheckOptions::for_rtol(rtol)).unwrap();
+            let c =
+                check_within(&compiled, &p, &ranges, &opts, &nominal, &CheckOptions::for_rtol(rtol)).unwrap();
             assert!(c.passed(), "{} at rtol {rtol:e}:\n{}", path.display(), c.to_table());
-            *w = c.params.iter().map(|x| x.worst_discrepancy()).fold(*w, f64::max);
+            assert_eq!(c.events.compared, nominal.events.len(), "{}", path.display());
+            let model_worst = c.params.iter().map(|x| x.worst_discrepancy()).fold(0.0, f64::max);
+            row.push(format!("{model_worst:.1e}"));
+            *w = w.max(model_worst);
         }
+        println!("{}: worst discrepancy at rtol 1e-6, 1e-8, 1e-10, 1e-12: {}", model.name, row.join(", "));
     }
     for (w, rtol) in worst.iter().zip(rtols) {
         println!("rtol {rtol:.0e}: worst --check-grad discrepancy over the shipped models {w:.1e}");
+    }
+}
+
+// ---- issue #17: a check that tells the truth ---------------------------------------------------
+
+/// `hybc run FILE --grad all --check-grad --format json` with extra flags: exit code and JSON.
+fn check_json(file: &str, extra: &[&str]) -> (Option<i32>, Value) {
+    let mut args = vec!["run", file, "--grad", "all", "--check-grad", "--format", "json"];
+    args.extend_from_slice(extra);
+    let out = hybc(&args);
+    (out.status.code(), json_of(&out))
+}
+
+/// The check of parameter `name` in a `--format json` report.
+fn param_check<'a>(json: &'a Value, name: &str) -> &'a Value {
+    json["check_grad"]["params"].as_array().unwrap().iter().find(|p| p["name"] == name).unwrap()
+}
+
+/// A reported number by JSON path, e.g. `["final", "dstate_total", "x", "v0"]`.
+fn at(json: &Value, path: &[&str]) -> f64 {
+    path.iter().fold(json, |v, k| &v[k]).as_f64().unwrap_or_else(|| panic!("{path:?} in {json}"))
+}
+
+fn assert_rel(a: f64, b: f64, rel: f64, what: &str) {
+    assert!((a - b).abs() <= rel * b.abs(), "{what}: {a} vs {b} (relative {rel})");
+}
+
+#[test]
+fn a_projectile_landing_on_a_stop_event_passes_with_its_height_within_noise() {
+    // Closed forms (h0 = 0): T = 2 v0 sin(a) / g, x(T) = v0 cos(a) T, dT/dh0 = 1 / (v0 sin a).
+    let (code, json) = check_json("tests/data/check_grad/projectile.hyb", &[]);
+    assert_eq!(code, Some(0), "{json}");
+    let (g, v0, a) = (9.81_f64, 20.0_f64, 0.7_f64);
+    let t = 2.0 * v0 * a.sin() / g;
+    let ev = &json["events"][0];
+    assert_rel(at(ev, &["time"]), t, 1e-12, "T");
+    assert_rel(at(ev, &["dtime", "v0"]), 2.0 * a.sin() / g, 1e-9, "dT/dv0");
+    assert_rel(at(ev, &["dtime", "angle"]), 2.0 * v0 * a.cos() / g, 1e-9, "dT/dangle");
+    assert_rel(at(ev, &["dtime", "g"]), -t / g, 1e-9, "dT/dg");
+    assert_rel(at(ev, &["dtime", "h0"]), 1.0 / (v0 * a.sin()), 1e-9, "dT/dh0");
+    let range = |v0: f64, a: f64| v0 * v0 * (2.0 * a).sin() / g;
+    assert_rel(at(&json, &["final", "state", "x"]), range(v0, a), 1e-12, "x(T)");
+    assert_rel(at(&json, &["final", "dstate_total", "x", "v0"]), 2.0 * range(v0, a) / v0, 1e-9, "dx/dv0");
+    assert_rel(
+        at(&json, &["final", "dstate_total", "x", "angle"]),
+        2.0 * v0 * v0 * (2.0 * a).cos() / g,
+        1e-9,
+        "dx/da",
+    );
+    // The height at the stop is round-off, its total derivative exactly 0 in exact arithmetic.
+    assert!(at(&json, &["final", "state", "y"]).abs() < 1e-13);
+    for p in ["g", "v0", "angle", "h0"] {
+        assert!(at(&json, &["final", "dstate_total", "y", p]).abs() < 1e-13, "dy/d{p}");
+        let c = param_check(&json, p);
+        assert_eq!(c["checked"], 6, "1 event, 4 states, 1 output: {c}");
+        assert!(c["cusp"].is_null(), "{c}");
+        assert!(c["worst"]["discrepancy"].as_f64().unwrap() < 1e-7, "{c}");
+    }
+    // h0 = 0 has no range: an absolute step, said in a note. Its height's difference quotient is
+    // round-off over h, far from the reported 0 in relative terms, but within the resolution.
+    let h0 = param_check(&json, "h0");
+    assert_eq!(at(h0, &["step"]), 1e-5);
+    assert!(h0["notes"][0].as_str().unwrap().contains("p = 0 with no declared range"), "{h0}");
+    let noise = h0["within_noise"].as_array().unwrap();
+    assert_eq!(noise.len(), 1, "{h0}");
+    assert_eq!(noise[0]["quantity"], "state y");
+    let gap = (at(&noise[0], &["reported"]) - at(&noise[0], &["central"])).abs();
+    assert!(gap > 0.0 && gap <= at(&noise[0], &["resolution"]), "{h0}");
+    assert!(at(&noise[0], &["resolution"]) < 1e-6, "about atol / h = 1e-7: {h0}");
+    let events = &json["check_grad"]["events"];
+    assert_eq!((events["compared"].as_u64(), events["difference"].is_null()), (Some(1), true), "{events}");
+}
+
+/// The RC oscillator's closed forms: event times `t_k` (each proportional to `C`) and the final
+/// voltage `v(T) = V_hi exp(-(T - t3) / RC)` with `dv/dC = v T / (R C^2)`.
+fn assert_rc_closed_forms(json: &Value, c: f64, t_end: f64) {
+    let (r, vs, lo, hi) = (1000.0_f64, 5.0_f64, 1.0_f64, 4.0_f64);
+    let tau = r * c;
+    let t1 = tau * (vs / (vs - hi)).ln();
+    let t2 = t1 + tau * (hi / lo).ln();
+    let t3 = t2 + tau * ((vs - lo) / (vs - hi)).ln();
+    for (k, t) in [t1, t2, t3].into_iter().enumerate() {
+        assert_rel(at(&json["events"][k], &["time"]), t, 1e-10, "t_k");
+        assert_rel(at(&json["events"][k], &["dtime", "C"]), t / c, 1e-8, "dt_k/dC");
+    }
+    let v = hi * (-(t_end - t3) / tau).exp();
+    assert_rel(at(json, &["final", "state", "v"]), v, 1e-9, "v(T)");
+    assert_rel(at(json, &["final", "dstate", "v", "C"]), v * t_end / (r * c * c), 1e-8, "dv/dC");
+    assert_rel(at(json, &["final", "dstate", "v", "v0"]), -v / vs, 1e-8, "dv/dv0");
+}
+
+#[test]
+fn an_rc_circuit_with_a_small_capacitance_passes_at_1e_4_and_1e_6_farad() {
+    for (c, extra) in [(1e-4, vec![]), (1e-6, vec!["--set", "C=1e-6", "--t-end", "0.005"])] {
+        let t_end = if c == 1e-4 { 0.5 } else { 0.005 };
+        let (code, json) = check_json("tests/data/check_grad/rc.hyb", &extra);
+        assert_eq!(code, Some(0), "C = {c}: {json}");
+        assert_rc_closed_forms(&json, c, t_end);
+        // The step of C is relative to C (1e-9 F, 1e-11 F), central, and every quantity is checked.
+        let cc = param_check(&json, "C");
+        assert_rel(at(cc, &["step"]), 1e-5 * c, 1e-6, "h of C");
+        assert_eq!((cc["difference"].as_str(), cc["checked"].as_u64()), (Some("central"), Some(5)), "{cc}");
+        assert!(cc["cusp"].is_null() && cc["within_noise"].as_array().unwrap().is_empty(), "{cc}");
+        assert!(at(cc, &["worst", "discrepancy"]) < 1e-5, "{cc}");
+        // v0 = 0 at the lower end of [0, 5]: a forward difference with h = 1e-5 * 5.
+        let v0 = param_check(&json, "v0");
+        assert_eq!((v0["difference"].as_str(), at(v0, &["step"])), (Some("forward"), 5e-5), "{v0}");
+        assert_eq!(v0["checked"], 5, "{v0}");
+    }
+}
+
+#[test]
+fn a_parameter_at_the_upper_end_of_its_range_gets_a_backward_difference() {
+    // The ball with e = 1 (the top of `e in [0, 1]`): elastic bounces at t1 (2k + 1), whose
+    // derivative at e = 1 is t1 k (k + 1), with t1 = sqrt(2 h0 / g). No run leaves the range.
+    let (code, json) = check_json("models/ball.hyb", &["--set", "e=1"]);
+    assert_eq!(code, Some(0), "{json}");
+    let t1 = (2.0_f64 / 9.81).sqrt();
+    for k in 0..3 {
+        let ev = &json["events"][k];
+        let kf = k as f64;
+        assert_rel(at(ev, &["time"]), t1 * (2.0 * kf + 1.0), 1e-10, "t_k");
+        if k > 0 {
+            assert_rel(at(ev, &["dtime", "e"]), t1 * kf * (kf + 1.0), 1e-8, "dt_k/de");
+        }
+    }
+    let e = param_check(&json, "e");
+    assert_eq!(e["difference"], "backward", "{e}");
+    assert_rel(at(e, &["step"]), 1e-5, 1e-9, "h of e");
+    assert!(at(e, &["worst", "discrepancy"]) < 1e-6, "{e}");
+    let table = hybc(&["run", "models/ball.hyb", "--grad", "e", "--check-grad", "--set", "e=1"]);
+    let table = String::from_utf8_lossy(&table.stdout);
+    assert!(table.contains("  e               1.0e-5  backward"), "{table}");
+}
+
+/// A clock `x` with `der(x) = a` (parameter `a`, differentiated) and one event `ripple`, either
+/// way, identity reset, on the guard `sin(w x)`: crossings at `x = k pi / w`. The guard is
+/// declared `Affine` although it oscillates: the integrator trusts the declaration, samples the
+/// guard's speed at the stages with `g_x` taken as a constant (so the speed never changes sign
+/// within a step) and takes steps as long as the error control allows, which for this exact flow
+/// is long: crossings between two step ends of the same sign are missed, and which ones depends
+/// on the step sizes.
+struct Ripple {
+    info: SystemInfo,
+    w: f64,
+}
+
+impl Ripple {
+    fn new(w: f64) -> Ripple {
+        Ripple {
+            info: SystemInfo {
+                state_names: vec!["x".into()],
+                output_names: vec![],
+                param_names: vec!["a".into()],
+                grad_params: vec![0],
+                modes: vec![ModeInfo { name: "only".into(), events: vec![0] }],
+                events: vec![EventInfo {
+                    name: "ripple".into(),
+                    direction: Direction::Either,
+                    target_mode: None,
+                    is_stop: false,
+                    has_condition: false,
+                    implicit: false,
+                    guard: GuardShape::Affine,
+                    contact: false,
+                }],
+                initial_mode: 0,
+            },
+            w,
+        }
+    }
+}
+
+impl HybridSystem for Ripple {
+    fn info(&self) -> &SystemInfo {
+        &self.info
+    }
+    fn initial_state(&self, _p: &[f64], x0: &mut [f64]) {
+        x0[0] = 0.1;
+    }
+    fn initial_sens(&self, _p: &[f64], s0: &mut [f64]) {
+        s0[0] = 0.0;
+    }
+    fn flow(&self, _mode: usize, _t: f64, _x: &[f64], p: &[f64], dx: &mut [f64]) {
+        dx[0] = p[0];
+    }
+    fn flow_sens(&self, _: usize, _: f64, _: &[f64], _s: &[f64], p: &[f64], dx: &mut [f64], ds: &mut [f64]) {
+        dx[0] = p[0];
+        ds[0] = 1.0;
+    }
+    fn guards(&self, _mode: usize, _t: f64, x: &[f64], _p: &[f64], g: &mut [f64]) {
+        g[0] = (self.w * x[0]).sin();
+    }
+    fn guard_grad(&self, _: usize, _t: f64, x: &[f64], _p: &[f64], gx: &mut [f64], gp: &mut [f64]) -> f64 {
+        gx[0] = self.w * (self.w * x[0]).cos();
+        gp[0] = 0.0;
+        0.0
+    }
+    fn condition(&self, _event: usize, _t: f64, _x: &[f64], _p: &[f64]) -> bool {
+        true
+    }
+    fn reset(&self, _event: usize, _t: f64, x: &[f64], _p: &[f64], r: &mut [f64]) {
+        r[0] = x[0];
+    }
+    #[allow(clippy::too_many_arguments)]
+    fn reset_jac(
+        &self,
+        _: usize,
+        _: f64,
+        _: &[f64],
+        _: &[f64],
+        rx: &mut [f64],
+        rp: &mut [f64],
+        rt: &mut [f64],
+    ) {
+        rx[0] = 1.0;
+        rp[0] = 0.0;
+        rt[0] = 0.0;
+    }
+    fn outputs(&self, _t: f64, _x: &[f64], _p: &[f64], _y: &mut [f64]) {}
+    fn output_jac(&self, _: f64, _: &[f64], _: &[f64], _yx: &mut [f64], _yp: &mut [f64], _yt: &mut [f64]) {}
+}
+
+#[test]
+fn events_that_change_with_the_step_size_fail_the_check() {
+    // w = 2 pi: crossings every 0.5 s from t = 0.4, so 20 of them in [0, 10] for a = 1.
+    let sys = Ripple::new(2.0 * std::f64::consts::PI);
+    let p = [1.0];
+    let opts = SimOptions { t_end: 10.0, rtol: 1e-6, atol: 1e-8, ..SimOptions::default() };
+    let nominal = run(&sys, &p, &opts).expect("runs");
+    // The detector misses crossings at these steps ...
+    assert!(nominal.events.len() < 20, "{} events", nominal.events.len());
+    // ... and finds all of them with steps of at most span / 100 (what the check re-runs with).
+    let capped = SimOptions { h_max: 0.1, rtol: 1e-7, atol: 1e-9, ..opts.clone() };
+    let rerun = run(&sys, &p, &capped).expect("runs");
+    assert_eq!(rerun.events.len(), 20);
+    for (k, e) in rerun.events.iter().enumerate() {
+        approx::assert_relative_eq!(e.time, 0.5 * k as f64 + 0.4, max_relative = 1e-9);
+    }
+    let c = check(&sys, &p, &opts, &nominal, &CheckOptions::for_rtol(opts.rtol)).expect("checks");
+    assert!(!c.passed());
+    let d = c.events.difference.as_deref().expect("an event-sequence difference");
+    assert_eq!(c.events.events, [nominal.events.len(), 20]);
+    assert!(d.contains("in the run but at t = ") || d.contains("the run has"), "{d}");
+    let table = c.to_table();
+    assert!(
+        table.contains(
+            "event sequence FAILED: the events change with the step size: a crossing may be missed or invented"
+        ),
+        "{table}"
+    );
+    assert!(
+        table.contains("gradient check FAILED: the event sequence changes with the step size"),
+        "{table}"
+    );
+    // The same system declared honestly (`Nonlinear`: checked inside every step, taking part in
+    // step-size control) finds every crossing and passes.
+    let mut honest = Ripple::new(2.0 * std::f64::consts::PI);
+    honest.info.events[0].guard = GuardShape::Nonlinear;
+    let nominal = run(&honest, &p, &opts).expect("runs");
+    assert_eq!(nominal.events.len(), 20);
+    let c = check(&honest, &p, &opts, &nominal, &CheckOptions::for_rtol(opts.rtol)).expect("checks");
+    assert!(c.passed(), "{}", c.to_table());
+    assert_eq!(c.events.compared, 20);
+    // The 20 event times (dt_k/da = -t_k / a) and the final state, against the differences.
+    assert_eq!(c.params[0].checked, 21);
+    for e in &nominal.events {
+        approx::assert_relative_eq!(e.dtime.as_ref().unwrap()[0], -e.time, max_relative = 1e-9);
     }
 }
