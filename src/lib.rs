@@ -41,6 +41,7 @@ pub mod plot;
 pub mod report;
 pub mod sema;
 pub mod sim;
+mod stack;
 pub mod sweep;
 pub mod syntax;
 

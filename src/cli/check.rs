@@ -36,6 +36,7 @@ pub fn summary(model: &Model) -> String {
         plural(model.events.iter().filter(|e| !e.implicit).count(), "event"),
         plural(model.outputs.len(), "output"),
     );
+    let show = crate::lower::ExprPrinter::new(model);
     let _ = writeln!(out, "parameters");
     for p in &model.params {
         let range = p.range.map(|(lo, hi)| format!("  in [{lo}, {hi}]")).unwrap_or_default();
@@ -43,14 +44,14 @@ pub fn summary(model: &Model) -> String {
     }
     let _ = writeln!(out, "states");
     for s in &model.states {
-        let _ = writeln!(out, "  {} = {}", s.name, crate::lower::show_expr(model, &s.init));
+        let _ = writeln!(out, "  {} = {}", s.name, show.show(&s.init));
     }
     let _ = writeln!(out, "modes");
     for (k, m) in model.modes.iter().enumerate() {
         let initial = if k == model.initial_mode.0 as usize { " (initial)" } else { "" };
         let _ = writeln!(out, "  {}{initial}", m.name);
         for (s, f) in model.states.iter().zip(&m.flows) {
-            let _ = writeln!(out, "    der({}) = {}", s.name, crate::lower::show_expr(model, f));
+            let _ = writeln!(out, "    der({}) = {}", s.name, show.show(f));
         }
     }
     let _ = writeln!(out, "events");
@@ -64,22 +65,12 @@ pub fn summary(model: &Model) -> String {
             Some(m) => format!("in mode {}", model.modes[m.0 as usize].name),
             None => "in every mode".to_string(),
         };
-        let _ = writeln!(
-            out,
-            "  {} ({scope}): guard {}, fires {dir}",
-            ev.name,
-            crate::lower::show_expr(model, &ev.guard)
-        );
+        let _ = writeln!(out, "  {} ({scope}): guard {}, fires {dir}", ev.name, show.show(&ev.guard));
         if ev.condition.is_some() {
             let _ = writeln!(out, "    only if its condition holds");
         }
         for (s, e) in &ev.resets {
-            let _ = writeln!(
-                out,
-                "    {} := {}",
-                model.states[s.0 as usize].name,
-                crate::lower::show_expr(model, e)
-            );
+            let _ = writeln!(out, "    {} := {}", model.states[s.0 as usize].name, show.show(e));
         }
         if let Some(t) = ev.target {
             let _ = writeln!(out, "    -> {}", model.modes[t.0 as usize].name);
@@ -95,12 +86,12 @@ pub fn summary(model: &Model) -> String {
             "flow switches (where a flow jumps: located like events, the gradients jump there)"
         );
         for ev in switches {
-            let _ = writeln!(out, "  {}: at {} = 0", ev.name, crate::lower::show_expr(model, &ev.guard));
+            let _ = writeln!(out, "  {}: at {} = 0", ev.name, show.show(&ev.guard));
         }
     }
     let _ = writeln!(out, "outputs");
     for o in &model.outputs {
-        let _ = writeln!(out, "  {} = {}", o.name, crate::lower::show_expr(model, &o.expr));
+        let _ = writeln!(out, "  {} = {}", o.name, show.show(&o.expr));
     }
     out
 }

@@ -10,7 +10,7 @@
 //! Texts are built bottom-up in id order with one text per node, so printing is linear in the
 //! size of the printed text.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 use super::eval::reachable;
 use super::node::{BinaryOp, ExprId, Node, UnaryOp};
@@ -30,7 +30,22 @@ const P_ATOM: u8 = 9;
 
 /// Text of one expression (no `let`s).
 pub fn to_infix(store: &ExprStore, id: ExprId, states: &[String], params: &[String]) -> String {
+    to_infix_capped(store, id, states, params, usize::MAX)
+}
+
+/// Text of one expression, each subexpression's text cut after `cap` characters and marked with
+/// `...`: the text of a DAG can be exponentially longer than the DAG (a `let` that doubles its
+/// predecessor, 60 times), so summaries print a capped text in time and memory linear in the
+/// DAG.
+pub fn to_infix_capped(
+    store: &ExprStore,
+    id: ExprId,
+    states: &[String],
+    params: &[String],
+    cap: usize,
+) -> String {
     let mut p = Printer::new(store, states, params);
+    p.cap = cap;
     p.build(&[id], false);
     p.wrap(id, P_SELECT)
 }
@@ -62,7 +77,7 @@ pub fn to_infix_group(
     taken: &[String],
 ) -> Group {
     let mut p = Printer::new(store, states, params);
-    p.taken.extend(taken.iter().cloned());
+    p.taken.extend(states.iter().chain(params).chain(taken).cloned());
     p.build(roots, true);
     let roots = roots.iter().map(|&r| p.wrap(r, P_SELECT)).collect();
     Group { lets: p.lets, roots }
@@ -86,12 +101,14 @@ struct Printer<'a> {
     /// Hoisted nodes and their `let` names.
     bound: HashMap<ExprId, String>,
     lets: Vec<(String, String)>,
-    taken: Vec<String>,
+    /// Names a hoisted `let` must avoid (filled only when hoisting).
+    taken: HashSet<String>,
+    /// Longest text kept for one node, in characters.
+    cap: usize,
 }
 
 impl<'a> Printer<'a> {
     fn new(store: &'a ExprStore, states: &'a [String], params: &'a [String]) -> Self {
-        let taken = states.iter().chain(params).cloned().collect();
         Printer {
             store,
             states,
@@ -99,7 +116,8 @@ impl<'a> Printer<'a> {
             memo: HashMap::new(),
             bound: HashMap::new(),
             lets: Vec::new(),
-            taken,
+            taken: HashSet::new(),
+            cap: usize::MAX,
         }
     }
 
@@ -115,7 +133,11 @@ impl<'a> Printer<'a> {
             }
         }
         for id in nodes {
-            let rendered = self.render(id);
+            let mut rendered = self.render(id);
+            if let Some((cut, _)) = rendered.0.char_indices().nth(self.cap) {
+                rendered.0.truncate(cut);
+                rendered.0.push_str("...");
+            }
             let n_uses = uses.get(&id).copied().unwrap_or(0);
             let is_leaf = self.store.node(id).children().next().is_none();
             if hoist && !is_leaf && n_uses >= 2 {
@@ -126,7 +148,7 @@ impl<'a> Printer<'a> {
                 if hoisted < inline {
                     self.lets.push((name.clone(), rendered.0.clone()));
                     self.bound.insert(id, name.clone());
-                    self.taken.push(name);
+                    self.taken.insert(name);
                 }
             }
             self.memo.insert(id, rendered);

@@ -14,21 +14,23 @@ mod single;
 pub use events::classify_events;
 pub use interp::Interpreter;
 pub use report::derive_report;
-pub use single::show_expr;
+pub use single::{ExprPrinter, SHOWN_CHARS};
+
+use std::collections::HashMap;
 
 use crate::expr::eval::reachable;
 use crate::expr::{
     BinaryOp, Differentiator, EventFunctions, ExprId, ExprStore, ModeFunctions, ModelFunctions, Node,
     SparseMat, SparseVec, UnaryOp, Var,
 };
-use crate::sema::{self, BinOp, CmpOp, Cond, Expr, Func, Model};
+use crate::sema::{self, BinOp, CmpOp, Cond, Expr, Func, Model, SharedDef};
 use crate::sim::{self, SystemInfo};
 
 /// Lowers every function of `model` and all their derivatives into one store.
 pub fn lower(model: &Model) -> ModelFunctions {
     let n_states = model.n_states() as u32;
     let n_params = model.n_params() as u32;
-    let mut cx = Lowerer { store: ExprStore::new(), diff: Differentiator::new(), n_states, n_params };
+    let mut cx = Lowerer::new(n_states, n_params);
 
     let init: Vec<ExprId> = model.states.iter().map(|s| cx.expr(&s.init)).collect();
     let init_p = cx.jacobian(&init, Jac::Params);
@@ -146,9 +148,22 @@ struct Lowerer {
     diff: Differentiator,
     n_states: u32,
     n_params: u32,
+    /// The node of each shared `let` definition lowered so far: a definition is lowered once,
+    /// however many uses it has.
+    shared: HashMap<*const SharedDef, ExprId>,
 }
 
 impl Lowerer {
+    fn new(n_states: u32, n_params: u32) -> Lowerer {
+        Lowerer {
+            store: ExprStore::new(),
+            diff: Differentiator::new(),
+            n_states,
+            n_params,
+            shared: HashMap::new(),
+        }
+    }
+
     fn vars(&self, jac: Jac) -> (u32, fn(u32) -> Var) {
         match jac {
             Jac::States => (self.n_states, Var::State),
@@ -204,6 +219,14 @@ impl Lowerer {
             Expr::State(i) => self.store.state(i.0),
             Expr::Param(i) => self.store.param(i.0),
             Expr::Time => self.store.time(),
+            Expr::Shared(s) => {
+                if let Some(&id) = self.shared.get(&s.key()) {
+                    return id;
+                }
+                let id = crate::stack::deep(|| self.expr(s.expr()));
+                self.shared.insert(s.key(), id);
+                id
+            }
             Expr::Neg(a) => {
                 let a = self.expr(a);
                 self.store.neg(a)

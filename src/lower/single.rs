@@ -2,19 +2,35 @@
 //! expressions without lowering the whole model.
 
 use super::Lowerer;
-use crate::expr::{to_infix, Differentiator, ExprStore};
+use crate::expr::to_infix_capped;
 use crate::sema::{Expr, Model};
 
-/// `e` simplified and printed with the model's names (e.g. the guard `y - 0` prints as `y`).
-pub fn show_expr(model: &Model, e: &Expr) -> String {
-    let mut cx = Lowerer {
-        store: ExprStore::new(),
-        diff: Differentiator::new(),
-        n_states: model.n_states() as u32,
-        n_params: model.n_params() as u32,
-    };
-    let id = cx.expr(e);
-    let states: Vec<String> = model.states.iter().map(|s| s.name.clone()).collect();
-    let params: Vec<String> = model.params.iter().map(|p| p.name.clone()).collect();
-    to_infix(&cx.store, id, &states, &params)
+/// Longest text a summary shows for one expression (a chain of `let`s can make it as long as
+/// the chain, or exponentially long when each `let` uses its predecessor twice).
+pub const SHOWN_CHARS: usize = 400;
+
+/// Prints a model's expressions with its names. The names are gathered once, so a summary of a
+/// model with many states costs its size, not its size times the number of states.
+pub struct ExprPrinter<'m> {
+    model: &'m Model,
+    states: Vec<String>,
+    params: Vec<String>,
+}
+
+impl<'m> ExprPrinter<'m> {
+    pub fn new(model: &'m Model) -> ExprPrinter<'m> {
+        ExprPrinter {
+            model,
+            states: model.states.iter().map(|s| s.name.clone()).collect(),
+            params: model.params.iter().map(|p| p.name.clone()).collect(),
+        }
+    }
+
+    /// `e` simplified and printed (e.g. the guard `y - 0` prints as `y`), cut after
+    /// [`SHOWN_CHARS`] characters with `...`.
+    pub fn show(&self, e: &Expr) -> String {
+        let mut cx = Lowerer::new(self.model.n_states() as u32, self.model.n_params() as u32);
+        let id = cx.expr(e);
+        to_infix_capped(&cx.store, id, &self.states, &self.params, SHOWN_CHARS)
+    }
 }

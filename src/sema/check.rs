@@ -1,7 +1,7 @@
-//! AST -> checked [`Model`]: builds the scopes, resolves every name, inlines `let`s and runs every
+//! AST -> checked [`Model`]: builds the scopes, resolves every name, shares `let`s and runs every
 //! semantic check, collecting all errors instead of stopping at the first.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 use super::error::CheckError;
 use super::model::*;
@@ -465,23 +465,41 @@ impl<'a> Checker<'a> {
 
 /// Names the first use of `t` or a state in `e`, if any.
 fn first_non_constant(e: &Expr, scopes: &Scopes) -> Option<String> {
-    match e {
-        Expr::Time => Some("time `t`".to_string()),
-        Expr::State(i) => Some(format!("state `{}`", scopes.state_name(i.0 as usize))),
-        Expr::Num(_) | Expr::Param(_) => None,
-        Expr::Neg(a) => first_non_constant(a, scopes),
-        Expr::Binary(_, a, b) => first_non_constant(a, scopes).or_else(|| first_non_constant(b, scopes)),
-        Expr::Call(_, args) => args.iter().find_map(|a| first_non_constant(a, scopes)),
-        Expr::If(c, a, b) => first_in_cond(c, scopes)
-            .or_else(|| first_non_constant(a, scopes))
-            .or_else(|| first_non_constant(b, scopes)),
-    }
+    NonConstant { scopes, searched: HashSet::new() }.find(e)
 }
 
-fn first_in_cond(c: &Cond, scopes: &Scopes) -> Option<String> {
-    match c {
-        Cond::Cmp(_, a, b) => first_non_constant(a, scopes).or_else(|| first_non_constant(b, scopes)),
-        Cond::And(a, b) | Cond::Or(a, b) => first_in_cond(a, scopes).or_else(|| first_in_cond(b, scopes)),
-        Cond::Not(a) => first_in_cond(a, scopes),
+/// The search for `t` or a state, visiting each shared `let` definition once (a definition seen
+/// before held neither, or the search would have stopped there).
+struct NonConstant<'s, 'a> {
+    scopes: &'s Scopes<'a>,
+    searched: HashSet<*const SharedDef>,
+}
+
+impl NonConstant<'_, '_> {
+    fn find(&mut self, e: &Expr) -> Option<String> {
+        match e {
+            Expr::Time => Some("time `t`".to_string()),
+            Expr::State(i) => Some(format!("state `{}`", self.scopes.state_name(i.0 as usize))),
+            Expr::Num(_) | Expr::Param(_) => None,
+            Expr::Shared(s) => {
+                if self.searched.insert(s.key()) {
+                    crate::stack::deep(|| self.find(s.expr()))
+                } else {
+                    None
+                }
+            }
+            Expr::Neg(a) => self.find(a),
+            Expr::Binary(_, a, b) => self.find(a).or_else(|| self.find(b)),
+            Expr::Call(_, args) => args.iter().find_map(|a| self.find(a)),
+            Expr::If(c, a, b) => self.find_in_cond(c).or_else(|| self.find(a)).or_else(|| self.find(b)),
+        }
+    }
+
+    fn find_in_cond(&mut self, c: &Cond) -> Option<String> {
+        match c {
+            Cond::Cmp(_, a, b) => self.find(a).or_else(|| self.find(b)),
+            Cond::And(a, b) | Cond::Or(a, b) => self.find_in_cond(a).or_else(|| self.find_in_cond(b)),
+            Cond::Not(a) => self.find_in_cond(a),
+        }
     }
 }

@@ -29,6 +29,8 @@ pub enum CheckError {
     SecondInitialMode { name: String, span: Span, first: Span },
     #[error("`let {name}` depends on itself")]
     LetCycle { name: String, path: String, span: Span },
+    #[error("`let {name}` nests expressions {depth} levels deep")]
+    TooDeep { name: String, depth: usize, span: Span },
     #[error("`{func}` takes {expected} argument{}, found {found}", if *expected == 1 { "" } else { "s" })]
     Arity { func: String, expected: usize, found: usize, span: Span },
     #[error("the range of `{name}` excludes its default {default}")]
@@ -63,6 +65,7 @@ impl CheckError {
             | NoInitialMode { span }
             | SecondInitialMode { span, .. }
             | LetCycle { span, .. }
+            | TooDeep { span, .. }
             | Arity { span, .. }
             | RangeExcludesDefault { span, .. }
             | EmptyRange { span, .. }
@@ -116,6 +119,13 @@ impl CheckError {
             LetCycle { path, .. } => (
                 "expected a definition that does not refer back to itself".to_string(),
                 vec![format!("cycle: {path}")],
+            ),
+            TooDeep { .. } => (
+                format!(
+                    "expected at most {} levels, counting through the `let`s it uses",
+                    super::model::MAX_EXPR_DEPTH
+                ),
+                vec!["each `let` that uses another adds the depth of its definition".to_string()],
             ),
             Arity { expected, .. } => (format!("expected {expected} argument(s)"), vec![]),
             RangeExcludesDefault { lo, hi, .. } => {

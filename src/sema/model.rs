@@ -109,8 +109,10 @@ pub struct SimulateDefaults {
     pub atol: Option<f64>,
 }
 
-/// A resolved real-valued expression. `let`s are already substituted: a `let` used twice appears
-/// as two clones of one subtree, which the hash-consed DAG in `expr` merges again.
+/// A resolved real-valued expression. A `let` is resolved once and every use refers to that one
+/// definition ([`Expr::Shared`]), so the checked model is a DAG as large as the text, however
+/// the `let`s nest (24 lines of `let a_k = a_(k-1) + a_(k-1)` would be a tree of 2^24 nodes).
+/// Passes over it visit each shared definition once.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Expr {
     Num(f64),
@@ -121,6 +123,111 @@ pub enum Expr {
     Binary(BinOp, Box<Expr>, Box<Expr>),
     Call(Func, Vec<Expr>),
     If(Box<Cond>, Box<Expr>, Box<Expr>),
+    /// A use of a `let`: its resolved definition, shared by all its uses.
+    Shared(Shared),
+}
+
+/// How deep a checked expression may nest, counting through `let`s. It bounds the work and stack
+/// of every pass over an expression; `sema` reports a `let` that would exceed it.
+pub const MAX_EXPR_DEPTH: usize = 100_000;
+
+/// A `let`'s resolved definition, shared by every use; equal when it is the same definition or
+/// the definitions are equal.
+#[derive(Clone, Debug)]
+pub struct Shared(std::sync::Arc<SharedDef>);
+
+#[derive(Debug)]
+pub struct SharedDef {
+    pub expr: Expr,
+    /// Nesting depth of `expr`, counting through the `let`s it uses.
+    pub depth: usize,
+}
+
+impl Shared {
+    pub fn new(expr: Expr) -> Shared {
+        let depth = expr.depth();
+        Shared(std::sync::Arc::new(SharedDef { expr, depth }))
+    }
+
+    pub fn expr(&self) -> &Expr {
+        &self.0.expr
+    }
+
+    pub fn depth(&self) -> usize {
+        self.0.depth
+    }
+
+    /// Identifies the definition, for passes that visit each shared definition once.
+    pub fn key(&self) -> *const SharedDef {
+        std::sync::Arc::as_ptr(&self.0)
+    }
+}
+
+impl PartialEq for Shared {
+    fn eq(&self, other: &Shared) -> bool {
+        std::sync::Arc::ptr_eq(&self.0, &other.0) || self.0.expr == other.0.expr
+    }
+}
+
+impl Expr {
+    /// Nesting depth, reading a `let`'s depth from its definition: the walk stays within this
+    /// expression's own text.
+    pub fn depth(&self) -> usize {
+        match self {
+            Expr::Num(_) | Expr::State(_) | Expr::Param(_) | Expr::Time => 1,
+            Expr::Shared(s) => s.depth(),
+            Expr::Neg(a) => 1 + a.depth(),
+            Expr::Binary(_, a, b) => 1 + a.depth().max(b.depth()),
+            Expr::Call(_, args) => 1 + args.iter().map(Expr::depth).max().unwrap_or(0),
+            Expr::If(c, a, b) => 1 + c.depth().max(a.depth()).max(b.depth()),
+        }
+    }
+}
+
+impl Cond {
+    fn depth(&self) -> usize {
+        match self {
+            Cond::Cmp(_, a, b) => 1 + a.depth().max(b.depth()),
+            Cond::And(a, b) | Cond::Or(a, b) => 1 + a.depth().max(b.depth()),
+            Cond::Not(a) => 1 + a.depth(),
+        }
+    }
+}
+
+/// Dropping the last use of a long chain of `let`s would recurse once per link; the links are
+/// taken apart with a work list instead.
+impl Drop for SharedDef {
+    fn drop(&mut self) {
+        let mut work = vec![std::mem::replace(&mut self.expr, Expr::Num(0.0))];
+        let mut conds: Vec<Cond> = Vec::new();
+        loop {
+            if let Some(e) = work.pop() {
+                match e {
+                    Expr::Shared(Shared(arc)) => {
+                        if let Some(mut def) = std::sync::Arc::into_inner(arc) {
+                            work.push(std::mem::replace(&mut def.expr, Expr::Num(0.0)));
+                        }
+                    }
+                    Expr::Neg(a) => work.push(*a),
+                    Expr::Binary(_, a, b) => work.extend([*a, *b]),
+                    Expr::Call(_, args) => work.extend(args),
+                    Expr::If(c, a, b) => {
+                        conds.push(*c);
+                        work.extend([*a, *b]);
+                    }
+                    Expr::Num(_) | Expr::State(_) | Expr::Param(_) | Expr::Time => {}
+                }
+            } else if let Some(c) = conds.pop() {
+                match c {
+                    Cond::Cmp(_, a, b) => work.extend([a, b]),
+                    Cond::And(a, b) | Cond::Or(a, b) => conds.extend([*a, *b]),
+                    Cond::Not(a) => conds.push(*a),
+                }
+            } else {
+                break;
+            }
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

@@ -61,6 +61,8 @@ pub struct Scopes<'a> {
     state_names: Vec<String>,
     /// Lets being resolved, innermost last: the path reported for a cycle.
     let_stack: Vec<LetId>,
+    /// Whether a `let` over `MAX_EXPR_DEPTH` has been reported (the ones built on it are not).
+    too_deep_reported: bool,
 }
 
 impl Default for Scopes<'_> {
@@ -70,6 +72,7 @@ impl Default for Scopes<'_> {
             lets: Vec::new(),
             state_names: Vec::new(),
             let_stack: Vec::new(),
+            too_deep_reported: false,
         }
     }
 }
@@ -202,8 +205,25 @@ fn resolve_let(scopes: &mut Scopes, errors: &mut Vec<CheckError>, id: LetId, use
     scopes.lets[k].state = LetState::InProgress;
     scopes.let_stack.push(id);
     let (decl, scope) = (scopes.lets[k].decl, scopes.lets[k].scope);
-    let e = resolve_names(scopes, errors, &decl.value, scope);
+    // A `let` used before its definition resolves its definition here, so a chain of them
+    // declared last-first recurses once per link.
+    let value = crate::stack::deep(|| resolve_names(scopes, errors, &decl.value, scope));
     scopes.let_stack.pop();
+    let shared = Shared::new(value);
+    let e = if shared.depth() > MAX_EXPR_DEPTH {
+        // Reported once, at the first `let` over the cap; every `let` built on it reads as 0.
+        if !scopes.too_deep_reported {
+            scopes.too_deep_reported = true;
+            errors.push(CheckError::TooDeep {
+                name: decl.name.name.clone(),
+                depth: shared.depth(),
+                span: decl.name.span,
+            });
+        }
+        Expr::Num(0.0)
+    } else {
+        Expr::Shared(shared)
+    };
     scopes.lets[k].state = LetState::Done(e.clone());
     e
 }

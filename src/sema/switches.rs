@@ -10,16 +10,19 @@
 //!
 //! `min`, `max` and `abs` are continuous: their kinks change no sensitivity and need no event.
 
-use super::model::{Cond, Direction, Event, EventIdx, Expr, Func, Model};
+use std::collections::{HashMap, HashSet};
+
+use super::model::{Cond, Direction, Event, EventIdx, Expr, Func, Model, SharedDef};
 
 /// Appends the flow switches of every mode to `model.events` (after all declared events, so
 /// declared events fire first at a shared instant) and to the mode's event list.
 pub(crate) fn add_flow_switches(model: &mut Model) {
     for m in 0..model.modes.len() {
-        let mut guards: Vec<Expr> = Vec::new();
+        let mut switches = Switches::default();
         for flow in &model.modes[m].flows {
-            collect(flow, &mut guards);
+            switches.collect(flow);
         }
+        let guards = switches.found;
         let mode = &model.modes[m];
         let count = guards.len();
         let new_events: Vec<Event> = guards
@@ -52,73 +55,97 @@ pub(crate) fn add_flow_switches(model: &mut Model) {
 /// Whether `e` jumps somewhere in time or the state: it has an `if` comparison or a `sign`
 /// argument that moves with them (a guard like that is refused, see `check`).
 pub(crate) fn jumps(e: &Expr) -> bool {
-    let mut found = Vec::new();
-    collect(e, &mut found);
-    !found.is_empty()
+    let mut switches = Switches::default();
+    switches.collect(e);
+    !switches.found.is_empty()
 }
 
-/// The switch functions in `e` that move with time or state, without repeats.
-fn collect(e: &Expr, out: &mut Vec<Expr>) {
-    match e {
-        Expr::Num(_) | Expr::State(_) | Expr::Param(_) | Expr::Time => {}
-        Expr::Neg(a) => collect(a, out),
-        Expr::Binary(_, a, b) => {
-            collect(a, out);
-            collect(b, out);
-        }
-        Expr::Call(func, args) => {
-            if let (Func::Sign, Some(a)) = (func, args.first()) {
-                push(a.clone(), out);
+/// The switch functions found so far, without repeats, and what has been learnt about shared
+/// `let` definitions: each is searched once and its `moves` answer kept, so a model whose `let`s
+/// share subexpressions costs its size, not the size of the expanded tree.
+#[derive(Default)]
+struct Switches {
+    found: Vec<Expr>,
+    searched: HashSet<*const SharedDef>,
+    moving: HashMap<*const SharedDef, bool>,
+}
+
+impl Switches {
+    fn collect(&mut self, e: &Expr) {
+        match e {
+            Expr::Num(_) | Expr::State(_) | Expr::Param(_) | Expr::Time => {}
+            Expr::Shared(s) => {
+                if self.searched.insert(s.key()) {
+                    crate::stack::deep(|| self.collect(s.expr()));
+                }
             }
-            for a in args {
-                collect(a, out);
+            Expr::Neg(a) => self.collect(a),
+            Expr::Binary(_, a, b) => {
+                self.collect(a);
+                self.collect(b);
+            }
+            Expr::Call(func, args) => {
+                if let (Func::Sign, Some(a)) = (func, args.first()) {
+                    self.push(a.clone());
+                }
+                for a in args {
+                    self.collect(a);
+                }
+            }
+            Expr::If(c, a, b) => {
+                self.collect_cond(c);
+                self.collect(a);
+                self.collect(b);
             }
         }
-        Expr::If(c, a, b) => {
-            collect_cond(c, out);
-            collect(a, out);
-            collect(b, out);
+    }
+
+    fn collect_cond(&mut self, c: &Cond) {
+        match c {
+            Cond::Cmp(_, l, r) => {
+                self.collect(l);
+                self.collect(r);
+                self.push(Expr::Binary(super::BinOp::Sub, Box::new(l.clone()), Box::new(r.clone())));
+            }
+            Cond::And(a, b) | Cond::Or(a, b) => {
+                self.collect_cond(a);
+                self.collect_cond(b);
+            }
+            Cond::Not(a) => self.collect_cond(a),
         }
     }
-}
 
-fn collect_cond(c: &Cond, out: &mut Vec<Expr>) {
-    match c {
-        Cond::Cmp(_, l, r) => {
-            collect(l, out);
-            collect(r, out);
-            push(Expr::Binary(super::BinOp::Sub, Box::new(l.clone()), Box::new(r.clone())), out);
+    fn push(&mut self, guard: Expr) {
+        if self.moves(&guard) && !self.found.contains(&guard) {
+            self.found.push(guard);
         }
-        Cond::And(a, b) | Cond::Or(a, b) => {
-            collect_cond(a, out);
-            collect_cond(b, out);
+    }
+
+    /// Whether `e` mentions `t` or a state (a switch of parameters alone never moves in time).
+    fn moves(&mut self, e: &Expr) -> bool {
+        match e {
+            Expr::Num(_) | Expr::Param(_) => false,
+            Expr::State(_) | Expr::Time => true,
+            Expr::Shared(s) => {
+                if let Some(&known) = self.moving.get(&s.key()) {
+                    return known;
+                }
+                let known = crate::stack::deep(|| self.moves(s.expr()));
+                self.moving.insert(s.key(), known);
+                known
+            }
+            Expr::Neg(a) => self.moves(a),
+            Expr::Binary(_, a, b) => self.moves(a) || self.moves(b),
+            Expr::Call(_, args) => args.iter().any(|a| self.moves(a)),
+            Expr::If(c, a, b) => self.cond_moves(c) || self.moves(a) || self.moves(b),
         }
-        Cond::Not(a) => collect_cond(a, out),
     }
-}
 
-fn push(guard: Expr, out: &mut Vec<Expr>) {
-    if moves(&guard) && !out.contains(&guard) {
-        out.push(guard);
-    }
-}
-
-/// Whether `e` mentions `t` or a state (a switch of parameters alone never moves in time).
-fn moves(e: &Expr) -> bool {
-    match e {
-        Expr::Num(_) | Expr::Param(_) => false,
-        Expr::State(_) | Expr::Time => true,
-        Expr::Neg(a) => moves(a),
-        Expr::Binary(_, a, b) => moves(a) || moves(b),
-        Expr::Call(_, args) => args.iter().any(moves),
-        Expr::If(c, a, b) => cond_moves(c) || moves(a) || moves(b),
-    }
-}
-
-fn cond_moves(c: &Cond) -> bool {
-    match c {
-        Cond::Cmp(_, l, r) => moves(l) || moves(r),
-        Cond::And(a, b) | Cond::Or(a, b) => cond_moves(a) || cond_moves(b),
-        Cond::Not(a) => cond_moves(a),
+    fn cond_moves(&mut self, c: &Cond) -> bool {
+        match c {
+            Cond::Cmp(_, l, r) => self.moves(l) || self.moves(r),
+            Cond::And(a, b) | Cond::Or(a, b) => self.cond_moves(a) || self.cond_moves(b),
+            Cond::Not(a) => self.cond_moves(a),
+        }
     }
 }
