@@ -21,15 +21,17 @@ pub struct Diagnostic {
 }
 
 /// Renders `diagnostics` against the source text, as plain text (no colour): stable for snapshots
-/// and readable in logs.
+/// and readable in logs. The source lines are shown as [`Shown`] describes: every line end counts,
+/// and no byte of the file reaches the terminal unescaped.
 pub fn render(file_name: &str, source: &str, diagnostics: &[Diagnostic]) -> String {
-    let file = SimpleFile::new(file_name, source);
+    let shown = Shown::new(source);
+    let file = SimpleFile::new(file_name, shown.text.as_str());
     let config = Config { chars: Chars::ascii(), ..Config::default() };
     let mut out = String::new();
     for d in diagnostics {
         // Clamp so that a span at the very end of the file still renders.
-        let start = d.span.start.min(source.len());
-        let end = d.span.end.clamp(start, source.len());
+        let start = shown.offset(d.span.start.min(source.len()));
+        let end = shown.offset(d.span.end.clamp(d.span.start, source.len())).max(start);
         let cs = CsDiagnostic::error()
             .with_message(&d.message)
             .with_labels(vec![Label::primary((), start..end).with_message(&d.label)])
@@ -41,4 +43,113 @@ pub fn render(file_name: &str, source: &str, diagnostics: &[Diagnostic]) -> Stri
         }
     }
     out
+}
+
+/// The source as diagnostics show it.
+/// - Line ends: LF, CRLF and a lone CR each end a line, as in the parser (a CRLF's CR shows as a
+///   space, a lone CR as LF: same byte lengths, so spans need no mapping for them).
+/// - A byte-order mark at the start is not shown.
+/// - Every other control or invisible character (see [`is_invisible`]) is shown as `<U+XXXX>`, so
+///   a caret can point at it and no escape sequence in a file reaches the terminal.
+///
+/// Columns are counted in the shown line.
+struct Shown {
+    text: String,
+    /// `(end of a replaced character in the source, shown minus source length up to there)`, in
+    /// source order: a sparse map from source offsets to shown offsets.
+    shifts: Vec<(usize, isize)>,
+}
+
+impl Shown {
+    fn new(source: &str) -> Shown {
+        let mut text = String::with_capacity(source.len());
+        let mut shifts = Vec::new();
+        let mut shift = 0isize;
+        let mut chars = source.char_indices().peekable();
+        while let Some((i, c)) = chars.next() {
+            let end = i + c.len_utf8();
+            match c {
+                '\r' if chars.peek().map(|&(_, n)| n) == Some('\n') => text.push(' '),
+                '\r' => text.push('\n'),
+                '\u{FEFF}' if i == 0 => {
+                    shift -= c.len_utf8() as isize;
+                    shifts.push((end, shift));
+                }
+                c if is_invisible(c) => {
+                    let escaped = escaped(c);
+                    shift += escaped.len() as isize - c.len_utf8() as isize;
+                    text.push_str(&escaped);
+                    shifts.push((end, shift));
+                }
+                c => text.push(c),
+            }
+        }
+        Shown { text, shifts }
+    }
+
+    /// The shown offset of a source offset (on a character boundary).
+    fn offset(&self, source_offset: usize) -> usize {
+        let before = self.shifts.partition_point(|&(end, _)| end <= source_offset);
+        let shift = if before == 0 { 0 } else { self.shifts[before - 1].1 };
+        source_offset.saturating_add_signed(shift).min(self.text.len())
+    }
+}
+
+/// Characters a terminal would not show as themselves: control characters other than tab and
+/// line feed, zero-width and format characters, and bidirectional overrides (which can make a
+/// line read differently from what it contains).
+pub fn is_invisible(c: char) -> bool {
+    (c.is_control() && c != '\n' && c != '\t')
+        || matches!(c, '\u{00AD}' | '\u{200B}'..='\u{200F}' | '\u{202A}'..='\u{202E}' | '\u{2060}'..='\u{2064}' | '\u{2066}'..='\u{2069}' | '\u{FEFF}')
+}
+
+/// `<U+XXXX>`, how diagnostics show an invisible character.
+pub fn escaped(c: char) -> String {
+    format!("<U+{:04X}>", c as u32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn one(source: &str, start: usize, end: usize) -> String {
+        let d = Diagnostic {
+            message: "bad".into(),
+            span: Span::new(start, end),
+            label: "here".into(),
+            notes: vec![],
+        };
+        render("m.hyb", source, &[d])
+    }
+
+    #[test]
+    fn a_control_character_is_escaped_with_the_caret_under_it() {
+        let out = one("model m\nstate x = 1\x1b[2J\n", 19, 20);
+        assert!(!out.contains('\x1b'), "{out}");
+        assert!(out.contains("state x = 1<U+001B>[2J"), "{out}");
+        assert!(out.contains("m.hyb:2:12"), "{out}");
+        let caret_line = out.lines().find(|l| l.contains('^')).unwrap();
+        let line = out.lines().find(|l| l.contains("<U+001B>")).unwrap();
+        let col = |l: &str, pat: &str| l.find(pat).unwrap();
+        assert_eq!(col(caret_line, "^"), col(line, "<U+001B>"), "{out}");
+        assert_eq!(caret_line.matches('^').count(), "<U+001B>".len(), "{out}");
+    }
+
+    #[test]
+    fn lone_cr_and_crlf_end_lines_like_lf() {
+        for nl in ["\n", "\r\n", "\r"] {
+            let source = format!("model m{nl}state x = 1{nl}der(x) = )");
+            let at = source.rfind(')').unwrap();
+            let out = one(&source, at, at + 1);
+            assert!(out.contains("m.hyb:3:10"), "{nl:?}: {out}");
+            assert!(!out.contains('\r'), "{nl:?}: {out}");
+        }
+    }
+
+    #[test]
+    fn a_bom_is_not_shown_and_columns_ignore_it() {
+        let out = one("\u{FEFF}model m )", 11, 12);
+        assert!(out.contains("m.hyb:1:9"), "{out}");
+        assert!(!out.contains("U+FEFF"), "{out}");
+    }
 }

@@ -37,7 +37,8 @@ fn check_limits(source: &str) -> Result<(), ParseError> {
     let mut depth = 0usize;
     for (i, c) in source.char_indices() {
         match c {
-            '\n' => {
+            // Line ends as the grammar's NEWLINE counts them: LF, CRLF, or a lone CR.
+            '\n' | '\r' => {
                 line_start = i + 1;
                 continue;
             }
@@ -482,6 +483,10 @@ fn found_at(source: &str, pos: usize) -> (String, usize) {
     };
     if c == '\n' || c == '\r' {
         return ("end of line".to_string(), 0);
+    }
+    if crate::diag::is_invisible(c) {
+        let kind = if c.is_control() { "control character" } else { "invisible character" };
+        return (format!("{kind} {}", crate::diag::escaped(c)), c.len_utf8());
     }
     let word: String =
         rest.chars().take_while(|ch| ch.is_alphanumeric() || *ch == '_' || *ch == '.').collect();
