@@ -11,46 +11,9 @@ use std::time::{Duration, Instant};
 use approx::assert_relative_eq;
 use hybc::Model;
 
-/// `n` chained lets `a_k = a_(k-1) + c` and `der(x) = a_(n-1)`: x(T) = n c T, dx/dc = n T.
-/// `reversed` declares them last-first, so every use comes before its definition.
-fn let_chain(n: usize, reversed: bool) -> String {
-    let mut lets: Vec<String> = (1..n).map(|k| format!("let a{k} = a{} + c", k - 1)).collect();
-    lets.insert(0, "let a0 = c".to_string());
-    if reversed {
-        lets.reverse();
-    }
-    format!(
-        "model lets\nparam c = 1e-4\nstate x = 0\nder(x) = a{}\n{}\noutput y = a{}\nsimulate t_end = 1\n",
-        n - 1,
-        lets.join("\n"),
-        n - 1
-    )
-}
-
-/// `let d_k = d_(k-1) + p * d_(k-1)`, 60 times: as a tree, 2^60 nodes; as a DAG, about 120.
-/// d_k = p (1 + p)^k.
-fn doubling_lets(n: usize) -> String {
-    let mut text = String::from("model doubling\nparam p = 1\nstate x = 1\nder(x) = 0\nlet d0 = p\n");
-    for k in 1..n {
-        text.push_str(&format!("let d{k} = d{} + p * d{}\n", k - 1, k - 1));
-    }
-    text.push_str(&format!("output big = d{}\nsimulate t_end = 1\n", n - 1));
-    text
-}
-
-/// `der(x1) = -k x1`, `der(xi) = k (x(i-1) - xi)`, x1(0) = 1: xi(t) = (kt)^(i-1)/(i-1)! e^(-kt).
-fn state_chain(n: usize) -> String {
-    let mut text = String::from("model chain\nparam k = 1\nstate x1 = 1\n");
-    for i in 2..=n {
-        text.push_str(&format!("state x{i} = 0\n"));
-    }
-    text.push_str("der(x1) = -k * x1\n");
-    for i in 2..=n {
-        text.push_str(&format!("der(x{i}) = k * (x{} - x{i})\n", i - 1));
-    }
-    text.push_str("simulate t_end = 1\n");
-    text
-}
+#[path = "../../benches/support/stress_models.rs"]
+mod stress_models;
+use stress_models::{doubling_lets, let_chain, state_chain};
 
 /// Runs `hybc args` on `model_text`, polling its peak resident memory (VmHWM); returns stdout,
 /// stderr, the exit code, the wall time and the peak in MiB.
