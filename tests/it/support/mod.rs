@@ -4,6 +4,7 @@ pub mod cli;
 pub mod expr;
 pub mod hand_functions;
 pub mod hand_systems;
+pub mod models;
 pub mod reference;
 
 use proptest::test_runner::{Config, FailurePersistence, FileFailurePersistence};
