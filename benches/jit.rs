@@ -24,6 +24,11 @@ use hybc::sim::{HybridSystem, SystemInfo};
 mod chain;
 use chain::chain_source;
 
+// The shipped-model list the tests use (`tests/it/support/models.rs`: `models/*.hyb`, sorted).
+#[path = "../tests/it/support/models.rs"]
+mod models;
+use models::shipped_models;
+
 const BALL: &str = include_str!("../models/ball.hyb");
 
 /// Parses, checks and lowers a model, differentiating every parameter.
@@ -173,13 +178,7 @@ fn bench_chain_calls(c: &mut Criterion) {
 /// Parse, check, lower and compile (all parameters differentiated): what `hybc run` pays once.
 fn bench_model_compile(c: &mut Criterion) {
     let mut group = c.benchmark_group("compile/model");
-    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/models");
-    let mut paths: Vec<_> =
-        std::fs::read_dir(dir).expect("models").map(|e| e.expect("entry").path()).collect();
-    paths.sort();
-    for path in paths {
-        let name = path.file_stem().expect("name").to_string_lossy().into_owned();
-        let source = std::fs::read_to_string(&path).expect("readable");
+    for models::ShippedModel { name, source, .. } in shipped_models() {
         group.bench_function(name, |b| {
             b.iter(|| {
                 let (funcs, info) = front_end(black_box(&source));

@@ -3,6 +3,8 @@
 //! failing, and puts its result in the JSON report.
 
 use crate::support::cli::hybc;
+use crate::support::models::shipped_models;
+use crate::support::reference::BallForm;
 
 use std::process::Output;
 
@@ -20,13 +22,8 @@ fn json_of(out: &Output) -> Value {
 
 #[test]
 fn every_shipped_model_passes_its_gradient_check() {
-    let mut paths: Vec<_> = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/models"))
-        .expect("models")
-        .map(|e| e.expect("entry").path())
-        .collect();
-    paths.sort();
-    for path in paths {
-        let path = path.to_str().expect("utf-8");
+    for shipped in shipped_models() {
+        let path = shipped.path.as_str();
         let out = hybc(&["run", path, "--grad", "all", "--check-grad", "--format", "json"]);
         assert_eq!(out.status.code(), Some(0), "{path}: {}", String::from_utf8_lossy(&out.stdout));
         let json = json_of(&out);
@@ -207,15 +204,10 @@ fn default_check_passes_every_model_from_rtol_1e_6_to_1e_12() {
     // user may pick, not only at the models' own, with the declared ranges as `hybc run` passes
     // them; the worst discrepancies per model and tolerance are printed for the README
     // (`cargo test --release --test it check_grad -- --nocapture`).
-    let mut paths: Vec<_> = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/models"))
-        .expect("models")
-        .map(|e| e.expect("entry").path())
-        .collect();
-    paths.sort();
     let rtols = [1e-6, 1e-8, 1e-10, 1e-12];
     let mut worst = [0.0_f64; 4];
-    for path in paths {
-        let model = hybc::check_source(&std::fs::read_to_string(&path).unwrap()).expect("valid");
+    for shipped in shipped_models() {
+        let model = hybc::check_source(&shipped.source).expect("valid");
         let grad: Vec<ParamIdx> = (0..model.params.len()).map(|i| ParamIdx(i as u32)).collect();
         let compiled = compile(&lower(&model), system_info(&model, &grad), &CompileOptions::default())
             .expect("compiles");
@@ -228,8 +220,8 @@ fn default_check_passes_every_model_from_rtol_1e_6_to_1e_12() {
             let nominal = run(&compiled, &p, &opts).expect("runs");
             let c =
                 check_within(&compiled, &p, &ranges, &opts, &nominal, &CheckOptions::for_rtol(rtol)).unwrap();
-            assert!(c.passed(), "{} at rtol {rtol:e}:\n{}", path.display(), c.to_table());
-            assert_eq!(c.events.compared, nominal.events.len(), "{}", path.display());
+            assert!(c.passed(), "{} at rtol {rtol:e}:\n{}", shipped.path, c.to_table());
+            assert_eq!(c.events.compared, nominal.events.len(), "{}", shipped.path);
             let model_worst = c.params.iter().map(|x| x.worst_discrepancy()).fold(0.0, f64::max);
             row.push(format!("{model_worst:.1e}"));
             *w = w.max(model_worst);
@@ -355,13 +347,12 @@ fn a_parameter_at_the_upper_end_of_its_range_gets_a_backward_difference() {
     // derivative at e = 1 is t1 k (k + 1), with t1 = sqrt(2 h0 / g). No run leaves the range.
     let (code, json) = check_json("models/ball.hyb", &["--set", "e=1"]);
     assert_eq!(code, Some(0), "{json}");
-    let t1 = (2.0_f64 / 9.81).sqrt();
-    for k in 0..3 {
-        let ev = &json["events"][k];
-        let kf = k as f64;
-        assert_rel(at(ev, &["time"]), t1 * (2.0 * kf + 1.0), 1e-10, "t_k");
-        if k > 0 {
-            assert_rel(at(ev, &["dtime", "e"]), t1 * kf * (kf + 1.0), 1e-8, "dt_k/de");
+    let ball = BallForm { e: 1.0, ..BallForm::DEFAULT };
+    for k in 1..=3 {
+        let ev = &json["events"][k as usize - 1];
+        assert_rel(at(ev, &["time"]), ball.touchdown(k), 1e-10, "t_k");
+        if k > 1 {
+            assert_rel(at(ev, &["dtime", "e"]), ball.touchdown_grad(k)[1], 1e-8, "dt_k/de");
         }
     }
     let e = param_check(&json, "e");

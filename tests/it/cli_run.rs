@@ -1,7 +1,12 @@
-//! `hybc run` end to end: the binary's JSON against the bouncing ball's closed form, exit codes,
-//! Zeno and grazing reports. Closed forms: ../shared/reference/closed-forms.md.
+//! `hybc run` end to end, where a property is asserted in code: the binary's JSON against the
+//! bouncing ball's closed form (`support::reference`), a quick Zeno stop, grazing reports, total
+//! derivatives at a stop event, every shipped model, the trajectory file. What hybc prints for
+//! given flags (exit codes, error messages, reports) is pinned by the cases in tests/data/cli
+//! (`cli_cases.rs`).
 
 use crate::support::cli::hybc;
+use crate::support::models::shipped_models;
+use crate::support::reference::BallForm;
 
 use std::process::Output;
 use std::time::{Duration, Instant};
@@ -27,54 +32,22 @@ fn f(v: &Value) -> f64 {
 fn ball_reproduces_the_closed_form_to_1e_9() {
     let (json, out) = run_json(&["models/ball.hyb", "--grad", "e,h0"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let (g, e, h0) = (9.81_f64, 0.8_f64, 1.0_f64);
-    let t1 = (2.0 * h0 / g).sqrt();
-    let v1 = (2.0 * g * h0).sqrt();
+    let ball = BallForm::DEFAULT;
     let events = json["events"].as_array().expect("events");
     assert_eq!(events.len(), 4, "four bounces before 2.5 s");
-    // Bounce k+1 follows bounce k after a flight of 2 e^k v1 / g.
-    let mut t = t1;
-    for (k, ev) in events.iter().enumerate() {
-        assert_relative_eq!(f(&ev["time"]), t, max_relative = 1e-9);
+    for (ev, k) in events.iter().zip(1..) {
+        assert_relative_eq!(f(&ev["time"]), ball.touchdown(k), max_relative = 1e-9);
         assert_eq!(ev["grazing"], Value::Bool(false));
-        t += 2.0 * e.powi(k as i32 + 1) * v1 / g;
     }
-    assert_relative_eq!(f(&events[0]["dtime"]["h0"]), 1.0 / (2.0 * g * h0).sqrt(), max_relative = 1e-9);
+    assert_relative_eq!(f(&events[0]["dtime"]["h0"]), 1.0 / ball.v1(), max_relative = 1e-9);
     assert_relative_eq!(f(&events[0]["dtime"]["h0"]), 0.2257618205, max_relative = 1e-9);
-    let k = 4;
-    let energy = g * h0 * e.powi(2 * k);
+    let [_, denergy_de, denergy_dh0] = ball.energy_grad(4);
     let fin = &json["final"];
-    assert_relative_eq!(f(&fin["outputs"]["energy"]), energy, max_relative = 1e-9);
-    assert_relative_eq!(
-        f(&fin["doutputs"]["energy"]["e"]),
-        2.0 * k as f64 * g * h0 * e.powi(2 * k - 1),
-        max_relative = 1e-9
-    );
-    assert_relative_eq!(f(&fin["doutputs"]["energy"]["h0"]), g * e.powi(2 * k), max_relative = 1e-9);
+    assert_relative_eq!(f(&fin["outputs"]["energy"]), ball.energy(4), max_relative = 1e-9);
+    assert_relative_eq!(f(&fin["doutputs"]["energy"]["e"]), denergy_de, max_relative = 1e-9);
+    assert_relative_eq!(f(&fin["doutputs"]["energy"]["h0"]), denergy_dh0, max_relative = 1e-9);
     assert_eq!(json["stopped_by"], "t_end");
     assert_eq!(json["grad"], serde_json::json!(["e", "h0"]));
-}
-
-#[test]
-fn second_closed_form_point_matches_state_and_sensitivities() {
-    let (json, out) = run_json(&["models/ball.hyb", "--grad", "all", "--set", "h0=10", "--t-end", "2"]);
-    assert!(out.status.success());
-    let fin = &json["final"];
-    assert_relative_eq!(f(&fin["state"]["y"]), 4.80570772929, max_relative = 1e-9);
-    assert_relative_eq!(f(&fin["state"]["v"]), 5.59285386465, max_relative = 1e-9);
-    let expect = [
-        ("h0", -0.0787146135354, 1.26064269323),
-        ("g", 0.570117621269, -0.714941189366),
-        ("e", 8.01428207183, 14.0071410359),
-    ];
-    for (p, dy, dv) in expect {
-        assert_relative_eq!(f(&fin["dstate"]["y"][p]), dy, max_relative = 1e-8);
-        assert_relative_eq!(f(&fin["dstate"]["v"][p]), dv, max_relative = 1e-8);
-    }
-    let ev = &json["events"][0];
-    assert_relative_eq!(f(&ev["time"]), 1.42784312293, max_relative = 1e-10);
-    assert_relative_eq!(f(&ev["dtime"]["g"]), -0.0727748788444, max_relative = 1e-9);
-    assert_relative_eq!(f(&ev["dtime"]["h0"]), 0.0713921561464, max_relative = 1e-9);
 }
 
 #[test]
@@ -120,25 +93,11 @@ fn stop_event_reports_total_derivatives() {
 }
 
 #[test]
-fn exit_codes_distinguish_model_usage_and_runtime_errors() {
-    assert_eq!(hybc(&["check", "models/ball.hyb"]).status.code(), Some(0));
-    assert_eq!(hybc(&["check", "tests/data/sema_err/let_cycle.hyb"]).status.code(), Some(1));
-    assert_eq!(hybc(&["check", "no/such/file.hyb"]).status.code(), Some(2));
-    assert_eq!(hybc(&["run", "models/ball.hyb", "--grad", "nope"]).status.code(), Some(2));
-    assert_eq!(hybc(&["run", "models/ball.hyb", "--set", "e=2"]).status.code(), Some(2));
-    assert_eq!(hybc(&["run", "models/ball.hyb", "--rtol", "-1"]).status.code(), Some(2));
-    assert_eq!(hybc(&["run", "models/ball.hyb", "--bogus"]).status.code(), Some(2));
-    let err = hybc(&["run", "models/ball.hyb", "--set", "e=2"]);
-    assert!(String::from_utf8_lossy(&err.stderr).contains("outside its range [0, 1]"));
-}
-
-#[test]
 fn every_shipped_model_runs_and_the_table_shows_its_gradients() {
-    for entry in std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/models")).expect("models") {
-        let path = entry.expect("entry").path();
-        let out = hybc(&["run", path.to_str().expect("utf-8"), "--grad", "all"]);
+    for model in shipped_models() {
+        let out = hybc(&["run", &model.path, "--grad", "all"]);
         let stdout = String::from_utf8_lossy(&out.stdout);
-        assert!(out.status.success(), "{}: {}", path.display(), String::from_utf8_lossy(&out.stderr));
+        assert!(out.status.success(), "{}: {}", model.path, String::from_utf8_lossy(&out.stderr));
         assert!(stdout.contains("final: t = "), "{stdout}");
         assert!(stdout.contains("d/d"), "{stdout}");
     }
@@ -169,7 +128,7 @@ fn trajectory_csv_has_a_header_and_uniform_samples() {
     let times: Vec<f64> = rows.iter().map(|r| r[0]).collect();
     // dE/de at t = 2.5 (after 4 bounces) is 8 g h0 e^7, the closed form.
     let last = rows.last().expect("rows");
-    assert_relative_eq!(last[6], 8.0 * 9.81 * 0.8_f64.powi(7), max_relative = 1e-8);
+    assert_relative_eq!(last[6], BallForm::DEFAULT.energy_grad(4)[1], max_relative = 1e-8);
     assert_eq!(times.len(), 6, "t = 0, 0.5, ..., 2.5: {times:?}");
     for (k, t) in times.iter().enumerate() {
         assert_relative_eq!(*t, 0.5 * k as f64, epsilon = 1e-12);

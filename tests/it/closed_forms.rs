@@ -2,17 +2,18 @@
 //! parameter points of each model: the vertical ball (closed form; also its saltation matrix),
 //! the tilted floor (each flight solved exactly as a quadratic), the thermostat (exponential
 //! solutions) and dosing (linear kinetics). Gradients of the references are Richardson-extrapolated
-//! central differences of those exact computations (`closed_support::derivative`, ~1e-12).
+//! central differences of those exact computations (`support::reference`, ~1e-12).
 //! Nonlinear models without closed form are checked against central differences of the compiled
 //! model itself by `hybc::gradcheck`, at tight tolerances and several points.
 //!
 //! All runs use the models' tolerances, rtol 1e-10 (atol 1e-12). Stated tolerances: event times
 //! 1e-9 relative; gradients, final states and outputs 1e-8 relative with an absolute floor of
-//! 1e-9 (a derivative that is exactly zero is reported as ~1e-12, not 0). `cargo test --test
+//! 1e-9 (a derivative that is exactly zero is reported as ~1e-12, not 0). `cargo test --test it
 //! closed_forms -- --nocapture` prints the largest errors seen (README, Accuracy).
 
 use crate::support::reference::{
-    ball_reference, derivative, mid_flight, thermostat_reference, Compiled, Errors, Reference, MAX_EVENTS,
+    ball_reference, derivative, dosing_reference, mid_flight, thermostat_reference, tilted_reference,
+    BallForm, Compiled, Errors, Reference,
 };
 use hybc::gradcheck::{check, CheckOptions};
 use hybc::sim::{SimOptions, SimResult};
@@ -95,7 +96,7 @@ fn vertical_ball_against_its_closed_form_at_four_points() {
             "final states and outputs",
             &format!("{tag} energy"),
             energy,
-            p[0] * p[2] * p[1].powi(2 * k),
+            BallForm::at(&p).energy(k),
             REL,
             0.0,
         );
@@ -175,39 +176,6 @@ fn saltation_matrix_at_the_first_bounce() {
 
 // ---- tilted floor: p = [g, e, s, vx0, h0] ------------------------------------------------------
 
-/// Each flight is a parabola meeting the line y = -s x: the clearance `c = y + s x` follows
-/// `c0 + b tau - g tau^2 / 2` with `b = vy + s vx`, so the impact is the larger root of a quadratic
-/// (`2 b / g` when starting on the floor). Then the normal velocity is reflected with restitution.
-/// Final values: `[x, y, vx, vy, energy, clearance]`.
-fn tilted_reference(p: &[f64], t_end: f64) -> Reference {
-    let (g, e, s, vx0, h0) = (p[0], p[1], p[2], p[3], p[4]);
-    let (mut t, mut x, mut y, mut vx, mut vy) = (0.0, 0.0, h0, vx0, 0.0);
-    let mut c0 = h0;
-    let mut times = Vec::new();
-    loop {
-        let b = vy + s * vx;
-        let tau = if c0 == 0.0 { 2.0 * b / g } else { (b + (b * b + 2.0 * g * c0).sqrt()) / g };
-        if t + tau > t_end || times.len() == MAX_EVENTS {
-            break;
-        }
-        t += tau;
-        times.push(t);
-        x += vx * tau;
-        y += vy * tau - 0.5 * g * tau * tau;
-        vy -= g * tau;
-        let vn = (s * vx + vy) / (1.0 + s * s);
-        vx -= (1.0 + e) * vn * s;
-        vy -= (1.0 + e) * vn;
-        c0 = 0.0; // on the floor: the clearance is exactly zero in exact arithmetic
-    }
-    let tau = t_end - t;
-    x += vx * tau;
-    y += vy * tau - 0.5 * g * tau * tau;
-    vy -= g * tau;
-    let energy = 0.5 * (vx * vx + vy * vy) + g * y;
-    Reference { times, finals: vec![x, y, vx, vy, energy, y + s * x] }
-}
-
 #[test]
 fn tilted_floor_against_exact_flights_at_four_points() {
     let m = Compiled::from_file("models/tilted_ball.hyb");
@@ -265,21 +233,6 @@ fn thermostat_switching_times_from_the_exponential_solution() {
 }
 
 // ---- dosing: p = [ka, ke, dose, t_dose, tau, V] ------------------------------------------------
-
-/// Linear kinetics, superposed per dose given at `t_d`: `gut = D e^(-ka (t - t_d))`,
-/// `central = D ka / (ka - ke) (e^(-ke (t - t_d)) - e^(-ka (t - t_d)))`. Final values:
-/// `[gut, central, conc]`.
-fn dosing_reference(p: &[f64], t_end: f64) -> Reference {
-    let (ka, ke, dose, t_dose, tau, v) = (p[0], p[1], p[2], p[3], p[4], p[5]);
-    let times: Vec<f64> = [t_dose, t_dose + tau].into_iter().filter(|&t| t <= t_end).collect();
-    let (mut gut, mut central) = (0.0, 0.0);
-    for td in &times {
-        let dt = t_end - td;
-        gut += dose * (-ka * dt).exp();
-        central += dose * ka / (ka - ke) * ((-ke * dt).exp() - (-ka * dt).exp());
-    }
-    Reference { times, finals: vec![gut, central, central / v] }
-}
 
 #[test]
 fn dosing_amounts_from_linear_kinetics() {

@@ -3,7 +3,6 @@
 //! structural zero) agrees with a central finite difference of the evaluator.
 
 use std::collections::HashMap;
-use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use hybc::expr::{eval_one, ExprId, ModelFunctions, SparseMat, SparseVec, Var};
@@ -11,28 +10,17 @@ use hybc::lower::{derive_report, lower};
 use hybc::sema::{Model, ParamIdx};
 use proptest::prelude::*;
 
-fn model_paths() -> Vec<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("models");
-    let mut paths: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .expect("models directory")
-        .map(|e| e.expect("directory entry").path())
-        .filter(|p| p.extension().is_some_and(|x| x == "hyb"))
-        .collect();
-    paths.sort();
-    paths
-}
+use crate::support::models::{shipped_models, ShippedModel};
 
 /// Every shipped model, checked and lowered once.
 fn models() -> &'static [(String, Model, ModelFunctions)] {
     static MODELS: OnceLock<Vec<(String, Model, ModelFunctions)>> = OnceLock::new();
     MODELS.get_or_init(|| {
-        model_paths()
+        shipped_models()
             .into_iter()
-            .map(|path| {
-                let source = std::fs::read_to_string(&path).expect("readable model");
-                let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("?").to_string();
-                let model = hybc::check_source(&source)
-                    .unwrap_or_else(|e| panic!("{name}: {}", e.render(&name, &source)));
+            .map(|ShippedModel { name, path, source, .. }| {
+                let model =
+                    hybc::check_source(&source).unwrap_or_else(|e| panic!("{}", e.render(&path, &source)));
                 let funcs = lower(&model);
                 (name, model, funcs)
             })

@@ -6,6 +6,8 @@ use approx::assert_relative_eq;
 use hybc::sim::StopReason;
 use hybc::{Model, Run, SimOptions};
 
+use crate::support::reference::BallForm;
+
 /// Compiles `text` with gradients for `grad` and runs it at its defaults with `opts` over the
 /// model's `simulate` line.
 fn run(text: &str, grad: &[&str], opts: impl FnOnce(&mut SimOptions)) -> Run {
@@ -113,7 +115,7 @@ fn a_perfectly_inelastic_ball_stays_at_the_floor() {
     let text = BALL.replace("v := -e * v", "v := 0");
     let r = run(&text, &["h0"], |o| o.t_end = 2.5);
     assert!(matches!(r.stopped_by(), StopReason::Stuck { .. }), "{:?}", r.stopped_by());
-    assert_relative_eq!(r.final_time(), (2.0 / 9.81f64).sqrt(), max_relative = 1e-12);
+    assert_relative_eq!(r.final_time(), BallForm::DEFAULT.t1(), max_relative = 1e-12);
     assert!(r.state("y").unwrap() > -1e-12, "{:?}", r.state("y"));
 }
 
@@ -210,9 +212,7 @@ fn many_events_over_a_long_horizon_end_at_max_events_not_zeno() {
 fn the_ball_run_without_end_stops_as_zeno_at_its_accumulation_point() {
     let r = run(BALL, &[], |o| o.t_end = 1e308);
     let StopReason::Zeno { accumulation, .. } = *r.stopped_by() else { panic!("{:?}", r.stopped_by()) };
-    // t* = t1 + 2 e v1 / (g (1 - e)) with t1 = sqrt(2 h0 / g), v1 = g t1.
-    let t1 = (2.0f64 / 9.81).sqrt();
-    let t_star = t1 + 2.0 * 0.8 * 9.81 * t1 / (9.81 * 0.2);
+    let t_star = BallForm::DEFAULT.accumulation_time();
     assert!((accumulation.expect("an estimate") - t_star).abs() < 1e-6, "{accumulation:?} vs {t_star}");
     assert!((t_star - 4.0637127689).abs() < 1e-9);
 }

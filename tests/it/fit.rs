@@ -1,15 +1,16 @@
 //! `hybc fit` against the bouncing ball's closed forms (../shared/reference/closed-forms.md): the
 //! library API for the numbers, the binary for flags, JSON and exit codes.
 //!
-//! Ball (g = 9.81, dropped from h0 at rest, restitution e): the first touchdown is at
-//! t1 = sqrt(2 h0 / g), the k-th at t_k = t1 (1 + 2 e + ... + 2 e^(k-1)); after k bounces the
-//! energy is E = g h0 e^(2k) and, a time s after the k-th bounce, y = e^k v1 s - g s^2 / 2 with
-//! v1 = sqrt(2 g h0). The fits run at the model's own tolerances (rtol 1e-10, atol 1e-12), where
+//! Ball (g = 9.81, dropped from h0 at rest, restitution e; `support::reference::BallForm`): the
+//! first touchdown is at t1 = sqrt(2 h0 / g), the k-th at t_k = t1 (1 + 2 e + ... + 2 e^(k-1));
+//! after k bounces the energy is E = g h0 e^(2k) and, a time s after the k-th bounce,
+//! y = e^k v1 s - g s^2 / 2 with v1 = sqrt(2 g h0). The fits run at the model's own tolerances (rtol 1e-10, atol 1e-12), where
 //! `hybc run` matches these forms to relative 1e-9 (tests/cli_run.rs). The fitted parameters are
 //! compared at relative 1e-8: an error of 1e-9 in E moves e = (E / (g h0))^(1/8) by 1.3e-10, and the
 //! solver stops once its Gauss-Newton step is below xtol = 1e-10 relative.
 
 use crate::support::cli::hybc;
+use crate::support::reference::BallForm;
 
 use std::process::Output;
 
@@ -28,33 +29,20 @@ const G: f64 = 9.81;
 const T: f64 = 2.5;
 const BALL: &str = include_str!("../../models/ball.hyb");
 
-/// Touchdown times before T (closed form).
-fn touchdowns(h0: f64, e: f64, t_end: f64) -> Vec<f64> {
-    let t1 = (2.0 * h0 / G).sqrt();
-    let mut times = vec![t1];
-    let mut t = t1;
-    for k in 1.. {
-        t += 2.0 * t1 * e.powi(k);
-        if t >= t_end || k > 1000 {
-            break;
-        }
-        times.push(t);
-    }
-    times.retain(|&t| t < t_end);
-    times
+/// The ball's closed forms at `h0` and `e` (g = 9.81).
+fn ball_form(h0: f64, e: f64) -> BallForm {
+    BallForm { h0, e, ..BallForm::DEFAULT }
 }
 
+/// Touchdowns before T.
 fn bounces(h0: f64, e: f64) -> usize {
-    touchdowns(h0, e, T).len()
+    ball_form(h0, e).touchdowns_before(T).len()
 }
 
-/// (y, energy) at T (closed form).
+/// (y, energy) at T.
 fn final_y_energy(h0: f64, e: f64) -> (f64, f64) {
-    let times = touchdowns(h0, e, T);
-    let k = times.len() as i32;
-    let s = T - times[times.len() - 1];
-    let v = e.powi(k) * (2.0 * G * h0).sqrt();
-    (v * s - 0.5 * G * s * s, G * h0 * e.powi(2 * k))
+    let ball = ball_form(h0, e);
+    (ball.state_at(T).0, ball.energy(bounces(h0, e) as i32))
 }
 
 /// Root of `f` in [a, b] by bisection (f(a), f(b) of opposite signs).
@@ -136,7 +124,11 @@ fn energy_fit_matches_the_closed_form_restitution() {
             assert_eq!(r.evaluation.events.len(), 4);
             assert!(r.cusps.is_empty(), "no cusp between {start} and {e_star}");
             // The Jacobian is the exact dE/de = 8 g h0 e^7 at the fitted point.
-            assert_relative_eq!(r.evaluation.jacobian[(0, 0)], 8.0 * G * e_star.powi(7), max_relative = 1e-7);
+            assert_relative_eq!(
+                r.evaluation.jacobian[(0, 0)],
+                ball_form(1.0, e_star).energy_grad(4)[1],
+                max_relative = 1e-7
+            );
         }
     }
 }
@@ -165,8 +157,8 @@ fn energy_fit_from_another_bounce_count_crosses_the_cusp() {
 fn energy_in_the_jump_stalls_at_the_cusp_and_says_so() {
     // At e_c the 4th touchdown reaches T: E jumps from g e_c^8 = 3.09 (4 bounces) to g e_c^6 =
     // 4.12 (3 bounces). No e gives E = 3.5; the closest the objective gets is at e_c from below.
-    let e_c = bisect(|e| touchdowns(1.0, e, 1e9)[3] - T, 0.8, 0.9);
-    assert!(G * e_c.powi(8) < 3.5 && 3.5 < G * e_c.powi(6));
+    let e_c = bisect(|e| ball_form(1.0, e).touchdown(4) - T, 0.8, 0.9);
+    assert!(ball_form(1.0, e_c).energy(4) < 3.5 && 3.5 < ball_form(1.0, e_c).energy(3));
     let ball = Fixture::ball(&["e"]);
     let r = ball.fit(&[("e", 0.84)], &["energy=3.5"]);
     assert!(!r.is_converged());
@@ -201,7 +193,7 @@ fn two_parameter_fit_reproduces_energy_and_height() {
     // start lies near one of them.
     let (y_star, energy_star) = final_y_energy(1.0, 0.8);
     let (y_star, energy_star) = ((y_star * 1e6).round() / 1e6, (energy_star * 1e6).round() / 1e6);
-    let h0_of = |e: f64| energy_star / (G * e.powi(8));
+    let h0_of = |e: f64| energy_star / ball_form(1.0, e).energy(4); // E is proportional to h0
     let ball = Fixture::ball(&["h0", "e"]);
     let targets = [format!("energy={energy_star}"), format!("y={y_star}")];
     let targets: Vec<&str> = targets.iter().map(String::as_str).collect();
@@ -225,7 +217,7 @@ fn two_parameter_fit_reproduces_energy_and_height() {
 #[test]
 fn event_time_targets_match_the_touchdown_closed_forms() {
     // t2 = t1 (1 + 2 e): e = (t2 / t1 - 1) / 2 with h0 = 1.
-    let t1 = (2.0 / G).sqrt();
+    let t1 = BallForm::DEFAULT.t1();
     let ball = Fixture::ball(&["e"]);
     let r = ball.fit(&[("e", 0.8)], &["touchdown#2=1.2"]);
     assert!(r.is_converged(), "{:?}", r.stop);
@@ -250,7 +242,7 @@ fn event_time_targets_match_the_touchdown_closed_forms() {
 fn trials_without_the_target_event_or_with_a_failed_run_are_rejected() {
     // From e = 0.7 (11 touchdowns) the first Gauss-Newton steps for t4 = 2.45 land beyond e = 0.867,
     // where the ball touches down only 3 times before T: those trials are rejected and shortened.
-    let e_star = bisect(|e| touchdowns(1.0, e, 1e9)[3] - 2.45, 0.8, 0.86);
+    let e_star = bisect(|e| ball_form(1.0, e).touchdown(4) - 2.45, 0.8, 0.86);
     let ball = Fixture::ball(&["e"]);
     let r = ball.fit(&[("e", 0.7)], &["touchdown#4=2.45"]);
     assert!(r.is_converged(), "{:?}", r.stop);
@@ -389,7 +381,7 @@ fn cli_underdetermined_fit_warns_and_reports_an_infinite_condition() {
     assert_eq!(json["condition"], Value::Null);
     let (e, h0) = (f(&json["params"]["e"]), f(&json["params"]["h0"]));
     assert_eq!(bounces(h0, e), 4);
-    assert_relative_eq!(G * h0 * e.powi(8), 2.0, max_relative = 1e-8);
+    assert_relative_eq!(ball_form(h0, e).energy(4), 2.0, max_relative = 1e-8);
 }
 
 #[test]

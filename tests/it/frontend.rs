@@ -3,21 +3,11 @@
 //! its rendered diagnostics are pinned by an insta snapshot. A new file is a new test.
 
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use hybc::FrontendError;
 
-fn hyb_files(dir: &str) -> Vec<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join(dir);
-    let mut files: Vec<PathBuf> = fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("cannot read {}: {e}", dir.display()))
-        .map(|e| e.expect("directory entry").path())
-        .filter(|p| p.extension().is_some_and(|x| x == "hyb"))
-        .collect();
-    files.sort();
-    assert!(!files.is_empty(), "no .hyb files in {}", dir.display());
-    files
-}
+use crate::support::models::{hyb_files, shipped_models};
 
 fn stem(path: &Path) -> String {
     path.file_stem().expect("file name").to_string_lossy().into_owned()
@@ -30,10 +20,9 @@ fn relative(path: &Path) -> String {
 
 #[test]
 fn shipped_models_check_clean() {
-    for path in hyb_files("models") {
-        let source = fs::read_to_string(&path).expect("readable model");
-        if let Err(e) = hybc::check_source(&source) {
-            panic!("{} does not check:\n{}", path.display(), e.render(&relative(&path), &source));
+    for model in shipped_models() {
+        if let Err(e) = hybc::check_source(&model.source) {
+            panic!("{} does not check:\n{}", model.path, e.render(&model.path, &model.source));
         }
     }
 }

@@ -7,6 +7,7 @@ use hybc::sim::SimWarning;
 use hybc::{Model, Run, SimOptions};
 
 use super::support::cli::hybc;
+use super::support::reference::BallForm;
 
 fn run_at(text: &str, grad: &[&str], set: &[(&str, f64)], opts: impl FnOnce(&mut SimOptions)) -> Run {
     let model = Model::parse(text).unwrap_or_else(|e| panic!("{e}"));
@@ -27,20 +28,16 @@ const BALL_REST: &str = include_str!("../data/run/ball_rest.hyb");
 /// v_rest; then it settles (E = 0 and dE/de = 0 from then on). In flight after k bounces
 /// E = g h0 e^(2k), dE/de = 2 k g h0 e^(2k - 1).
 fn ball_rest_closed_form(e: f64) -> (f64, f64) {
-    let (g, h0, v_rest, t_end) = (9.81f64, 1.0f64, 1e-3, 2.5);
-    let v1 = (2.0 * g * h0).sqrt();
-    let mut t = v1 / g;
+    let (ball, v_rest, t_end) = (BallForm { e, ..BallForm::DEFAULT }, 1e-3, 2.5);
     let mut k = 0;
-    while t <= t_end {
-        let arrival = e.powi(k) * v1;
+    while ball.touchdown(k + 1) <= t_end {
+        let arrival = e.powi(k) * ball.v1();
         if e * arrival < v_rest {
             return (0.0, 0.0);
         }
         k += 1;
-        t += 2.0 * e.powi(k) * v1 / g;
     }
-    let k = k as f64;
-    (g * h0 * e.powf(2.0 * k), 2.0 * k * g * h0 * e.powf(2.0 * k - 1.0))
+    (ball.energy(k), ball.energy_grad(k)[1])
 }
 
 fn assert_energy(e: f64, energy: f64, denergy: f64) {

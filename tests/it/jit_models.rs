@@ -9,6 +9,7 @@
 //! with `==`.
 
 use crate::support::hand_functions::same;
+use crate::support::models::shipped_models;
 use hybc::codegen::{CompileOptions, CompiledModel};
 use hybc::lower::{lower, system_info, Interpreter};
 use hybc::sema::ParamIdx;
@@ -261,17 +262,10 @@ proptest! {
 
 #[test]
 fn every_shipped_model_matches_the_interpreter() {
-    let mut paths: Vec<_> = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/models"))
-        .expect("models directory")
-        .map(|e| e.expect("directory entry").path())
-        .filter(|p| p.extension().is_some_and(|e| e == "hyb"))
-        .collect();
-    paths.sort();
-    assert!(paths.len() >= 5, "expected the shipped models, found {paths:?}");
+    let models = shipped_models();
+    assert!(models.len() >= 5, "expected the shipped models, found {}", models.len());
     let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
-    for path in paths {
-        let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("?").to_owned();
-        let source = std::fs::read_to_string(&path).expect("model text");
-        compare_model_text(&name, &source, &mut rng);
+    for model in models {
+        compare_model_text(&model.name, &model.source, &mut rng);
     }
 }

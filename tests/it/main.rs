@@ -5,6 +5,7 @@
 mod support;
 
 mod check_grad;
+mod cli_cases;
 mod cli_run;
 mod closed_forms;
 mod convergence;

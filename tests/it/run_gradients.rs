@@ -10,17 +10,7 @@ use hybc::lower::{lower, system_info};
 use hybc::sema::ParamIdx;
 use hybc::sim::{run, SimOptions, SimResult};
 
-fn models() -> Vec<(String, String)> {
-    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/models");
-    let mut out: Vec<(String, String)> = std::fs::read_dir(dir)
-        .expect("models dir")
-        .map(|e| e.expect("entry").path())
-        .filter(|p| p.extension().is_some_and(|x| x == "hyb"))
-        .map(|p| (p.display().to_string(), std::fs::read_to_string(&p).expect("readable")))
-        .collect();
-    out.sort();
-    out
-}
+use crate::support::models::{shipped_models, ShippedModel};
 
 /// Every differentiable number of a run, in a fixed order, with the matching derivative row.
 fn observables(r: &SimResult, n_grad: usize, j: usize) -> (Vec<f64>, Vec<f64>) {
@@ -46,7 +36,7 @@ fn observables(r: &SimResult, n_grad: usize, j: usize) -> (Vec<f64>, Vec<f64>) {
 #[test]
 fn every_model_gradient_matches_central_differences() {
     let mut checked = 0;
-    for (path, source) in models() {
+    for ShippedModel { path, source, .. } in shipped_models() {
         let model = hybc::check_source(&source).unwrap_or_else(|e| panic!("{path}: {e}"));
         let funcs = lower(&model);
         let grad: Vec<ParamIdx> = (0..model.params.len()).map(|i| ParamIdx(i as u32)).collect();

@@ -3,6 +3,7 @@
 //! gradient, state sensitivities after a bounce, Zeno accumulation point, stop events).
 
 use crate::support::hand_systems::{close, Ball};
+use crate::support::reference::BallForm;
 use hybc::sim::{run, Method, SimError, SimOptions, StopReason, TrajectoryRequest};
 
 const G: f64 = 9.81;
@@ -12,19 +13,8 @@ fn opts(t_end: f64, method: Method, sens_error_control: bool) -> SimOptions {
     SimOptions { t_end, rtol: 1e-10, atol: 1e-12, method, sens_error_control, ..SimOptions::default() }
 }
 
-/// k-th bounce time (k >= 1): `t_k = tau (1 + 2 sum_{i<k} e^i)` with `tau = sqrt(2 h0 / g)`.
-fn bounce_time(g: f64, e: f64, h0: f64, k: i32) -> f64 {
-    let tau = (2.0 * h0 / g).sqrt();
-    tau * (1.0 + 2.0 * (1..k).map(|i| e.powi(i)).sum::<f64>())
-}
-
-/// `[dt_k/dg, dt_k/de, dt_k/dh0]` of the closed form above, differentiated by hand.
-fn bounce_time_grad(g: f64, e: f64, h0: f64, k: i32) -> [f64; 3] {
-    let tau = (2.0 * h0 / g).sqrt();
-    let t = bounce_time(g, e, h0, k);
-    let de = 2.0 * tau * (1..k).map(|i| i as f64 * e.powi(i - 1)).sum::<f64>();
-    [-t / (2.0 * g), de, t / (2.0 * h0)]
-}
+/// The closed forms at the defaults `g = 9.81, e = 0.8, h0 = 1` (the runs below use `[G, E, 1.0]`).
+const BALL: BallForm = BallForm::DEFAULT;
 
 fn check_first_point(method: Method, sens_error_control: bool) {
     let ball = Ball::new();
@@ -35,25 +25,25 @@ fn check_first_point(method: Method, sens_error_control: bool) {
     let published = [0.4515236410, 1.1739614666, 1.7519117270, 2.2142719354];
     for (k, ev) in r.events.iter().enumerate() {
         let kk = k as i32 + 1;
-        let t = bounce_time(G, E, 1.0, kk);
+        let t = BALL.touchdown(kk);
         assert!(close(ev.time, t, 1e-9), "{tag} bounce {kk}: {} vs {t}", ev.time);
         assert!(close(ev.time, published[k], 1e-9), "{tag} bounce {kk} vs published");
         let dt = ev.dtime.as_ref().expect("non-grazing bounce has a gradient");
-        let want = bounce_time_grad(G, E, 1.0, kk);
+        let want = BALL.touchdown_grad(kk);
         for j in 0..3 {
             assert!(close(dt[j], want[j], 1e-9), "{tag} bounce {kk} dt/dp{j}: {} vs {}", dt[j], want[j]);
         }
         assert!(!ev.grazing);
     }
     let dt1_dh0 = r.events[0].dtime.as_ref().unwrap()[2];
-    assert!(close(dt1_dh0, 1.0 / (2.0 * G).sqrt(), 1e-9), "{tag}");
+    assert!(close(dt1_dh0, 1.0 / BALL.v1(), 1e-9), "{tag}: dt1/dh0 = 1 / v1");
     assert!(close(dt1_dh0, 0.2257618205, 1e-9), "{tag}");
     // E(T) = g h0 e^8 after four bounces, and its gradient in (g, e, h0).
     let f = &r.final_state;
-    assert!(close(f.outputs[0], G * E.powi(8), 1e-9), "{tag} E {}", f.outputs[0]);
+    assert!(close(f.outputs[0], BALL.energy(4), 1e-9), "{tag} E {}", f.outputs[0]);
     assert!(close(f.outputs[0], 1.6458448896, 1e-9), "{tag}");
     let de = f.doutputs.as_ref().expect("gradients valid");
-    let want = [E.powi(8), 8.0 * G * E.powi(7), G * E.powi(8)];
+    let want = BALL.energy_grad(4);
     for j in 0..3 {
         assert!(close(de[j], want[j], 1e-9), "{tag} dE/dp{j}: {} vs {}", de[j], want[j]);
     }
@@ -112,8 +102,7 @@ fn ball_state_sensitivities_after_one_bounce() {
 #[test]
 fn ball_stops_as_zeno_near_the_accumulation_point() {
     let r = run(&Ball::new(), &[G, E, 1.0], &opts(10.0, Method::Auto, true)).expect("valid run");
-    let v1 = (2.0 * G).sqrt();
-    let t_star = (2.0 / G).sqrt() + 2.0 * E * v1 / (G * (1.0 - E));
+    let t_star = BALL.accumulation_time();
     assert!((t_star - 4.0637127689).abs() < 1e-9);
     match r.stopped_by {
         StopReason::Zeno { time, count, accumulation, .. } => {
@@ -130,7 +119,7 @@ fn ball_stops_as_zeno_near_the_accumulation_point() {
     assert!(r.final_state.time < 4.07);
     // Each bounce time still matches the closed form (checked on the first 20).
     for (k, ev) in r.events.iter().take(20).enumerate() {
-        assert!(close(ev.time, bounce_time(G, E, 1.0, k as i32 + 1), 1e-9));
+        assert!(close(ev.time, BALL.touchdown(k as i32 + 1), 1e-9));
     }
 }
 
@@ -139,9 +128,9 @@ fn stop_event_total_derivative() {
     let h0 = 1.0;
     let r = run(&Ball::stopping(), &[G, E, h0], &opts(5.0, Method::Auto, true)).expect("valid");
     assert_eq!(r.stopped_by, StopReason::Event { event: 0, name: "floor".into() });
-    let v1 = (2.0 * G * h0).sqrt();
+    let v1 = BALL.v1();
     let f = &r.final_state;
-    assert!(close(f.time, (2.0 * h0 / G).sqrt(), 1e-12));
+    assert!(close(f.time, BALL.t1(), 1e-12));
     assert!(f.state[0].abs() < 1e-12);
     assert!(close(f.state[1], E * v1, 1e-12));
     // Final state R(t1, x(t1), p) = [0, e v1] as a function of (g, e, h0).
@@ -167,13 +156,7 @@ fn sampled_trajectory_follows_the_parabolas() {
     assert_eq!(rows.len(), 26);
     for row in &rows {
         // Closed-form height: the flight after bounce k starts at t_k with speed e^k v1.
-        let k = (1..=4).filter(|&k| bounce_time(G, E, 1.0, k) <= row.t).count() as i32;
-        let y = if k == 0 {
-            1.0 - 0.5 * G * row.t * row.t
-        } else {
-            let dt = row.t - bounce_time(G, E, 1.0, k);
-            E.powi(k) * (2.0 * G).sqrt() * dt - 0.5 * G * dt * dt
-        };
+        let (y, _) = BALL.state_at(row.t);
         assert!((row.x[0] - y).abs() < 1e-9, "t = {}: {} vs {y}", row.t, row.x[0]);
     }
 }
@@ -259,8 +242,7 @@ fn bounces_too_small_to_resolve_stop_as_zeno_instead_of_falling_through() {
             StopReason::TEnd => {}
             StopReason::Zeno { time, accumulation, .. } => {
                 zeno += 1;
-                let t1 = bounce_time(G, e, 1.0, 1);
-                let t_star = t1 + 2.0 * e * G * t1 / (G * (1.0 - e));
+                let t_star = BallForm { e, ..BALL }.accumulation_time();
                 assert!((time - t_star).abs() < 1e-6, "e = {e}: stopped at {time}, accumulation at {t_star}");
                 if let Some(a) = accumulation {
                     assert!((a - t_star).abs() < 1e-6, "e = {e}: estimated {a}, exact {t_star}");

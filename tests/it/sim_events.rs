@@ -3,6 +3,7 @@
 //! no re-firing at the same instant and no firing when starting on a guard.
 
 use crate::support::hand_systems::{close, Ball, Counter, Oscillator, Thermostat};
+use crate::support::reference::ThermostatForm;
 use hybc::sim::{run, Method, SimOptions, SimWarning, StopReason, TrajectoryRequest};
 
 #[test]
@@ -84,23 +85,10 @@ fn apex_exactly_touching_the_ceiling_is_flagged_grazing() {
     }
 }
 
-/// Closed form of the thermostat: switching times up to `t_end` and the final temperature.
-/// Between switches `T` relaxes exponentially to `T_out + P` (heating, rate k) or `T_out`.
+/// The hand-written thermostat's closed form (`hand_systems::Thermostat`: p = [k, T_out, P, T_lo,
+/// T_hi], starting at `t0`): switching times up to `t_end` and the final temperature.
 fn thermostat_closed(p: &[f64], t0: f64, t_end: f64) -> (Vec<f64>, f64) {
-    let (k, t_out, pw, lo, hi) = (p[0], p[1], p[2], p[3], p[4]);
-    let (mut t, mut temp, mut heating) = (0.0, t0, true);
-    let mut times = Vec::new();
-    loop {
-        let (eq, target) = if heating { (t_out + pw / k, hi) } else { (t_out, lo) };
-        let tau = ((temp - eq) / (target - eq)).ln() / k;
-        if t + tau > t_end {
-            return (times, eq + (temp - eq) * (-k * (t_end - t)).exp());
-        }
-        t += tau;
-        temp = target;
-        heating = !heating;
-        times.push(t);
-    }
+    ThermostatForm { k: p[0], t_out: p[1], power: p[2], t_lo: p[3], t_hi: p[4], t0 }.switches(t_end)
 }
 
 #[test]

@@ -5,11 +5,13 @@
 //! relative 1e-9, one unit of the tenth significant digit hybc prints. The statistics line
 //! (`... kernel calls, compile ... ms, run ... us`) is left out on both sides: it holds timings.
 //!
-//! After a change that moves printed numbers, `HYBC_BLESS=1 cargo test --release --test tutorial`
+//! After a change that moves printed numbers, `HYBC_BLESS=1 cargo test --release --test it tutorial`
 //! rewrites every pasted output with what this build prints (release, so that the pasted
 //! statistics lines show representative timings; review the diff before committing).
 
 use std::process::Command;
+
+use crate::support::printed::numbers as numbers_in;
 
 /// One command of the tutorial and the output pasted under it.
 struct Example {
@@ -49,47 +51,7 @@ fn examples(doc: &str) -> Vec<Example> {
 /// The numbers in `text`, in order, leaving out digits that are part of a name (`h0`, `dt1`) and
 /// the statistics line.
 fn numbers(text: &str) -> Vec<f64> {
-    let mut out = Vec::new();
-    for line in text.lines().filter(|l| !l.contains("kernel calls, compile")) {
-        let b = line.as_bytes();
-        let mut i = 0;
-        while i < b.len() {
-            let c = b[i];
-            if c.is_ascii_alphabetic() || c == b'_' {
-                while i < b.len() && (b[i].is_ascii_alphanumeric() || b[i] == b'_') {
-                    i += 1;
-                }
-                continue;
-            }
-            let starts_number =
-                c.is_ascii_digit() || (c == b'-' && b.get(i + 1).is_some_and(u8::is_ascii_digit));
-            if !starts_number {
-                i += 1;
-                continue;
-            }
-            let start = i;
-            i += 1;
-            while i < b.len() && (b[i].is_ascii_digit() || b[i] == b'.') {
-                i += 1;
-            }
-            // An exponent: e, an optional sign, digits.
-            if i + 1 < b.len() && (b[i] == b'e' || b[i] == b'E') {
-                let mut j = i + 1;
-                if b[j] == b'-' || b[j] == b'+' {
-                    j += 1;
-                }
-                if j < b.len() && b[j].is_ascii_digit() {
-                    i = j;
-                    while i < b.len() && b[i].is_ascii_digit() {
-                        i += 1;
-                    }
-                }
-            }
-            let token = line[start..i].trim_end_matches('.');
-            out.push(token.parse().unwrap_or_else(|e| panic!("`{token}` in `{line}`: {e}")));
-        }
-    }
-    out
+    text.lines().filter(|l| !l.contains("kernel calls, compile")).flat_map(numbers_in).collect()
 }
 
 #[test]

@@ -4,6 +4,8 @@ pub mod cli;
 pub mod expr;
 pub mod hand_functions;
 pub mod hand_systems;
+pub mod models;
+pub mod printed;
 pub mod reference;
 
 use proptest::test_runner::{Config, FailurePersistence, FileFailurePersistence};
