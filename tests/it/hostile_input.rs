@@ -18,17 +18,6 @@ const BUDGET: Duration = Duration::from_secs(20);
 /// Fewer inputs than this within the budget would make the test meaningless.
 const MIN_CASES: usize = 300;
 
-fn shipped_models() -> Vec<String> {
-    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/models");
-    let mut paths: Vec<_> = std::fs::read_dir(dir)
-        .expect("models/")
-        .map(|e| e.expect("entry").path())
-        .filter(|p| p.extension().is_some_and(|x| x == "hyb"))
-        .collect();
-    paths.sort();
-    paths.into_iter().map(|p| std::fs::read_to_string(p).expect("readable model")).collect()
-}
-
 /// Control, invisible and otherwise awkward characters.
 const NASTY: &[char] = &[
     '\0', '\x07', '\x08', '\x0b', '\x0c', '\x1b', '\x7f', '\u{85}', '\u{9b}', '\u{a0}', '\u{ad}', '\u{200b}',
@@ -172,7 +161,8 @@ fn exercise(text: &str) -> Result<Outcome, String> {
 
 #[test]
 fn mutated_models_are_refused_with_a_location_or_run() {
-    let models = shipped_models();
+    let models: Vec<String> =
+        crate::support::models::shipped_models().into_iter().map(|m| m.source).collect();
     let mut rng = ChaCha8Rng::seed_from_u64(SEED);
     let start = Instant::now();
     let (mut cases, mut refused, mut ran) = (0usize, 0usize, 0usize);
@@ -221,8 +211,8 @@ fn control_characters_are_named_and_escaped_in_diagnostics() {
 
 #[test]
 fn a_bom_is_skipped_and_every_line_end_counts_alike() {
-    let ball = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/models/ball.hyb")).unwrap();
-    let plain = hybc::Model::parse(&ball).expect("the ball checks");
+    let ball = include_str!("../../models/ball.hyb");
+    let plain = hybc::Model::parse(ball).expect("the ball checks");
     for variant in [format!("\u{feff}{ball}"), ball.replace('\n', "\r\n"), ball.replace('\n', "\r")] {
         let model = hybc::Model::parse(&variant).expect("the ball checks with a BOM or other line ends");
         assert_eq!(model.checked().states.len(), plain.checked().states.len());
