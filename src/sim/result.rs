@@ -68,6 +68,28 @@ pub(crate) fn named_state(info: &SystemInfo, state: &[f64]) -> String {
     pairs.join(", ")
 }
 
+/// `final values not finite: energy = inf, y = NaN` for the final states and outputs that are not
+/// finite numbers (a run can end as asked with an output such as `1 / y` at `y = 0`); `None` when
+/// all are finite.
+pub fn non_finite_finals(info: &SystemInfo, f: &FinalState) -> Option<String> {
+    let bad: Vec<String> = info
+        .state_names
+        .iter()
+        .zip(&f.state)
+        .chain(info.output_names.iter().zip(&f.outputs))
+        .filter(|(_, v)| !v.is_finite())
+        .map(|(n, v)| format!("{n} = {}", short(*v)))
+        .collect();
+    (!bad.is_empty()).then(|| {
+        format!(
+            "final values not finite at t = {} in mode {}: {}",
+            short(f.time),
+            mode_name(info, f.mode),
+            bad.join(", ")
+        )
+    })
+}
+
 fn mode_name(info: &SystemInfo, mode: usize) -> &str {
     info.modes.get(mode).map_or("?", |m| m.name.as_str())
 }
