@@ -69,7 +69,9 @@ impl RunReport {
     /// A warning naming the final states and outputs that are not finite numbers (NaN or
     /// infinite), for a run that ended as asked; `None` when all are finite.
     pub fn non_finite(&self) -> Option<String> {
-        self.is_complete().then(|| crate::sim::non_finite_finals(&self.info, &self.result.final_state)).flatten()
+        self.is_complete()
+            .then(|| crate::sim::non_finite_finals(&self.info, &self.result.final_state))
+            .flatten()
     }
 
     /// The JSON object documented in the README.

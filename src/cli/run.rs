@@ -7,10 +7,10 @@ use std::time::Instant;
 
 use clap::ValueEnum;
 
+use super::trajectory::{self, StreamingTrajectory};
 use super::{compile_model, error_chain, load_model, parse_param_list, usage_error, ModelArg};
 use super::{EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
 use crate::gradcheck::{self, CheckOptions};
-use super::trajectory::{self, StreamingTrajectory};
 use crate::report::RunReport;
 use crate::sim::{Method, SimOptions, Simulator, TrajectoryRequest};
 use crate::{Compiled, Model, Params};
@@ -200,19 +200,19 @@ fn trajectory_request(args: &RunArgs, opts: &SimOptions) -> Result<TrajectoryReq
 }
 
 /// One run whose trajectory rows are written to `path` as they are recorded, never kept.
-fn run_streaming(compiled: &Compiled, params: &Params, opts: &SimOptions, path: &Path) -> Result<RunReport, String> {
+fn run_streaming(
+    compiled: &Compiled,
+    params: &Params,
+    opts: &SimOptions,
+    path: &Path,
+) -> Result<RunReport, String> {
     let cannot_write = |e: std::io::Error| format!("--trajectory: cannot write `{}`: {e}", path.display());
     let file = std::fs::File::create(path).map_err(cannot_write)?;
     let system = compiled.native();
     let p = params.values();
-    let mut recorder = StreamingTrajectory::new(
-        system,
-        p,
-        opts.trajectory,
-        opts.t_start,
-        std::io::BufWriter::new(file),
-    )
-    .map_err(cannot_write)?;
+    let mut recorder =
+        StreamingTrajectory::new(system, p, opts.trajectory, opts.t_start, std::io::BufWriter::new(file))
+            .map_err(cannot_write)?;
     let run_opts = SimOptions { trajectory: TrajectoryRequest::None, ..opts.clone() };
     let mut simulator = Simulator::new(system, &run_opts).map_err(|e| error_chain(&e))?;
     let started = Instant::now();

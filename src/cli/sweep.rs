@@ -244,8 +244,17 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
     };
     let bar = progress_bar(points.len());
     let keep = args.plot.is_some();
-    let streamed =
-        sweep::stream_rows(compiled.native(), &points, &opts, &columns, format, args.threads, keep, &|| bar.inc(1), &mut out);
+    let streamed = sweep::stream_rows(
+        compiled.native(),
+        &points,
+        &opts,
+        &columns,
+        format,
+        args.threads,
+        keep,
+        &|| bar.inc(1),
+        &mut out,
+    );
     bar.finish_and_clear();
     let streamed = match streamed {
         Ok(streamed) => streamed,

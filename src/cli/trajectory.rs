@@ -44,7 +44,12 @@ impl<'s, S: HybridSystem + ?Sized> TrajectoryCsv<'s, S> {
     pub fn new(system: &'s S, params: &'s [f64]) -> Self {
         let info = system.info();
         let (n, k, m) = (info.n_states(), info.n_outputs(), info.n_grad());
-        TrajectoryCsv { system, params, jac: (vec![0.0; k * n], vec![0.0; k * m], vec![0.0; k]), line: String::new() }
+        TrajectoryCsv {
+            system,
+            params,
+            jac: (vec![0.0; k * n], vec![0.0; k * m], vec![0.0; k]),
+            line: String::new(),
+        }
     }
 
     pub fn write_header(&self, out: &mut impl Write) -> io::Result<()> {
@@ -107,7 +112,13 @@ pub(crate) struct StreamingTrajectory<'s, S: HybridSystem + ?Sized, W: Write> {
 }
 
 impl<'s, S: HybridSystem + ?Sized, W: Write> StreamingTrajectory<'s, S, W> {
-    pub fn new(system: &'s S, params: &'s [f64], request: TrajectoryRequest, t_start: f64, mut out: W) -> io::Result<Self> {
+    pub fn new(
+        system: &'s S,
+        params: &'s [f64],
+        request: TrajectoryRequest,
+        t_start: f64,
+        mut out: W,
+    ) -> io::Result<Self> {
         let csv = TrajectoryCsv::new(system, params);
         csv.write_header(&mut out)?;
         Ok(StreamingTrajectory { csv, out, request, t_start, next_sample: 0, error: None })

@@ -164,7 +164,8 @@ impl Grid {
     /// The grid over `axes` (parameter index, values) from `base`. Order: the first axis varies
     /// slowest, the last fastest (nested loops in flag order).
     pub fn new(base: Vec<f64>, axes: Vec<(usize, Axis)>) -> Result<Grid, TooManyPoints> {
-        let len = axes.iter().try_fold(1usize, |acc, (_, a)| acc.checked_mul(a.len())).ok_or(TooManyPoints)?;
+        let len =
+            axes.iter().try_fold(1usize, |acc, (_, a)| acc.checked_mul(a.len())).ok_or(TooManyPoints)?;
         Ok(Grid { base, axes, len })
     }
 
@@ -193,20 +194,22 @@ pub struct Samples {
     base: Vec<f64>,
     ranges: Vec<(usize, f64, f64)>,
     n: usize,
-    rng: ChaCha8Rng,
+    /// The ChaCha8 key (the generator is built per point: a key copy and a block, nothing to
+    /// share between threads).
+    key: [u8; 32],
 }
 
 impl Samples {
     pub fn new(base: Vec<f64>, ranges: Vec<(usize, f64, f64)>, n: usize, seed: u64) -> Samples {
         let mut key = [0u8; 32];
         key[..8].copy_from_slice(&seed.to_le_bytes());
-        Samples { base, ranges, n, rng: ChaCha8Rng::from_seed(key) }
+        Samples { base, ranges, n, key }
     }
 
     /// Writes point `i < n` into `out` (as long as the base).
     pub fn fill(&self, i: usize, out: &mut [f64]) {
         out.copy_from_slice(&self.base);
-        let mut rng = self.rng.clone();
+        let mut rng = ChaCha8Rng::from_seed(self.key);
         // Two 32-bit words per value; a u64 read at an even word offset is the one a sequential
         // draw gives there.
         rng.set_word_pos(2 * i as u128 * self.ranges.len() as u128);

@@ -29,8 +29,14 @@ fn every_count_a_flag_accepts_is_capped_with_the_flag_named() {
     let ball = "models/ball.hyb";
     usage_error(&["run", ball, "--max-events", "1000001"], "--max-events: at most 1000000");
     usage_error(&["sweep", ball, "--vary", "e=0.5", "--max-events", "99999999999"], "--max-events: at most");
-    usage_error(&["fit", ball, "--free", "e", "--target", "energy=1", "--max-events", "2000000"], "--max-events");
-    usage_error(&["fit", ball, "--free", "e", "--target", "energy=1", "--max-iter", "1000001"], "--max-iter: at most");
+    usage_error(
+        &["fit", ball, "--free", "e", "--target", "energy=1", "--max-events", "2000000"],
+        "--max-events",
+    );
+    usage_error(
+        &["fit", ball, "--free", "e", "--target", "energy=1", "--max-iter", "1000001"],
+        "--max-iter: at most",
+    );
     usage_error(&["sweep", ball, "--vary", "e=0.5", "--events", "1001"], "--events: at most 1000");
     usage_error(&["sweep", ball, "--vary", "e=0.5", "--threads", "1025"], "--threads: at most 1024");
     usage_error(&["sweep", ball, "--samples", "1000000001"], "--samples: expected 1 to 1000000000");
@@ -45,7 +51,10 @@ fn every_count_a_flag_accepts_is_capped_with_the_flag_named() {
     let g = format!("g={big}");
     let e = "e=0:1:1000000000";
     usage_error(&["sweep", ball, "--vary", &h0, "--vary", &g, "--vary", e], "points");
-    usage_error(&["sweep", ball, "--vary", "e=0:1:100001", "--plot", "p.svg"], "--plot: the sweep has 100001 points");
+    usage_error(
+        &["sweep", ball, "--vary", "e=0:1:100001", "--plot", "p.svg"],
+        "--plot: the sweep has 100001 points",
+    );
 }
 
 #[test]
@@ -55,12 +64,24 @@ fn a_trajectory_too_fine_to_hold_is_refused_before_the_run() {
     let path = dir.path().join("traj.csv");
     let path = path.to_str().expect("utf-8");
     let started = Instant::now();
-    usage_error(&["run", "models/ball.hyb", "--trajectory", path, "--sample", "1e-8"], "--sample: 1e-8 over t = 0..2.5 asks for 250000001 rows; at most 10000000");
+    usage_error(
+        &["run", "models/ball.hyb", "--trajectory", path, "--sample", "1e-8"],
+        "--sample: 1e-8 over t = 0..2.5 asks for 250000001 rows; at most 10000000",
+    );
     assert!(started.elapsed() < Duration::from_secs(20), "refused before the run");
     assert!(!std::path::Path::new(path).exists(), "no file is started");
     // With --plot the rows are kept for the figure: a tenth of that.
     let plot = dir.path().join("p.svg");
-    let args = ["run", "models/ball.hyb", "--trajectory", path, "--sample", "1e-6", "--plot", plot.to_str().expect("p")];
+    let args = [
+        "run",
+        "models/ball.hyb",
+        "--trajectory",
+        path,
+        "--sample",
+        "1e-6",
+        "--plot",
+        plot.to_str().expect("p"),
+    ];
     usage_error(&args, "at most 1000000 with --plot");
     // 1e7 rows exactly is allowed: span / dt + 1 with t = 0 and t = T both sampled.
     let out = hybc(&["run", "models/ball.hyb", "--t-end", "1e-6", "--trajectory", path, "--sample", "1e-13"]);
@@ -102,9 +123,18 @@ fn a_streamed_trajectory_is_the_file_the_kept_rows_give() {
 #[test]
 fn duplicate_settings_are_usage_errors_naming_the_flag() {
     usage_error(&["run", "models/ball.hyb", "--set", "g=1", "--set", "g=2"], "--set: `g` is set twice");
-    usage_error(&["sweep", "models/ball.hyb", "--vary", "e=0.5", "--set", "g=1", "--set", "g=2"], "--set: `g`");
-    usage_error(&["fit", "models/ball.hyb", "--free", "e", "--target", "energy=1", "--set", "g=1", "--set", "g=2"], "--set");
-    usage_error(&["sweep", "models/ball.hyb", "--vary", "e=0.5", "--vary", "e=0.6"], "--vary: `e` is varied twice");
+    usage_error(
+        &["sweep", "models/ball.hyb", "--vary", "e=0.5", "--set", "g=1", "--set", "g=2"],
+        "--set: `g`",
+    );
+    usage_error(
+        &["fit", "models/ball.hyb", "--free", "e", "--target", "energy=1", "--set", "g=1", "--set", "g=2"],
+        "--set",
+    );
+    usage_error(
+        &["sweep", "models/ball.hyb", "--vary", "e=0.5", "--vary", "e=0.6"],
+        "--vary: `e` is varied twice",
+    );
     usage_error(&["run", "models/ball.hyb", "--grad", "e,e"], "--grad: `e` is named twice");
 }
 
@@ -137,14 +167,24 @@ fn a_grid_over_the_whole_double_range_is_finite_in_range_and_monotone() {
     assert_eq!((g[0], g[2], g[4]), (-1e308, 0.0, 1e308), "ends exact, the middle exactly 0");
     assert!(g.windows(2).all(|w| w[0] < w[1]), "{g:?}");
     approx::assert_relative_eq!(g[3], 5e307, max_relative = 1e-15);
-    let out = hybc(&["sweep", "models/ball.hyb", "--vary", "h0=-1.7976931348623157e308:1.7976931348623157e308:7"]);
+    let out =
+        hybc(&["sweep", "models/ball.hyb", "--vary", "h0=-1.7976931348623157e308:1.7976931348623157e308:7"]);
     let h0 = csv_column(&out.stdout, "h0");
     assert!(h0.iter().all(|v| v.is_finite()) && h0.windows(2).all(|w| w[0] < w[1]), "{h0:?}");
 }
 
 #[test]
 fn samples_over_the_whole_double_range_are_finite_and_spread() {
-    let out = hybc(&["sweep", "models/ball.hyb", "--samples", "200", "--vary", "g=-1.7e308:1.7e308", "--t-end", "0.1"]);
+    let out = hybc(&[
+        "sweep",
+        "models/ball.hyb",
+        "--samples",
+        "200",
+        "--vary",
+        "g=-1.7e308:1.7e308",
+        "--t-end",
+        "0.1",
+    ]);
     assert!(matches!(out.status.code(), Some(0 | 3)), "{}", stderr(&out));
     let g = csv_column(&out.stdout, "g");
     assert_eq!(g.len(), 200);
@@ -177,7 +217,10 @@ fn non_finite_final_values_warn_exit_3_and_are_strings_in_json() {
     assert!(err.contains("inv = inf, neg = -inf, nan = NaN") && !err.contains("fine"), "{err}");
     let json: Value = serde_json::from_slice(&out.stdout).expect("json");
     let outputs = &json["final"]["outputs"];
-    assert_eq!((&outputs["inv"], &outputs["neg"], &outputs["nan"]), (&"inf".into(), &"-inf".into(), &"NaN".into()));
+    assert_eq!(
+        (&outputs["inv"], &outputs["neg"], &outputs["nan"]),
+        (&"inf".into(), &"-inf".into(), &"NaN".into())
+    );
     assert_relative_eq_exp(&outputs["fine"]);
     assert_eq!(json["stopped_by"], "t_end", "the run itself ended as asked");
     let warnings = json["warnings"].as_array().expect("warnings");
@@ -186,7 +229,10 @@ fn non_finite_final_values_warn_exit_3_and_are_strings_in_json() {
     let out = hybc(&["run", &model]);
     assert_eq!(out.status.code(), Some(3));
     let table = String::from_utf8_lossy(&out.stdout);
-    assert!(table.lines().any(|l| l.trim_start().starts_with("inv") && l.trim_end().ends_with("inf")), "{table}");
+    assert!(
+        table.lines().any(|l| l.trim_start().starts_with("inv") && l.trim_end().ends_with("inf")),
+        "{table}"
+    );
     // A finite run of the same model is clean.
     let out = hybc(&["run", &model, "--set", "c=2", "--format", "json"]);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
@@ -205,10 +251,15 @@ fn non_finite_sweep_cells_are_distinct_from_missing_ones() {
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(3), "{err}");
     assert!(err.contains("1 of 2 points ended early or have final values that are not finite"), "{err}");
-    let rows: Vec<Value> =
-        String::from_utf8_lossy(&out.stdout).lines().map(|l| serde_json::from_str(l).expect("json")).collect();
+    let rows: Vec<Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("json"))
+        .collect();
     assert_eq!(rows[0]["status"], "non_finite");
-    assert_eq!((&rows[0]["inv"], &rows[0]["neg"], &rows[0]["nan"]), (&"inf".into(), &"-inf".into(), &"NaN".into()));
+    assert_eq!(
+        (&rows[0]["inv"], &rows[0]["neg"], &rows[0]["nan"]),
+        (&"inf".into(), &"-inf".into(), &"NaN".into())
+    );
     assert!(rows[0]["error"].as_str().is_some_and(|e| e.contains("inv = inf")), "{}", rows[0]["error"]);
     assert_relative_eq_exp(&rows[0]["fine"]);
     assert_eq!(rows[1]["status"], "ok");
@@ -246,8 +297,9 @@ fn fault_messages_name_the_mode_and_the_states_in_run_sweep_and_fit() {
     assert!(stderr(&out).contains(named), "{}", stderr(&out));
     let out = hybc(&["sweep", "models/ball.hyb", "--vary", "g=-1e308,9.81", "--format", "jsonl"]);
     assert_eq!(out.status.code(), Some(3));
-    let first: Value = serde_json::from_str(String::from_utf8_lossy(&out.stdout).lines().next().expect("row"))
-        .expect("json");
+    let first: Value =
+        serde_json::from_str(String::from_utf8_lossy(&out.stdout).lines().next().expect("row"))
+            .expect("json");
     assert_eq!(first["status"], "fault");
     assert!(first["error"].as_str().is_some_and(|e| e.contains(named)), "{}", first["error"]);
     let out = hybc(&["fit", "models/ball.hyb", "--free", "e", "--target", "energy=1", "--set", "g=-1e308"]);
