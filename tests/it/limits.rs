@@ -306,3 +306,12 @@ fn fault_messages_name_the_mode_and_the_states_in_run_sweep_and_fit() {
     assert_eq!(out.status.code(), Some(3));
     assert!(stderr(&out).contains(named), "{}", stderr(&out));
 }
+
+#[test]
+fn a_fault_without_the_model_at_hand_says_the_same_with_indices() {
+    use hybc::sim::SimError;
+    let fault = SimError::NonFinite { t: 1.5, mode: 0, state: vec![f64::NAN, 2.0] };
+    assert_eq!(fault.to_string(), "non-finite state at t = 1.5 in mode 0, state x[0] = NaN, x[1] = 2");
+    let fault = SimError::TooManySteps { t: 0.25, max_steps: 5, mode: 1, state: vec![0.1] };
+    assert_eq!(fault.to_string(), "more than 5 steps at t = 0.25 in mode 1, state x[0] = 0.1");
+}
