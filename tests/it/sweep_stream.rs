@@ -171,3 +171,30 @@ fn peak_memory_does_not_grow_with_the_number_of_points() {
     assert!(large < 128 * 1024, "peak {large} KiB at 10^6 points");
     assert!(large_wall < Duration::from_secs(300), "{large_wall:?}");
 }
+
+#[test]
+fn a_reader_that_stops_early_stops_the_sweep() {
+    // `hybc sweep ... | head -2`: the rows are written as they complete, so a closed pipe ends the
+    // sweep at once (exit 0: the reader has what it wanted) instead of after 10^7 runs.
+    use std::io::{BufRead as _, BufReader};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let model = dir.path().join("decay.hyb");
+    std::fs::write(&model, DECAY).expect("model written");
+    let started = Instant::now();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_hybc"))
+        .args(["sweep", model.to_str().expect("path"), "--vary", "k=0:10:10000000", "--threads", "2"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("hybc starts");
+    let mut lines = BufReader::new(child.stdout.take().expect("stdout")).lines();
+    assert_eq!(
+        lines.next().expect("header").expect("text"),
+        "k,status,events,event1,t1,event2,t2,event3,t3,event4,t4,event5,t5,t_final,x,half,error"
+    );
+    assert!(lines.next().expect("row").expect("text").starts_with("0,ok,0,"));
+    drop(lines);
+    let status = child.wait().expect("exits");
+    assert_eq!(status.code(), Some(0));
+    assert!(started.elapsed() < Duration::from_secs(60), "{:?}", started.elapsed());
+}
