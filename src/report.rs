@@ -41,7 +41,7 @@ impl RunReport {
         for (j, name) in self.grad_names().into_iter().enumerate() {
             // A derivative that does not exist is NaN in the result and `null` here.
             let d = a[j * rows + i];
-            m.insert(name.to_string(), if d.is_nan() { Value::Null } else { json!(d) });
+            m.insert(name.to_string(), if d.is_nan() { Value::Null } else { number_json(d) });
         }
         Value::Object(m)
     }
@@ -64,6 +64,14 @@ impl RunReport {
     pub fn failure(&self) -> Option<String> {
         let r = &self.result;
         r.stopped_by.describe(&self.info, &r.events, &r.final_state)
+    }
+
+    /// A warning naming the final states and outputs that are not finite numbers (NaN or
+    /// infinite), for a run that ended as asked; `None` when all are finite.
+    pub fn non_finite(&self) -> Option<String> {
+        self.is_complete()
+            .then(|| crate::sim::non_finite_finals(&self.info, &self.result.final_state))
+            .flatten()
     }
 
     /// The JSON object documented in the README.
@@ -91,7 +99,7 @@ impl RunReport {
             })
             .collect();
         let named = |names: &[String], v: &[f64]| -> Value {
-            Value::Object(names.iter().zip(v).map(|(n, x)| (n.clone(), json!(x))).collect())
+            Value::Object(names.iter().zip(v).map(|(n, x)| (n.clone(), number_json(*x))).collect())
         };
         let mut fin = json!({
             "time": f.time,
@@ -108,6 +116,7 @@ impl RunReport {
         let stopped_by = json!(r.stopped_by.name());
         let mut warnings: Vec<String> = r.warnings.iter().map(|w| w.to_string()).collect();
         warnings.extend(self.failure());
+        warnings.extend(self.non_finite());
         json!({
             "model": self.model,
             "t_end": self.t_end,
@@ -208,6 +217,29 @@ fn grad_text(v: f64) -> String {
         "-".to_string()
     } else {
         num(v)
+    }
+}
+
+/// A value as the JSON contract writes it: a number, or the strings `"NaN"`, `"inf"` and `"-inf"`
+/// for values that are not finite (JSON has no such numbers, and `null` is reserved for "this
+/// derivative does not exist").
+pub fn number_json(v: f64) -> Value {
+    match non_finite_name(v) {
+        Some(name) => Value::String(name.to_string()),
+        None => json!(v),
+    }
+}
+
+/// `"NaN"`, `"inf"` or `"-inf"` for a value that is not finite; `None` for a finite one.
+pub fn non_finite_name(v: f64) -> Option<&'static str> {
+    if v.is_nan() {
+        Some("NaN")
+    } else if v == f64::INFINITY {
+        Some("inf")
+    } else if v == f64::NEG_INFINITY {
+        Some("-inf")
+    } else {
+        None
     }
 }
 

@@ -10,8 +10,11 @@ use super::run::{parameter_values, positive, sim_options, SimFlags};
 use super::{
     compile_model, load_model, parse_param_list, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED,
 };
-use crate::fit::{self, Bounds, FitError, FitOptions, FitProblem, FitReport, Target};
+use crate::fit::{self, Bounds, FitError, FitOptions, FitProblem, FitReport, Rejection, Target};
 use crate::Model;
+
+/// The most trials `--max-iter` allows.
+pub(crate) const MAX_ITER: usize = 1_000_000;
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum Format {
@@ -67,6 +70,8 @@ fn fit_options(args: &FitArgs) -> Result<FitOptions, String> {
     if args.max_iter == 0 {
         return Err("--max-iter: expected at least 1".to_string());
     }
+    // Every trial is kept for the report (a few hundred bytes each).
+    super::run::at_most("--max-iter", args.max_iter, MAX_ITER)?;
     Ok(FitOptions {
         max_iter: args.max_iter,
         xtol: positive("--xtol", args.xtol)?,
@@ -108,6 +113,11 @@ fn fit_model(model: &Model, args: &FitArgs) -> Result<ExitCode, String> {
     let started = Instant::now();
     let result = match fit::fit(&problem, &options) {
         Ok(result) => result,
+        // The run works, but the fit's goal cannot be stated in doubles: the goal is not met.
+        Err(e @ FitError::Start(Rejection::ObjectiveOverflow { .. } | Rejection::NonFinite { .. })) => {
+            eprintln!("error: {e}");
+            return Ok(ExitCode::from(EXIT_GOAL_NOT_MET));
+        }
         Err(e @ FitError::Start(_)) => {
             eprintln!("error: {e}");
             return Ok(ExitCode::from(EXIT_SIM_STOPPED));

@@ -6,6 +6,7 @@ mod derive;
 mod fit;
 mod run;
 mod sweep;
+mod trajectory;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;

@@ -1,18 +1,19 @@
 //! `hybc run FILE`: compile a model, simulate it with sensitivities and report events, final state,
 //! outputs and their gradients.
 
-use std::io::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::time::Instant;
 
 use clap::ValueEnum;
 
+use super::trajectory::{self, StreamingTrajectory};
 use super::{compile_model, error_chain, load_model, parse_param_list, usage_error, ModelArg};
 use super::{EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
 use crate::gradcheck::{self, CheckOptions};
-use crate::report::{num, RunReport};
-use crate::sim::{HybridSystem, Method, SimOptions, TrajectoryRequest};
-use crate::{Model, Params};
+use crate::report::RunReport;
+use crate::sim::{Method, SimOptions, Simulator, TrajectoryRequest};
+use crate::{Compiled, Model, Params};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum MethodArg {
@@ -137,6 +138,21 @@ pub(crate) fn parameter_values(model: &Model, sets: &[String]) -> Result<Params,
     Ok(params)
 }
 
+/// The most events a run may record (`--max-events`): each record takes about 100 bytes plus 8 per
+/// gradient parameter, so 10^6 events stay well under a gigabyte.
+pub(crate) const MAX_EVENTS: usize = 1_000_000;
+/// The most rows `--trajectory` with `--plot` keeps in memory for the figure.
+const MAX_PLOTTED_ROWS: f64 = 1e6;
+
+/// `value` if it is at most `cap`, else a usage error naming the flag.
+pub(crate) fn at_most(flag: &str, value: usize, cap: usize) -> Result<usize, String> {
+    if value > cap {
+        Err(format!("{flag}: at most {cap}, found {value}"))
+    } else {
+        Ok(value)
+    }
+}
+
 pub(crate) fn positive(name: &str, v: f64) -> Result<f64, String> {
     if v.is_finite() && v > 0.0 {
         Ok(v)
@@ -162,19 +178,55 @@ pub(crate) fn sim_options(model: &Model, args: &SimFlags) -> Result<SimOptions, 
             MethodArg::Dopri5 => Method::Dopri5,
             MethodArg::Dop853 => Method::Dop853,
         },
-        max_events: args.max_events,
+        max_events: at_most("--max-events", args.max_events, MAX_EVENTS)?,
         graze_tol: positive("--graze-tol", args.graze_tol)?,
         sens_error_control: !args.no_sens_error_control,
         ..base
     })
 }
 
-/// The trajectory `--trajectory`/`--sample` ask for.
-fn trajectory_request(args: &RunArgs) -> Result<TrajectoryRequest, String> {
+/// The trajectory `--trajectory`/`--sample` ask for, its number of rows checked.
+fn trajectory_request(args: &RunArgs, opts: &SimOptions) -> Result<TrajectoryRequest, String> {
     Ok(match (&args.trajectory, args.sample) {
         (None, _) => TrajectoryRequest::None,
         (Some(_), None) => TrajectoryRequest::Steps,
-        (Some(_), Some(dt)) => TrajectoryRequest::Sample(positive("--sample", dt)?),
+        (Some(_), Some(dt)) => {
+            let dt = positive("--sample", dt)?;
+            let cap = if args.plot.is_some() { MAX_PLOTTED_ROWS } else { trajectory::MAX_TRAJECTORY_ROWS };
+            trajectory::check_rows(opts, dt, cap)?;
+            TrajectoryRequest::Sample(dt)
+        }
+    })
+}
+
+/// One run whose trajectory rows are written to `path` as they are recorded, never kept.
+fn run_streaming(
+    compiled: &Compiled,
+    params: &Params,
+    opts: &SimOptions,
+    path: &Path,
+) -> Result<RunReport, String> {
+    let cannot_write = |e: std::io::Error| format!("--trajectory: cannot write `{}`: {e}", path.display());
+    let file = std::fs::File::create(path).map_err(cannot_write)?;
+    let system = compiled.native();
+    let p = params.values();
+    let mut recorder =
+        StreamingTrajectory::new(system, p, opts.trajectory, opts.t_start, std::io::BufWriter::new(file))
+            .map_err(cannot_write)?;
+    let run_opts = SimOptions { trajectory: TrajectoryRequest::None, ..opts.clone() };
+    let mut simulator = Simulator::new(system, &run_opts).map_err(|e| error_chain(&e))?;
+    let started = Instant::now();
+    let result = simulator.run_with(p, &mut recorder).map_err(|e| error_chain(&e))?;
+    let run_seconds = started.elapsed().as_secs_f64();
+    recorder.finish().map_err(cannot_write)?;
+    Ok(RunReport {
+        model: compiled.model().name().to_string(),
+        t_end: opts.t_end,
+        info: compiled.info().clone(),
+        params: p.to_vec(),
+        result,
+        compile_seconds: compiled.compile_seconds(),
+        run_seconds,
     })
 }
 
@@ -185,7 +237,7 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
     };
     let params = parameter_values(model, &args.set)?;
     let mut opts = sim_options(model, &args.sim)?;
-    opts.trajectory = trajectory_request(args)?;
+    opts.trajectory = trajectory_request(args, &opts)?;
     plot_trajectory(args, &mut opts)?;
     let check_opts = check_options(&opts, args)?;
 
@@ -193,13 +245,19 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         Ok(c) => c,
         Err(code) => return Ok(code),
     };
-    let run = compiled.simulate(&params, &opts).map_err(|e| error_chain(&e))?;
-    let report = run.report();
-    if let Some(path) = &args.trajectory {
-        if let Err(e) = write_trajectory(path, &report, compiled.native()) {
-            return Err(format!("--trajectory: cannot write `{}`: {e}", path.display()));
+    let report = match (&args.trajectory, &args.plot) {
+        // Rows go to the file as the run records them.
+        (Some(path), None) => run_streaming(&compiled, &params, &opts, path)?,
+        (trajectory, _) => {
+            let report = compiled.simulate(&params, &opts).map_err(|e| error_chain(&e))?.report();
+            if let Some(path) = trajectory {
+                let rows = report.result.trajectory.as_deref().unwrap_or_default();
+                trajectory::write_kept(path, compiled.native(), &report.params, rows)
+                    .map_err(|e| format!("--trajectory: cannot write `{}`: {e}", path.display()))?;
+            }
+            report
         }
-    }
+    };
     if let Some(path) = &args.plot {
         crate::plot::plot_run(&report, path).map_err(|e| format!("--plot: {e}"))?;
     }
@@ -243,13 +301,18 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
             }
         }
     }
-    Ok(match report.failure() {
-        None if check.as_ref().is_some_and(|c| !c.passed()) => ExitCode::from(EXIT_GOAL_NOT_MET),
-        None => ExitCode::SUCCESS,
-        Some(message) => {
-            eprintln!("error: {message}");
-            ExitCode::from(EXIT_SIM_STOPPED)
-        }
+    if let Some(message) = report.failure() {
+        eprintln!("error: {message}");
+        return Ok(ExitCode::from(EXIT_SIM_STOPPED));
+    }
+    // Values that are not numbers are not a result, even from a run that ended as asked.
+    if let Some(message) = report.non_finite() {
+        eprintln!("warning: {message}");
+        return Ok(ExitCode::from(EXIT_SIM_STOPPED));
+    }
+    Ok(match check {
+        Some(check) if !check.passed() => ExitCode::from(EXIT_GOAL_NOT_MET),
+        _ => ExitCode::SUCCESS,
     })
 }
 
@@ -275,40 +338,4 @@ fn plot_trajectory(args: &RunArgs, opts: &mut SimOptions) -> Result<(), String> 
         }
     }
     Ok(())
-}
-
-/// CSV columns: t, mode, the states, the outputs, then with gradients `d<state>/d<param>` and
-/// `d<output>/d<param>` (output sensitivities `h_x S + h_p`, from the compiled output Jacobians).
-fn write_trajectory(path: &PathBuf, report: &RunReport, system: &impl HybridSystem) -> std::io::Result<()> {
-    let info = &report.info;
-    let (n, k, m) = (info.n_states(), info.n_outputs(), info.n_grad());
-    let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
-    let mut header: Vec<String> = vec!["t".into(), "mode".into()];
-    header.extend(info.state_names.iter().cloned());
-    header.extend(info.output_names.iter().cloned());
-    for &j in &info.grad_params {
-        header.extend(info.state_names.iter().map(|s| format!("d{s}/d{}", info.param_names[j])));
-    }
-    for &j in &info.grad_params {
-        header.extend(info.output_names.iter().map(|o| format!("d{o}/d{}", info.param_names[j])));
-    }
-    writeln!(out, "{}", header.join(","))?;
-    let (mut yx, mut yp, mut yt) = (vec![0.0; k * n], vec![0.0; k * m], vec![0.0; k]);
-    for row in report.result.trajectory.iter().flatten() {
-        let mode = info.modes.get(row.mode).map(|m| m.name.as_str()).unwrap_or("?");
-        let mut cells: Vec<String> = vec![num(row.t), mode.to_string()];
-        cells.extend(row.x.iter().chain(&row.outputs).chain(&row.s).map(|v| format!("{v:e}")));
-        if m > 0 && row.s.len() == n * m {
-            system.output_jac(row.t, &row.x, &report.params, &mut yx, &mut yp, &mut yt);
-            for j in 0..m {
-                for i in 0..k {
-                    let dy: f64 =
-                        (0..n).map(|c| yx[i * n + c] * row.s[j * n + c]).sum::<f64>() + yp[j * k + i];
-                    cells.push(format!("{dy:e}"));
-                }
-            }
-        }
-        writeln!(out, "{}", cells.join(","))?;
-    }
-    out.flush()
 }

@@ -9,22 +9,24 @@ use std::process::ExitCode;
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::run::{parameter_values, sim_options, SimFlags};
+use super::run::{at_most, parameter_values, sim_options, SimFlags};
 use super::{compile_model, load_model, parse_param_list, usage_error, ModelArg, EXIT_SIM_STOPPED};
-use crate::codegen::CompiledModel;
 use crate::plot::{self, SweepFigure};
 use crate::sema::ParamIdx;
-use crate::sim::{SimOptions, StopReason};
-use crate::sweep::{self, AxisSpec, Columns, Format, PointResult};
+use crate::sim::SimOptions;
+use crate::sweep::{self, Axis, AxisSpec, Columns, Format, Grid, PointResult, Points, Samples};
 use crate::{Compiled, Model};
 
-/// More points than this would not fit in memory on an ordinary machine (each point keeps its
-/// whole result until the rows are written); a larger sweep is a usage error, not an abort.
-const MAX_POINTS: usize = 10_000_000;
-/// Caps on flags whose size is allocated up front (columns per event, worker threads), so that a
-/// typo is a usage error rather than an out-of-memory abort.
-const MAX_EVENT_COLUMNS: usize = 10_000;
-const MAX_THREADS: usize = 1024;
+/// Caps on the counts the flags accept (README, "Limits"). Rows are streamed, so the number of
+/// points costs time, not memory; the cap turns a typo (`--samples 10000000000000`) into a usage
+/// error rather than a run of years.
+pub(crate) const MAX_POINTS: usize = 1_000_000_000;
+/// With `--plot` every point's result is kept until the figure is drawn (about 4 KB each).
+const MAX_PLOT_POINTS: usize = 100_000;
+/// Caps on flags whose size is allocated per row or up front (columns per event, worker
+/// threads), so that a typo is a usage error rather than an out-of-memory abort.
+pub(crate) const MAX_EVENT_COLUMNS: usize = 1_000;
+pub(crate) const MAX_THREADS: usize = 1024;
 /// Tangents drawn per panel of a sweep plot.
 const PLOT_TANGENTS: usize = 5;
 
@@ -90,7 +92,7 @@ pub fn run(args: &SweepArgs) -> ExitCode {
 }
 
 /// The points of the sweep and the varied parameters, in flag order.
-fn points(model: &Model, args: &SweepArgs) -> Result<(Vec<Vec<f64>>, Vec<usize>), String> {
+fn points(model: &Model, args: &SweepArgs) -> Result<(Points, Vec<usize>), String> {
     let base = parameter_values(model, &args.set)?.values().to_vec();
     let checked = model.checked();
     let mut specs: Vec<(usize, AxisSpec, &str)> = Vec::new();
@@ -147,7 +149,7 @@ fn points(model: &Model, args: &SweepArgs) -> Result<(Vec<Vec<f64>>, Vec<usize>)
                 ));
             }
             let varied = ranges.iter().map(|r| r.0).collect();
-            Ok((sweep::uniform_samples(&base, &ranges, n, args.seed.unwrap_or(0)), varied))
+            Ok((Points::Samples(Samples::new(base, ranges, n, args.seed.unwrap_or(0))), varied))
         }
         None => {
             if specs.is_empty() {
@@ -155,7 +157,7 @@ fn points(model: &Model, args: &SweepArgs) -> Result<(Vec<Vec<f64>>, Vec<usize>)
                     "nothing to vary: give --vary P=LO:HI:N, --vary P=V1,V2,... or --samples N".into()
                 );
             }
-            let mut axes: Vec<(usize, Vec<f64>)> = Vec::new();
+            let mut axes: Vec<(usize, Axis)> = Vec::new();
             let mut count: usize = 1;
             for (idx, axis, text) in &specs {
                 let values = match axis {
@@ -165,11 +167,11 @@ fn points(model: &Model, args: &SweepArgs) -> Result<(Vec<Vec<f64>>, Vec<usize>)
                         if *n > MAX_POINTS {
                             return Err(format!("--vary {text}: at most {MAX_POINTS} points"));
                         }
-                        sweep::linspace(*lo, *hi, *n)
+                        Axis::Even { lo: *lo, hi: *hi, n: *n }
                     }
-                    AxisSpec::List(values) => {
-                        values.iter().map(|&v| in_range(*idx, v)).collect::<Result<Vec<f64>, String>>()?
-                    }
+                    AxisSpec::List(values) => Axis::List(
+                        values.iter().map(|&v| in_range(*idx, v)).collect::<Result<Vec<f64>, String>>()?,
+                    ),
                     AxisSpec::Range { .. } | AxisSpec::Declared => {
                         return Err(format!(
                             "--vary {text}: a grid needs P=LO:HI:N or P=V1,V2,...; ranges are for --samples N"
@@ -185,29 +187,21 @@ fn points(model: &Model, args: &SweepArgs) -> Result<(Vec<Vec<f64>>, Vec<usize>)
                 ));
             }
             let varied = axes.iter().map(|a| a.0).collect();
-            Ok((sweep::full_grid(&base, &axes), varied))
+            let grid = Grid::new(base, axes).map_err(|e| format!("--vary: {e}"))?;
+            Ok((Points::Grid(grid), varied))
         }
     }
 }
 
-/// Runs the points with a progress bar on stderr when stderr is a terminal.
-fn run_with_progress(
-    compiled: &CompiledModel,
-    points: &[Vec<f64>],
-    opts: &SimOptions,
-    threads: usize,
-) -> Result<Vec<PointResult>, String> {
-    let bar = if std::io::stderr().is_terminal() {
+/// A progress bar on stderr when stderr is a terminal, else a hidden one.
+fn progress_bar(points: usize) -> ProgressBar {
+    if std::io::stderr().is_terminal() {
         let style = ProgressStyle::with_template("{bar:40} {pos}/{len} points, eta {eta}")
             .unwrap_or_else(|_| ProgressStyle::default_bar());
-        ProgressBar::new(points.len() as u64).with_style(style)
+        ProgressBar::new(points as u64).with_style(style)
     } else {
         ProgressBar::hidden()
-    };
-    let results = sweep::run_points(compiled, points, opts, threads, &|| bar.inc(1))
-        .map_err(|e| format!("--threads: {e}"))?;
-    bar.finish_and_clear();
-    Ok(results)
+    }
 }
 
 fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
@@ -215,16 +209,19 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
         Some(list) => parse_param_list(model, list, "--grad")?,
         None => Vec::new(),
     };
-    if args.events > MAX_EVENT_COLUMNS {
-        return Err(format!("--events: at most {MAX_EVENT_COLUMNS}, found {}", args.events));
-    }
-    if args.threads > MAX_THREADS {
-        return Err(format!("--threads: at most {MAX_THREADS}, found {}", args.threads));
-    }
+    at_most("--events", args.events, MAX_EVENT_COLUMNS)?;
+    at_most("--threads", args.threads, MAX_THREADS)?;
     let (points, varied) = points(model, args)?;
     let opts = sim_options(model, &args.sim)?;
     if let Some(path) = &args.plot {
         plot::ImageFormat::from_path(path).map_err(|e| format!("--plot: {e}"))?;
+        if points.len() > MAX_PLOT_POINTS {
+            return Err(format!(
+                "--plot: the sweep has {} points; a plot keeps every result until it is drawn and takes \
+                 at most {MAX_PLOT_POINTS} (sweep without --plot: rows are streamed)",
+                points.len()
+            ));
+        }
     }
     // Open the output before the work, so that a bad path fails at once.
     let mut out: Box<dyn Write> = match &args.output {
@@ -239,42 +236,51 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
         Ok(c) => c,
         Err(code) => return Ok(code),
     };
-    let results = run_with_progress(compiled.native(), &points, &opts, args.threads)?;
     let info = compiled.info();
     let columns = Columns::new(info, opts.t_end, args.events, grad.len());
     let format = match args.format {
         FormatArg::Csv => Format::Csv,
         FormatArg::Jsonl => Format::Jsonl,
     };
-    match sweep::write_rows(&mut out, &columns, format, &points, &results, args.threads) {
+    let bar = progress_bar(points.len());
+    let keep = args.plot.is_some();
+    let streamed = sweep::stream_rows(
+        compiled.native(),
+        &points,
+        &opts,
+        &columns,
+        format,
+        args.threads,
+        keep,
+        &|| bar.inc(1),
+        &mut out,
+    );
+    bar.finish_and_clear();
+    let streamed = match streamed {
+        Ok(streamed) => streamed,
         // A closed stdout pipe (`hybc sweep ... | head`) means the reader has what it wanted.
-        Err(sweep::SweepError::Write(_)) if args.output.is_none() => {}
+        Err(sweep::SweepError::Write(_)) if args.output.is_none() => return Ok(ExitCode::SUCCESS),
         Err(sweep::SweepError::Write(e)) => {
             let path = args.output.as_deref().unwrap_or(std::path::Path::new("-"));
             return Err(format!("--output: cannot write `{}`: {e}", path.display()));
         }
-        Err(e) => return Err(format!("--threads: {e}")),
-        Ok(()) => {}
-    }
+        Err(e @ sweep::SweepError::WorkerPanicked { .. }) => return Err(format!("internal error: {e}")),
+        Err(e) => return Err(format!("--threads: {}", super::error_chain(&e))),
+    };
     drop(out);
 
     if let Some(path) = &args.plot {
-        plot_sweep(model, &compiled, &grad, &points, &results, &varied, &opts, args.threads, path)?;
+        let (kept_points, results): (Vec<Vec<f64>>, Vec<PointResult>) = streamed.kept.into_iter().unzip();
+        plot_sweep(model, &compiled, &grad, &kept_points, &results, &varied, &opts, args.threads, path)?;
     }
-    let failed: Vec<usize> = (0..points.len())
-        .filter(|&i| {
-            !results[i]
-                .as_ref()
-                .is_ok_and(|r| matches!(r.stopped_by, StopReason::TEnd | StopReason::Event { .. }))
-        })
-        .collect();
-    Ok(match failed.first() {
+    Ok(match streamed.first_ended_early {
         None => ExitCode::SUCCESS,
         Some(first) => {
             eprintln!(
-                "error: {} of {} points ended early (status and error columns); the first is row {}",
-                failed.len(),
-                points.len(),
+                "error: {} of {} points ended early or have final values that are not finite (status and \
+                 error columns); the first is row {}",
+                streamed.ended_early,
+                streamed.rows,
                 first + 1
             );
             ExitCode::from(EXIT_SIM_STOPPED)

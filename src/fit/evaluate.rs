@@ -43,6 +43,9 @@ pub enum Rejection {
     NoGradient { target: String },
     /// A target's value or gradient is not a finite number.
     NonFinite { target: String },
+    /// Every residual is finite but `0.5 * sum(residual^2)` overflows: the objective, its
+    /// gradient and every convergence test would be infinities and NaNs.
+    ObjectiveOverflow { target: String, residual: f64 },
 }
 
 impl fmt::Display for Rejection {
@@ -63,6 +66,12 @@ impl fmt::Display for Rejection {
                  zero) came at or before it"
             ),
             Rejection::NonFinite { target } => write!(f, "target `{target}` is not a finite number"),
+            Rejection::ObjectiveOverflow { target, residual } => write!(
+                f,
+                "the objective 0.5 sum(residual^2) overflows a double (residual {} for target `{target}`): \
+                 scale the target or its weight (`@W`)",
+                crate::sim::short(*residual)
+            ),
         }
     }
 }
@@ -108,7 +117,19 @@ pub fn evaluate<S: HybridSystem + ?Sized>(
             jacobian[(i, j)] = target.weight * d;
         }
     }
-    Ok(Evaluation { values, residuals, jacobian, events: result.events.iter().map(|e| e.event).collect() })
+    let evaluation =
+        Evaluation { values, residuals, jacobian, events: result.events.iter().map(|e| e.event).collect() };
+    if !evaluation.objective().is_finite() {
+        let (i, residual) = evaluation
+            .residuals
+            .iter()
+            .copied()
+            .enumerate()
+            .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+            .unwrap_or((0, f64::INFINITY));
+        return Err(Rejection::ObjectiveOverflow { target: targets[i].label(info), residual });
+    }
+    Ok(evaluation)
 }
 
 /// The derivatives of the final values that apply to how the run ended.

@@ -22,13 +22,14 @@ pub enum SimError {
     InvalidOption { name: &'static str, value: f64 },
     #[error("model shape is inconsistent: {what} index {index} out of range (count {count})")]
     BadIndex { what: &'static str, index: usize, count: usize },
-    #[error("step size underflow at t = {t} (h = {h}) in mode {mode}, state {state:?}: rtol {rtol:e}, atol {atol:e} cannot be met there")]
+    // The runtime faults: one wording, `fault_text`, with names (`describe`) or indices (here).
+    #[error("{}", self.fault_text(None))]
     StepTooSmall { t: f64, h: f64, mode: usize, state: Vec<f64>, rtol: f64, atol: f64 },
-    #[error("more than {max_steps} steps at t = {t} in mode {mode}, state {state:?}")]
+    #[error("{}", self.fault_text(None))]
     TooManySteps { t: f64, max_steps: usize, mode: usize, state: Vec<f64> },
-    #[error("non-finite state at t = {t} in mode {mode}: {state:?}")]
+    #[error("{}", self.fault_text(None))]
     NonFinite { t: f64, mode: usize, state: Vec<f64> },
-    #[error("the guard of event `{event}` stops being finite at t = {t} in mode {mode}, state {state:?}")]
+    #[error("{}", self.fault_text(None))]
     GuardNotFinite { event: Arc<str>, t: f64, mode: usize, state: Vec<f64> },
     #[error(
         "rtol {rtol:e} cannot be met: below {floor:e} the error estimates are round-off in double precision"
@@ -37,10 +38,24 @@ pub enum SimError {
 }
 
 impl SimError {
-    /// The message with the mode and the states named (the `Display` form has only indices).
+    /// The message with the mode and the states named, as every message of hybc gives them
+    /// (`at t = 0 in mode main, state y = 1, v = 0`); the `Display` form, without the model's
+    /// names, says `in mode 0, state x[0] = 1, x[1] = 0` in the same words.
     pub fn describe(&self, info: &SystemInfo) -> String {
-        let at = |t: f64, mode: usize, state: &[f64]| {
-            format!("at t = {t} in mode {}, state {}", mode_name(info, mode), named_state(info, state))
+        self.fault_text(Some(info))
+    }
+
+    /// The one formatting of every error, runtime faults with where they happened.
+    fn fault_text(&self, info: Option<&SystemInfo>) -> String {
+        let at = |t: f64, mode: usize, state: &[f64]| match info {
+            Some(info) => {
+                format!("at t = {t} in mode {}, state {}", mode_name(info, mode), named_state(info, state))
+            }
+            None => {
+                let pairs: Vec<String> =
+                    state.iter().enumerate().map(|(i, v)| format!("x[{i}] = {}", short(*v))).collect();
+                format!("at t = {t} in mode {mode}, state {}", pairs.join(", "))
+            }
         };
         match self {
             SimError::StepTooSmall { t, h, mode, state, rtol, atol } => format!(
@@ -66,6 +81,28 @@ pub(crate) fn named_state(info: &SystemInfo, state: &[f64]) -> String {
     let pairs: Vec<String> =
         info.state_names.iter().zip(state).map(|(n, v)| format!("{n} = {}", short(*v))).collect();
     pairs.join(", ")
+}
+
+/// `final values not finite: energy = inf, y = NaN` for the final states and outputs that are not
+/// finite numbers (a run can end as asked with an output such as `1 / y` at `y = 0`); `None` when
+/// all are finite.
+pub fn non_finite_finals(info: &SystemInfo, f: &FinalState) -> Option<String> {
+    let bad: Vec<String> = info
+        .state_names
+        .iter()
+        .zip(&f.state)
+        .chain(info.output_names.iter().zip(&f.outputs))
+        .filter(|(_, v)| !v.is_finite())
+        .map(|(n, v)| format!("{n} = {}", short(*v)))
+        .collect();
+    (!bad.is_empty()).then(|| {
+        format!(
+            "final values not finite at t = {} in mode {}: {}",
+            short(f.time),
+            mode_name(info, f.mode),
+            bad.join(", ")
+        )
+    })
 }
 
 fn mode_name(info: &SystemInfo, mode: usize) -> &str {

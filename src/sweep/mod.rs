@@ -1,18 +1,25 @@
-//! Parameter sweeps: one compiled model run at many parameter vectors in parallel, the results
-//! kept in input order, then written as one row per point. Knows `sim` and its results; no CLI
-//! and no IO beyond the writer it is given.
+//! Parameter sweeps: one compiled model run at many parameter vectors in parallel, written as one
+//! row per point in input order. Knows `sim` and its results; no CLI and no IO beyond the writer it
+//! is given.
 //!
-//! Code map: `points` (which vectors: grids, lists, seeded samples), `table` (the row and
-//! column scheme, CSV and JSON lines), this file (running them on a local thread pool).
+//! Code map: `points` (which vectors: grids, lists, seeded samples, each computed from its
+//! index), `table` (the row and column scheme, CSV and JSON lines), `stream` (rows written as they
+//! complete through a bounded reorder window: memory independent of the number of points), this
+//! file (in-memory runs for library callers and small sweeps).
 
 pub mod points;
+mod stream;
 pub mod table;
 
 use rayon::prelude::*;
 
 use crate::sim::{self, HybridSystem, SimError, SimOptions, SimResult};
 
-pub use points::{full_grid, linspace, parse_vary, uniform_samples, AxisSpec, VaryError, VarySpec};
+pub use points::{
+    full_grid, lerp, linspace, parse_vary, uniform_samples, Axis, AxisSpec, Grid, Points, Samples,
+    TooManyPoints, VaryError, VarySpec,
+};
+pub use stream::{stream_rows, Streamed, BATCH, WINDOW_BYTES, WINDOW_ROWS};
 pub use table::{Columns, Format};
 
 /// The outcome of one point: exactly what `sim::run` returned for it. A run that stopped early
@@ -27,8 +34,16 @@ pub enum SweepError {
         #[source]
         source: rayon::ThreadPoolBuildError,
     },
+    #[error("cannot start {threads} worker threads")]
+    Spawn {
+        threads: usize,
+        #[source]
+        source: std::io::Error,
+    },
     #[error("cannot write the rows")]
     Write(#[source] std::io::Error),
+    #[error("a worker thread panicked at point {index}")]
+    WorkerPanicked { index: usize },
 }
 
 /// Rows formatted in parallel per chunk, then written in order: formatting costs about as much

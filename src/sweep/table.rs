@@ -5,8 +5,9 @@
 //! Columns, in order (`K` = the number of events shown, grads = the differentiated parameters
 //! shown):
 //! - every parameter, in declaration order;
-//! - `status`: `ok` (ended at t_end or by a `stop` event), `zeno`, `fault` (ended early) or
-//!   `error` (the run was refused);
+//! - `status`: `ok` (ended at t_end or by a `stop` event), `non_finite` (ended as asked, but a
+//!   final state or output is NaN or infinite), `zeno`, `max_events`, `stuck`, `fault` (ended
+//!   early) or `error` (the run was refused);
 //! - `events`: how many events fired;
 //! - for k = 1..=K: `event<k>` (its name), `t<k>` (its time), `dt<k>/d<p>` per grad;
 //! - `t_final`: the time the run ended;
@@ -17,15 +18,17 @@
 //! - `error`: why the run ended early, else empty.
 //!
 //! Empty cells (`null` in JSON) mean "does not exist": events beyond the count, gradients after
-//! a grazing event, and final values and their gradients of a run that ended early.
+//! a grazing event, and final values and their gradients of a run that ended early. Values that
+//! are not finite are `NaN`, `inf`, `-inf` in CSV and the strings `"NaN"`, `"inf"`, `"-inf"` in
+//! JSON, as in `hybc run --format json`.
 
 use std::io::{self, Write};
 
 use serde_json::{Map, Value};
 
 use super::PointResult;
-use crate::report::RunReport;
-use crate::sim::{SimResult, StopReason, SystemInfo};
+use crate::report::{non_finite_name, RunReport};
+use crate::sim::{non_finite_finals, SimResult, StopReason, SystemInfo};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
@@ -112,10 +115,24 @@ impl<'a> Columns<'a> {
         row
     }
 
+    /// Whether a point's row says `ok`: its run ended as asked with finite final values.
+    pub fn is_ok(&self, result: &PointResult) -> bool {
+        result.as_ref().is_ok_and(|r| r.stopped_by.is_complete() && self.non_finite(r).is_none())
+    }
+
+    fn non_finite(&self, r: &SimResult) -> Option<String> {
+        non_finite_finals(self.info, &r.final_state)
+    }
+
     fn result_cells(&self, params: &[f64], r: &SimResult, row: &mut Vec<Cell>) {
         let (n, k, m) = (self.info.n_states(), self.info.n_outputs(), self.info.n_grad());
-        let status = if r.stopped_by.is_complete() { "ok" } else { r.stopped_by.name() };
-        let complete = status == "ok";
+        let complete = r.stopped_by.is_complete();
+        let non_finite = if complete { self.non_finite(r) } else { None };
+        let status = match (complete, &non_finite) {
+            (true, None) => "ok",
+            (true, Some(_)) => "non_finite",
+            (false, _) => r.stopped_by.name(),
+        };
         row.push(Cell::Text(status.into()));
         row.push(Cell::Count(r.events.len()));
         for slot in 0..self.events {
@@ -144,7 +161,7 @@ impl<'a> Columns<'a> {
         for j in 0..self.shown_grad {
             row.extend((0..k).map(|i| dy.map_or(Cell::Empty, |d| num_or_empty(d[j * k + i]))));
         }
-        row.push(match self.failure(params, r) {
+        row.push(match self.failure(params, r).or(non_finite) {
             Some(message) => Cell::Text(message),
             None => Cell::Empty,
         });
@@ -168,7 +185,7 @@ impl<'a> Columns<'a> {
     }
 
     /// Writes the header (CSV only; JSON lines name every value).
-    pub fn write_header(&self, w: &mut impl Write, format: Format) -> io::Result<()> {
+    pub fn write_header(&self, w: &mut (impl Write + ?Sized), format: Format) -> io::Result<()> {
         match format {
             Format::Csv => {
                 let names: Vec<String> = self.header().iter().map(|h| csv_field(h)).collect();
@@ -201,7 +218,10 @@ impl<'a> Columns<'a> {
                     .zip(cells)
                     .map(|(name, c)| {
                         let v = match c {
-                            Cell::Num(v) => Value::from(v),
+                            Cell::Num(v) => match non_finite_name(v) {
+                                Some(name) => Value::String(name.into()),
+                                None => Value::from(v),
+                            },
                             Cell::Count(c) => Value::from(c),
                             Cell::Text(s) => Value::String(s),
                             Cell::Empty => Value::Null,
