@@ -158,6 +158,8 @@ def test_bad_parameters_and_options_are_refused(ball):
         ball.simulate(trajectory="every")
     with pytest.raises(ValueError, match="trajectory"):
         ball.simulate(trajectory=-0.1)
+    with pytest.raises(ValueError, match="max_events: expected a non-negative integer, found -3"):
+        ball.simulate(max_events=-3)
     with pytest.raises(TypeError):
         ball.simulate(rtoll=1e-6)
     assert issubclass(hybc.ParameterError, ValueError)
