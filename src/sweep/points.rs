@@ -284,6 +284,20 @@ pub fn uniform_samples(base: &[f64], ranges: &[(usize, f64, f64)], n: usize, see
     Points::Samples(Samples::new(base.to_vec(), ranges.to_vec(), n, seed)).to_vec()
 }
 
+/// Points `indices` (a range of point numbers) of [`uniform_samples`]`(base, ranges, _, seed)`,
+/// without drawing the points before them (each [`Samples`] point is computed from its index),
+/// so a sweep can be sharded by index ranges (a Dask task draws only its own points) and the
+/// shards concatenated equal the whole.
+pub fn uniform_samples_from(
+    base: &[f64],
+    ranges: &[(usize, f64, f64)],
+    seed: u64,
+    indices: std::ops::Range<usize>,
+) -> Vec<Vec<f64>> {
+    let points = Points::Samples(Samples::new(base.to_vec(), ranges.to_vec(), indices.end, seed));
+    indices.map(|i| points.point(i)).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -396,6 +410,23 @@ mod tests {
         assert_eq!(grid.point(4), vec![1.0, 5.0, 7.0]);
         let huge = vec![(0, Axis::Even { lo: 0.0, hi: 1.0, n: 1 << 40 }); 2];
         assert_eq!(Grid::new(vec![0.0], huge), Err(TooManyPoints));
+    }
+
+    #[test]
+    fn sample_shards_concatenate_to_the_whole() {
+        let ranges = [(0, 0.0, 1.0), (2, -5.0, 5.0), (1, 10.0, 20.0)];
+        let base = [0.5, 15.0, 0.0, 7.0];
+        let whole = uniform_samples(&base, &ranges, 1000, 42);
+        // Shard bounds at odd and even points, across the generator's 64-word buffer.
+        let mut joined = Vec::new();
+        for bounds in [0..1, 1..10, 10..11, 11..333, 333..334, 334..1000] {
+            joined.extend(uniform_samples_from(&base, &ranges, 42, bounds));
+        }
+        assert_eq!(joined, whole);
+        assert_eq!(
+            uniform_samples_from(&base, &ranges[..1], 7, 5..6)[0],
+            uniform_samples(&base, &ranges[..1], 6, 7)[5]
+        );
     }
 
     #[test]

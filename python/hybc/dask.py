@@ -1,0 +1,122 @@
+"""Sweeps sharded over a Dask distributed cluster: ``hybc.dask.sweep(model, points, client=...)``.
+
+Same points, keywords and result as :meth:`hybc.Model.sweep`, and the result equals the local
+sweep exactly (every point is an independent run; a run's result depends only on its point).
+
+How it is split: shards are index ranges ``[start, stop)``. Given points (one C-ordered float64
+matrix) are scattered once to every worker and each task names its range; for
+:class:`hybc.Samples` only the sampler's description travels and each task draws its own range
+of the seeded stream (the same points as the whole draw). Each worker process keeps one
+:class:`hybc.Model` per model text in a module-level cache, and the model keeps one compiled form
+per gradient set, so a worker compiles once however many shards it runs. The shards' columns are
+concatenated in input order.
+
+Each task runs its shard on one thread unless ``threads=`` is given: the parallelism comes from
+Dask's worker processes and threads. Dask is an optional dependency (``pip install ./python[dask]``).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from ._model import Model, Samples, normalise_points, sweep_matrix
+
+# One Model per (text, file name) in this process (a Dask worker). Guarded: a worker runs tasks
+# on several threads.
+_MODELS: dict[tuple[str, str], Model] = {}
+_MODELS_LOCK = threading.Lock()
+
+
+def sweep(
+    model: Model,
+    points: Mapping[str, Any] | np.ndarray,
+    *,
+    client: Any = None,
+    names: Sequence[str] | None = None,
+    shards: int | None = None,
+    **kw: Any,
+) -> dict[str, np.ndarray]:
+    """:meth:`hybc.Model.sweep` on a Dask cluster.
+
+    ``client``: a ``distributed.Client`` (default: the current one). ``shards``: the number of
+    tasks (default: four per worker thread, at most one per point). Other keywords as
+    :meth:`hybc.Model.sweep` (``grad``, ``events``, ``t_end``, ``rtol``, ...).
+    """
+    from distributed import default_client
+
+    client = client if client is not None else default_client()
+    kw = {"threads": 1, **kw}
+    sampled = isinstance(points, Samples)
+    if sampled:
+        # Only the sampler's description travels; each task draws its own rows.
+        if names is not None:
+            raise TypeError("names= is for a 2-D array of points; Samples names its parameters")
+        names, first = points.rows(model, 0, min(points.n, 1))
+        matrix, fixed, n = first, dict(points.fixed), points.n
+    else:
+        names, matrix, fixed = normalise_points(model, points, names)
+        n = len(matrix)
+    # Every error a task could raise (points, keywords, gradient names) is raised here first
+    # (for samples: their ranges; every drawn value lies within them).
+    sweep_matrix(model, names, matrix, fixed, {**kw, "check_only": True})
+    if n == 0:
+        return sweep_matrix(model, names, matrix, fixed, kw)
+    if shards is None:
+        slots = sum(client.nthreads().values()) or 1
+        shards = 4 * slots
+    if not isinstance(shards, int) or shards < 1:
+        raise ValueError(f"shards: expected a positive integer, found {shards!r}")
+    bounds = np.linspace(0, n, min(shards, n) + 1).round().astype(np.int64)
+    if sampled:
+        source = points
+    else:
+        [source] = client.scatter([matrix], broadcast=True)
+    futures = [
+        client.submit(
+            _sweep_shard, model.source, model.file_name, names, source, int(a), int(b), fixed, kw,
+            pure=False,
+        )
+        for a, b in zip(bounds[:-1], bounds[1:])
+    ]
+    parts = client.gather(futures)
+    return {name: np.concatenate([part[name] for part in parts]) for name in parts[0]}
+
+
+def _worker_model(text: str, file_name: str) -> Model:
+    key = (text, file_name)
+    with _MODELS_LOCK:
+        model = _MODELS.get(key)
+        if model is None:
+            model = _MODELS[key] = Model(text, file_name=file_name)
+        return model
+
+
+def _sweep_shard(
+    text: str,
+    file_name: str,
+    names: list[str],
+    source: np.ndarray | Samples,
+    start: int,
+    stop: int,
+    fixed: dict[str, float],
+    kw: dict[str, Any],
+) -> dict[str, np.ndarray]:
+    """Runs points ``[start, stop)`` of ``source`` (the points, or the sampler that draws them) on
+    this worker (one compiled model per worker process and gradient set)."""
+    model = _worker_model(text, file_name)
+    if isinstance(source, Samples):
+        names, rows = source.rows(model, start, stop)
+    else:
+        # Arrays that arrive through Dask's serialisation may be read-only or unaligned.
+        rows = np.require(source[start:stop], np.float64, ["C", "A"])
+    return sweep_matrix(model, names, rows, fixed, kw)
+
+
+def _cache_info() -> list[tuple[str, list[list[str]]]]:
+    """The models cached in this process and their compiled gradient sets (for tests)."""
+    with _MODELS_LOCK:
+        return [(m.name, m._native.compiled_grad_sets) for m in _MODELS.values()]

@@ -1,0 +1,27 @@
+//! `hybc._hybc`: the native half of the Python package `hybc` (python/hybc/ is the other half).
+//!
+//! Code map: `errors` (the exception classes and how library errors map onto them), `model`
+//! (a checked model and its per-gradient-set compile cache), `options` (keyword arguments to
+//! `SimOptions`), `run` (one run's result as Python values and NumPy arrays), `sweep` (many points
+//! in parallel, the columns of `hybc sweep`). Every call that integrates releases the GIL.
+//!
+//! Where the JAX primitive plugs in (branch `jax`): a module `jax_ffi` declared below next to the
+//! others, registered by one line in [`_hybc`]; it reaches compiled models through
+//! [`model::Model::compiled`] (cached per gradient set, `Send + Sync + 'static`).
+
+mod errors;
+mod model;
+mod options;
+mod run;
+mod sweep;
+
+use pyo3::prelude::*;
+
+#[pymodule]
+fn _hybc(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    errors::register(m)?;
+    m.add_class::<model::Model>()?;
+    m.add_class::<run::Run>()?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,277 @@
+//! A checked model as a Python object, with its compiled forms cached per gradient set.
+
+use std::collections::HashMap;
+use std::sync::Mutex;
+
+use pyo3::prelude::*;
+
+use numpy::{PyArray1, PyArray2, PyArrayMethods as _, PyReadonlyArray2};
+use pyo3::exceptions::PyValueError;
+use pyo3::types::PyDict;
+
+use crate::errors::{self, ParameterError};
+use crate::options::{trajectory_request, SimKeywords};
+use crate::run::Run;
+use crate::sweep;
+
+/// A checked model. Compiling is the costly step (milliseconds to seconds), so each gradient set
+/// is compiled once and kept: `Compiled` is `Send + Sync + 'static` and cheap to clone.
+#[pyclass(module = "hybc._hybc", frozen)]
+pub struct Model {
+    model: hybc::Model,
+    compiled: Mutex<HashMap<Vec<String>, hybc::Compiled>>,
+}
+
+impl Model {
+    /// The model compiled with gradients with respect to `grad` (in that column order), from the
+    /// cache or compiled now (with the GIL released).
+    pub fn compiled(&self, py: Python<'_>, grad: &[String]) -> PyResult<hybc::Compiled> {
+        if let Some(c) = self.lock().get(grad) {
+            return Ok(c.clone());
+        }
+        let model = self.model.clone();
+        let compiled = py.detach(|| model.compile(grad)).map_err(errors::to_py)?;
+        self.lock().insert(grad.to_vec(), compiled.clone());
+        Ok(compiled)
+    }
+
+    pub fn inner(&self) -> &hybc::Model {
+        &self.model
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<Vec<String>, hybc::Compiled>> {
+        // A panic while holding the lock cannot leave the map half-updated (insert is the only
+        // write), so a poisoned lock is still usable.
+        self.compiled.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The parameter values: the defaults with `params` set (each checked against its range).
+    pub fn param_values(&self, params: Option<HashMap<String, f64>>) -> PyResult<hybc::Params> {
+        let mut values = self.model.params();
+        for (name, value) in params.unwrap_or_default() {
+            values.set(&name, value).map_err(|e| errors::to_py(e.into()))?;
+        }
+        Ok(values)
+    }
+
+    fn wrap(model: hybc::Model) -> Model {
+        Model { model, compiled: Mutex::new(HashMap::new()) }
+    }
+}
+
+#[pymethods]
+impl Model {
+    /// Parses and checks a model text; diagnostics name the file `file_name`.
+    #[new]
+    #[pyo3(signature = (text, file_name = "model.hyb"))]
+    fn new(py: Python<'_>, text: &str, file_name: &str) -> PyResult<Model> {
+        let text = text.to_string();
+        let file_name = file_name.to_string();
+        py.detach(|| hybc::Model::parse_named(&text, &file_name)).map(Model::wrap).map_err(errors::to_py)
+    }
+
+    /// Reads, parses and checks a model file.
+    #[staticmethod]
+    fn from_file(py: Python<'_>, path: std::path::PathBuf) -> PyResult<Model> {
+        py.detach(|| hybc::Model::from_file(&path)).map(Model::wrap).map_err(errors::to_py)
+    }
+
+    #[getter]
+    fn name(&self) -> &str {
+        self.model.name()
+    }
+
+    #[getter]
+    fn source(&self) -> &str {
+        self.model.source()
+    }
+
+    #[getter]
+    fn file_name(&self) -> &str {
+        self.model.file_name()
+    }
+
+    /// Parameter names and defaults, in declaration order.
+    #[getter]
+    fn params(&self) -> Vec<(String, f64)> {
+        self.model.params().iter().map(|(n, v)| (n.to_string(), v)).collect()
+    }
+
+    #[getter]
+    fn states(&self) -> Vec<String> {
+        self.model.state_names().map(String::from).collect()
+    }
+
+    #[getter]
+    fn outputs(&self) -> Vec<String> {
+        self.model.output_names().map(String::from).collect()
+    }
+
+    /// Declared event names, in declaration order (firing order at one instant).
+    #[getter]
+    fn events(&self) -> Vec<String> {
+        self.model.checked().events.iter().map(|e| e.name.to_string()).collect()
+    }
+
+    #[getter]
+    fn modes(&self) -> Vec<String> {
+        self.model.checked().modes.iter().map(|m| m.name.to_string()).collect()
+    }
+
+    /// The gradient sets compiled so far (each is compiled once per `Model` object).
+    #[getter]
+    fn compiled_grad_sets(&self) -> Vec<Vec<String>> {
+        let mut sets: Vec<Vec<String>> = self.lock().keys().cloned().collect();
+        sets.sort();
+        sets
+    }
+
+    /// Declared parameter ranges `name -> (lo, hi)`, for the parameters that declare one.
+    #[getter]
+    fn param_ranges(&self) -> Vec<(String, (f64, f64))> {
+        let params = &self.model.checked().params;
+        params.iter().filter_map(|p| p.range.map(|r| (p.name.clone(), r))).collect()
+    }
+
+    /// One run; see `hybc.Model.simulate`.
+    #[pyo3(signature = (params = None, *, grad = None, trajectory = None, t_end = None, rtol = None,
+        atol = None, max_events = None, max_steps = None, method = None, graze_tol = None,
+        sens_error_control = None, h_max = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn simulate(
+        &self,
+        py: Python<'_>,
+        params: Option<HashMap<String, f64>>,
+        grad: Option<Vec<String>>,
+        trajectory: Option<&Bound<'_, PyAny>>,
+        t_end: Option<f64>,
+        rtol: Option<f64>,
+        atol: Option<f64>,
+        max_events: Option<usize>,
+        max_steps: Option<usize>,
+        method: Option<String>,
+        graze_tol: Option<f64>,
+        sens_error_control: Option<bool>,
+        h_max: Option<f64>,
+    ) -> PyResult<Run> {
+        let keywords = SimKeywords {
+            t_end,
+            rtol,
+            atol,
+            max_events,
+            max_steps,
+            method,
+            graze_tol,
+            sens_error_control,
+            h_max,
+        };
+        let mut opts = keywords.options(&self.model)?;
+        opts.trajectory = trajectory_request(trajectory)?;
+        let values = self.param_values(params)?;
+        let compiled = self.compiled(py, &grad.unwrap_or_default())?;
+        let t_end = opts.t_end;
+        let run = py.detach(|| compiled.simulate(&values, &opts)).map_err(errors::to_py)?;
+        Ok(Run::new(run, t_end))
+    }
+
+    /// Rows `[start, stop)` of the seeded uniform samples of `hybc sweep --samples n --seed seed`:
+    /// `ranges` lists `(name, (lo, hi))` in draw order (`None` for the declared range; no list:
+    /// every parameter with a declared range). Returns the sampled names and one row per point.
+    #[pyo3(signature = (n, seed, ranges, start, stop))]
+    fn sample_points<'py>(
+        &self,
+        py: Python<'py>,
+        n: usize,
+        seed: u64,
+        ranges: Option<sweep::RangeArgs>,
+        start: usize,
+        stop: usize,
+    ) -> PyResult<(Vec<String>, Bound<'py, PyArray2<f64>>)> {
+        let ranges = sweep::sample_ranges(&self.model, ranges)?;
+        if n == 0 || n > sweep::MAX_POINTS {
+            return Err(PyValueError::new_err(format!(
+                "samples: expected 1 to {} points, found {n}",
+                sweep::MAX_POINTS
+            )));
+        }
+        if start > stop || stop > n {
+            return Err(PyValueError::new_err(format!("samples: rows {start}..{stop} of {n}")));
+        }
+        let base = vec![0.0; self.model.checked().params.len()];
+        let rows = py.detach(|| hybc::sweep::uniform_samples_from(&base, &ranges, seed, start..stop));
+        let names = ranges.iter().map(|r| self.model.checked().params[r.0].name.clone()).collect();
+        let flat: Vec<f64> = rows.iter().flat_map(|p| ranges.iter().map(|r| p[r.0])).collect();
+        Ok((names, PyArray1::from_vec(py, flat).reshape([stop - start, ranges.len()])?))
+    }
+
+    /// Runs every row of `points` (columns `names`; the other parameters from `fixed`, else their
+    /// defaults) in parallel; see `hybc.Model.sweep`.
+    ///
+    /// With `check_only`, everything is checked (points, options, gradient names) and nothing is
+    /// compiled or run: an empty dict comes back.
+    #[pyo3(signature = (names, points, fixed = None, *, grad = None, events = 5, threads = 0, check_only = false,
+        t_end = None, rtol = None, atol = None, max_events = None, max_steps = None, method = None,
+        graze_tol = None, sens_error_control = None, h_max = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn sweep<'py>(
+        &self,
+        py: Python<'py>,
+        names: Vec<String>,
+        points: PyReadonlyArray2<'py, f64>,
+        fixed: Option<HashMap<String, f64>>,
+        grad: Option<Vec<String>>,
+        events: usize,
+        threads: usize,
+        check_only: bool,
+        t_end: Option<f64>,
+        rtol: Option<f64>,
+        atol: Option<f64>,
+        max_events: Option<usize>,
+        max_steps: Option<usize>,
+        method: Option<String>,
+        graze_tol: Option<f64>,
+        sens_error_control: Option<bool>,
+        h_max: Option<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let keywords = SimKeywords {
+            t_end,
+            rtol,
+            atol,
+            max_events,
+            max_steps,
+            method,
+            graze_tol,
+            sens_error_control,
+            h_max,
+        };
+        let opts = keywords.options(&self.model)?;
+        sweep::check_counts(events, threads)?;
+        if let Some(name) = names.iter().find(|n| fixed.as_ref().is_some_and(|f| f.contains_key(*n))) {
+            return Err(ParameterError::new_err(format!(
+                "parameter `{name}` is given both as a column and as a fixed value"
+            )));
+        }
+        let base = self.param_values(fixed)?;
+        let rows = sweep::points(&self.model, base.values(), &names, &points)?;
+        drop(points);
+        let grad = grad.unwrap_or_default();
+        if check_only {
+            check_grad_names(&self.model, &grad)?;
+            return Ok(PyDict::new(py));
+        }
+        let compiled = self.compiled(py, &grad)?;
+        let request = sweep::SweepRequest { grad_len: grad.len(), events, threads, opts };
+        sweep::run(py, &compiled, rows, &request)
+    }
+}
+
+/// The errors `compile` would give for the gradient names, without compiling.
+fn check_grad_names(model: &hybc::Model, grad: &[String]) -> PyResult<()> {
+    for (i, name) in grad.iter().enumerate() {
+        model.param_index(name).map_err(|e| errors::to_py(e.into()))?;
+        if grad[..i].contains(name) {
+            return Err(ParameterError::new_err(format!("parameter `{name}` is named twice")));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,90 @@
+//! Keyword arguments of `simulate` and `sweep` to `SimOptions`: the model's `simulate` line over
+//! the run defaults, then the keywords, checked as `hybc run` checks its flags (the message names
+//! the keyword and the value).
+
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+
+use hybc::{Method, SimOptions, TrajectoryRequest};
+
+/// The simulation keywords shared by `simulate` and `sweep`; `None` keeps the model's value.
+#[derive(Clone, Debug, Default)]
+pub struct SimKeywords {
+    pub t_end: Option<f64>,
+    pub rtol: Option<f64>,
+    pub atol: Option<f64>,
+    pub max_events: Option<usize>,
+    pub max_steps: Option<usize>,
+    pub method: Option<String>,
+    pub graze_tol: Option<f64>,
+    pub sens_error_control: Option<bool>,
+    pub h_max: Option<f64>,
+}
+
+fn positive(name: &str, v: f64) -> PyResult<f64> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(PyValueError::new_err(format!("{name}: expected a positive finite number, found {v}")))
+    }
+}
+
+impl SimKeywords {
+    /// The options of a run of `model` with these keywords.
+    pub fn options(&self, model: &hybc::Model) -> PyResult<SimOptions> {
+        let base = model.sim_options();
+        let rtol = positive("rtol", self.rtol.unwrap_or(base.rtol))?;
+        if rtol >= 1.0 {
+            return Err(PyValueError::new_err(format!("rtol: expected a number below 1, found {rtol}")));
+        }
+        let method = match self.method.as_deref() {
+            None | Some("auto") => Method::Auto,
+            Some("dopri5") => Method::Dopri5,
+            Some("dop853") => Method::Dop853,
+            Some(other) => {
+                return Err(PyValueError::new_err(format!(
+                    "method: expected \"auto\", \"dopri5\" or \"dop853\", found {other:?}"
+                )))
+            }
+        };
+        let h_max = match self.h_max {
+            None => base.h_max,
+            Some(h) => positive("h_max", h)?,
+        };
+        Ok(SimOptions {
+            t_end: positive("t_end", self.t_end.unwrap_or(base.t_end))?,
+            rtol,
+            atol: positive("atol", self.atol.unwrap_or(base.atol))?,
+            method,
+            max_events: self.max_events.unwrap_or(base.max_events),
+            max_steps: self.max_steps.unwrap_or(base.max_steps),
+            graze_tol: positive("graze_tol", self.graze_tol.unwrap_or(base.graze_tol))?,
+            sens_error_control: self.sens_error_control.unwrap_or(base.sens_error_control),
+            h_max,
+            ..base
+        })
+    }
+}
+
+/// `trajectory=None` (none), `"steps"` (every accepted step and both sides of every event) or a
+/// positive number `dt` (samples at every multiple of `dt`).
+pub fn trajectory_request(value: Option<&Bound<'_, PyAny>>) -> PyResult<TrajectoryRequest> {
+    let Some(value) = value.filter(|v| !v.is_none()) else {
+        return Ok(TrajectoryRequest::None);
+    };
+    if let Ok(text) = value.extract::<String>() {
+        return match text.as_str() {
+            "steps" => Ok(TrajectoryRequest::Steps),
+            _ => Err(PyValueError::new_err(format!(
+                "trajectory: expected None, \"steps\" or a sampling interval dt > 0, found {text:?}"
+            ))),
+        };
+    }
+    match value.extract::<f64>() {
+        Ok(dt) => Ok(TrajectoryRequest::Sample(positive("trajectory", dt)?)),
+        Err(_) => Err(PyValueError::new_err(format!(
+            "trajectory: expected None, \"steps\" or a sampling interval dt > 0, found {}",
+            value.repr().map(|r| r.to_string()).unwrap_or_default()
+        ))),
+    }
+}

@@ -1,0 +1,225 @@
+"""hybc.Model and Model.simulate against closed forms; errors a user can make."""
+
+import math
+import pickle
+
+import numpy as np
+import pytest
+
+import hybc
+from conftest import MODELS, REPO, ball_bounces, ball_energy
+
+G = 9.81
+
+
+def test_names_and_defaults(ball):
+    assert ball.name == "ball"
+    assert ball.params == {"g": 9.81, "e": 0.8, "h0": 1.0}
+    assert list(ball.params) == ["g", "e", "h0"]
+    assert ball.param_ranges == {"e": (0.0, 1.0)}
+    assert ball.states == ["y", "v"]
+    assert ball.outputs == ["energy"]
+    assert ball.events == ["touchdown"]
+    assert ball.file_name.endswith("ball.hyb")
+    assert hybc.Model(ball.source).params == ball.params
+
+
+def test_ball_event_times_and_energy_match_the_closed_form(ball):
+    # The tutorial's numbers: g = 9.81, e = 0.8, h0 = 1, T = 2.5, four bounces.
+    run = ball.simulate(grad=["e", "h0"])
+    expected = ball_bounces(G, 0.8, 1.0, 2.5)
+    assert len(expected) == 4
+    np.testing.assert_allclose(run.event_times, expected, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(expected, [0.4515236410, 1.1739614666, 1.7519117270, 2.2142719354], atol=1e-10)
+    assert run.event_names == ["touchdown"] * 4
+    assert run.stopped_by == "t_end" and run.status == "ok" and run.ok and run.error is None
+    assert run.warnings == []
+    assert run.t == 2.5 and run.t_end == 2.5
+    energy, de, dh0 = ball_energy(G, 0.8, 1.0, 4)
+    assert math.isclose(energy, 1.6458448896, rel_tol=1e-10)
+    assert math.isclose(run.outputs["energy"], energy, rel_tol=1e-8)
+    assert run.grad == ["e", "h0"]
+    assert run.doutputs["energy"].shape == (2,)
+    np.testing.assert_allclose(run.doutputs["energy"], [de, dh0], rtol=1e-7)
+    assert set(run.state) == {"y", "v"} and set(run.dstate) == {"y", "v"}
+
+
+def test_dt1_dh0_is_one_over_the_impact_speed(ball):
+    run = ball.simulate({"e": 0.9}, grad=["e", "h0"], t_end=2.5, rtol=1e-10)
+    assert run.event_dtime.shape == (len(run.event_times), 2)
+    dt1_dh0 = 1 / math.sqrt(2 * G * 1.0)
+    assert math.isclose(dt1_dh0, 0.2257618205, rel_tol=1e-9)
+    assert math.isclose(run.event_dtime[0, 1], dt1_dh0, rel_tol=1e-8)
+    assert run.event_dtime[0, 0] == 0.0  # the first impact does not depend on e
+    # At e = 0.9 three bounces come before T = 2.5: E(T) = g h0 e^6.
+    expected = ball_bounces(G, 0.9, 1.0, 2.5)
+    np.testing.assert_allclose(run.event_times, expected, atol=1e-9)
+    energy, de, dh0 = ball_energy(G, 0.9, 1.0, len(expected))
+    assert math.isclose(run.outputs["energy"], energy, rel_tol=1e-8)
+    np.testing.assert_allclose(run.doutputs["energy"], [de, dh0], rtol=1e-7)
+
+
+def test_second_closed_form_point_with_every_gradient(ball):
+    # closed-forms.md, g = 9.81, e = 0.8, h0 = 10, T = 2 (between bounces 1 and 2).
+    run = ball.simulate({"h0": 10}, grad=["h0", "g", "e"], t_end=2)
+    assert math.isclose(run.event_times[0], 1.42784312293, rel_tol=1e-9)
+    np.testing.assert_allclose(run.event_dtime[0], [0.0713921561464, -0.0727748788444, 0], atol=1e-9)
+    assert math.isclose(run.state["y"], 4.80570772929, rel_tol=1e-8)
+    assert math.isclose(run.state["v"], 5.59285386465, rel_tol=1e-8)
+    np.testing.assert_allclose(run.dstate["y"], [-0.0787146135354, 0.570117621269, 8.01428207183], rtol=1e-7)
+    np.testing.assert_allclose(run.dstate["v"], [1.26064269323, -0.714941189366, 14.0071410359], rtol=1e-7)
+
+
+def test_tilted_floor_first_bounce_slope_gradient():
+    # t1 = (s vx0 + sqrt(s^2 vx0^2 + 2 g h0)) / g; the tutorial printed -0.0000 for dt1/ds.
+    model = hybc.Model.from_file(MODELS / "tilted_ball.hyb")
+    run = model.simulate(grad=["s"])
+    s, vx0, h0 = 0.1, 1.5, 1.0
+    root = math.sqrt(s**2 * vx0**2 + 2 * G * h0)
+    t1 = (s * vx0 + root) / G
+    dt1_ds = (vx0 + s * vx0**2 / root) / G
+    assert math.isclose(run.event_times[0], t1, rel_tol=1e-9)
+    assert round(dt1_ds, 4) == 0.1581
+    assert math.isclose(run.event_dtime[0, 0], dt1_ds, rel_tol=1e-7)
+    np.testing.assert_allclose(run.event_times, [0.4671, 1.1899, 1.7682, 2.2308, 2.6009, 2.8970], atol=6e-5)
+
+
+def test_zeno_is_reported_never_a_silent_number(ball):
+    run = ball.simulate(grad=["e"], t_end=10)
+    t_star = 4.0637127689
+    assert run.stopped_by == "zeno" and run.status == "zeno" and not run.ok
+    assert "Zeno" in run.error and "4.06371276" in run.error
+    assert run.t <= t_star + 1e-6
+    # No final values exist at t_end = 10: NaN, not the state where the run stopped.
+    assert all(math.isnan(v) for v in run.state.values())
+    assert math.isnan(run.outputs["energy"]) and np.isnan(run.doutputs["energy"]).all()
+    assert len(run.event_times) > 20 and (np.diff(run.event_times) > 0).all()
+
+
+CEILING = (REPO / "tests/data/run/ceiling_graze.hyb").read_text()
+
+
+def test_grazing_is_reported_with_nan_gradients():
+    model = hybc.Model(CEILING)
+    run = model.simulate(grad=["g", "v0", "H"])
+    assert run.event_names[0] == "ceiling"
+    assert any("grazes" in w for w in run.warnings), run.warnings
+    assert np.isnan(run.event_dtime[0]).all()
+    # The state after the contact depends on its time: no derivative exists.
+    assert np.isnan(run.dstate["v"]).all()
+    assert run.status == "ok"  # the run itself is fine; the gradients are what does not exist
+
+
+def test_a_bad_model_raises_model_error_with_a_caret(tmp_path):
+    text = "model m\nparam a = 1\nstate x = 0\nder(x) = a * y\n"
+    with pytest.raises(hybc.ModelError) as info:
+        hybc.Model(text)
+    message = str(info.value)
+    assert "model.hyb:4:14" in message and "unknown name `y`" in message
+    assert "der(x) = a * y" in message
+    lines = message.splitlines()
+    source_line = next(line for line in lines if line.endswith("der(x) = a * y"))
+    caret_line = next(line for line in lines if "^" in line)
+    assert caret_line.index("^") == source_line.rindex("y")  # the caret points at the `y`
+    path = tmp_path / "bad.hyb"
+    path.write_text(text)
+    with pytest.raises(hybc.ModelError, match=rf"{path}:4:14"):
+        hybc.Model.from_file(path)
+    with pytest.raises(hybc.ModelError, match="my.hyb:4:14"):
+        hybc.Model(text, file_name="my.hyb")
+    assert issubclass(hybc.ModelError, ValueError)
+
+
+def test_a_missing_file_is_an_os_error(tmp_path):
+    with pytest.raises(OSError, match="cannot read"):
+        hybc.Model.from_file(tmp_path / "nope.hyb")
+
+
+def test_bad_parameters_and_options_are_refused(ball):
+    with pytest.raises(hybc.ParameterError, match=r"no parameter `ee`.*did you mean `e`"):
+        ball.simulate({"ee": 0.5})
+    with pytest.raises(hybc.ParameterError, match=r"e = 1.5 is outside its range \[0, 1\]"):
+        ball.simulate({"e": 1.5})
+    with pytest.raises(hybc.ParameterError, match="not a finite number"):
+        ball.simulate({"h0": float("nan")})
+    with pytest.raises(hybc.ParameterError, match="no parameter `k`"):
+        ball.simulate(grad=["k"])
+    with pytest.raises(hybc.ParameterError, match="named twice"):
+        ball.simulate(grad=["e", "e"])
+    with pytest.raises(ValueError, match="rtol: expected a positive finite number, found -1"):
+        ball.simulate(rtol=-1)
+    with pytest.raises(ValueError, match="rtol: expected a number below 1"):
+        ball.simulate(rtol=2)
+    with pytest.raises(ValueError, match="t_end"):
+        ball.simulate(t_end=float("inf"))
+    with pytest.raises(ValueError, match="method"):
+        ball.simulate(method="euler")
+    with pytest.raises(ValueError, match="trajectory"):
+        ball.simulate(trajectory="every")
+    with pytest.raises(ValueError, match="trajectory"):
+        ball.simulate(trajectory=-0.1)
+    with pytest.raises(ValueError, match="max_events: expected a non-negative integer, found -3"):
+        ball.simulate(max_events=-3)
+    with pytest.raises(TypeError):
+        ball.simulate(rtoll=1e-6)
+    assert issubclass(hybc.ParameterError, ValueError)
+
+
+def test_sampled_trajectory_matches_the_piecewise_parabola(ball):
+    run = ball.simulate(trajectory=0.1)
+    traj = run.trajectory
+    np.testing.assert_allclose(traj["t"], np.arange(26) * 0.1, atol=1e-12)
+    bounces = ball_bounces(G, 0.8, 1.0, 2.5)
+    v1 = math.sqrt(2 * G)
+    for t, y in zip(traj["t"], traj["y"]):
+        k = int(np.searchsorted(bounces, t))  # bounces before t
+        if k == 0:
+            expect = 1.0 - G * t**2 / 2
+        else:
+            dt = t - bounces[k - 1]
+            expect = 0.8**k * v1 * dt - G * dt**2 / 2
+        assert abs(y - expect) < 1e-8, (t, y, expect)
+    assert list(traj["mode"]) == ["main"] * 26 or len(set(traj["mode"])) == 1
+    assert ball.simulate().trajectory is None
+
+
+def test_steps_trajectory_has_both_sides_of_every_event(ball):
+    run = ball.simulate(grad=["e"], trajectory="steps")
+    traj = run.trajectory
+    t = traj["t"]
+    assert t[0] == 0 and t[-1] == 2.5 and (np.diff(t) >= 0).all()
+    for te in run.event_times:
+        at = np.flatnonzero(t == te)
+        assert len(at) == 2, te  # before and after the reset
+        v_before, v_after = traj["v"][at]
+        assert math.isclose(v_after, -0.8 * v_before, rel_tol=1e-12)
+    assert "dy/de" in traj and len(traj["dv/de"]) == len(t)
+
+
+def test_models_pickle_as_their_text(ball):
+    again = pickle.loads(pickle.dumps(ball))
+    assert again.source == ball.source and again.file_name == ball.file_name
+    assert again.simulate().event_times.tolist() == ball.simulate().event_times.tolist()
+
+
+def test_to_json_is_the_cli_report(ball):
+    import json
+
+    report = json.loads(ball.simulate({"e": 0.9}, grad=["e"]).to_json())
+    assert report["model"] == "ball" and len(report["events"]) == 3
+
+
+def test_a_stop_event_gives_values_at_the_stop_and_total_derivatives():
+    # Stopped at t = ts: y = h0 - g ts^2 / 2, so dy/dts = -g ts (the motion of the stopping time
+    # included) and dy/dh0 = 1.
+    text = (
+        "model s\nparam g = 9.81\nparam h0 = 10\nparam ts = 1\nstate y = h0\nstate v = 0\n"
+        "der(y) = v\nder(v) = -g\nevent done when t >= ts {\n    stop\n}\n"
+    )
+    run = hybc.Model(text).simulate(grad=["ts", "h0"], t_end=5, rtol=1e-10, atol=1e-12)
+    assert run.stopped_by == "done" and run.status == "ok" and run.ok
+    assert math.isclose(run.t, 1.0, rel_tol=1e-12) and run.t_end == 5
+    assert math.isclose(run.state["y"], 10 - G / 2, rel_tol=1e-10)
+    np.testing.assert_allclose(run.dstate["y"], [-G, 1.0], rtol=1e-8)
+    np.testing.assert_allclose(run.dstate["v"], [-G, 0.0], rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(run.event_dtime, [[1.0, 0.0]], atol=1e-12)
