@@ -8,6 +8,7 @@ Prints, best of --repeat after a warm-up call (compile and trace excluded unless
   hoist the call out of the loop);
 - the per-point cost of jax.vmap over 1000 and 100,000 values of e (values only, and values with
   d/de through jax.vmap(jax.value_and_grad));
+- hybc's NumPy API, model.sweep, over the same points (a library call, no process start);
 - with --hybc, the native `hybc sweep` over the same 100,000 points in the same minutes (whole
   command, CSV to /dev/null; values only and with --grad e), for the ratio;
 - the first jax.grad call (trace + XLA compile + run), the figure to set against diffrax's
@@ -22,6 +23,7 @@ import subprocess
 import time
 
 import jax
+import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
@@ -96,6 +98,11 @@ def main() -> None:
         batch_grad(es)[1].block_until_ready()
         t = best(lambda: batch_grad(es)[1].block_until_ready(), r)
         print(f"vmap of {points} points, value and d/de: {t / points * 1e6:.2f} us per point ({t * 1e3:.1f} ms)")
+        # The NumPy API's parallel sweep over the same points (library call, the table's columns).
+        e_np = np.asarray(es)
+        for grad_names in ([], ["e"]):
+            t = best(lambda: model.sweep({"e": e_np}, grad=grad_names, events=4), r)
+            print(f"model.sweep of {points} points, grad={grad_names}: {t / points * 1e6:.2f} us per point ({t * 1e3:.1f} ms)")
 
     if args.hybc:
         for grad_flag in ([], ["--grad", "e"]):

@@ -12,8 +12,10 @@
 The function runs natively through one XLA FFI target (the handler is Rust, in
 ``python/src/jax_ffi/``). Its derivative is a ``jax.custom_jvp`` whose JVP multiplies the
 Jacobians hybc's forward sensitivities give (saltation through every event) from the same native
-call that gives the values, so ``jax.grad``, ``jax.jacfwd``, ``jax.jacrev`` and ``jax.hessian`` of
-downstream code all work; a ``jax.vmap`` batch is one native call run in parallel.
+call that gives the values, so ``jax.grad``, ``jax.jacfwd``, ``jax.jacrev`` and ``jax.jvp`` all
+work (JAX transposes the linear JVP for reverse mode); a ``jax.vmap`` batch is one native call run
+in parallel. Derivatives are first order: a derivative of the Jacobian (``jax.hessian``) raises
+JAX's "The FFI call to `hybc_run` cannot be differentiated".
 
 Rules:
 

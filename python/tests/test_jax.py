@@ -309,3 +309,33 @@ def test_identical_functions_share_a_handle(ball_model):
     b = hj.function(ball_model, params=["e"], outputs=["energy"], events=2)
     c = hj.function(ball_model, params=["e"], outputs=["energy"], events=3)
     assert a.handle == b.handle != c.handle
+
+
+def test_second_derivatives_raise_instead_of_giving_zeros(f):
+    """Sensitivities are first order: a derivative of the Jacobian is refused, not taken as 0."""
+    with pytest.raises(ValueError, match="cannot be differentiated"):
+        jax.hessian(lambda p: f(p)["energy"])(jnp.array(P0))
+
+
+def test_malformed_raw_calls_get_named_errors(f):
+    """The handler checks what XLA hands it; a call not made by hybc.jax gets a clear error."""
+    shapes = (
+        jax.ShapeDtypeStruct((1,), jnp.float64),
+        jax.ShapeDtypeStruct((4,), jnp.float64),
+        jax.ShapeDtypeStruct((), jnp.int32),
+        jax.ShapeDtypeStruct((), jnp.int32),
+    )
+    call = jax.ffi.ffi_call("hybc_run", shapes)
+    handle = np.int64(f.handle)
+    cases = [
+        (jnp.array(P0), {"handle": np.int64(10**9)}, "no function with handle"),
+        (jnp.array(P0, dtype=jnp.float32), {"handle": handle}, "jax_enable_x64"),
+        (jnp.array([0.8, 1.0, 2.0]), {"handle": handle}, r"takes 2 inputs \(e, h0\)"),
+        (jnp.array(P0), {}, "no `handle` attribute"),
+    ]
+    for p, attrs, message in cases:
+        with pytest.raises(Exception, match=message):
+            jax.block_until_ready(call(p, **attrs))
+    wrong_shape = jax.ffi.ffi_call("hybc_run", (jax.ShapeDtypeStruct((3,), jnp.float64),) + shapes[1:])
+    with pytest.raises(Exception, match=r"values has shape \[3\], expected \[1\]"):
+        jax.block_until_ready(wrong_shape(jnp.array(P0), handle=handle))
