@@ -6,6 +6,6 @@ imported on demand, so that neither Dask nor JAX is needed to import ``hybc``.
 """
 
 from ._hybc import ModelError, ParameterError, Run, __version__
-from ._model import Model, grid
+from ._model import Model, Samples, grid
 
-__all__ = ["Model", "ModelError", "ParameterError", "Run", "grid", "__version__"]
+__all__ = ["Model", "ModelError", "ParameterError", "Run", "Samples", "grid", "__version__"]

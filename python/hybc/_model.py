@@ -123,7 +123,7 @@ class Model:
         Columns: float64 (NaN where ``hybc sweep`` leaves a cell empty), ``events`` int64,
         ``status``/``event<k>``/``error`` str ("" where empty).
         """
-        names, matrix, fixed = normalise_points(points, names)
+        names, matrix, fixed = normalise_points(self, points, names)
         return sweep_matrix(self, names, matrix, fixed, dict(grad=grad, events=events, threads=threads, **options))
 
 
@@ -137,11 +137,59 @@ def sweep_matrix(
     return {name: _column(v) for name, v in columns.items()}
 
 
+class Samples:
+    """``n`` points drawn uniformly and reproducibly: the points of ``hybc sweep --samples n
+    --seed seed`` (ChaCha8, documented in the README's "Sweeps"), usable as sweep points.
+
+    ``ranges``: ``{name: (lo, hi)}`` in draw order, ``{name: None}`` for the declared range;
+    omitted, every parameter that declares a range (as ``hybc sweep --samples`` without
+    ``--vary``). ``fixed``: values for every point (``--set``). :func:`hybc.dask.sweep` draws each
+    shard's points on its worker (only index ranges travel).
+    """
+
+    __slots__ = ("n", "seed", "ranges", "fixed")
+
+    def __init__(
+        self,
+        n: int,
+        *,
+        seed: int = 0,
+        ranges: Mapping[str, tuple[float, float] | None] | None = None,
+        fixed: Mapping[str, float] | None = None,
+    ):
+        self.n = int(n)
+        self.seed = int(seed)
+        self.ranges = None if ranges is None else {
+            str(k): (None if v is None else (float(v[0]), float(v[1]))) for k, v in ranges.items()
+        }
+        self.fixed = _param_dict(fixed)
+
+    def __repr__(self) -> str:
+        return f"hybc.Samples({self.n}, seed={self.seed}, ranges={self.ranges}, fixed={self.fixed})"
+
+    def rows(self, model: "Model", start: int = 0, stop: int | None = None) -> tuple[list[str], np.ndarray]:
+        """The sampled names and points ``[start, stop)``, one row per point."""
+        ranges = None if self.ranges is None else list(self.ranges.items())
+        stop = self.n if stop is None else stop
+        names, matrix = model._native.sample_points(self.n, self.seed, ranges, start, stop)
+        return names, matrix
+
+    def points(self, model: "Model") -> dict[str, np.ndarray]:
+        """The sampled points as a dict name -> array."""
+        names, matrix = self.rows(model)
+        return {name: matrix[:, j].copy() for j, name in enumerate(names)}
+
+
 def normalise_points(
-    points: Mapping[str, Any] | np.ndarray, names: Sequence[str] | None = None
+    model: Model, points: Mapping[str, Any] | np.ndarray | Samples, names: Sequence[str] | None = None
 ) -> tuple[list[str], np.ndarray, dict[str, float]]:
     """``(names, matrix, fixed)``: the varied parameters, one C-ordered float64 row per point,
     and the parameters fixed for every point."""
+    if isinstance(points, Samples):
+        if names is not None:
+            raise TypeError("names= is for a 2-D array of points; Samples names its parameters")
+        sampled, matrix = points.rows(model)
+        return sampled, matrix, dict(points.fixed)
     if isinstance(points, Mapping):
         if names is not None:
             raise TypeError("names= is for a 2-D array of points; a dict names its columns")

@@ -3,8 +3,10 @@
 Same points, keywords and result as :meth:`hybc.Model.sweep`, and the result equals the local
 sweep exactly (every point is an independent run; a run's result depends only on its point).
 
-How it is split: the points (one C-ordered float64 matrix) are scattered once to every worker;
-each task then names only an index range ``[start, stop)`` of them. Each worker process keeps one
+How it is split: shards are index ranges ``[start, stop)``. Given points (one C-ordered float64
+matrix) are scattered once to every worker and each task names its range; for
+:class:`hybc.Samples` only the sampler's description travels and each task draws its own range
+of the seeded stream (the same points as the whole draw). Each worker process keeps one
 :class:`hybc.Model` per model text in a module-level cache, and the model keeps one compiled form
 per gradient set, so a worker compiles once however many shards it runs. The shards' columns are
 concatenated in input order.
@@ -21,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from ._model import Model, normalise_points, sweep_matrix
+from ._model import Model, Samples, normalise_points, sweep_matrix
 
 # One Model per (text, file name) in this process (a Dask worker). Guarded: a worker runs tasks
 # on several threads.
@@ -47,11 +49,20 @@ def sweep(
     from distributed import default_client
 
     client = client if client is not None else default_client()
-    names, matrix, fixed = normalise_points(points, names)
     kw = {"threads": 1, **kw}
-    # Every error a task could raise (points, keywords, gradient names) is raised here first.
+    sampled = isinstance(points, Samples)
+    if sampled:
+        # Only the sampler's description travels; each task draws its own rows.
+        if names is not None:
+            raise TypeError("names= is for a 2-D array of points; Samples names its parameters")
+        names, first = points.rows(model, 0, min(points.n, 1))
+        matrix, fixed, n = first, dict(points.fixed), points.n
+    else:
+        names, matrix, fixed = normalise_points(model, points, names)
+        n = len(matrix)
+    # Every error a task could raise (points, keywords, gradient names) is raised here first
+    # (for samples: their ranges; every drawn value lies within them).
     sweep_matrix(model, names, matrix, fixed, {**kw, "check_only": True})
-    n = len(matrix)
     if n == 0:
         return sweep_matrix(model, names, matrix, fixed, kw)
     if shards is None:
@@ -60,10 +71,13 @@ def sweep(
     if not isinstance(shards, int) or shards < 1:
         raise ValueError(f"shards: expected a positive integer, found {shards!r}")
     bounds = np.linspace(0, n, min(shards, n) + 1).round().astype(np.int64)
-    [scattered] = client.scatter([matrix], broadcast=True)
+    if sampled:
+        source = points
+    else:
+        [source] = client.scatter([matrix], broadcast=True)
     futures = [
         client.submit(
-            _sweep_shard, model.source, model.file_name, names, scattered, int(a), int(b), fixed, kw,
+            _sweep_shard, model.source, model.file_name, names, source, int(a), int(b), fixed, kw,
             pure=False,
         )
         for a, b in zip(bounds[:-1], bounds[1:])
@@ -85,17 +99,20 @@ def _sweep_shard(
     text: str,
     file_name: str,
     names: list[str],
-    matrix: np.ndarray,
+    source: np.ndarray | Samples,
     start: int,
     stop: int,
     fixed: dict[str, float],
     kw: dict[str, Any],
 ) -> dict[str, np.ndarray]:
-    """Runs rows ``[start, stop)`` of ``matrix`` on this worker (one compiled model per worker
-    process and gradient set)."""
+    """Runs points ``[start, stop)`` of ``source`` (the points, or the sampler that draws them) on
+    this worker (one compiled model per worker process and gradient set)."""
     model = _worker_model(text, file_name)
-    # Arrays that arrive through Dask's serialisation may be read-only or unaligned.
-    rows = np.require(matrix[start:stop], np.float64, ["C", "A"])
+    if isinstance(source, Samples):
+        names, rows = source.rows(model, start, stop)
+    else:
+        # Arrays that arrive through Dask's serialisation may be read-only or unaligned.
+        rows = np.require(source[start:stop], np.float64, ["C", "A"])
     return sweep_matrix(model, names, rows, fixed, kw)
 
 

@@ -5,7 +5,8 @@ use std::sync::Mutex;
 
 use pyo3::prelude::*;
 
-use numpy::PyReadonlyArray2;
+use numpy::{PyArray1, PyArray2, PyArrayMethods as _, PyReadonlyArray2};
+use pyo3::exceptions::PyValueError;
 use pyo3::types::PyDict;
 
 use crate::errors::{self, ParameterError};
@@ -171,6 +172,36 @@ impl Model {
         let t_end = opts.t_end;
         let run = py.detach(|| compiled.simulate(&values, &opts)).map_err(errors::to_py)?;
         Ok(Run::new(run, t_end))
+    }
+
+    /// Rows `[start, stop)` of the seeded uniform samples of `hybc sweep --samples n --seed seed`:
+    /// `ranges` lists `(name, (lo, hi))` in draw order (`None` for the declared range; no list:
+    /// every parameter with a declared range). Returns the sampled names and one row per point.
+    #[pyo3(signature = (n, seed, ranges, start, stop))]
+    fn sample_points<'py>(
+        &self,
+        py: Python<'py>,
+        n: usize,
+        seed: u64,
+        ranges: Option<sweep::RangeArgs>,
+        start: usize,
+        stop: usize,
+    ) -> PyResult<(Vec<String>, Bound<'py, PyArray2<f64>>)> {
+        let ranges = sweep::sample_ranges(&self.model, ranges)?;
+        if n == 0 || n > sweep::MAX_POINTS {
+            return Err(PyValueError::new_err(format!(
+                "samples: expected 1 to {} points, found {n}",
+                sweep::MAX_POINTS
+            )));
+        }
+        if start > stop || stop > n {
+            return Err(PyValueError::new_err(format!("samples: rows {start}..{stop} of {n}")));
+        }
+        let base = vec![0.0; self.model.checked().params.len()];
+        let rows = py.detach(|| hybc::sweep::uniform_samples_from(&base, &ranges, seed, start..stop));
+        let names = ranges.iter().map(|r| self.model.checked().params[r.0].name.clone()).collect();
+        let flat: Vec<f64> = rows.iter().flat_map(|p| ranges.iter().map(|r| p[r.0])).collect();
+        Ok((names, PyArray1::from_vec(py, flat).reshape([stop - start, ranges.len()])?))
     }
 
     /// Runs every row of `points` (columns `names`; the other parameters from `fixed`, else their

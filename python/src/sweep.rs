@@ -91,6 +91,59 @@ pub fn points(
     Ok(rows)
 }
 
+/// Ranges to sample as Python gives them: `(name, (lo, hi))`, `None` for the declared range.
+pub type RangeArgs = Vec<(String, Option<(f64, f64)>)>;
+
+/// The `(parameter index, lo, hi)` to sample, checked as `hybc sweep --samples` checks them: a
+/// given range must lie within the declared one and have lo < hi; `None` takes the declared range;
+/// no list samples every parameter that declares a range.
+pub fn sample_ranges(model: &hybc::Model, ranges: Option<RangeArgs>) -> PyResult<Vec<(usize, f64, f64)>> {
+    let params = &model.checked().params;
+    let Some(ranges) = ranges else {
+        let all: Vec<(usize, f64, f64)> =
+            params.iter().enumerate().filter_map(|(i, p)| p.range.map(|(lo, hi)| (i, lo, hi))).collect();
+        if all.is_empty() {
+            return Err(ParameterError::new_err(format!(
+                "samples: model `{}` declares no parameter range; give ranges={{name: (lo, hi)}}",
+                model.name()
+            )));
+        }
+        return Ok(all);
+    };
+    if ranges.is_empty() {
+        return Err(PyValueError::new_err("samples: ranges is empty; give at least one parameter"));
+    }
+    let mut out: Vec<(usize, f64, f64)> = Vec::with_capacity(ranges.len());
+    for (name, range) in ranges {
+        let idx = model.param_index(&name).map_err(|e| ParameterError::new_err(e.to_string()))?.0 as usize;
+        if out.iter().any(|r| r.0 == idx) {
+            return Err(ParameterError::new_err(format!("parameter `{name}` is given twice")));
+        }
+        let declared = params[idx].range;
+        let (lo, hi) = match (range, declared) {
+            (Some(r), _) => r,
+            (None, Some(r)) => r,
+            (None, None) => {
+                return Err(ParameterError::new_err(format!(
+                    "samples: `{name}` has no declared range to sample from; give one ({name}: (lo, hi))"
+                )))
+            }
+        };
+        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+            return Err(ParameterError::new_err(format!(
+                "samples: {name}: expected finite lo < hi, found ({lo}, {hi})"
+            )));
+        }
+        if let Some((dlo, dhi)) = declared.filter(|(dlo, dhi)| lo < *dlo || hi > *dhi) {
+            return Err(ParameterError::new_err(format!(
+                "samples: {name} range ({lo}, {hi}) is outside its declared range [{dlo}, {dhi}]"
+            )));
+        }
+        out.push((idx, lo, hi));
+    }
+    Ok(out)
+}
+
 /// The checks on `events` and `threads`, as `hybc sweep` makes them.
 pub fn check_counts(events: usize, threads: usize) -> PyResult<()> {
     if events > MAX_EVENT_COLUMNS {

@@ -44,7 +44,7 @@ def test_equals_the_local_sweep(client, ball):
     info = client.run(hybc.dask._cache_info)
     assert len(info) == 2
     for cached in info.values():
-        assert cached == [["ball", [["e", "h0"]]]]
+        assert [list(c) for c in cached] == [["ball", [["e", "h0"]]]]
 
 
 def test_fortran_points_and_default_shards(client, ball):
@@ -59,3 +59,10 @@ def test_errors_are_raised_before_any_task(client, ball):
         hybc.dask.sweep(ball, {"e": [0.5, 2.0]}, client=client)
     with pytest.raises(ValueError, match="shards"):
         hybc.dask.sweep(ball, {"e": [0.5]}, client=client, shards=0)
+
+
+def test_samples_are_drawn_on_the_workers_and_equal_the_local_draw(client, ball):
+    samples = hybc.Samples(301, seed=11, ranges={"e": (0.6, 0.95), "h0": (0.5, 2.0)})
+    local = ball.sweep(samples, grad=["h0"], events=2)
+    remote = hybc.dask.sweep(ball, samples, client=client, shards=9, grad=["h0"], events=2)
+    assert_tables_equal(remote, local)

@@ -168,17 +168,24 @@ def hybc_binary():
 
 
 def test_the_same_table_as_hybc_sweep(ball):
-    binary = hybc_binary()
-    out = subprocess.run(
-        [binary, "sweep", MODELS / "ball.hyb", "--vary", "e=0.3,0.65,0.8,0.95", "--grad", "e,h0",
-         "--events", "6", "--t-end", "5"],
-        capture_output=True, text=True,
-    )
+    header, rows = cli_table([MODELS / "ball.hyb", "--vary", "e=0.3,0.65,0.8,0.95", "--grad", "e,h0",
+                              "--events", "6", "--t-end", "5"])
+    table = ball.sweep({"e": [0.3, 0.65, 0.8, 0.95]}, grad=["e", "h0"], events=6, t_end=5)
+    assert set(table["status"]) == {"ok", "zeno"}
+    assert_same_as_cli(table, header, rows)
+
+
+def cli_table(args):
+    """`hybc sweep ARGS` read back as header and rows of text."""
+    out = subprocess.run([hybc_binary(), "sweep", *args], capture_output=True, text=True)
     assert out.returncode in (0, 3), out.stderr  # 3: some points ended early (Zeno)
     rows = list(csv.reader(io.StringIO(out.stdout)))
-    header, rows = rows[0], rows[1:]
-    table = ball.sweep({"e": [0.3, 0.65, 0.8, 0.95]}, grad=["e", "h0"], events=6, t_end=5)
+    return rows[0], rows[1:]
+
+
+def assert_same_as_cli(table, header, rows):
     assert list(table) == header
+    assert all(len(v) == len(rows) for v in table.values())
     for i, row in enumerate(rows):
         for name, cell in zip(header, row):
             value = table[name][i]
@@ -188,3 +195,57 @@ def test_the_same_table_as_hybc_sweep(ball):
                 assert math.isnan(value), (name, i)
             else:
                 assert value == float(cell), (name, i, value, cell)  # bit for bit
+
+
+def test_samples_are_those_of_hybc_sweep_samples(ball):
+    header, rows = cli_table([MODELS / "ball.hyb", "--samples", "50", "--seed", "3", "--vary", "e",
+                              "--vary", "h0=0.5:2", "--set", "g=9.5", "--grad", "e", "--events", "3"])
+    samples = hybc.Samples(50, seed=3, ranges={"e": None, "h0": (0.5, 2)}, fixed={"g": 9.5})
+    table = ball.sweep(samples, grad=["e"], events=3)
+    assert_same_as_cli(table, header, rows)
+    points = samples.points(ball)
+    assert list(points) == ["e", "h0"] and (points["e"] == table["e"]).all()
+    # Without ranges: every parameter that declares one (e only), as --samples without --vary.
+    header, rows = cli_table([MODELS / "ball.hyb", "--samples", "20"])
+    assert_same_as_cli(ball.sweep(hybc.Samples(20)), header, rows)
+
+
+def test_bad_samples_are_refused(ball):
+    with pytest.raises(hybc.ParameterError, match="outside its declared range"):
+        ball.sweep(hybc.Samples(5, ranges={"e": (0.5, 1.5)}))
+    with pytest.raises(hybc.ParameterError, match="no declared range"):
+        ball.sweep(hybc.Samples(5, ranges={"h0": None}))
+    with pytest.raises(hybc.ParameterError, match="lo < hi"):
+        ball.sweep(hybc.Samples(5, ranges={"h0": (2, 1)}))
+    with pytest.raises(ValueError, match="expected 1 to"):
+        ball.sweep(hybc.Samples(0))
+    with pytest.raises(hybc.ParameterError, match="both"):
+        ball.sweep(hybc.Samples(5, fixed={"e": 0.5}))
+
+
+def test_the_gil_is_released_while_a_sweep_runs(ball):
+    # A sweep of a few tenths of a second in a thread; this thread keeps running Python meanwhile.
+    # Were the GIL held, no iteration here could run until the sweep returned.
+    import threading
+    import time
+
+    e = np.linspace(0.7, 0.9, 20000)
+    done = threading.Event()
+    result = {}
+
+    def work():
+        result["table"] = ball.sweep({"e": e}, threads=1)
+        done.set()
+
+    started = time.perf_counter()
+    worker = threading.Thread(target=work)
+    worker.start()
+    ticks = 0
+    while not done.is_set():
+        ticks += 1
+        time.sleep(0.001)
+    worker.join()
+    elapsed = time.perf_counter() - started
+    assert len(result["table"]["e"]) == 20000
+    assert elapsed > 0.05, "the sweep was too short to tell"
+    assert ticks >= 10, (ticks, elapsed)

@@ -12,7 +12,9 @@ use rayon::prelude::*;
 
 use crate::sim::{self, HybridSystem, SimError, SimOptions, SimResult};
 
-pub use points::{full_grid, linspace, parse_vary, uniform_samples, AxisSpec, VaryError, VarySpec};
+pub use points::{
+    full_grid, linspace, parse_vary, uniform_samples, uniform_samples_from, AxisSpec, VaryError, VarySpec,
+};
 pub use table::{Columns, Format};
 
 /// The outcome of one point: exactly what `sim::run` returned for it. A run that stopped early

@@ -113,10 +113,25 @@ pub fn full_grid(base: &[f64], axes: &[(usize, Vec<f64>)]) -> Vec<Vec<f64>> {
 /// point in the order of `ranges`. So one seed gives the same points on every machine and
 /// every version of hybc that keeps this description.
 pub fn uniform_samples(base: &[f64], ranges: &[(usize, f64, f64)], n: usize, seed: u64) -> Vec<Vec<f64>> {
+    uniform_samples_from(base, ranges, seed, 0..n)
+}
+
+/// Points `indices` (a range of point numbers) of [`uniform_samples`]`(base, ranges, _, seed)`,
+/// without drawing the points before them: point `i` starts at word `2 i ranges.len()` of the
+/// ChaCha8 stream (each value takes one `next_u64`, two 32-bit words). So a sweep can be sharded
+/// by index ranges (a Dask task draws only its own points) and the shards concatenated equal the
+/// whole.
+pub fn uniform_samples_from(
+    base: &[f64],
+    ranges: &[(usize, f64, f64)],
+    seed: u64,
+    indices: std::ops::Range<usize>,
+) -> Vec<Vec<f64>> {
     let mut key = [0u8; 32];
     key[..8].copy_from_slice(&seed.to_le_bytes());
     let mut rng = ChaCha8Rng::from_seed(key);
-    (0..n)
+    rng.set_word_pos(2 * ranges.len() as u128 * indices.start as u128);
+    indices
         .map(|_| {
             let mut p = base.to_vec();
             for &(param, lo, hi) in ranges {
@@ -157,6 +172,23 @@ mod tests {
         for w in v.windows(2) {
             approx::assert_relative_eq!(w[1] - w[0], 0.1, max_relative = 1e-12);
         }
+    }
+
+    #[test]
+    fn sample_shards_concatenate_to_the_whole() {
+        let ranges = [(0, 0.0, 1.0), (2, -5.0, 5.0), (1, 10.0, 20.0)];
+        let base = [0.5, 15.0, 0.0, 7.0];
+        let whole = uniform_samples(&base, &ranges, 1000, 42);
+        // Shard bounds at odd and even points, across the generator's 64-word buffer.
+        let mut joined = Vec::new();
+        for bounds in [0..1, 1..10, 10..11, 11..333, 333..334, 334..1000] {
+            joined.extend(uniform_samples_from(&base, &ranges, 42, bounds));
+        }
+        assert_eq!(joined, whole);
+        assert_eq!(
+            uniform_samples_from(&base, &ranges[..1], 7, 5..6)[0],
+            uniform_samples(&base, &ranges[..1], 6, 7)[5]
+        );
     }
 
     #[test]
