@@ -2,15 +2,14 @@
 
     python python/bench/jax_bench.py [--hybc PATH-TO-RELEASE-hybc] [--repeat 5]
 
-Prints, best of --repeat after a warm-up call (compile and trace excluded unless said):
+Prints, best of --repeat (rounds) after a warm-up call (compile and trace excluded unless said):
 - the per-call cost of a jitted f(p) from Python (value only, and value with jax.grad);
 - the per-call cost inside jax.lax.fori_loop (the parameter moves every iteration, so XLA cannot
   hoist the call out of the loop);
 - the per-point cost of jax.vmap over 1000 and 100,000 values of e (values only, and values with
-  d/de through jax.vmap(jax.value_and_grad));
-- hybc's NumPy API, model.sweep, over the same points (a library call, no process start);
-- with --hybc, the native `hybc sweep` over the same 100,000 points in the same minutes (whole
-  command, CSV to /dev/null; values only and with --grad e), for the ratio;
+  d/de through jax.vmap(jax.value_and_grad)), alternating round by round with hybc's NumPy API
+  (model.sweep, a library call) and, with --hybc, the native `hybc sweep` (whole command: process
+  start, parse, compile, runs, CSV to /dev/null) over the same points; best and median;
 - the first jax.grad call (trace + XLA compile + run), the figure to set against diffrax's
   recorded 6.4 s compile.
 """
@@ -19,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import pathlib
+import statistics
 import subprocess
 import time
 
@@ -88,28 +88,33 @@ def main() -> None:
         t = best(lambda: loop().block_until_ready(), r)
         print(f"{name} inside jax.lax.fori_loop: {t / n * 1e6:.2f} us per iteration")
 
+    # Batches: each method once per round, alternating, so that every figure sees the same load.
     for points in (1000, 100_000):
         es = jnp.linspace(0.75, 0.95, points)
-        batch = jax.jit(jax.vmap(lambda e: f(jnp.stack([e, 1.0]))["energy"]))
-        batch(es).block_until_ready()
-        t = best(lambda: batch(es).block_until_ready(), r)
-        print(f"vmap of {points} points, values: {t / points * 1e6:.2f} us per point ({t * 1e3:.1f} ms)")
-        batch_grad = jax.jit(jax.vmap(jax.value_and_grad(lambda e: f(jnp.stack([e, 1.0]))["energy"])))
-        batch_grad(es)[1].block_until_ready()
-        t = best(lambda: batch_grad(es)[1].block_until_ready(), r)
-        print(f"vmap of {points} points, value and d/de: {t / points * 1e6:.2f} us per point ({t * 1e3:.1f} ms)")
-        # The NumPy API's parallel sweep over the same points (library call, the table's columns).
         e_np = np.asarray(es)
-        for grad_names in ([], ["e"]):
-            t = best(lambda: model.sweep({"e": e_np}, grad=grad_names, events=4), r)
-            print(f"model.sweep of {points} points, grad={grad_names}: {t / points * 1e6:.2f} us per point ({t * 1e3:.1f} ms)")
-
-    if args.hybc:
-        for grad_flag in ([], ["--grad", "e"]):
-            cmd = [args.hybc, "sweep", str(ROOT / "models" / "ball.hyb"), "--vary",
-                   "e=0.75:0.95:100000", "--events", "4", *grad_flag, "-o", "/dev/null"]
-            t = best(lambda: subprocess.run(cmd, check=False, capture_output=True), r)
-            print(f"native {' '.join(cmd[1:2] + cmd[3:])}: {t / 1e5 * 1e6:.2f} us per point ({t * 1e3:.0f} ms, whole command)")
+        plain = jax.jit(jax.vmap(lambda e: f(jnp.stack([e, 1.0]))["energy"]))
+        with_grad = jax.jit(jax.vmap(jax.value_and_grad(lambda e: f(jnp.stack([e, 1.0]))["energy"])))
+        plain(es).block_until_ready()
+        with_grad(es)[1].block_until_ready()
+        methods = {
+            "jax.vmap(f), values": lambda: plain(es).block_until_ready(),
+            "jax.vmap(value_and_grad), d/de": lambda: with_grad(es)[1].block_until_ready(),
+            "model.sweep, values": lambda: model.sweep({"e": e_np}, events=4),
+            "model.sweep, grad=['e']": lambda: model.sweep({"e": e_np}, grad=["e"], events=4),
+        }
+        if args.hybc:
+            for label, grad_flag in (("values", []), ("--grad e", ["--grad", "e"])):
+                cmd = [args.hybc, "sweep", str(ROOT / "models" / "ball.hyb"), "--vary",
+                       f"e=0.75:0.95:{points}", "--events", "4", *grad_flag, "-o", "/dev/null"]
+                methods[f"hybc sweep (whole command), {label}"] = (
+                    lambda cmd=cmd: subprocess.run(cmd, check=False, capture_output=True))
+        times = {name: [] for name in methods}
+        for _ in range(r):
+            for name, run in methods.items():
+                times[name].append(best(run, 1))
+        print(f"{points} points, e in [0.75, 0.95], {r} alternating rounds: best (median) per point")
+        for name, ts in times.items():
+            print(f"  {name}: {min(ts) / points * 1e6:.2f} us ({statistics.median(ts) / points * 1e6:.2f} us)")
 
 
 if __name__ == "__main__":
