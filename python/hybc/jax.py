@@ -28,7 +28,9 @@ Rules:
 - The derivative of an unfired (NaN) event slot is 0: the pad is a constant, so a loss that masks
   the pads gets a finite gradient.
 - A plain call runs the model compiled without sensitivities; a differentiated call runs it with
-  them (their error is controlled too), so the two values agree to the tolerances, not bit for bit.
+  them (their error is controlled too), so the two values agree to the tolerances, not bit for bit,
+  and ``status`` describes the run that gave the numbers: only a differentiated call can report
+  ``not_differentiable``, or a fault where only the sensitivities' error cannot be met.
 - float64 only: ``jax_enable_x64`` must be on; float32 inputs are refused.
 """
 

@@ -339,3 +339,51 @@ def test_malformed_raw_calls_get_named_errors(f):
     wrong_shape = jax.ffi.ffi_call("hybc_run", (jax.ShapeDtypeStruct((3,), jnp.float64),) + shapes[1:])
     with pytest.raises(Exception, match=r"values has shape \[3\], expected \[1\]"):
         jax.block_until_ready(wrong_shape(jnp.array(P0), handle=handle))
+
+
+def test_not_differentiable_status_keeps_the_derivatives_that_exist():
+    """x' = sqrt(|x|) from x0 = p = 0: dx/dp does not exist (NaN); y = exp(p t) has dy/dp = t."""
+    model = hybc.Model(
+        "model root\nparam p = 0\nstate x = p\nstate y = 1\nder(x) = sqrt(abs(x))\nder(y) = p * y\n"
+    )
+    fr = hj.function(model, params=["p"], outputs=["x", "y"], t_end=1.0)
+    # The status describes the run that gave the numbers: a plain call computes no derivatives.
+    assert hj.status_name(fr(jnp.array([0.0]))["status"]) == "ok"
+    out, _ = jax.jvp(fr, (jnp.array([0.0]),), (jnp.array([1.0]),))
+    assert hj.status_name(out["status"]) == "not_differentiable"
+    assert float(out["x"]) == 0.0 and float(out["y"]) == pytest.approx(1.0, rel=VALUE_RTOL)
+    jac = jax.jacfwd(lambda p: jnp.stack([fr(p)["x"], fr(p)["y"]]))(jnp.array([0.0]))
+    assert math.isnan(float(jac[0, 0]))
+    assert float(jac[1, 0]) == pytest.approx(1.0, rel=GRAD_RTOL)
+
+
+def test_serial_and_parallel_batches_agree_bit_for_bit(f):
+    """Batches of up to 4 points run on the calling thread, larger ones on the pool."""
+    pts = jnp.stack([jnp.linspace(0.7, 0.9, 12), jnp.linspace(0.8, 1.4, 12)], axis=-1)
+    whole = jax.jit(jax.vmap(jax.jacfwd(lambda p: f(p)["event_times"])))(pts)
+    for i in range(0, 12, 3):
+        part = jax.jit(jax.vmap(jax.jacfwd(lambda p: f(p)["event_times"])))(pts[i : i + 3])
+        np.testing.assert_array_equal(part, whole[i : i + 3])
+    single = [f(p)["energy"] for p in pts]
+    np.testing.assert_array_equal(single, jax.vmap(f)(pts)["energy"])
+
+
+def test_max_events_and_fault_are_reported(ball_model):
+    capped = hj.function(ball_model, params=["e"], outputs=["energy"], events=4, max_events=3)
+    out = capped(jnp.array([E]))
+    assert hj.status_name(out["status"]) == "max_events" and int(out["n_events"]) == 3
+    assert math.isnan(float(out["energy"])) and math.isnan(float(out["event_times"][3]))
+    # x' = x^2 from x = k = 1 blows up at t = 1: the run fails before t_end = 2.
+    model = hybc.Model("model blowup\nparam k = 1\nstate x = k\nder(x) = x^2\n")
+    fb = hj.function(model, params=["k"], outputs=["x"], t_end=2.0)
+    out = fb(jnp.array([1.0]))
+    assert hj.status_name(out["status"]) == "fault" and math.isnan(float(out["x"]))
+    # x' = k sqrt(x) + 1 from x = a = 0: the values run, but the error of dx/da (d sqrt/dx is
+    # infinite at 0) cannot be met: a differentiated call reports the fault a plain one does not.
+    model = hybc.Model("model nd\nparam a = 0\nparam k = 1\nstate x = a\nder(x) = k * sqrt(x) + 1\n")
+    fs = hj.function(model, params=["a", "k"], outputs=["x"], t_end=1.0)
+    p = jnp.array([0.0, 1.0])
+    assert hj.status_name(fs(p)["status"]) == "ok"
+    out, dx = jax.jvp(fs, (p,), (jnp.array([1.0, 0.0]),))
+    assert hj.status_name(out["status"]) == "fault" and math.isnan(float(out["x"]))
+    assert math.isnan(float(dx["x"]))

@@ -225,19 +225,31 @@ unsafe fn read_handle(attrs: &abi::Attrs) -> Result<u64, Failure> {
     if attrs.struct_size < abi::ATTRS_SIZE {
         return Err(Failure::invalid("hybc: XLA's attribute list is too small"));
     }
-    for i in 0..usize::try_from(attrs.size).unwrap_or(0) {
-        // SAFETY: the three arrays hold `size` entries; a name is a byte span of `len` bytes, a
-        // scalar attribute points to an `XLA_FFI_Scalar` whose value has its dtype's size.
+    let size = usize::try_from(attrs.size).unwrap_or(0);
+    if size > 0 && (attrs.names.is_null() || attrs.types.is_null() || attrs.attrs.is_null()) {
+        return Err(Failure::invalid("hybc: XLA's attribute list has null arrays"));
+    }
+    for i in 0..size {
+        // SAFETY: the three arrays hold `size` entries (checked non-null); a name is a byte span
+        // of `len` bytes, a scalar attribute points to an `XLA_FFI_Scalar` whose value has its
+        // dtype's size. Null pointers are refused before they are read.
         unsafe {
-            let name = &**attrs.names.add(i);
-            let name = std::slice::from_raw_parts(name.ptr.cast::<u8>(), name.len);
+            let name = *attrs.names.add(i);
+            if name.is_null() || (*name).ptr.is_null() {
+                continue;
+            }
+            let name = std::slice::from_raw_parts((*name).ptr.cast::<u8>(), (*name).len);
             if name != b"handle" {
                 continue;
             }
-            if *attrs.types.add(i) != abi::ATTR_SCALAR {
+            let attr = *attrs.attrs.add(i);
+            if *attrs.types.add(i) != abi::ATTR_SCALAR || attr.is_null() {
                 return Err(Failure::invalid("hybc: attribute `handle` is not a scalar"));
             }
-            let scalar = &*(*attrs.attrs.add(i)).cast::<abi::Scalar>();
+            let scalar = &*attr.cast::<abi::Scalar>();
+            if scalar.value.is_null() {
+                return Err(Failure::invalid("hybc: attribute `handle` has no value"));
+            }
             return match scalar.dtype {
                 dtype::S64 => u64::try_from(*scalar.value.cast::<i64>())
                     .map_err(|_| Failure::invalid("hybc: negative function handle")),
