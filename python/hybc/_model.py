@@ -96,6 +96,7 @@ class Model:
         ``sens_error_control``, ``h_max``; unset ones come from the model's ``simulate`` line, then
         the defaults of ``hybc run``. The GIL is released while the model compiles and runs.
         """
+        _check_counts(options)
         return self._native.simulate(
             _param_dict(params), grad=list(grad), trajectory=trajectory, **options
         )
@@ -133,6 +134,7 @@ def sweep_matrix(
     """The sweep of the rows of ``matrix`` (normalised points) with keywords ``kw``."""
     kw = dict(kw)
     kw["grad"] = list(kw.get("grad", ()))
+    _check_counts(kw)
     columns = model._native.sweep(names, matrix, fixed, **kw)
     return {name: _column(v) for name, v in columns.items()}
 
@@ -205,6 +207,11 @@ def normalise_points(
                 raise ValueError(
                     f"points[{name!r}]: expected a scalar or a 1-D array, found shape {array.shape}"
                 )
+        if not columns:
+            raise ValueError(
+                "points: no 1-D array to vary (scalars fix a parameter for every point); "
+                "for one point use simulate"
+            )
         lengths = {name: len(a) for name, a in columns.items()}
         if len(set(lengths.values())) > 1:
             raise ValueError(f"points: the arrays differ in length: {lengths}")
@@ -219,6 +226,19 @@ def normalise_points(
     if matrix.ndim != 2:
         raise ValueError(f"points: expected a 2-D array (n_points, n_names), found shape {matrix.shape}")
     return [str(n) for n in names], matrix, {}
+
+
+_COUNTS = ("events", "threads", "max_events", "max_steps")
+
+
+def _check_counts(kw: Mapping[str, Any]) -> None:
+    """Integer keywords: a clear error naming the keyword rather than an overflow."""
+    for name in _COUNTS:
+        value = kw.get(name)
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+            raise ValueError(f"{name}: expected a non-negative integer, found {value!r}")
 
 
 def _float64(array: Any, what: Any) -> np.ndarray:

@@ -158,6 +158,8 @@ def test_bad_parameters_and_options_are_refused(ball):
         ball.simulate(trajectory="every")
     with pytest.raises(ValueError, match="trajectory"):
         ball.simulate(trajectory=-0.1)
+    with pytest.raises(ValueError, match="max_events: expected a non-negative integer, found -3"):
+        ball.simulate(max_events=-3)
     with pytest.raises(TypeError):
         ball.simulate(rtoll=1e-6)
     assert issubclass(hybc.ParameterError, ValueError)
@@ -205,3 +207,19 @@ def test_to_json_is_the_cli_report(ball):
 
     report = json.loads(ball.simulate({"e": 0.9}, grad=["e"]).to_json())
     assert report["model"] == "ball" and len(report["events"]) == 3
+
+
+def test_a_stop_event_gives_values_at_the_stop_and_total_derivatives():
+    # Stopped at t = ts: y = h0 - g ts^2 / 2, so dy/dts = -g ts (the motion of the stopping time
+    # included) and dy/dh0 = 1.
+    text = (
+        "model s\nparam g = 9.81\nparam h0 = 10\nparam ts = 1\nstate y = h0\nstate v = 0\n"
+        "der(y) = v\nder(v) = -g\nevent done when t >= ts {\n    stop\n}\n"
+    )
+    run = hybc.Model(text).simulate(grad=["ts", "h0"], t_end=5, rtol=1e-10, atol=1e-12)
+    assert run.stopped_by == "done" and run.status == "ok" and run.ok
+    assert math.isclose(run.t, 1.0, rel_tol=1e-12) and run.t_end == 5
+    assert math.isclose(run.state["y"], 10 - G / 2, rel_tol=1e-10)
+    np.testing.assert_allclose(run.dstate["y"], [-G, 1.0], rtol=1e-8)
+    np.testing.assert_allclose(run.dstate["v"], [-G, 0.0], rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(run.event_dtime, [[1.0, 0.0]], atol=1e-12)

@@ -143,6 +143,13 @@ def test_bad_points_are_refused(ball):
         ball.sweep(np.ones((2, 2)))
     with pytest.raises(ValueError, match="2 columns for 1 names"):
         ball.sweep(np.ones((2, 2)) * 0.5, names=["e"])
+    with pytest.raises(ValueError, match="no 1-D array to vary"):
+        ball.sweep({"e": 0.5})
+    with pytest.raises(ValueError, match="events: expected a non-negative integer, found -1"):
+        ball.sweep({"e": [0.5]}, events=-1)
+    with pytest.raises(ValueError, match="threads: expected a non-negative integer, found 1.5"):
+        ball.sweep({"e": [0.5]}, threads=1.5)
+    assert all(len(v) == 0 for v in ball.sweep({"e": []}).values())
     with pytest.raises(ValueError, match="events: at most"):
         ball.sweep({"e": [0.5]}, events=10**6)
     with pytest.raises(ValueError, match="float64"):
