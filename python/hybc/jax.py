@@ -45,6 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _hybc
+from ._model import _check_counts
 
 __all__ = ["function", "Function", "STATUS", "status_name"]
 
@@ -201,9 +202,8 @@ def function(
         raise TypeError(_X64_MESSAGE)
     params = [params] if isinstance(params, str) else list(params)
     outputs = [outputs] if isinstance(outputs, str) else list(outputs)
+    _check_counts({"events": events, **sim_kw})
     events = int(events)
-    if events < 0:
-        raise ValueError(f"events: expected a number of event slots >= 0, found {events}")
     for name in outputs:
         if name in _RESERVED:
             raise ValueError(f"outputs: `{name}` collides with the result key of that name")

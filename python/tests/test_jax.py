@@ -302,6 +302,10 @@ def test_bad_names_raise_at_construction(ball_model):
         hj.function(ball_model, params=["e"], values={"e": 0.5})
     with pytest.raises(ValueError, match="t_end"):
         hj.function(ball_model, params=["e"], t_end=-1.0)
+    with pytest.raises(ValueError, match="events: expected a non-negative integer"):
+        hj.function(ball_model, params=["e"], events=2.5)
+    with pytest.raises(ValueError, match="max_events: expected a non-negative integer"):
+        hj.function(ball_model, params=["e"], max_events=-1)
 
 
 def test_identical_functions_share_a_handle(ball_model):
