@@ -65,3 +65,41 @@ k = len(r.event_times)
 print(f"fit: e = {e_fit:.10f} gives E(T) = {r.outputs['energy']:.12f} after {step} steps "
       f"(closed form ({target} / (g h0))^(1/{2 * k}) = {(target / (g * h0)) ** (1 / (2 * k)):.10f})")
 assert math.isclose(e_fit, (target / (g * h0)) ** (1 / (2 * k)), rel_tol=1e-8)
+
+# 7. The same through JAX (hybc.jax, when JAX is installed): jax.grad, jax.jacfwd and jax.vmap
+# each run one native call; a fit with jax.grad steps runs inside one jitted fori_loop.
+try:
+    import jax
+except ImportError:
+    print("JAX is not installed: the hybc.jax part is skipped")
+    raise SystemExit(0)
+
+jax.config.update("jax_enable_x64", True)
+import jax.numpy as jnp  # noqa: E402
+
+import hybc.jax  # noqa: E402
+
+f = hybc.jax.function(ball, params=["e", "h0"], outputs=["energy"], events=4, t_end=2.5)
+p = jnp.array([0.8, 1.0])
+out = f(p)
+print(f"JAX: E(T) = {float(out['energy']):.10f}, {int(out['n_events'])} bounces, "
+      f"status {hybc.jax.status_name(out['status'])}")
+dE = jax.jit(jax.grad(lambda p: f(p)["energy"]))(p)
+print(f"JAX: jax.grad E(T) = {np.asarray(dE)} (closed form [8 g h0 e^7, g e^8])")
+assert np.allclose(dE, [8 * g * h0 * 0.8**7, g * 0.8**8], rtol=1e-7)
+dt = jax.jacfwd(lambda p: f(p)["event_times"])(p)
+print(f"JAX: dt1/dh0 = {float(dt[0, 1]):.10f}")
+assert math.isclose(dt[0, 1], 1 / v1, rel_tol=1e-7)
+
+es = jnp.linspace(0.65, 0.9, 1000)
+batch = jax.jit(jax.vmap(lambda e: f(jnp.stack([e, 1.0]))))(es)
+names = sorted({hybc.jax.status_name(s) for s in np.asarray(batch["status"])})
+print(f"JAX: vmap over {len(es)} restitutions in one native call: statuses {names} "
+      f"(zeno: the bounces accumulate before T, E is NaN there)")
+assert np.all(np.isnan(batch["energy"]) == (batch["status"] == hybc.jax.ZENO))
+
+loss = lambda e: (f(jnp.stack([e, 1.0]))["energy"] - target) ** 2  # noqa: E731
+fit = jax.jit(lambda e0: jax.lax.fori_loop(0, 60, lambda _, e: e - 1e-3 * jax.grad(loss)(e), e0))
+e_jax = float(fit(jnp.float64(0.8)))
+print(f"JAX: fit with jax.grad steps: e = {e_jax:.10f}")
+assert math.isclose(e_jax, (target / (g * h0)) ** (1 / 8), rel_tol=1e-8)

@@ -10,6 +10,7 @@
 //! [`model::Model::compiled`] (cached per gradient set, `Send + Sync + 'static`).
 
 mod errors;
+mod jax_ffi;
 mod model;
 mod options;
 mod run;
@@ -22,6 +23,7 @@ fn _hybc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     errors::register(m)?;
     m.add_class::<model::Model>()?;
     m.add_class::<run::Run>()?;
+    jax_ffi::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

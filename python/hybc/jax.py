@@ -1,0 +1,216 @@
+"""hybc.jax: a hybc model as a JAX function with exact derivatives through events.
+
+::
+
+    import jax, jax.numpy as jnp, hybc, hybc.jax
+    jax.config.update("jax_enable_x64", True)
+    model = hybc.Model.from_file("models/ball.hyb")
+    f = hybc.jax.function(model, params=["e", "h0"], outputs=["energy"], events=4, t_end=2.5)
+    out = f(jnp.array([0.8, 1.0]))   # {"energy": (), "event_times": (4,), "n_events": (), "status": ()}
+    jax.grad(lambda p: f(p)["energy"])(jnp.array([0.8, 1.0]))
+
+The function runs natively through one XLA FFI target (the handler is Rust, in
+``python/src/jax_ffi/``). Its derivative is a ``jax.custom_jvp`` whose JVP multiplies the
+Jacobians hybc's forward sensitivities give (saltation through every event) from the same native
+call that gives the values, so ``jax.grad``, ``jax.jacfwd``, ``jax.jacrev`` and ``jax.jvp`` all
+work (JAX transposes the linear JVP for reverse mode); a ``jax.vmap`` batch is one native call run
+in parallel. Derivatives are first order: a derivative of the Jacobian (``jax.hessian``) raises
+JAX's "The FFI call to `hybc_run` cannot be differentiated".
+
+Rules:
+
+- Shapes are static: ``events=K`` slots hold the first K event times, NaN where fewer fired;
+  ``n_events`` counts every event that fired (it can exceed K).
+- ``status`` (int32) says why the numbers are what they are, instead of an exception inside
+  traced code; see :data:`STATUS`. The final values of a run that did not reach ``t_end``
+  (Zeno, stuck, max_events, fault) are NaN, and so is every derivative that does not exist
+  (grazing). A parameter outside its declared range gives ``bad_param`` and NaN everywhere.
+- The derivative of an unfired (NaN) event slot is 0: the pad is a constant, so a loss that masks
+  the pads gets a finite gradient.
+- A plain call runs the model compiled without sensitivities; a differentiated call runs it with
+  them (their error is controlled too), so the two values agree to the tolerances, not bit for bit,
+  and ``status`` describes the run that gave the numbers: only a differentiated call can report
+  ``not_differentiable``, or a fault where only the sensitivities' error cannot be met.
+- float64 only: ``jax_enable_x64`` must be on; float32 inputs are refused.
+"""
+
+from __future__ import annotations
+
+import ctypes
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import _hybc
+from ._model import _check_counts
+
+__all__ = ["function", "Function", "STATUS", "status_name"]
+
+#: Status codes (the ``status`` output) and their names.
+STATUS: dict[int, str] = {
+    0: "ok",  # reached t_end (or a stop event); every derivative exists
+    1: "grazing",  # an event grazed its guard: derivatives depending on its time are NaN
+    2: "not_differentiable",  # some derivative stopped existing (NaN), values exact
+    3: "zeno",  # events accumulate before t_end: final values NaN
+    4: "stuck",  # the state cannot leave a guard, or events keep firing at one instant
+    5: "max_events",  # max_events fired before t_end: final values NaN
+    6: "fault",  # the integration failed (step size underflow, non-finite state, ...)
+    7: "bad_param",  # an input is not finite or outside its declared range: all NaN
+}
+OK, GRAZING, NOT_DIFFERENTIABLE, ZENO, STUCK, MAX_EVENTS, FAULT, BAD_PARAM = range(8)
+
+_TARGET = "hybc_run"
+_registered = False
+# Keys of the result dict that are not model outputs.
+_RESERVED = ("event_times", "n_events", "status")
+
+
+def status_name(code: Any) -> str:
+    """The name of a status code (``"ok"``, ``"zeno"``, ...)."""
+    return STATUS.get(int(code), f"unknown status {int(code)}")
+
+
+def _register_target() -> None:
+    global _registered
+    if not _registered:
+        address = _hybc.jax_handler_address()
+        capsule = jax.ffi.pycapsule(ctypes.c_void_p(address))
+        jax.ffi.register_ffi_target(_TARGET, capsule, platform="cpu")
+        _registered = True
+
+
+def _x64() -> bool:
+    return bool(jax.config.read("jax_enable_x64"))
+
+
+_X64_MESSAGE = (
+    'hybc.jax computes in float64: call jax.config.update("jax_enable_x64", True) '
+    "before building arrays"
+)
+
+
+class Function:
+    """A hybc model as a JAX function of a parameter vector (see :func:`function`)."""
+
+    def __init__(
+        self,
+        model: Any,
+        params: list[str],
+        outputs: list[str],
+        events: int,
+        handle: int,
+    ):
+        self.model = model
+        self.params = params
+        self.outputs = outputs
+        self.events = events
+        self.handle = handle
+        m, n, k = len(params), len(outputs), events
+        f64, i32 = jnp.float64, jnp.int32
+        values = jax.ShapeDtypeStruct((n,), f64)
+        times = jax.ShapeDtypeStruct((k,), f64)
+        count = jax.ShapeDtypeStruct((), i32)
+        plain = jax.ffi.ffi_call(
+            _TARGET, (values, times, count, count), vmap_method="broadcast_all"
+        )
+        with_jacobians = jax.ffi.ffi_call(
+            _TARGET,
+            (
+                values,
+                jax.ShapeDtypeStruct((n, m), f64),
+                times,
+                jax.ShapeDtypeStruct((k, m), f64),
+                count,
+                count,
+            ),
+            vmap_method="broadcast_all",
+        )
+        attr = np.int64(handle)
+
+        @jax.custom_jvp
+        def call(p):
+            return plain(p, handle=attr)
+
+        @call.defjvp
+        def call_jvp(primals, tangents):
+            (p,), (dp,) = primals, tangents
+            v, dv, t, dt, n_events, status = with_jacobians(p, handle=attr)
+            no_tangent = np.zeros((), dtype=jax.dtypes.float0)
+            return (v, t, n_events, status), (dv @ dp, dt @ dp, no_tangent, no_tangent)
+
+        self._call = call
+
+    def __repr__(self) -> str:
+        return (
+            f"<hybc.jax.Function of {self.params} -> {self.outputs}, "
+            f"{self.events} event slots>"
+        )
+
+    def __call__(self, p: Any) -> dict[str, jax.Array]:
+        """Runs at the input vector ``p`` (shape ``(len(params),)``, float64).
+
+        Returns a dict: each output (a scalar), ``"event_times"`` (K,), ``"n_events"`` and
+        ``"status"`` (int32 scalars).
+        """
+        if not _x64():
+            raise TypeError(_X64_MESSAGE)
+        p = jnp.asarray(p)
+        if jnp.issubdtype(p.dtype, jnp.floating) and p.dtype != jnp.float64:
+            raise TypeError(f"hybc.jax: the parameters are {p.dtype}; {_X64_MESSAGE}")
+        if not jnp.issubdtype(p.dtype, jnp.floating):
+            p = p.astype(jnp.float64)
+        m = len(self.params)
+        if p.shape != (m,):
+            raise ValueError(
+                f"hybc.jax: expected a vector of {m} parameters ({', '.join(self.params)}), "
+                f"got shape {p.shape} (map over more points with jax.vmap)"
+            )
+        values, times, n_events, status = self._call(p)
+        out = {name: values[i] for i, name in enumerate(self.outputs)}
+        out["event_times"] = times
+        out["n_events"] = n_events
+        out["status"] = status
+        return out
+
+
+def function(
+    model: Any,
+    params: Iterable[str],
+    outputs: Iterable[str] = (),
+    events: int = 0,
+    *,
+    values: Mapping[str, float] | None = None,
+    **sim_kw: Any,
+) -> Function:
+    """A JAX function ``f(p) -> dict`` running ``model`` with the parameters ``params`` as inputs.
+
+    - ``params``: names of the input parameters, the order of ``p``'s entries (and of gradients).
+    - ``outputs``: names of outputs (or states) read at the end of the run.
+    - ``events``: number K of event slots (``"event_times"`` has shape (K,)).
+    - ``values``: values of the other parameters (their defaults otherwise).
+    - ``sim_kw``: the keywords of ``Model.simulate``: ``t_end``, ``rtol``, ``atol``,
+      ``max_events``, ``max_steps``, ``method``, ``graze_tol``, ``sens_error_control``, ``h_max``
+      (the model's ``simulate`` line and the run defaults otherwise).
+
+    The model is compiled here (twice: without and with sensitivities, each cached per model).
+    A bad name or option raises at once (``hybc.ParameterError``, ``ValueError``).
+    """
+    if not _x64():
+        raise TypeError(_X64_MESSAGE)
+    params = [params] if isinstance(params, str) else list(params)
+    outputs = [outputs] if isinstance(outputs, str) else list(outputs)
+    _check_counts({"events": events, **sim_kw})
+    events = int(events)
+    for name in outputs:
+        if name in _RESERVED:
+            raise ValueError(f"outputs: `{name}` collides with the result key of that name")
+    if len(set(outputs)) != len(outputs):
+        raise ValueError(f"outputs: a name is given twice in {outputs}")
+    native = getattr(model, "_native", model)
+    fixed = {str(k): float(v) for k, v in (values or {}).items()}
+    handle = _hybc.jax_register(native, params, outputs, events, fixed, **sim_kw)
+    _register_target()
+    return Function(model, params, outputs, events, handle)

@@ -1,0 +1,296 @@
+//! One `hybc.jax.function`: a compiled model with the parameters that are inputs, the values
+//! that are outputs and the number of event slots, and how a batch of points is run into the
+//! flat output buffers XLA hands over. Safe Rust; `handler.rs` supplies the slices.
+//!
+//! Per point (every buffer row-major, leading batch dimensions flattened into `b`):
+//! `p[b, j]` in; `values[b, i]`, `times[b, k]`, `n_events[b]`, `status[b]` out, and with
+//! Jacobians `dvalues[b, i, j]`, `dtimes[b, k, j]`. Unfired event slots hold NaN times and zero
+//! time derivatives (a pad is a constant, so a masked loss gets no NaN through them); a derivative
+//! that does not exist (grazing) is NaN, and so is every final value of a run that did not reach
+//! `t_end` (see `status.rs`).
+
+use std::sync::Mutex;
+
+use rayon::prelude::*;
+
+use super::status;
+use hybc::sim::{SimOptions, SimResult};
+
+/// What a value column reads from the final state.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Selector {
+    Output(usize),
+    State(usize),
+}
+
+/// A compiled model with options checked and simulators kept for reuse: one for values only
+/// (compiled without gradients, so plain calls pay no sensitivities) and one for values with
+/// Jacobians (compiled with gradients with respect to the inputs, in input order).
+pub struct Engine {
+    compiled: hybc::Compiled,
+    opts: SimOptions,
+    /// Simulators not in use. A call takes one per worker and gives it back, so steady state
+    /// allocates no scratch buffers; at most one per thread that ever ran a point is kept.
+    idle: Mutex<Vec<hybc::Simulator>>,
+}
+
+impl Engine {
+    /// Checks the options by building the first simulator.
+    pub fn new(compiled: hybc::Compiled, opts: SimOptions) -> Result<Engine, hybc::Error> {
+        let first = compiled.simulator(&opts)?;
+        Ok(Engine { compiled, opts, idle: Mutex::new(vec![first]) })
+    }
+
+    fn take(&self) -> Result<hybc::Simulator, hybc::Error> {
+        let idle = self.idle.lock().unwrap_or_else(|p| p.into_inner()).pop();
+        match idle {
+            Some(sim) => Ok(sim),
+            None => self.compiled.simulator(&self.opts),
+        }
+    }
+
+    fn give_back(&self, sim: hybc::Simulator) {
+        self.idle.lock().unwrap_or_else(|p| p.into_inner()).push(sim);
+    }
+
+    fn n_grad(&self) -> usize {
+        self.compiled.info().n_grad()
+    }
+}
+
+/// A worker's simulator and parameter vector, the simulator returned to its engine when the
+/// worker is done (also when a point panics).
+struct Worker<'a> {
+    engine: &'a Engine,
+    sim: Option<hybc::Simulator>,
+    p: Vec<f64>,
+}
+
+impl Drop for Worker<'_> {
+    fn drop(&mut self) {
+        if let Some(sim) = self.sim.take() {
+            self.engine.give_back(sim);
+        }
+    }
+}
+
+/// The output slices of one call, each `batch * width` long.
+pub struct Outputs<'a> {
+    pub values: &'a mut [f64],
+    pub times: &'a mut [f64],
+    pub n_events: &'a mut [i32],
+    pub status: &'a mut [i32],
+    /// `(dvalues, dtimes)` when the call asks for Jacobians.
+    pub jacobians: Option<(&'a mut [f64], &'a mut [f64])>,
+}
+
+/// One point's slots in the output buffers.
+struct Slots<'a> {
+    values: &'a mut [f64],
+    times: &'a mut [f64],
+    n_events: &'a mut i32,
+    status: &'a mut i32,
+    jacobians: Option<(&'a mut [f64], &'a mut [f64])>,
+}
+
+/// An input parameter.
+pub struct Input {
+    /// Its index in the model's parameter vector.
+    pub index: usize,
+    pub name: String,
+    /// Its declared range.
+    pub range: Option<(f64, f64)>,
+}
+
+pub struct Function {
+    /// The model's name, for messages.
+    pub model_name: String,
+    /// The input parameters, in input order.
+    inputs: Vec<Input>,
+    /// Their names, for messages.
+    input_names: Vec<String>,
+    /// Every parameter's value where it is not an input (defaults with the caller's overrides).
+    base: Vec<f64>,
+    columns: Vec<Selector>,
+    events: usize,
+    plain: Engine,
+    with_jacobians: Engine,
+}
+
+/// Batches up to this size run on the calling thread: a thread hand-off costs more than a point
+/// of a small model.
+const SERIAL_BATCH: usize = 4;
+
+impl Function {
+    /// `plain` must be compiled without gradients and `with_jacobians` with gradients with
+    /// respect to the inputs, in order.
+    pub fn new(
+        model_name: String,
+        inputs: Vec<Input>,
+        base: Vec<f64>,
+        columns: Vec<Selector>,
+        events: usize,
+        plain: Engine,
+        with_jacobians: Engine,
+    ) -> Function {
+        assert_eq!(with_jacobians.n_grad(), inputs.len(), "Jacobian engine compiled for the inputs");
+        let input_names = inputs.iter().map(|i| i.name.clone()).collect();
+        Function { model_name, inputs, input_names, base, columns, events, plain, with_jacobians }
+    }
+
+    pub fn n_inputs(&self) -> usize {
+        self.inputs.len()
+    }
+
+    pub fn n_values(&self) -> usize {
+        self.columns.len()
+    }
+
+    pub fn n_event_slots(&self) -> usize {
+        self.events
+    }
+
+    pub fn input_names(&self) -> &[String] {
+        &self.input_names
+    }
+
+    /// Runs `batch` points (`p` is `batch * n_inputs` long) into `out`, in parallel for batches
+    /// larger than a few points. The slice lengths must match (the handler checks them against the
+    /// buffers' shapes first).
+    pub fn run_batch(&self, p: &[f64], batch: usize, out: Outputs<'_>) {
+        let (m, k, n) = (self.n_inputs(), self.events, self.n_values());
+        debug_assert_eq!(p.len(), batch * m);
+        let Outputs { values, times, n_events, status, jacobians } = out;
+        let engine = if jacobians.is_some() { &self.with_jacobians } else { &self.plain };
+        let mut slots: Vec<Slots<'_>> = Vec::with_capacity(batch);
+        let mut values = values.chunks_mut(n.max(1));
+        let mut times = times.chunks_mut(k.max(1));
+        let (mut dvalues, mut dtimes) = match jacobians {
+            Some((dv, dt)) => (Some(dv.chunks_mut((n * m).max(1))), Some(dt.chunks_mut((k * m).max(1)))),
+            None => (None, None),
+        };
+        for (n_events, status) in n_events.iter_mut().zip(status.iter_mut()) {
+            let jacobians = match (dvalues.as_mut(), dtimes.as_mut()) {
+                (Some(dv), Some(dt)) => Some((next_row(dv, n * m), next_row(dt, k * m))),
+                _ => None,
+            };
+            let values = next_row(&mut values, n);
+            let times = next_row(&mut times, k);
+            slots.push(Slots { values, times, n_events, status, jacobians });
+        }
+        let worker = || Worker { engine, sim: None, p: self.base.clone() };
+        // Point `b`'s inputs (empty when the function has no inputs: then `p` is empty too).
+        let inputs_of = |b: usize| &p[b * m..(b + 1) * m];
+        if batch <= SERIAL_BATCH {
+            let mut w = worker();
+            for (b, slot) in slots.into_iter().enumerate() {
+                self.run_point(&mut w, inputs_of(b), slot);
+            }
+        } else {
+            slots.into_par_iter().enumerate().for_each_init(worker, |w, (b, slot)| {
+                self.run_point(w, inputs_of(b), slot);
+            });
+        }
+    }
+
+    fn run_point(&self, w: &mut Worker<'_>, q: &[f64], slot: Slots<'_>) {
+        let in_range = q
+            .iter()
+            .zip(&self.inputs)
+            .all(|(&v, input)| v.is_finite() && input.range.is_none_or(|(lo, hi)| (lo..=hi).contains(&v)));
+        if !in_range {
+            return fill_failed(slot, status::BAD_PARAM);
+        }
+        for (input, &v) in self.inputs.iter().zip(q) {
+            w.p[input.index] = v;
+        }
+        let sim = match w.sim.take() {
+            Some(sim) => sim,
+            None => match w.engine.take() {
+                Ok(sim) => sim,
+                // Options were checked when the engine was built; a simulator cannot fail now.
+                Err(_) => return fill_failed(slot, status::FAULT),
+            },
+        };
+        let mut sim = sim;
+        let result = sim.run_raw(&w.p);
+        w.sim = Some(sim);
+        match result {
+            Ok(result) => self.fill(slot, &result),
+            // Bad input to `run` (a parameter vector of the wrong length, options): the function
+            // was built from the model, so this cannot happen; never a silent number all the same.
+            Err(_) => fill_failed(slot, status::FAULT),
+        }
+    }
+
+    fn fill(&self, slot: Slots<'_>, result: &SimResult) {
+        let code = status::of_run(result);
+        *slot.status = code;
+        *slot.n_events = i32::try_from(result.events.len()).unwrap_or(i32::MAX);
+        let (m, k) = (self.n_inputs(), self.events);
+        for (t, event) in
+            slot.times.iter_mut().zip(result.events.iter().map(Some).chain(std::iter::repeat(None)))
+        {
+            *t = event.map_or(f64::NAN, |e| e.time);
+        }
+        let complete = result.stopped_by.is_complete();
+        let fin = &result.final_state;
+        let n_states = fin.state.len();
+        let n_outputs = fin.outputs.len();
+        for (v, col) in slot.values.iter_mut().zip(&self.columns) {
+            *v = match (complete, col) {
+                (false, _) => f64::NAN,
+                (true, Selector::Output(i)) => fin.outputs[*i],
+                (true, Selector::State(i)) => fin.state[*i],
+            };
+        }
+        let Some((dvalues, dtimes)) = slot.jacobians else { return };
+        // At a `stop` event the final values are taken at a time that moves with the parameters:
+        // their derivative is the total one.
+        let dstate = fin.dstate_total.as_deref().or(fin.dstate.as_deref());
+        let doutputs = fin.doutputs_total.as_deref().or(fin.doutputs.as_deref());
+        for (i, col) in self.columns.iter().enumerate() {
+            for j in 0..m {
+                let d = match (complete, col) {
+                    (false, _) => None,
+                    (true, Selector::Output(o)) => doutputs.map(|d| d[j * n_outputs + o]),
+                    (true, Selector::State(s)) => dstate.map(|d| d[j * n_states + s]),
+                };
+                dvalues[i * m + j] = d.unwrap_or(f64::NAN);
+            }
+        }
+        for slot_k in 0..k {
+            let row = &mut dtimes[slot_k * m..(slot_k + 1) * m];
+            match result.events.get(slot_k) {
+                None => row.fill(0.0),
+                Some(event) => match &event.dtime {
+                    Some(d) => row.copy_from_slice(&d[..m]),
+                    None => row.fill(f64::NAN),
+                },
+            }
+        }
+    }
+}
+
+/// The next `width` values of a row-major buffer; a width of zero gets an empty slice (the
+/// buffer is empty then and its chunks iterator yields nothing).
+fn next_row<'a>(rows: &mut std::slice::ChunksMut<'a, f64>, width: usize) -> &'a mut [f64] {
+    if width == 0 {
+        &mut []
+    } else {
+        rows.next().expect("buffer lengths checked against the batch")
+    }
+}
+
+/// A point with no run (or a run that could not start): every value and time NaN, no events.
+fn fill_failed(slot: Slots<'_>, code: i32) {
+    *slot.status = code;
+    *slot.n_events = 0;
+    slot.values.fill(f64::NAN);
+    slot.times.fill(f64::NAN);
+    if let Some((dv, dt)) = slot.jacobians {
+        dv.fill(f64::NAN);
+        // No event fired: the slots are pads.
+        dt.fill(0.0);
+    }
+}

@@ -1,0 +1,130 @@
+//! What `hybc/jax.py` calls: the handler's address (to register it as an XLA FFI target) and the
+//! registration of a function (model, inputs, value columns, event slots, options) in the
+//! process-wide registry, which returns the handle every call passes as an attribute.
+
+use std::collections::HashMap;
+
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+
+use super::function::{Engine, Function, Input, Selector};
+use super::{handler, registry};
+use crate::errors;
+use crate::model::Model;
+use crate::options::SimKeywords;
+
+/// The address of the FFI handler, for `jax.ffi.pycapsule`.
+#[pyfunction]
+pub fn jax_handler_address() -> usize {
+    handler::hybc_jax_handler as *const () as usize
+}
+
+/// Registers a function and returns its handle (an existing one for an identical configuration).
+///
+/// `params`: the input parameters, in input order; `columns`: outputs or states read at the end;
+/// `events`: event slots; `values`: values of other parameters (defaults otherwise).
+#[pyfunction]
+#[pyo3(signature = (
+    model, params, columns, events, values,
+    t_end = None, rtol = None, atol = None, max_events = None, max_steps = None, method = None,
+    graze_tol = None, sens_error_control = None, h_max = None,
+))]
+#[allow(clippy::too_many_arguments)]
+pub fn jax_register(
+    py: Python<'_>,
+    model: PyRef<'_, Model>,
+    params: Vec<String>,
+    columns: Vec<String>,
+    events: usize,
+    values: HashMap<String, f64>,
+    t_end: Option<f64>,
+    rtol: Option<f64>,
+    atol: Option<f64>,
+    max_events: Option<usize>,
+    max_steps: Option<usize>,
+    method: Option<String>,
+    graze_tol: Option<f64>,
+    sens_error_control: Option<bool>,
+    h_max: Option<f64>,
+) -> PyResult<u64> {
+    let keywords = SimKeywords {
+        t_end,
+        rtol,
+        atol,
+        max_events,
+        max_steps,
+        method,
+        graze_tol,
+        sens_error_control,
+        h_max,
+    };
+    let inner = model.inner();
+    let opts = keywords.options(inner)?;
+    let checked = inner.checked();
+
+    let mut inputs = Vec::with_capacity(params.len());
+    for name in &params {
+        let idx = inner.param_index(name).map_err(|e| errors::to_py(e.into()))?.0 as usize;
+        if inputs.iter().any(|i: &Input| i.index == idx) {
+            return Err(errors::ParameterError::new_err(format!(
+                "parameter `{name}` is given twice in params"
+            )));
+        }
+        inputs.push(Input { index: idx, name: name.clone(), range: checked.params[idx].range });
+    }
+    let mut base = inner.params();
+    let mut fixed: Vec<(&String, &f64)> = values.iter().collect();
+    fixed.sort_by(|a, b| a.0.cmp(b.0));
+    for (name, &value) in &fixed {
+        if params.contains(name) {
+            return Err(errors::ParameterError::new_err(format!(
+                "parameter `{name}` is an input (in params) and cannot also have a fixed value"
+            )));
+        }
+        base.set(name, value).map_err(|e| errors::to_py(e.into()))?;
+    }
+    let selectors = columns.iter().map(|name| selector(inner, name)).collect::<PyResult<Vec<_>>>()?;
+
+    let key =
+        format!("{:?}", (inner.file_name(), inner.source(), &params, &columns, events, base.values(), &opts));
+    if let Some(handle) = registry::find(&key) {
+        return Ok(handle);
+    }
+    let plain = model.compiled(py, &[])?;
+    let with_jacobians = model.compiled(py, &params)?;
+    let base = base.values().to_vec();
+    let function = py
+        .detach(move || -> Result<Function, hybc::Error> {
+            Ok(Function::new(
+                inner_name(&plain),
+                inputs,
+                base,
+                selectors,
+                events,
+                Engine::new(plain, opts.clone())?,
+                Engine::new(with_jacobians, opts)?,
+            ))
+        })
+        .map_err(errors::to_py)?;
+    Ok(registry::insert(key, function))
+}
+
+fn inner_name(compiled: &hybc::Compiled) -> String {
+    format!("model `{}`", compiled.model().name())
+}
+
+/// An output or a state, by name (outputs first: a model cannot declare both with one name).
+fn selector(model: &hybc::Model, name: &str) -> PyResult<Selector> {
+    if let Some(i) = model.output_names().position(|o| o == name) {
+        return Ok(Selector::Output(i));
+    }
+    if let Some(i) = model.state_names().position(|s| s == name) {
+        return Ok(Selector::State(i));
+    }
+    let known: Vec<&str> = model.output_names().chain(model.state_names()).collect();
+    Err(PyValueError::new_err(format!(
+        "outputs: model `{}` has no output or state `{name}` (it has: {})",
+        model.name(),
+        known.join(", ")
+    )))
+}
