@@ -16,8 +16,8 @@ use rayon::prelude::*;
 use crate::sim::{self, HybridSystem, SimError, SimOptions, SimResult};
 
 pub use points::{
-    full_grid, lerp, linspace, parse_vary, uniform_samples, uniform_samples_from, Axis, AxisSpec, Grid, Points,
-    Samples, TooManyPoints, VaryError, VarySpec,
+    full_grid, lerp, linspace, parse_vary, uniform_samples, uniform_samples_from, Axis, AxisSpec, Grid,
+    Points, Samples, TooManyPoints, VaryError, VarySpec,
 };
 pub use stream::{stream_rows, Streamed, BATCH, WINDOW_BYTES, WINDOW_ROWS};
 pub use table::{Columns, Format};
