@@ -142,7 +142,7 @@ pub(crate) fn parameter_values(model: &Model, sets: &[String]) -> Result<Params,
 /// gradient parameter, so 10^6 events stay well under a gigabyte.
 pub(crate) const MAX_EVENTS: usize = 1_000_000;
 /// The most rows `--trajectory` with `--plot` keeps in memory for the figure.
-const MAX_PLOTTED_ROWS: f64 = 1e6;
+const MAX_PLOTTED_ROWS: f64 = crate::sim::MAX_SAMPLED_ROWS;
 
 /// `value` if it is at most `cap`, else a usage error naming the flag.
 pub(crate) fn at_most(flag: &str, value: usize, cap: usize) -> Result<usize, String> {

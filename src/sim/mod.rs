@@ -31,6 +31,6 @@ pub use options::*;
 pub use recorder::{NoRecorder, Point, PointKind, Recorder, TrajectoryRecorder};
 pub use result::*;
 pub use rk::Rk;
-pub use run::{run, Simulator, SystemRef, MIN_RTOL};
+pub use run::{run, Simulator, SystemRef, MAX_SAMPLED_ROWS, MIN_RTOL};
 pub use stepper::{Interpolant, Rhs, Stepper};
 pub use system::*;

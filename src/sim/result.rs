@@ -35,6 +35,11 @@ pub enum SimError {
         "rtol {rtol:e} cannot be met: below {floor:e} the error estimates are round-off in double precision"
     )]
     ToleranceTooSmall { rtol: f64, floor: f64 },
+    #[error(
+        "a trajectory sampled every {dt:e} from t = {t_start} to {t_end} has {rows:.0} rows, more than the \
+         {cap:.0} a run keeps in memory (sample more coarsely)"
+    )]
+    TooManySamples { dt: f64, t_start: f64, t_end: f64, rows: f64, cap: f64 },
 }
 
 impl SimError {

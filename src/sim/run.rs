@@ -187,6 +187,16 @@ fn validate(info: &SystemInfo, opts: &SimOptions) -> Result<(), SimError> {
         if !(dt.is_finite() && dt > 0.0) {
             return Err(SimError::InvalidOption { name: "trajectory sample interval", value: dt });
         }
+        let rows = ((opts.t_end - opts.t_start) / dt).floor() + 1.0;
+        if rows > MAX_SAMPLED_ROWS {
+            let (t_start, t_end, cap) = (opts.t_start, opts.t_end, MAX_SAMPLED_ROWS);
+            return Err(SimError::TooManySamples { dt, t_start, t_end, rows, cap });
+        }
     }
     Ok(())
 }
+
+/// The most rows a sampled trajectory kept in memory may have (checked before the run: the ball
+/// sampled every 1e-8 s would be 2.5e8 rows, several GB). `hybc run --trajectory` writes its rows
+/// out as they are recorded instead, with its own, larger cap.
+pub const MAX_SAMPLED_ROWS: f64 = 1e6;
