@@ -10,7 +10,9 @@ use std::io::{self, Write};
 use std::path::Path;
 
 use crate::report::num;
-use crate::sim::{HybridSystem, Point, PointKind, Recorder, SimOptions, SystemInfo, TrajectoryRequest};
+use crate::sim::{
+    HybridSystem, Point, PointKind, Recorder, RowSchedule, SimOptions, SystemInfo, TrajectoryRequest,
+};
 
 /// The most rows `--sample` may ask for: 10^7 rows are about 1-2 GB of CSV for a small model.
 /// (`--trajectory` without `--sample` writes one row per step, and the steps are capped by the
@@ -105,9 +107,7 @@ impl<'s, S: HybridSystem + ?Sized> TrajectoryCsv<'s, S> {
 pub(crate) struct StreamingTrajectory<'s, S: HybridSystem + ?Sized, W: Write> {
     csv: TrajectoryCsv<'s, S>,
     out: W,
-    request: TrajectoryRequest,
-    t_start: f64,
-    next_sample: usize,
+    schedule: RowSchedule,
     error: Option<io::Error>,
 }
 
@@ -121,7 +121,7 @@ impl<'s, S: HybridSystem + ?Sized, W: Write> StreamingTrajectory<'s, S, W> {
     ) -> io::Result<Self> {
         let csv = TrajectoryCsv::new(system, params);
         csv.write_header(&mut out)?;
-        Ok(StreamingTrajectory { csv, out, request, t_start, next_sample: 0, error: None })
+        Ok(StreamingTrajectory { csv, out, schedule: RowSchedule::new(request, t_start), error: None })
     }
 
     /// Flushes the file; the first error met while writing, if any.
@@ -135,29 +135,20 @@ impl<'s, S: HybridSystem + ?Sized, W: Write> StreamingTrajectory<'s, S, W> {
 
 impl<S: HybridSystem + ?Sized, W: Write> Recorder for StreamingTrajectory<'_, S, W> {
     fn is_active(&self) -> bool {
-        self.request != TrajectoryRequest::None
+        self.schedule.is_active()
     }
 
     // The same rows as `sim::TrajectoryRecorder` keeps.
     fn wants(&self, kind: PointKind) -> bool {
-        match self.request {
-            TrajectoryRequest::None => false,
-            TrajectoryRequest::Steps => kind != PointKind::Sample,
-            TrajectoryRequest::Sample(_) => kind == PointKind::Sample,
-        }
+        self.schedule.wants(kind)
     }
 
     fn next_sample(&self) -> Option<f64> {
-        match self.request {
-            TrajectoryRequest::Sample(dt) => Some(self.t_start + self.next_sample as f64 * dt),
-            _ => None,
-        }
+        self.schedule.next_sample()
     }
 
     fn record(&mut self, p: &Point<'_>) {
-        if p.kind == PointKind::Sample {
-            self.next_sample += 1;
-        }
+        self.schedule.recorded(p.kind);
         if self.error.is_none() {
             if let Err(e) = self.csv.write_row(&mut self.out, p.t, p.mode, p.x, p.s, p.outputs) {
                 self.error = Some(e);

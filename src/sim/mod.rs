@@ -28,7 +28,7 @@ mod zeno;
 pub use dense::Dense;
 pub use integrator::{Integrator, StepOutcome};
 pub use options::*;
-pub use recorder::{NoRecorder, Point, PointKind, Recorder, TrajectoryRecorder};
+pub use recorder::{NoRecorder, Point, PointKind, Recorder, RowSchedule, TrajectoryRecorder};
 pub use result::*;
 pub use rk::Rk;
 pub use run::{run, Simulator, SystemRef, MAX_SAMPLED_ROWS, MIN_RTOL};

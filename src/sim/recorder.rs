@@ -67,32 +67,40 @@ impl Recorder for NoRecorder {
 /// of every event group), or samples every `dt` from the start on the dense output.
 #[derive(Clone, Debug)]
 pub struct TrajectoryRecorder {
-    request: TrajectoryRequest,
-    t_start: f64,
-    next_sample: usize,
+    schedule: RowSchedule,
     rows: Vec<TrajectoryRow>,
 }
 
 impl TrajectoryRecorder {
     pub fn new(request: TrajectoryRequest, t_start: f64) -> TrajectoryRecorder {
-        TrajectoryRecorder { request, t_start, next_sample: 0, rows: Vec::new() }
+        TrajectoryRecorder { schedule: RowSchedule::new(request, t_start), rows: Vec::new() }
     }
 
     /// The rows recorded, `None` when no trajectory was asked for.
     pub fn into_rows(self) -> Option<Vec<TrajectoryRow>> {
-        match self.request {
-            TrajectoryRequest::None => None,
-            _ => Some(self.rows),
-        }
+        self.schedule.is_active().then_some(self.rows)
     }
 }
 
-impl Recorder for TrajectoryRecorder {
-    fn is_active(&self) -> bool {
+/// Which points a [`TrajectoryRequest`] keeps and where its next sample falls: one definition for
+/// every recorder of those rows (kept here, written to a file by `hybc run --trajectory`).
+#[derive(Clone, Copy, Debug)]
+pub struct RowSchedule {
+    request: TrajectoryRequest,
+    t_start: f64,
+    next_sample: usize,
+}
+
+impl RowSchedule {
+    pub fn new(request: TrajectoryRequest, t_start: f64) -> RowSchedule {
+        RowSchedule { request, t_start, next_sample: 0 }
+    }
+
+    pub fn is_active(&self) -> bool {
         self.request != TrajectoryRequest::None
     }
 
-    fn wants(&self, kind: PointKind) -> bool {
+    pub fn wants(&self, kind: PointKind) -> bool {
         match self.request {
             TrajectoryRequest::None => false,
             TrajectoryRequest::Steps => kind != PointKind::Sample,
@@ -100,17 +108,37 @@ impl Recorder for TrajectoryRecorder {
         }
     }
 
-    fn next_sample(&self) -> Option<f64> {
+    /// Samples fall at `t_start + k dt`, counted rather than summed so that they do not drift.
+    pub fn next_sample(&self) -> Option<f64> {
         match self.request {
             TrajectoryRequest::Sample(dt) => Some(self.t_start + self.next_sample as f64 * dt),
             _ => None,
         }
     }
 
-    fn record(&mut self, p: &Point<'_>) {
-        if p.kind == PointKind::Sample {
+    /// Notes that a point of `kind` was recorded.
+    pub fn recorded(&mut self, kind: PointKind) {
+        if kind == PointKind::Sample {
             self.next_sample += 1;
         }
+    }
+}
+
+impl Recorder for TrajectoryRecorder {
+    fn is_active(&self) -> bool {
+        self.schedule.is_active()
+    }
+
+    fn wants(&self, kind: PointKind) -> bool {
+        self.schedule.wants(kind)
+    }
+
+    fn next_sample(&self) -> Option<f64> {
+        self.schedule.next_sample()
+    }
+
+    fn record(&mut self, p: &Point<'_>) {
+        self.schedule.recorded(p.kind);
         self.rows.push(TrajectoryRow {
             t: p.t,
             mode: p.mode,
