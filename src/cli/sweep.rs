@@ -182,6 +182,9 @@ fn points(model: &Model, args: &SweepArgs) -> Result<(Points, Vec<usize>), Strin
                 axes.push((*idx, values));
             }
             if count > MAX_POINTS {
+                // `count` saturates: a product past 2^64 - 1 is only known to be larger.
+                let count =
+                    if count == usize::MAX { format!("more than {count}") } else { count.to_string() };
                 return Err(format!(
                     "--vary: the grid has {count} points; at most {MAX_POINTS} are supported"
                 ));

@@ -118,14 +118,18 @@ pub fn stream_rows<S: HybridSystem + ?Sized>(
         changed: Condvar::new(),
     };
     std::thread::scope(|scope| {
+        let mut workers = Vec::with_capacity(threads);
         for _ in 0..threads {
             let spawned = std::thread::Builder::new()
                 .name("hybc-sweep".into())
                 .spawn_scoped(scope, || work(sys, points, opts, columns, format, keep, progress, &shared));
-            if let Err(source) = spawned {
-                shared.lock().stop = true;
-                shared.changed.notify_all();
-                return Err(SweepError::Spawn { threads, source });
+            match spawned {
+                Ok(worker) => workers.push(worker),
+                Err(source) => {
+                    shared.lock().stop = true;
+                    shared.changed.notify_all();
+                    return Err(SweepError::Spawn { threads, source });
+                }
             }
         }
         let written = write_in_order(&shared, total, w);
@@ -133,7 +137,12 @@ pub fn stream_rows<S: HybridSystem + ?Sized>(
             shared.lock().stop = true;
             shared.changed.notify_all();
         }
-        written
+        // Joined here, so that a worker's panic is this error rather than a panic of the scope.
+        let panicked = workers.into_iter().map(|worker| worker.join().is_err()).fold(false, |a, b| a | b);
+        match shared.lock().panicked_at {
+            Some(index) if panicked => Err(SweepError::WorkerPanicked { index }),
+            _ => written,
+        }
     })
 }
 

@@ -50,7 +50,10 @@ fn every_count_a_flag_accepts_is_capped_with_the_flag_named() {
     let h0 = format!("h0={big}");
     let g = format!("g={big}");
     let e = "e=0:1:1000000000";
-    usage_error(&["sweep", ball, "--vary", &h0, "--vary", &g, "--vary", e], "points");
+    usage_error(
+        &["sweep", ball, "--vary", &h0, "--vary", &g, "--vary", e],
+        "more than 18446744073709551615 points",
+    );
     usage_error(
         &["sweep", ball, "--vary", "e=0:1:100001", "--plot", "p.svg"],
         "--plot: the sweep has 100001 points",
