@@ -24,6 +24,21 @@ pub struct Diagnostic {
 /// and readable in logs. The source lines are shown as [`Shown`] describes: every line end counts,
 /// and no byte of the file reaches the terminal unescaped.
 pub fn render(file_name: &str, source: &str, diagnostics: &[Diagnostic]) -> String {
+    render_as(CsDiagnostic::error, "error", file_name, source, diagnostics)
+}
+
+/// As [`render`], for warnings: the model is valid, and runs.
+pub fn render_warnings(file_name: &str, source: &str, diagnostics: &[Diagnostic]) -> String {
+    render_as(CsDiagnostic::warning, "warning", file_name, source, diagnostics)
+}
+
+fn render_as(
+    severity: fn() -> CsDiagnostic<()>,
+    word: &str,
+    file_name: &str,
+    source: &str,
+    diagnostics: &[Diagnostic],
+) -> String {
     let shown = Shown::new(source);
     let file = SimpleFile::new(file_name, shown.text.as_str());
     let config = Config { chars: Chars::ascii(), ..Config::default() };
@@ -32,14 +47,14 @@ pub fn render(file_name: &str, source: &str, diagnostics: &[Diagnostic]) -> Stri
         // Clamp so that a span at the very end of the file still renders.
         let start = shown.offset(d.span.start.min(source.len()));
         let end = shown.offset(d.span.end.clamp(d.span.start, source.len())).max(start);
-        let cs = CsDiagnostic::error()
+        let cs = severity()
             .with_message(&d.message)
             .with_labels(vec![Label::primary((), start..end).with_message(&d.label)])
             .with_notes(d.notes.clone());
         match term::emit_into_string(&config, &file, &cs) {
             Ok(text) => out.push_str(&text),
             // Rendering fails only for a span outside the file; fall back to a plain line.
-            Err(_) => out.push_str(&format!("error: {}\n --> {file_name}\n", d.message)),
+            Err(_) => out.push_str(&format!("{word}: {}\n --> {file_name}\n", d.message)),
         }
     }
     out

@@ -84,6 +84,13 @@ impl Model {
         &self.inner.file_name
     }
 
+    /// Warnings about the valid model (`sema::lint`), rendered like errors against its source;
+    /// empty when there are none.
+    pub fn warnings(&self) -> String {
+        let found = sema::lint::warnings(&self.inner.checked);
+        crate::diag::render_warnings(&self.inner.file_name, &self.inner.source, &found)
+    }
+
     /// The parameters at their declared defaults.
     pub fn params(&self) -> Params {
         Params::defaults(self.clone())

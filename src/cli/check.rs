@@ -15,6 +15,7 @@ pub struct CheckArgs {
 pub fn run(args: &CheckArgs) -> ExitCode {
     match load_model(&args.model.file) {
         Ok(model) => {
+            eprint!("{}", model.warnings());
             super::print_out(&summary(model.checked()));
             ExitCode::SUCCESS
         }

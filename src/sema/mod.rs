@@ -2,6 +2,7 @@
 
 mod check;
 mod error;
+pub mod lint;
 pub mod model;
 mod names;
 mod switches;

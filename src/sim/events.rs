@@ -139,6 +139,8 @@ pub(crate) struct Detector {
     dx: Vec<f64>,
     samples: Vec<Sample>,
     located: Vec<(usize, Crossing)>,
+    /// Crossings located in the current step whose enabling condition is false before the instant.
+    located_off: Vec<(usize, Crossing)>,
     /// The current step's start and end times (equal after a restart, before a step).
     span: (f64, f64),
     /// Time, state and flow at the step's start and end, for round-off bounds asked for later.
@@ -273,6 +275,7 @@ impl Detector {
             dx: vec![0.0; nx],
             samples: Vec::new(),
             located: Vec::new(),
+            located_off: Vec::new(),
             span: (0.0, 0.0),
             at: [(0.0, vec![0.0; nx], vec![0.0; nx]), (0.0, vec![0.0; nx], vec![0.0; nx])],
             stage_signs: vec![SignChanges::default(); ne],
@@ -336,6 +339,65 @@ impl Detector {
             self.speed_noise0[pos] = round_off(&self.gx, f, gt, 1.0);
         }
         (self.noise0[pos], self.speed_noise0[pos])
+    }
+
+    /// [`Self::noise0`] at the end of the step.
+    fn noise1<S: HybridSystem + ?Sized>(
+        &mut self,
+        sys: &S,
+        info: &SystemInfo,
+        mode: usize,
+        pos: usize,
+        p: &[f64],
+    ) -> (f64, f64) {
+        if self.noise1[pos].is_nan() {
+            let ev = info.modes[mode].events[pos];
+            let (t, x, f) = (self.at[1].0, &self.at[1].1, &self.at[1].2);
+            let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
+            self.noise1[pos] = round_off(&self.gx, x, gt, t);
+            self.speed_noise1[pos] = round_off(&self.gx, f, gt, 1.0);
+        }
+        (self.noise1[pos], self.speed_noise1[pos])
+    }
+
+    /// At the end of a step that ends the run with nothing selected: the events whose guard is
+    /// within round-off of zero there (or within what locating to adjacent floats leaves), not
+    /// yet across, with the flow moving it across. Their crossing is at the end to round-off, so
+    /// they fire there, whatever side of zero round-off put them on: an event at `t_end` fires.
+    /// Fills `group` (conditions are judged by the group) and says whether there is any.
+    pub fn on_guard_at_end<S: HybridSystem + ?Sized>(
+        &mut self,
+        sys: &S,
+        info: &SystemInfo,
+        mode: usize,
+        p: &[f64],
+    ) -> bool {
+        self.group.clear();
+        let t = self.span.1;
+        for (pos, &ev) in info.modes[mode].events.iter().enumerate() {
+            let einfo = &info.events[ev];
+            let (g, speed) = (self.g1[pos], self.dg1[pos]);
+            // On zero or across already (the scan found it), or moving away: nothing to decide.
+            if einfo.implicit || !g.is_finite() || g * speed >= 0.0 {
+                continue;
+            }
+            let (noise, speed_noise) = self.noise1(sys, info, mode, pos, p);
+            let located = 4.0 * speed.abs() * (t.abs().next_up() - t.abs());
+            if g.abs() > noise + located {
+                continue;
+            }
+            // Rule 1 still holds: at the step's start the guard was strictly on the side it is
+            // leaving, beyond round-off (not on zero after an event that just fired on it).
+            let (noise0, _) = self.noise0(sys, info, mode, pos, p);
+            let g0 = self.g0[pos];
+            if !(g0 * g > 0.0 && g0.abs() > noise0) {
+                continue;
+            }
+            if let Some(sigma) = moves_across(einfo.direction, speed, speed_noise) {
+                self.group.push((ev, Crossing { t, sigma, touch: false, t_pre: t, on_guard: true }));
+            }
+        }
+        !self.group.is_empty()
     }
 
     /// Guard values and speeds at the end of the stepper's last attempt, which ends at `t`, with
@@ -824,7 +886,17 @@ impl Detector {
                 return self.before_not_finite(sys, dir, mode, ne, pos, a, b, dense, p);
             }
             if let Some(sigma) = crossing_sign(dir, a.g, b.g) {
-                return Finding::Bracket { a: a.t, ga: a.g, da: a.dg, b: b.t, gb: b.g, db: b.dg, sigma };
+                // A `crosses` guard that bounced (its reset turned it around on zero) leaves
+                // round-off of zero back towards the side it came from: that is the bounce, not a
+                // crossing. (A directional guard never counts the way back as a crossing.)
+                let returning = k == 0
+                    && self.bounced[pos] == Some(-sigma)
+                    && a.g.abs()
+                        <= self.noise0[pos].max(self.noise1[pos])
+                            + 4.0 * a.dg.abs() * (a.t.abs().next_up() - a.t.abs());
+                if !returning {
+                    return Finding::Bracket { a: a.t, ga: a.g, da: a.dg, b: b.t, gb: b.g, db: b.dg, sigma };
+                }
             }
             // Moving towards zero and stopping within round-off of it: a touch.
             if b.extremum && allows(dir, a.g.signum()) && a.g != 0.0 && a.dg * a.g < 0.0 {
@@ -876,7 +948,8 @@ impl Detector {
 
     /// Chooses the events that fire next from what the scan found: the earliest crossing whose
     /// condition holds on the interpolated state there, with every other crossing at the same time
-    /// to the resolution of `t` (four floating-point spacings). The earliest by its first estimate
+    /// to the resolution of `t` (four floating-point spacings), whether its condition holds there
+    /// or not (`fire_group` judges each when its turn comes, after the events before it). The earliest by its first estimate
     /// (the Hermite root of its bracket) is located first, the others only if they have crossed by
     /// then. Fills `group` (declaration order) and returns the firing time, the latest of the
     /// group's times so that every guard in it has crossed, or the earliest non-finite guard
@@ -892,6 +965,7 @@ impl Detector {
         let evs = &info.modes[mode].events;
         let ne = evs.len();
         self.located.clear();
+        self.located_off.clear();
         self.group.clear();
         self.next_crossing = None;
         // The common case, one candidate: nothing to order.
@@ -951,6 +1025,9 @@ impl Detector {
                 sys.condition(ev, crossing.t, &self.x, p)
             };
             if !holds {
+                // Not the instant's first event; it may still join a group whose earlier events
+                // make its condition true (judged when its turn comes in `fire_group`).
+                self.located_off.push((pos, crossing));
                 continue;
             }
             self.located.push((pos, crossing));
@@ -1002,6 +1079,9 @@ impl Detector {
         }
         let resolution = 4.0 * (t_min.next_up() - t_min);
         let mut t_fire = t_min;
+        // Crossings whose condition is false before the instant join its group too: an event
+        // before them in the group may make it true.
+        self.located.extend(self.located_off.drain(..).filter(|(_, c)| c.t >= t_min - resolution));
         self.located.sort_by_key(|&(pos, _)| pos);
         for &(pos, c) in &self.located {
             if c.t <= t_min + resolution {

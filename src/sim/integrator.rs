@@ -276,6 +276,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         self.det.group.clear();
         let (t, n) = (self.t, self.n);
         let evs = &self.info.modes[self.mode].events;
+        let mut enabled = false;
         for (pos, &ev) in evs.iter().enumerate() {
             let einfo = &self.info.events[ev];
             if einfo.implicit || self.det.g0[pos].is_nan() {
@@ -286,18 +287,37 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 continue;
             }
             match moves_across(einfo.direction, self.det.dg0[pos], speed_noise) {
-                Some(sigma) if self.sys.condition(ev, t, &self.z[..n], self.p) => {
+                Some(sigma) => {
+                    // As in every group, each condition is judged when its event's turn comes.
+                    enabled |= self.sys.condition(ev, t, &self.z[..n], self.p);
                     let c = Crossing { t, sigma, touch: false, t_pre: t, on_guard: true };
                     self.det.group.push((ev, c));
                 }
-                Some(_) => {}
                 None if self.det.dg0[pos].abs() <= speed_noise => {
                     self.det.pending[pos] = Pending::OnGuard;
                 }
                 None => {}
             }
         }
-        self.immediate = !self.det.group.is_empty();
+        if !enabled {
+            self.det.group.clear();
+        }
+        self.immediate = enabled;
+    }
+
+    /// At the end of the run's last step: events whose crossing is at `t_end` to round-off fire
+    /// there (`Detector::on_guard_at_end`), when the first of them to fire has its condition.
+    fn end_on_guards(&mut self) -> bool {
+        if !self.det.on_guard_at_end(self.sys, self.info, self.mode, self.p) {
+            return false;
+        }
+        let x = &self.stepper.end_state()[..self.n];
+        let t = self.opts.t_end;
+        let enabled = self.det.group.iter().any(|&(ev, _)| self.sys.condition(ev, t, x, self.p));
+        if !enabled {
+            self.det.group.clear();
+        }
+        enabled
     }
 
     /// The current time.
@@ -365,7 +385,11 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         if lands {
             h_try = t_land - t0;
         }
-        let h_resolvable = h_try > 8.0 * EPS * t0.abs() && h_try > 0.0;
+        // A step that lands on a breakpoint is taken however short: two events a few spacings of
+        // `t` apart (a state event just before a time event, time events at `0.1 + 0.2` and
+        // `0.3`) fire in time order (rule 8). Breakpoints are finitely many and each step passes
+        // one, so this cannot stall; only the error control's own shrinking is an underflow.
+        let h_resolvable = (h_try > 8.0 * EPS * t0.abs() || lands) && h_try > 0.0;
         if !h_resolvable {
             return StepOutcome::Done(StopReason::Fault {
                 error: SimError::StepTooSmall {
@@ -419,7 +443,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         }
         let h_next = self.stepper.grow(err).min(h_try * guard_factor);
         self.stats.steps += 1;
-        let selection = if for_events {
+        let mut selection = if for_events {
             self.det.scan(self.sys, self.info, self.mode, &*self.stepper, n, self.p, t1);
             if let Some(pos) = self.det.stuck() {
                 return StepOutcome::Done(self.stuck_on_guard(self.info.modes[self.mode].events[pos]));
@@ -428,6 +452,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         } else {
             Selection::Nothing
         };
+        if matches!(selection, Selection::Nothing) && lands && t1 >= self.opts.t_end && self.end_on_guards() {
+            if !(for_events || sample_due) {
+                self.stepper.build_interpolant(t0, self.z, &mut rhs);
+            }
+            selection = Selection::Fire(t1);
+        }
         match selection {
             Selection::Nothing if self.det.penetrated().is_some() => {
                 // Stop where the last bounce left the state (the step is not taken).
@@ -537,7 +567,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         if let Some(t_next) =
             self.det.next_crossing.take().filter(|&t| t > self.t && self.mode == mode_before)
         {
-            self.h = self.h.min(NEXT_CROSSING_REACH * (t_next - self.t));
+            // At least a resolvable step: a crossing a few spacings of `t` ahead is then inside it.
+            let floor = 16.0 * EPS * self.t.abs();
+            self.h = self.h.min((NEXT_CROSSING_REACH * (t_next - self.t)).max(floor));
         }
         StepOutcome::Fired { first, count: self.events.len() - first }
     }
@@ -558,6 +590,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         if evs.iter().all(|ev| fired_now.iter().any(|f| f.0 == *ev)) {
             return false;
         }
+        let mut enabled = false;
         let (x_before, g_before) = &mut *self.before;
         g_before.resize(ne, 0.0);
         self.sys.guards(self.mode, t, x_before, self.p, &mut g_before[..ne]);
@@ -586,11 +619,16 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                     }
                 },
             };
-            if self.sys.condition(ev, t, &self.z[..n], self.p) {
-                self.det.group.push((ev, Crossing { t, sigma, touch: false, t_pre: t, on_guard: true }));
-            }
+            // Every moved guard joins the round, its condition judged when its turn comes (an
+            // earlier event of the round may make it true); the round happens when the first
+            // event to fire, which sees the state as the last round left it, has its condition.
+            enabled |= self.sys.condition(ev, t, &self.z[..n], self.p);
+            self.det.group.push((ev, Crossing { t, sigma, touch: false, t_pre: t, on_guard: true }));
         }
-        !self.det.group.is_empty()
+        if !enabled {
+            self.det.group.clear();
+        }
+        enabled
     }
 
     /// The rules after an instant: a contact that fired and is left on its guard is stuck when
@@ -610,15 +648,14 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             let located = 4.0 * speed_before.abs() * (self.t.abs().next_up() - self.t.abs());
             let (noise, speed_noise) = self.det.noise0(self.sys, self.info, self.mode, pos, self.p);
             let on_guard = self.det.g0[pos].abs() <= noise + located;
-            if einfo.contact && on_guard {
-                let (speed, noise) = (self.det.dg0[pos], speed_noise);
-                if moves_across(einfo.direction, speed, noise).is_some() {
-                    return Some(self.stuck_on_guard(ev));
-                }
-                if speed.abs() <= noise {
-                    self.det.pending[pos] = Pending::Contact;
-                    continue;
-                }
+            // Only a speed the reset left within round-off can be stuck: the first step decides
+            // (`Pending::Contact`). A clear speed that keeps the crossing's direction is a
+            // pass-through (a gear shift that changes the rate driving its own guard), one that
+            // turns around is a bounce. Stopping on the first (round 2's rule) stopped every
+            // gear shift, thermostat and dose that changes its own clearance.
+            if einfo.contact && on_guard && self.det.dg0[pos].abs() <= speed_noise {
+                self.det.pending[pos] = Pending::Contact;
+                continue;
             }
             self.det.note_bounce(pos, sigma, speed_before);
         }

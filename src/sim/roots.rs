@@ -76,6 +76,10 @@ fn illinois_until<F: FnMut(f64) -> f64>(
         // has not at least halved, so the iteration count stays bounded.
         let secant = match first {
             Some(c) if it == 0 => c,
+            // From the end with the smaller value: near the other end the correction would be
+            // the whole bracket and cancel (a root 1e-200 from `a` in a bracket of 1e-3 would
+            // come out as `a` itself and be crept towards by pushes).
+            _ if fb != fa && fa.abs() < fb.abs() => a - fa * (b - a) / (fb - fa),
             _ if fb != fa => b - fb * (b - a) / (fb - fa),
             _ => f64::NAN,
         };

@@ -4,23 +4,10 @@
 
 use approx::assert_relative_eq;
 use hybc::sim::StopReason;
-use hybc::{Model, Run, SimOptions};
+use hybc::{Model, SimOptions};
 
 use crate::support::reference::BallForm;
-
-/// Compiles `text` with gradients for `grad` and runs it at its defaults with `opts` over the
-/// model's `simulate` line.
-fn run(text: &str, grad: &[&str], opts: impl FnOnce(&mut SimOptions)) -> Run {
-    let model = Model::parse(text).unwrap_or_else(|e| panic!("{e}"));
-    let compiled = model.compile(grad).expect("compiles");
-    let mut o = model.sim_options();
-    opts(&mut o);
-    compiled.simulate(&model.params(), &o).expect("valid options")
-}
-
-fn times(r: &Run) -> Vec<f64> {
-    r.events().iter().map(|e| e.time).collect()
-}
+use crate::support::runs::{run, times};
 
 #[test]
 fn a_guard_crossing_zero_many_times_in_one_step_is_seen_every_time() {

@@ -10,6 +10,7 @@ mod cli_run;
 mod closed_forms;
 mod convergence;
 mod derive_snapshots;
+mod event_edges;
 mod event_semantics;
 mod expr_growth;
 mod expr_props;

@@ -7,6 +7,7 @@ pub mod hand_systems;
 pub mod models;
 pub mod printed;
 pub mod reference;
+pub mod runs;
 
 use proptest::test_runner::{Config, FailurePersistence, FileFailurePersistence};
 

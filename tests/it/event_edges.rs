@@ -1,0 +1,357 @@
+//! The event engine's edges (round 3, docs/language.md "When events fire"): each rule tested from
+//! both sides, against exact counts and closed forms.
+
+use approx::assert_relative_eq;
+use hybc::sim::StopReason;
+
+use crate::support::runs::{run, times};
+
+/// A state driven at rate `a` that changes its own rate when it reaches 10.
+fn shift(reset: &str) -> String {
+    format!(
+        "model shift\nparam a0 = 2\nstate v = 0\nstate a = a0\nder(v) = a\nder(a) = 0\n\
+         event shift when v >= 10 {{\n    {reset}\n}}\n"
+    )
+}
+
+#[test]
+fn a_gear_shift_that_changes_its_own_guards_speed_passes_through() {
+    // v = 2 t reaches 10 at t = 5, then v = 10 + a+ (t - 5): v(10) = 10 + 5 a+. With a0 free,
+    // t_e = 10 / a0 and v(10) = 10 + a+ (10 - 10 / a0): dv/da0 = a+ 10 / a0^2 for a constant a+.
+    for (reset, a_after) in [("a := 1", 1.0), ("a := 4", 4.0), ("a := 2", 2.0), ("a := a", 2.0)] {
+        let r = run(&shift(reset), &["a0"], |o| o.t_end = 10.0);
+        assert_eq!(*r.stopped_by(), StopReason::TEnd, "{reset}: {:?}", r.stopped_by());
+        // Located to round-off: v = 2 t is integrated to within a few ulps.
+        assert_relative_eq!(times(&r)[..], [5.0][..], max_relative = 4.0 * f64::EPSILON);
+        assert_relative_eq!(r.state("v").unwrap(), 10.0 + 5.0 * a_after, max_relative = 1e-12);
+        assert_relative_eq!(r.devent_time(0, "a0").unwrap(), -10.0 / 4.0, max_relative = 1e-12);
+        // `a := a` keeps a = a0, so v(10) = a0 10 and dv/da0 = 10.
+        let want = if reset == "a := a" { 10.0 } else { a_after * 10.0 / 4.0 };
+        assert_relative_eq!(r.dstate("v", "a0").unwrap(), want, max_relative = 1e-10);
+    }
+}
+
+#[test]
+fn a_falling_guard_whose_reset_slows_it_passes_through_once() {
+    // x = 10 - 3 t crosses 4 at t = 2, then falls at 1: x(5) = 4 - 3 = 1; one event only.
+    let text = "model down\nstate x = 10\nstate r = 3\nder(x) = -r\nder(r) = 0\n\
+                event slow when x <= 4 {\n    r := 1\n}\n";
+    let r = run(text, &[], |o| o.t_end = 5.0);
+    assert_eq!(*r.stopped_by(), StopReason::TEnd);
+    assert_eq!(times(&r), [2.0]);
+    assert_relative_eq!(r.state("x").unwrap(), 1.0, max_relative = 1e-12);
+}
+
+#[test]
+fn a_crossing_guard_reset_to_reverse_is_a_bounce_not_stuck() {
+    // x bounces between the walls at 0 and 1 (`crosses`: both directions), with the reset
+    // reversing the speed: the reset leaves the state on the guard, moving back.
+    let text = "model walls\nstate x = 0.5\nstate v = 1\nder(x) = v\nder(v) = 0\n\
+                event wall when (x - 0.5) * (x - 0.5) crosses 0.25 {\n    v := -v\n}\n";
+    let r = run(text, &[], |o| o.t_end = 3.2);
+    assert_eq!(*r.stopped_by(), StopReason::TEnd, "{:?}", r.stopped_by());
+    for (k, t) in times(&r).iter().enumerate() {
+        assert_relative_eq!(*t, 0.5 + k as f64, max_relative = 1e-12);
+    }
+    assert_eq!(r.events().len(), 3);
+    // After three bounces the speed is -1: x(3.2) = 1 - 0.7.
+    assert_relative_eq!(r.state("x").unwrap(), 0.3, max_relative = 1e-12);
+}
+
+#[test]
+fn a_reset_that_stops_the_motion_at_the_top_is_not_stuck_when_the_flow_leaves() {
+    // The other side of the stuck rule: v := 0 at y = 1 leaves the speed round-off, but gravity
+    // pulls the state back to the pre-crossing side. y = 2 t - t^2 / 2 (g = 1, v0 = 2) reaches 1
+    // at t = 2 - sqrt 2; then y = 1 - (t - t_e)^2 / 2.
+    let text = "model top\nstate y = 0\nstate v = 2\nder(y) = v\nder(v) = -1\n\
+                event top when y >= 1 {\n    v := 0\n}\n";
+    let r = run(text, &[], |o| o.t_end = 1.5);
+    assert_eq!(*r.stopped_by(), StopReason::TEnd, "{:?}", r.stopped_by());
+    let te = 2.0 - 2f64.sqrt();
+    assert_eq!(r.events().len(), 1);
+    assert_relative_eq!(r.events()[0].time, te, max_relative = 1e-12);
+    assert_relative_eq!(r.state("y").unwrap(), 1.0 - (1.5 - te).powi(2) / 2.0, max_relative = 1e-10);
+}
+
+#[test]
+fn robertsons_kinetics_with_a_rate_constant_reset_at_a_threshold_runs_on() {
+    // k1 is a state reset when y1 falls below 0.995: y1's speed changes but keeps its sign.
+    // Checked against the same kinetics with the switch written as two runs (the second started
+    // from the first's state at the event).
+    let text = "model robertson\nparam k1 = 0.04\nstate y1 = 1\nstate y2 = 0\nstate y3 = 0\n\
+                state k = k1\nder(y1) = -k * y1 + 1e4 * y2 * y3\n\
+                der(y2) = k * y1 - 1e4 * y2 * y3 - 3e7 * y2 * y2\nder(y3) = 3e7 * y2 * y2\nder(k) = 0\n\
+                event faster when y1 <= 0.995 {\n    k := 2 * k\n}\n";
+    let r = run(text, &["k1"], |o| {
+        o.t_end = 0.3;
+        o.rtol = 1e-9;
+        o.atol = 1e-12;
+    });
+    assert_eq!(*r.stopped_by(), StopReason::TEnd, "{:?}", r.stopped_by());
+    assert_eq!(r.events().len(), 1);
+    assert_relative_eq!(r.state("k").unwrap(), 0.08, max_relative = 1e-15);
+    // Mass is conserved through the event.
+    let total = r.state("y1").unwrap() + r.state("y2").unwrap() + r.state("y3").unwrap();
+    assert_relative_eq!(total, 1.0, max_relative = 1e-9);
+    // y1 keeps falling after the event.
+    assert!(r.state("y1").unwrap() < 0.995);
+}
+
+/// The simplest walker (Garcia, Chatterjee, Ruina and Coleman 1998; point feet, massless swing
+/// leg, slope `gamma`), started just after a heel strike. The heel strike swaps the legs: its
+/// reset puts the state back on its own guard `phi - 2 theta = 0`, with the flow leaving it.
+pub const WALKER: &str = "model walker
+param gamma = 0.009
+param theta0 = 0.200310900544287
+param dtheta0 = -0.199832473004977
+param dphi0 = -0.015822999948318
+state theta = theta0
+state dtheta = dtheta0
+state phi = 2 * theta0
+state dphi = dphi0
+der(theta) = dtheta
+der(dtheta) = sin(theta - gamma)
+der(phi) = dphi
+der(dphi) = sin(phi) * (dtheta * dtheta - cos(theta - gamma)) + sin(theta - gamma)
+event heelstrike when phi - 2 * theta >= 0 if theta < 0 {
+    theta := -theta
+    dtheta := cos(2 * theta) * dtheta
+    phi := -2 * theta
+    dphi := cos(2 * theta) * (1 - cos(2 * theta)) * dtheta
+    stop
+}
+";
+
+#[test]
+fn a_heel_strike_puts_the_walker_back_on_its_guard_and_it_walks_on() {
+    // Without the stop, the walker takes steps one after another: each heel strike leaves the
+    // state on the guard moving away from it (a bounce of the guard, not a stuck contact).
+    let text = WALKER.replace("    stop\n", "");
+    let r = run(&text, &[], |o| {
+        o.t_end = 12.0;
+        o.rtol = 1e-10;
+        o.atol = 1e-12;
+    });
+    assert_eq!(*r.stopped_by(), StopReason::TEnd, "{:?}", r.stopped_by());
+    assert_eq!(r.events().len(), 3, "{:?}", times(&r));
+    // At the published fixed point every step takes the same time.
+    let t = times(&r);
+    assert_relative_eq!(t[1] - t[0], t[0], max_relative = 1e-7);
+    assert_relative_eq!(t[2] - t[1], t[0], max_relative = 1e-7);
+}
+
+#[test]
+fn the_walkers_published_fixed_point_returns_to_itself_after_one_step() {
+    let r = run(WALKER, &[], |o| {
+        o.t_end = 10.0;
+        o.rtol = 1e-12;
+        o.atol = 1e-14;
+    });
+    assert_eq!(r.events().len(), 1);
+    for (state, start) in
+        [("theta", 0.200310900544287), ("dtheta", -0.199832473004977), ("dphi", -0.015822999948318)]
+    {
+        assert_relative_eq!(r.state(state).unwrap(), start, max_relative = 1e-9);
+    }
+}
+
+/// Two events on one time guard; `b`'s condition reads the flag `a` sets.
+fn flags(first: &str, second: &str) -> String {
+    format!(
+        "model flags\nparam t1 = 1\nstate f = 0\nstate n = 0\nder(f) = 0\nder(n) = 0\n{first}\n{second}\n"
+    )
+}
+const SETS_FLAG: &str = "event a when t >= t1 {\n    f := 1\n}";
+const READS_FLAG: &str = "event b when t >= t1 if f > 0.5 {\n    n := 1\n}";
+
+#[test]
+fn a_condition_in_a_group_sees_the_state_the_events_before_it_left() {
+    // a then b: b's condition is judged after a fired, so b fires too.
+    let r = run(&flags(SETS_FLAG, READS_FLAG), &[], |o| o.t_end = 2.0);
+    assert_eq!(crate::support::runs::names(&r), ["a", "b"]);
+    assert_eq!((r.state("f"), r.state("n")), (Some(1.0), Some(1.0)));
+    // b then a: b is judged first, before the flag is set: only a fires.
+    let r = run(&flags(READS_FLAG, SETS_FLAG), &[], |o| o.t_end = 2.0);
+    assert_eq!(crate::support::runs::names(&r), ["a"]);
+    assert_eq!((r.state("f"), r.state("n")), (Some(1.0), Some(0.0)));
+}
+
+#[test]
+fn a_condition_in_a_group_at_the_start_sees_the_earlier_events() {
+    // The same instant at the start of the run (t1 = 0: both guards start on zero, moving across).
+    let r = run(&flags(SETS_FLAG, READS_FLAG).replace("t1 = 1", "t1 = 0"), &[], |o| o.t_end = 1.0);
+    assert_eq!(crate::support::runs::names(&r), ["a", "b"]);
+    assert_eq!(r.state("n"), Some(1.0));
+}
+
+#[test]
+fn a_condition_of_a_state_event_in_a_group_sees_the_earlier_events() {
+    // x = t crosses 1 for both `a` (sets the flag) and `b` (a state event reading it).
+    let text = "model flags\nstate x = 0\nstate f = 0\nstate n = 0\nder(x) = 1\nder(f) = 0\nder(n) = 0\n\
+                event a when x >= 1 {\n    f := 1\n}\nevent b when x >= 1 if f > 0.5 {\n    n := 1\n}\n\
+                event c when x >= 0.5 if f > 0.5 {\n    n := 7\n}\n";
+    let r = run(text, &[], |o| o.t_end = 2.0);
+    // c crosses first, with its condition false: it does not fire, and never again.
+    assert_eq!(crate::support::runs::names(&r), ["a", "b"]);
+    assert_eq!(r.state("n"), Some(1.0));
+}
+
+#[test]
+fn a_condition_in_a_cascade_round_sees_the_earlier_events_of_the_round() {
+    // At t = 1, `jump` moves x from 0 to 5: in the next round `mark` (x >= 3, sets f) and `count`
+    // (x >= 3 if f > 0.5) both cross, in that order: count sees mark's flag.
+    let text = "model cascade\nstate x = 0\nstate f = 0\nstate n = 0\nder(x) = 0\nder(f) = 0\nder(n) = 0\n\
+                event jump when t >= 1 {\n    x := 5\n}\nevent mark when x >= 3 {\n    f := 1\n}\n\
+                event count when x >= 3 if f > 0.5 {\n    n := n + 1\n}\n";
+    let r = run(text, &[], |o| o.t_end = 2.0);
+    assert_eq!(crate::support::runs::names(&r), ["jump", "mark", "count"]);
+    assert!(r.events().iter().all(|e| e.time == 1.0));
+    assert_eq!(r.state("n"), Some(1.0));
+    // With count declared first, it is judged before mark sets the flag: it does not fire.
+    let text = text.replace(
+        "event mark when x >= 3 {\n    f := 1\n}\nevent count when x >= 3 if f > 0.5 {\n    n := n + 1\n}\n",
+        "event count when x >= 3 if f > 0.5 {\n    n := n + 1\n}\nevent mark when x >= 3 {\n    f := 1\n}\n",
+    );
+    let r = run(&text, &[], |o| o.t_end = 2.0);
+    assert_eq!(crate::support::runs::names(&r), ["jump", "mark"]);
+    assert_eq!(r.state("n"), Some(0.0));
+}
+
+#[test]
+fn check_warns_where_a_condition_reads_what_an_earlier_event_on_its_guard_resets() {
+    let bounce = "event bounce when y <= 0 if e * abs(v) >= v_rest {\n    v := -e * v\n}\n";
+    let settle = "event settle when y <= 0 if e * abs(v) < v_rest {\n    v := 0\n    stop\n}\n";
+    let head =
+        "model m\nparam v_rest = 0.1\nparam e = 0.8\nstate y = 1\nstate v = 0\nder(y) = v\nder(v) = -9.81\n";
+    let warned = hybc::Model::parse(&format!("{head}{bounce}{settle}")).expect("parses").warnings();
+    assert!(warned.contains("the condition of event `settle` reads `v`"), "{warned}");
+    // Settle first: bounce's condition reads `v`, which settle resets, but settle stops the run,
+    // so bounce is never judged after it: no warning.
+    let other = hybc::Model::parse(&format!("{head}{settle}{bounce}")).expect("parses").warnings();
+    assert!(other.is_empty(), "{other}");
+    // Without the stop, bounce would be judged on settle's v = 0: warned.
+    let on = hybc::Model::parse(&format!("{head}{}{bounce}", settle.replace("    stop\n", "")))
+        .expect("parses")
+        .warnings();
+    assert!(on.contains("the condition of event `bounce` reads `v`"), "{on}");
+    // Different guards: no warning.
+    let apart = hybc::Model::parse(&format!("{head}{bounce}{}", settle.replace("y <= 0", "y <= 0.5")))
+        .expect("parses")
+        .warnings();
+    assert!(apart.is_empty(), "{apart}");
+}
+
+#[test]
+fn a_state_event_at_the_instant_of_a_time_event_fires_with_it_whatever_is_differentiated() {
+    // x = r t reaches r tau exactly when t reaches tau: both fire, at tau, whatever the grad set;
+    // where round-off puts the state event a few spacings of t before the time event, the two
+    // fire in time order (rule 8), never a fault.
+    let text = "model both\nparam r = 1\nparam tau = 0.25\nstate x = 0\nstate n = 0\nstate m = 0\n\
+                der(x) = r\nder(n) = 0\nder(m) = 0\nevent tick when t >= tau {\n    n := n + 1\n}\n\
+                event hit when x >= r * tau {\n    m := m + 1\n}\n";
+    for r in [1.0, 0.3, 3.0, 7.1, 1e-3, 1e3] {
+        for tau in [0.25, 0.1, 0.3, 0.7, 1e-9, 0.999] {
+            for grad in [&[][..], &["r"], &["tau"], &["r", "tau"]] {
+                let model = hybc::Model::parse(text).unwrap();
+                let compiled = model.compile(grad).unwrap();
+                let mut o = model.sim_options();
+                o.t_end = 1.0;
+                let p = model.params().with("r", r).unwrap().with("tau", tau).unwrap();
+                let run = compiled.simulate(&p, &o).unwrap();
+                let at = format!("r = {r}, tau = {tau}, grad {grad:?}");
+                assert_eq!(*run.stopped_by(), StopReason::TEnd, "{at}: {:?}", run.stopped_by());
+                assert_eq!((run.state("n"), run.state("m")), (Some(1.0), Some(1.0)), "{at}");
+                for e in run.events() {
+                    assert!((e.time - tau).abs() <= 16.0 * f64::EPSILON * tau, "{at}: {}", e.time);
+                }
+                if grad.contains(&"tau") {
+                    for k in 0..2 {
+                        assert_relative_eq!(run.devent_time(k, "tau").unwrap(), 1.0, max_relative = 1e-12);
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn events_a_few_floating_point_spacings_apart_fire_in_time_order_never_a_fault() {
+    // Time events at 0.1 + 0.2 (one spacing above 0.3) and 0.3.
+    let text = "model ulps\nparam t1 = 0.1\nparam t2 = 0.2\nparam t3 = 0.3\nstate n = 0\nder(n) = 0\n\
+                event sum when t >= t1 + t2 {\n    n := n + 1\n}\nevent plain when t >= t3 {\n    n := n + 10\n}\n";
+    let r = run(text, &["t1"], |o| o.t_end = 1.0);
+    assert_eq!(*r.stopped_by(), StopReason::TEnd, "{:?}", r.stopped_by());
+    assert_eq!(r.state("n"), Some(11.0));
+    assert_eq!(crate::support::runs::names(&r), ["plain", "sum"]);
+    // Two state events k spacings of x apart, k = 1..8, on x = t near 1: one group or two
+    // events in time order, always both.
+    for k in 1..=8 {
+        let mut b = 1.0f64;
+        for _ in 0..k {
+            b = b.next_up();
+        }
+        let text = format!(
+            "model ulps\nparam a = 1\nparam b = {b:e}\nstate x = 0\nstate n = 0\nder(x) = 1\nder(n) = 0\n\
+             event first when x >= a {{\n    n := n + 1\n}}\nevent second when x >= b {{\n    n := n + 10\n}}\n"
+        );
+        let r = run(&text, &["a", "b"], |o| o.t_end = 2.0);
+        assert_eq!(*r.stopped_by(), StopReason::TEnd, "k = {k}: {:?}", r.stopped_by());
+        assert_eq!(r.state("n"), Some(11.0), "k = {k}");
+        let t = times(&r);
+        assert!(t[0] <= t[1] && (t[1] - 1.0).abs() < 1e-14, "k = {k}: {t:?}");
+    }
+}
+
+#[test]
+fn an_event_whose_crossing_is_at_t_end_fires_there_whatever_the_round_off() {
+    // x = r t reaches r T at t_end = T: one event, at T to round-off, for every r and T (before,
+    // round-off decided: fired, not fired, or a step underflow).
+    let text = "model tend\nparam r = 1\nparam T = 1\nstate x = 0\nder(x) = r\nevent hit when x >= r * T\n";
+    for r in [1.0, 0.3, 3.0, 7.1, 1e-3, 1e3, 0.1] {
+        for t_end in [1.0, 0.3, 0.7, 2.9, 10.1, 1e-5] {
+            for grad in [&[][..], &["r", "T"]] {
+                let model = hybc::Model::parse(text).unwrap();
+                let mut o = model.sim_options();
+                o.t_end = t_end;
+                let p = model.params().with("r", r).unwrap().with("T", t_end).unwrap();
+                let run = model.compile(grad).unwrap().simulate(&p, &o).unwrap();
+                let at = format!("r = {r}, T = {t_end}, grad {grad:?}");
+                assert_eq!(*run.stopped_by(), StopReason::TEnd, "{at}");
+                assert_eq!(run.events().len(), 1, "{at}: {:?}", times(&run));
+                // To the guard's round-off (rule 11: 16 eps |x|) over its speed r: 16 eps T.
+                let te = run.events()[0].time;
+                assert!((te - t_end).abs() <= 16.0 * f64::EPSILON * t_end, "{at}: {te}");
+            }
+        }
+    }
+    // The other side: a crossing clearly after t_end does not fire, one clearly before does.
+    for (factor, count) in [(1.0 + 1e-9, 0), (1.0 - 1e-9, 1)] {
+        let model = hybc::Model::parse(text).unwrap();
+        let mut o = model.sim_options();
+        o.t_end = 1.0;
+        let run = model
+            .compile::<&str>(&[])
+            .unwrap()
+            .simulate(&model.params().with("T", factor).unwrap(), &o)
+            .unwrap();
+        assert_eq!(run.events().len(), count, "T = {factor}");
+    }
+}
+
+#[test]
+fn a_state_a_hair_below_its_guard_crosses_it() {
+    // x0 = -1e-200 (and subnormal starts): x = x0 + t crosses 0 at -x0; the time is located to
+    // the round-off of the step's dense output, and dt/dx0 = -1.
+    let text = "model tiny\nparam x0 = -1e-200\nstate x = x0\nder(x) = 1\nevent up when x >= 0\n";
+    for x0 in [-1e-200, -1e-300, -1e-310, -5e-324, -1e-100, -1e-20, -1e-15] {
+        let model = hybc::Model::parse(text).unwrap();
+        let mut o = model.sim_options();
+        o.t_end = 1.0;
+        let run =
+            model.compile(&["x0"]).unwrap().simulate(&model.params().with("x0", x0).unwrap(), &o).unwrap();
+        assert_eq!(run.events().len(), 1, "x0 = {x0:e}");
+        assert!((run.events()[0].time + x0).abs() <= 1e-15, "x0 = {x0:e}: {}", run.events()[0].time);
+        assert_eq!(run.devent_time(0, "x0"), Some(-1.0), "x0 = {x0:e}");
+        assert_relative_eq!(run.state("x").unwrap(), 1.0 + x0, max_relative = 1e-14);
+    }
+}
