@@ -640,9 +640,26 @@ impl Detector {
                 let (c2, c3) = (3.0 * (g1 - g0) - 2.0 * m0 - m1, 2.0 * (g0 - g1) + m0 + m1);
                 ((c3 * s + c2) * s + m0) * s + g0
             };
-            let miss = INTERIOR.iter().zip(inner).map(|(&s, g)| (g - cubic(s)).abs()).fold(0.0, f64::max);
-            let variation =
-                inner.iter().chain([&g1]).map(|g| (g - g0).abs()).fold(m0.abs().max(m1.abs()), f64::max);
+            let slope = |s: f64| {
+                let (c2, c3) = (3.0 * (g1 - g0) - 2.0 * m0 - m1, 2.0 * (g0 - g1) + m0 + m1);
+                (3.0 * c3 * s + 2.0 * c2) * s + m0
+            };
+            let speeds = [h * self.interior[0].1[pos], h * self.interior[1].1[pos]];
+            // Values and speeds at the interior points: a guard oscillating within the step can
+            // match the cubic's values at two points by chance (a chirp lost 10 of 31 crossings
+            // that way), hardly its values and speeds at both. A speed miss of `d` (per unit of
+            // `s`) is a value miss of about `d / 4` over the step.
+            let miss = INTERIOR
+                .iter()
+                .zip(inner.iter().zip(speeds))
+                .map(|(&s, (g, m))| (g - cubic(s)).abs().max(0.25 * (m - slope(s)).abs()))
+                .fold(0.0, f64::max);
+            let variation = inner
+                .iter()
+                .chain([&g1])
+                .map(|g| (g - g0).abs())
+                .chain(speeds.iter().map(|m| m.abs()))
+                .fold(m0.abs().max(m1.abs()), f64::max);
             let allowed = RESOLUTION * variation + self.noise0[pos].max(self.noise1[pos]);
             let miss = ERROR_SPREAD * miss;
             if miss > allowed {

@@ -16,17 +16,36 @@ const ACCUMULATION_RESOLUTION: f64 = 1e-9;
 /// [`ACCUMULATION_RESOLUTION`] (relative). Events at one instant (a cascade) are not Zeno, nor
 /// are many events over a long time (that is `max_events`).
 pub(crate) fn accumulating(events: &[EventRecord]) -> Option<StopReason> {
-    let k = events.len();
-    if k < SHRINKING_INTERVALS + 2 {
+    let mut instants = [0.0; SHRINKING_INTERVALS + 2];
+    if last_instants(events, &mut instants) < instants.len() {
         return None;
     }
-    let shrinking = events[k - SHRINKING_INTERVALS - 2..].windows(3).all(|w| {
-        let (d1, d2) = (w[1].time - w[0].time, w[2].time - w[1].time);
+    let shrinking = instants.windows(3).all(|w| {
+        let (d1, d2) = (w[1] - w[0], w[2] - w[1]);
         d2 > 0.0 && d2 < d1
     });
     let t_star = accumulation(events)?;
-    let last = events[k - 1].time;
+    let last = instants[instants.len() - 1];
     (shrinking && t_star - last <= ACCUMULATION_RESOLUTION * t_star.abs().max(1.0)).then(|| stop(events))
+}
+
+/// Fills `out` with the times of the last `out.len()` distinct instants, in time order (several
+/// events at one instant are one instant: a bounce that also counts is still one bounce).
+/// Returns how many there were (fewer than `out.len()` leaves the front of `out` unset).
+fn last_instants(events: &[EventRecord], out: &mut [f64]) -> usize {
+    let mut found = 0;
+    let mut previous = f64::NAN;
+    for e in events.iter().rev() {
+        if found == out.len() {
+            break;
+        }
+        if e.time != previous {
+            found += 1;
+            out[out.len() - found] = e.time;
+            previous = e.time;
+        }
+    }
+    found
 }
 
 /// The Zeno stop at the last event, with the accumulation point estimated from the last
@@ -43,18 +62,14 @@ pub(crate) fn stop(events: &[EventRecord]) -> StopReason {
     }
 }
 
-/// Geometric extrapolation of the last two inter-event intervals: with ratio `r = d2 / d1 < 1`
+/// Geometric extrapolation of the last two intervals between distinct instants: with ratio `r = d2 / d1 < 1`
 /// the remaining intervals sum to `d2 r / (1 - r)`.
 pub(crate) fn accumulation(events: &[EventRecord]) -> Option<f64> {
-    let k = events.len();
-    if k < 3 {
-        return None;
+    let mut t = [0.0; 3];
+    if last_instants(events, &mut t) < 3 {
+        return events.last().map(|e| e.time).filter(|_| events.len() >= 3);
     }
-    let (ta, tb, tc) = (events[k - 3].time, events[k - 2].time, events[k - 1].time);
-    let (d1, d2) = (tb - ta, tc - tb);
-    if d1 <= 0.0 || d2 <= 0.0 {
-        return Some(tc);
-    }
+    let (d1, d2) = (t[1] - t[0], t[2] - t[1]);
     let r = d2 / d1;
-    (r < 1.0).then(|| tc + d2 * r / (1.0 - r))
+    (r < 1.0).then(|| t[2] + d2 * r / (1.0 - r))
 }

@@ -355,3 +355,60 @@ fn a_state_a_hair_below_its_guard_crosses_it() {
         assert_relative_eq!(run.state("x").unwrap(), 1.0 + x0, max_relative = 1e-14);
     }
 }
+
+#[test]
+fn a_chirp_late_in_time_is_not_zeno_and_a_ball_late_in_time_is() {
+    // sin(w (t - t0)^2) crosses 0 at t = t0 + sqrt(k pi / w): intervals shrink like 1/sqrt(k),
+    // never accumulating. Started at t0 = 1e6 the same chirp must give the same count as at 0.
+    let text = "model chirp\nparam w = 1e6\nparam t0 = 0\nstate x = 0\nder(x) = 1\n\
+                event tick when sin(w * (t - t0) * (t - t0)) crosses 0\n";
+    let model = hybc::Model::parse(text).unwrap();
+    let compiled = model.compile::<&str>(&[]).unwrap();
+    // k = 1 ..= floor(w 0.01^2 / pi) = 31, and k = 0 at the start (on the guard, the first step
+    // carries it across; a grazing start, with no time gradient).
+    let want = 1 + (1e6 * 0.01f64 * 0.01 / std::f64::consts::PI).floor() as usize;
+    for t0 in [0.0, 1e6] {
+        let mut o = model.sim_options();
+        o.t_start = t0;
+        o.t_end = t0 + 0.01;
+        o.max_events = 100_000;
+        let run = compiled.simulate(&model.params().with("t0", t0).unwrap(), &o).unwrap();
+        assert_eq!(*run.stopped_by(), StopReason::TEnd, "t0 = {t0}: {:?}", run.stopped_by());
+        assert_eq!(run.events().len(), want, "t0 = {t0}");
+    }
+    // The other side: the ball started at 1e6 accumulates like the ball started at 0.
+    let ball = "model ball\nparam e = 0.8\nstate y = 1\nstate v = 0\nder(y) = v\nder(v) = -9.81\n\
+                event touchdown when y <= 0 {\n    v := -e * v\n}\n";
+    let model = hybc::Model::parse(ball).unwrap();
+    let compiled = model.compile::<&str>(&[]).unwrap();
+    for t0 in [0.0, 1e6] {
+        let mut o = model.sim_options();
+        o.t_start = t0;
+        o.t_end = t0 + 10.0;
+        let run = compiled.simulate(&model.params(), &o).unwrap();
+        let StopReason::Zeno { accumulation: Some(t_star), .. } = *run.stopped_by() else {
+            panic!("t0 = {t0}: {:?}", run.stopped_by())
+        };
+        // The accumulation point of the ball: t1 (1 + 2 e / (1 - e)) = t1 (1 + e) / (1 - e).
+        let t1 = (2.0f64 / 9.81).sqrt();
+        assert_relative_eq!(t_star - t0, t1 * 1.8 / 0.2, max_relative = 1e-6);
+    }
+}
+
+#[test]
+fn a_zeno_ball_with_two_events_per_bounce_stops_where_the_ball_with_one_does() {
+    let one = "model dbl\nparam e = 0.8\nstate y = 1\nstate v = 0\nstate n = 0\nder(y) = v\nder(v) = -9.81\n\
+               der(n) = 0\nevent touchdown when y <= 0 {\n    v := -e * v\n}\n";
+    let two = format!("{one}event count when y <= 0 {{\n    n := n + 1\n}}\n");
+    let r1 = run(one, &[], |o| o.t_end = 10.0);
+    let r2 = run(&two, &[], |o| o.t_end = 10.0);
+    let (StopReason::Zeno { time: t1, .. }, StopReason::Zeno { time: t2, .. }) =
+        (r1.stopped_by(), r2.stopped_by())
+    else {
+        panic!("{:?} / {:?}", r1.stopped_by(), r2.stopped_by())
+    };
+    // The same bounces to round-off (the extra state takes part in the error norm).
+    assert_relative_eq!(t1, t2, max_relative = 1e-12);
+    assert_eq!(2 * r1.events().len(), r2.events().len());
+    assert_eq!(r2.state("n"), Some(r1.events().len() as f64));
+}
