@@ -1134,6 +1134,42 @@ impl Detector {
         }
     }
 
+    /// The earliest flow switch (implicit event) the scan found crossing in the step, located on
+    /// `dense` (its position and crossing; the located crossings are kept for `select`).
+    pub fn earliest_switch<S: HybridSystem + ?Sized, I: Interpolant>(
+        &mut self,
+        sys: &S,
+        info: &SystemInfo,
+        mode: usize,
+        dense: &I,
+        p: &[f64],
+    ) -> Option<(usize, Crossing)> {
+        let evs = &info.modes[mode].events;
+        let ne = evs.len();
+        let mut earliest: Option<(usize, Crossing)> = None;
+        for c in 0..self.candidates.len() {
+            let pos = self.candidates[c];
+            if !info.events[evs[pos]].implicit
+                || !matches!(self.found[pos], Finding::Bracket { .. } | Finding::Located(_))
+            {
+                continue;
+            }
+            let crossing = self.locate(sys, mode, ne, pos, dense, p);
+            self.found[pos] = Finding::Located(crossing);
+            if earliest.is_none_or(|(_, c)| crossing.t_pre < c.t_pre) {
+                earliest = Some((pos, crossing));
+            }
+        }
+        earliest
+    }
+
+    /// Drops what the scan found (the step is retried).
+    pub fn forget_findings(&mut self) {
+        for &pos in &self.candidates {
+            self.found[pos] = Finding::Nothing;
+        }
+    }
+
     /// The position of a contact found stuck by the scan, if any.
     pub fn stuck(&self) -> Option<usize> {
         self.candidates.iter().copied().find(|&pos| self.found[pos] == Finding::Stuck)

@@ -38,6 +38,11 @@ const AFTER_RESET_GROWTH: f64 = 1000.0;
 /// Trial points, at 1, 2, 4, ... floating-point spacings past a flow switch's located time,
 /// for one where its guard is strictly past zero (there the flow is the new branch's).
 const SWITCH_SIDE_TRIES: usize = 40;
+/// Retries of one step landing before a flow switch it crossed (each lands earlier than the last).
+const SWITCH_RETRIES: u8 = 4;
+/// A switch this many spacings of `t` past a step that landed before it (by the guard's value
+/// over its speed) is crossed at the step's end.
+const SWITCH_NEAR: f64 = 64.0;
 /// Rejections in a row with a non-finite trial state before the run gives up on shrinking.
 const MAX_NONFINITE_REJECTS: usize = 30;
 /// A step this short relative to `max(|t|, 1)` is taken even when a nonlinear guard is not
@@ -51,6 +56,18 @@ const NEXT_CROSSING_REACH: f64 = 1.5;
 const GUARD_GROWTH: f64 = 4.0;
 /// Rounds of cascading events at one instant before the run stops as stuck.
 pub(crate) const MAX_CASCADE_ROUNDS: usize = 100;
+
+/// A step retried to land just before a flow switch it crossed (see `retry_before_switch`).
+#[derive(Clone, Copy, Debug)]
+struct SwitchLanding {
+    /// The last time before the switch, on the crossing attempt's interpolant: the step lands here.
+    t_pre: f64,
+    /// Retries of this step so far.
+    retries: u8,
+    /// The switch's position in the mode's events and its pre-crossing sign.
+    pos: usize,
+    sigma: f64,
+}
 
 /// What one [`Integrator::step`] did.
 #[derive(Clone, Debug, PartialEq)]
@@ -152,6 +169,12 @@ pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = R
     /// Total derivative of the final state and `dt/dp` of a stop event.
     stop_total: Option<(Vec<f64>, Vec<f64>)>,
     done: Option<StopReason>,
+    /// A step that crossed a flow switch is retried landing just before it (the last time on
+    /// the old branch): the time to land on, and how often this step has been retried so.
+    land_before_switch: Option<SwitchLanding>,
+    /// The first time past the flow switches crossed at the current instant where their new
+    /// branches hold (see `cross_switch`).
+    switch_post: Option<f64>,
 }
 
 impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R, St> {
@@ -219,6 +242,8 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             stats: SimStats::default(),
             stop_total: None,
             done: None,
+            land_before_switch: None,
+            switch_post: None,
         };
         if it.z[..n].iter().any(|v| !v.is_finite()) {
             it.done = Some(it.fault_nonfinite());
@@ -305,6 +330,90 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         self.immediate = enabled;
     }
 
+    /// Branch locking by cutting: a step whose stages straddle a flow switch evaluated the flow
+    /// past it on the other branch, and its whole polynomial (the state at every time of the
+    /// step, events before the switch included) carries that error: a pulse narrower than a step
+    /// was lost whole. Such a step is retried landing exactly on the last time before the switch
+    /// (the first located on the interpolant), where every stage is on the branch of the step's
+    /// start; the next step then crosses the switch within its first floating-point spacings.
+    /// Returns whether to retry. A switch within a resolvable distance of the start is crossed as
+    /// before; the landing time must fall at each retry (at most [`SWITCH_RETRIES`]), so this
+    /// ends.
+    fn retry_before_switch(&mut self, t0: f64) -> bool {
+        let Some((pos, crossing)) =
+            self.det.earliest_switch(self.sys, self.info, self.mode, self.stepper.interpolant(), self.p)
+        else {
+            return false;
+        };
+        let t_pre = crossing.t_pre;
+        let resolvable = t_pre - t0 > 8.0 * EPS * t0.abs().max(f64::MIN_POSITIVE);
+        let retries = match self.land_before_switch {
+            Some(l) if l.t_pre > t0 => {
+                if t_pre >= l.t_pre || l.retries >= SWITCH_RETRIES {
+                    return false;
+                }
+                l.retries + 1
+            }
+            _ => 1,
+        };
+        if !resolvable {
+            return false;
+        }
+        self.det.forget_findings();
+        self.land_before_switch = Some(SwitchLanding { t_pre, retries, pos, sigma: crossing.sigma });
+        self.h = t_pre - t0;
+        true
+    }
+
+    /// After an attempt rejected by its error test in a mode with flow switches: whether it
+    /// crossed one, found as for an accepted step (the attempt's interpolant is only as good as
+    /// the attempt, but good enough to aim the retry at the switch), then as
+    /// `retry_before_switch`.
+    fn retry_after_rejected_switch<F: FnMut(f64, &[f64], &mut [f64])>(
+        &mut self,
+        t0: f64,
+        t1: f64,
+        rhs: &mut F,
+    ) -> bool {
+        let evs = &self.info.modes[self.mode].events;
+        if !evs.iter().any(|&ev| self.info.events[ev].implicit) {
+            return false;
+        }
+        let n = self.n;
+        self.det.eval_end(self.sys, self.info, self.mode, t1, &*self.stepper, n, self.p);
+        if !self.det.mark_candidates(self.info, self.mode) {
+            return false;
+        }
+        self.stepper.build_interpolant(t0, self.z, rhs);
+        self.det.check_resolution(self.sys, self.info, self.mode, self.stepper.interpolant(), self.p);
+        self.det.scan(self.sys, self.info, self.mode, &*self.stepper, n, self.p, t1);
+        let retry = self.retry_before_switch(t0);
+        self.det.forget_findings();
+        retry
+    }
+
+    /// A step that landed just before the flow switch it was retried for, with the switch still
+    /// a few spacings of `t` ahead: the switch is crossed right there (`group` holds it), rather
+    /// than by a next step whose first stage would be on the old branch and the others on the
+    /// new (its error estimate would reject it again and again, creeping up on the switch).
+    fn switch_at_landing(&mut self, t1: f64) -> bool {
+        let Some(landing) = self.land_before_switch.filter(|l| l.t_pre == t1) else {
+            return false;
+        };
+        let (g, speed) = (self.det.g1[landing.pos], self.det.dg1[landing.pos]);
+        let spacing = t1.abs().next_up() - t1.abs();
+        let near =
+            g.is_finite() && landing.sigma * g >= 0.0 && g.abs() <= SWITCH_NEAR * spacing * speed.abs();
+        if !near {
+            return false;
+        }
+        let ev = self.info.modes[self.mode].events[landing.pos];
+        let crossing = Crossing { t: t1, sigma: landing.sigma, touch: false, t_pre: t1, on_guard: false };
+        self.det.group.clear();
+        self.det.group.push((ev, crossing));
+        true
+    }
+
     /// At the end of the run's last step: events whose crossing is at `t_end` to round-off fire
     /// there (`Detector::on_guard_at_end`), when the first of them to fire has its condition.
     fn end_on_guards(&mut self) -> bool {
@@ -379,7 +488,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             });
         }
         let t0 = self.t;
-        let t_land = self.breakpoints.next_after(t0);
+        let mut t_land = self.breakpoints.next_after(t0);
+        if let Some(landing) = self.land_before_switch.filter(|l| l.t_pre > t0) {
+            t_land = t_land.min(landing.t_pre);
+        }
         let mut h_try = self.h.min(self.opts.h_max);
         let lands = t0 + 1.01 * h_try >= t_land;
         if lands {
@@ -416,6 +528,13 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 }
             }
             self.h = self.stepper.shrink(err);
+            // A step that failed its error test because it crossed a flow switch: shrinking by
+            // the error alone would creep up on the switch in many rejected steps.
+            let t1 = if lands { t_land } else { t0 + h_try };
+            if err.is_finite() {
+                // Sets `h` to land before the switch when there is one.
+                self.retry_after_rejected_switch(t0, t1, &mut rhs);
+            }
             return StepOutcome::Rejected;
         }
         self.nonfinite_rejects = 0;
@@ -448,10 +567,20 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             if let Some(pos) = self.det.stuck() {
                 return StepOutcome::Done(self.stuck_on_guard(self.info.modes[self.mode].events[pos]));
             }
+            if self.retry_before_switch(t0) {
+                self.stats.rejected += 1;
+                return StepOutcome::Rejected;
+            }
             self.det.select(self.sys, self.info, self.mode, self.stepper.interpolant(), self.p)
         } else {
             Selection::Nothing
         };
+        if matches!(selection, Selection::Nothing) && lands && self.switch_at_landing(t1) {
+            if !(for_events || sample_due) {
+                self.stepper.build_interpolant(t0, self.z, &mut rhs);
+            }
+            selection = Selection::Fire(t1);
+        }
         if matches!(selection, Selection::Nothing) && lands && t1 >= self.opts.t_end && self.end_on_guards() {
             if !(for_events || sample_due) {
                 self.stepper.build_interpolant(t0, self.z, &mut rhs);
@@ -470,6 +599,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 let singular_at_start = self.stepper.masked() && self.start_derivative_not_finite();
                 self.stepper.accept(self.z);
                 self.t = t1;
+                self.land_before_switch = None;
                 if self.stepper.masked() {
                     self.note_new_voids(if singular_at_start { t0 } else { t1 });
                 }
@@ -495,6 +625,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 let singular_at_start = self.stepper.masked() && self.start_derivative_not_finite();
                 self.stepper.interpolant().eval(t_fire, self.z);
                 self.t = t_fire;
+                self.land_before_switch = None;
                 if self.stepper.masked() {
                     self.note_new_voids(if singular_at_start { t0 } else { t_fire });
                 }
@@ -514,6 +645,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let mode_before = self.mode;
         self.step_mode = self.mode;
         self.instant = None;
+        self.switch_post = None;
         self.fired.clear();
         self.before.0.clear();
         self.before.0.extend_from_slice(&self.z[..n]);
@@ -527,6 +659,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             }
             if self.z[..n].iter().any(|v| !v.is_finite()) {
                 return StepOutcome::Done(self.fault_nonfinite());
+            }
+            if rounds == 0 {
+                self.restart_past_switches();
             }
             estimate = self.restart();
             reset_onto.clear();
@@ -824,9 +959,28 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             t_post = t + gap;
         }
         let (x, s) = self.z.split_at_mut(n);
+        self.switch_post = Some(self.switch_post.map_or(t_post, |tp| tp.max(t_post)));
         let sides = ((crossing.t_pre, &x_pre[..]), (t_post, &x_post[..]));
         let out = self.jump.apply_switch(self.sys, ev, self.mode, t, x, sides, s, self.p, context);
         self.note_conditioning(ev, t, out);
+    }
+
+    /// After an instant of flow switches alone: the run goes on from the first time where every
+    /// new branch holds (a few spacings of `t` on), with the state there on the interpolant. At
+    /// the located time itself the comparison can still give the old branch (`if x < 1` at
+    /// `x = 1`), and a restart there took the old branch's derivative as the next step's first
+    /// stage: an error of that step's length times the jump. Not after a declared event of the
+    /// instant, whose reset the interpolant does not know.
+    fn restart_past_switches(&mut self) {
+        let Some(t_post) = self.switch_post.take() else { return };
+        if !self.fired.is_empty() || t_post <= self.t || t_post >= self.opts.t_end {
+            return;
+        }
+        let n = self.n;
+        let x_post = &mut self.x_sides.1;
+        self.stepper.interpolant().eval(t_post, x_post);
+        self.z[..n].copy_from_slice(&x_post[..n]);
+        self.t = t_post;
     }
 
     /// Whether the derivative at the step's start has sensitivities that are not finite where the

@@ -412,3 +412,63 @@ fn a_zeno_ball_with_two_events_per_bounce_stops_where_the_ball_with_one_does() {
     assert_eq!(2 * r1.events().len(), r2.events().len());
     assert_eq!(r2.state("n"), Some(r1.events().len() as f64));
 }
+
+#[test]
+fn a_pulse_narrower_than_a_step_is_integrated_whole() {
+    // der(x) = 1 while a < t < a + wd: x(10) = wd, dx/dwd = 1, dx/da = 0. A step over the whole
+    // pulse used to see f = 0 at every stage and lose it; one half over it integrated the flow
+    // past the switch on the wrong branch (wd = 0.001 gave 0.10007).
+    let text = "model pulse\nparam a = 0.5\nparam wd = 0.01\nstate x = 0\n\
+                der(x) = if (t - a) * (t - a - wd) < 0 then 1 else 0\n";
+    for wd in [0.1, 0.01, 0.001, 1e-5] {
+        let model = hybc::Model::parse(text).unwrap();
+        let mut o = model.sim_options();
+        o.t_end = 10.0;
+        let run = model
+            .compile(&["wd", "a"])
+            .unwrap()
+            .simulate(&model.params().with("wd", wd).unwrap(), &o)
+            .unwrap();
+        assert_eq!(*run.stopped_by(), StopReason::TEnd);
+        assert_eq!(run.result().stats.switches, 2, "wd = {wd}");
+        assert_relative_eq!(run.state("x").unwrap(), wd, max_relative = 1e-9);
+        assert_relative_eq!(run.dstate("x", "wd").unwrap(), 1.0, max_relative = 1e-9);
+        assert!(run.dstate("x", "a").unwrap().abs() < 1e-9, "wd = {wd}: {:?}", run.dstate("x", "a"));
+    }
+}
+
+#[test]
+fn a_pulse_train_is_integrated_on_the_branch_that_holds_over_a_sweep_of_its_frequency() {
+    // der(x) = 1 while sin(w t) > 1/2, i.e. w t mod 2 pi in (pi/6, 5 pi/6): x(T) = M(w T) / w
+    // with M(th) = n 2 pi / 3 + clamp(r - pi / 6, 0, 2 pi / 3), th = 2 pi n + r; and
+    // dx/dw = M'(w T) T / w - x / w, M' = 1 inside a pulse, else 0.
+    use std::f64::consts::PI;
+    let text = "model train\nparam w = 20\nstate x = 0\nder(x) = if sin(w * t) > 0.5 then 1 else 0\n";
+    let model = hybc::Model::parse(text).unwrap();
+    let compiled = model.compile(&["w"]).unwrap();
+    let t_end = 10.0;
+    for (rtol, tol) in [(1e-8, 1e-7), (1e-11, 1e-10)] {
+        let mut o = model.sim_options();
+        o.t_end = t_end;
+        o.rtol = rtol;
+        o.atol = 1e-13;
+        let mut sim = compiled.simulator(&o).unwrap();
+        for i in 0..60 {
+            let w = 1.0 + 0.83 * i as f64;
+            let run = sim.run(&model.params().with("w", w).unwrap()).unwrap();
+            let th = w * t_end;
+            let n = (th / (2.0 * PI)).floor();
+            let r = th - 2.0 * PI * n;
+            let exact = (n * 2.0 * PI / 3.0 + (r - PI / 6.0).clamp(0.0, 2.0 * PI / 3.0)) / w;
+            let inside = if r > PI / 6.0 && r < 5.0 * PI / 6.0 { 1.0 } else { 0.0 };
+            let dexact = inside * t_end / w - exact / w;
+            assert_relative_eq!(run.state("x").unwrap(), exact, max_relative = tol);
+            assert_relative_eq!(
+                run.dstate("x", "w").unwrap(),
+                dexact,
+                max_relative = 100.0 * tol,
+                epsilon = 1e-9
+            );
+        }
+    }
+}
