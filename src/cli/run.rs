@@ -90,7 +90,7 @@ pub struct RunArgs {
     quiet: bool,
     /// After the run, check every reported derivative against finite differences of the same
     /// compiled model at p +/- h, h = 1e-5 |p| per parameter (one-sided at a declared bound), and
-    /// the events against a re-run at a tenth of the tolerances with steps of at most span/100;
+    /// the events against a re-run at a tenth of the tolerances with steps of at most span/10000;
     /// exit code 4 when a derivative disagrees by more than --check-tol and more than the
     /// differences resolve, or when the events change with the step size. Changed event
     /// sequences between p - h and p + h are reported as cusps, grazing events skipped.
