@@ -111,11 +111,34 @@ impl Shown {
 }
 
 /// Characters a terminal would not show as themselves: control characters other than tab and
-/// line feed, zero-width and format characters, and bidirectional overrides (which can make a
-/// line read differently from what it contains).
+/// line feed, zero-width and format characters, bidirectional overrides (which can make a line
+/// read differently from what it contains), and combining marks ([`is_combining`]).
 pub fn is_invisible(c: char) -> bool {
     (c.is_control() && c != '\n' && c != '\t')
         || matches!(c, '\u{00AD}' | '\u{200B}'..='\u{200F}' | '\u{202A}'..='\u{202E}' | '\u{2060}'..='\u{2064}' | '\u{2066}'..='\u{2069}' | '\u{FEFF}')
+        || is_combining(c)
+}
+
+/// Combining marks that draw onto the character before them, so that `e` followed by U+0301 shows
+/// as `é` and a caret under the mark points at nothing: the script-independent combining blocks
+/// (general categories Mn and Me) and the variation selectors. Script-specific marks (Hebrew
+/// points, Arabic vowels, Indic vowel signs) are left as they are: identifiers are ASCII, so such
+/// marks occur only in comments, after letters of their script, where escaping them would make
+/// the text unreadable. Ranges rather than a Unicode-table crate: these blocks are all that a
+/// diagnostic needs.
+pub fn is_combining(c: char) -> bool {
+    matches!(c,
+        '\u{0300}'..='\u{036F}'       // Combining Diacritical Marks (U+0301 acute, U+034F joiner)
+        | '\u{0483}'..='\u{0489}'     // Cyrillic combining marks, U+0488..U+0489 enclosing (Me)
+        | '\u{1AB0}'..='\u{1AFF}'     // Combining Diacritical Marks Extended
+        | '\u{1DC0}'..='\u{1DFF}'     // Combining Diacritical Marks Supplement
+        | '\u{20D0}'..='\u{20FF}'     // Combining Marks for Symbols (enclosing circle U+20DD, Me)
+        | '\u{3099}'..='\u{309A}'     // combining kana voiced marks
+        | '\u{A670}'..='\u{A672}'     // Cyrillic combining enclosing signs (Me)
+        | '\u{FE00}'..='\u{FE0F}'     // Variation Selectors
+        | '\u{FE20}'..='\u{FE2F}'     // Combining Half Marks
+        | '\u{E0100}'..='\u{E01EF}' // Variation Selectors Supplement
+    )
 }
 
 /// `<U+XXXX>`, how diagnostics show an invisible character.
@@ -148,6 +171,34 @@ mod tests {
         let col = |l: &str, pat: &str| l.find(pat).unwrap();
         assert_eq!(col(caret_line, "^"), col(line, "<U+001B>"), "{out}");
         assert_eq!(caret_line.matches('^').count(), "<U+001B>".len(), "{out}");
+    }
+
+    #[test]
+    fn zero_width_and_combining_characters_are_escaped_with_the_caret_under_them() {
+        // `e` + U+0301 would show as one letter `é`; U+200B and U+FEFF inside a line show as
+        // nothing at all; U+20DD (enclosing, Me) would draw a circle around the `)`.
+        for (c, tag) in [
+            ('\u{0301}', "<U+0301>"),
+            ('\u{200B}', "<U+200B>"),
+            ('\u{200D}', "<U+200D>"),
+            ('\u{2060}', "<U+2060>"),
+            ('\u{FEFF}', "<U+FEFF>"),
+            ('\u{20DD}', "<U+20DD>"),
+            ('\u{FE0F}', "<U+FE0F>"),
+        ] {
+            let source = format!("model m\nstate x = e{c})\n");
+            let at = source.find(c).unwrap();
+            let out = one(&source, at, at + c.len_utf8());
+            assert!(!out.contains(c), "{tag}: {out}");
+            assert!(out.contains(&format!("state x = e{tag})")), "{tag}: {out}");
+            assert!(out.contains("m.hyb:2:12"), "{tag}: {out}");
+            let caret_line = out.lines().find(|l| l.contains('^')).unwrap();
+            let line = out.lines().find(|l| l.contains(tag)).unwrap();
+            assert_eq!(caret_line.find('^'), line.find(tag), "{tag}: {out}");
+            assert_eq!(caret_line.matches('^').count(), tag.len(), "{tag}: {out}");
+        }
+        // Letters with their own code point and a script's own marks stay as they are.
+        assert!(!is_invisible('é') && !is_invisible('\u{093F}'));
     }
 
     #[test]

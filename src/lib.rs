@@ -35,13 +35,16 @@ pub mod diag;
 pub mod expr;
 pub mod fit;
 pub mod gradcheck;
+pub mod limits;
 pub mod lower;
+pub mod number;
 #[cfg(feature = "plot")]
 pub mod plot;
 pub mod report;
 pub mod sema;
 pub mod sim;
 mod stack;
+pub mod status;
 pub mod sweep;
 pub mod syntax;
 

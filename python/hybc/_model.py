@@ -98,7 +98,7 @@ class Model:
         """
         _check_counts(options)
         return self._native.simulate(
-            _param_dict(params), grad=list(grad), trajectory=trajectory, **options
+            _param_dict(params), grad=_names(grad, "grad"), trajectory=trajectory, **options
         )
 
     def sweep(
@@ -133,7 +133,7 @@ def sweep_matrix(
 ) -> dict[str, np.ndarray]:
     """The sweep of the rows of ``matrix`` (normalised points) with keywords ``kw``."""
     kw = dict(kw)
-    kw["grad"] = list(kw.get("grad", ()))
+    kw["grad"] = _names(kw.get("grad", ()), "grad")
     _check_counts(kw)
     columns = model._native.sweep(names, matrix, fixed, **kw)
     return {name: _column(v) for name, v in columns.items()}
@@ -164,7 +164,7 @@ class Samples:
         self.ranges = None if ranges is None else {
             str(k): (None if v is None else (float(v[0]), float(v[1]))) for k, v in ranges.items()
         }
-        self.fixed = _param_dict(fixed)
+        self.fixed = _param_dict(fixed, "fixed")
 
     def __repr__(self) -> str:
         return f"hybc.Samples({self.n}, seed={self.seed}, ranges={self.ranges}, fixed={self.fixed})"
@@ -199,6 +199,9 @@ def normalise_points(
         columns: dict[str, np.ndarray] = {}
         for name, value in points.items():
             array = np.asarray(value)
+            # float() and NumPy would turn "0.9" into 0.9: text is not a parameter value.
+            if array.dtype.kind not in "iuf":
+                raise TypeError(f"points: `{name}`: expected numbers, found {value!r}")
             if array.ndim == 0:
                 fixed[str(name)] = float(array)
             elif array.ndim == 1:
@@ -239,6 +242,7 @@ def _check_counts(kw: Mapping[str, Any]) -> None:
             continue
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
             raise ValueError(f"{name}: expected a non-negative integer, found {value!r}")
+        # The caps themselves (hybc::limits) are checked by the native side, as the CLI's.
 
 
 def _float64(array: Any, what: Any) -> np.ndarray:
@@ -254,12 +258,35 @@ def _column(values: Any) -> np.ndarray:
     return np.array(values, dtype=str) if isinstance(values, list) else values
 
 
-def _param_dict(params: Mapping[str, float] | None) -> dict[str, float]:
+def _names(names: Any, what: str) -> list[str]:
+    """A sequence of parameter names. A single ``str`` is refused: ``list("h0")`` would read it as
+    the names ``h`` and ``0``."""
+    if isinstance(names, (str, bytes)):
+        raise TypeError(f"{what}: expected a sequence of parameter names such as [{str(names)!r}], found the string {names!r}")
+    try:
+        names = list(names)
+    except TypeError:
+        raise TypeError(f"{what}: expected a sequence of parameter names, found {type(names).__name__}") from None
+    for name in names:
+        if not isinstance(name, str):
+            raise TypeError(f"{what}: expected parameter names (str), found {name!r}")
+    return names
+
+
+def _number(value: Any, what: str) -> float:
+    """A parameter value: a real number (Python or NumPy), never a string or a bool that
+    ``float()`` would quietly convert."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{what}: expected a number, found {type(value).__name__} {value!r}")
+    return float(value)
+
+
+def _param_dict(params: Mapping[str, float] | None, what: str = "params") -> dict[str, float]:
     if params is None:
         return {}
     if not isinstance(params, Mapping):
-        raise TypeError(f"params: expected a dict name -> value, found {type(params).__name__}")
-    return {str(k): float(v) for k, v in params.items()}
+        raise TypeError(f"{what}: expected a dict name -> value, found {type(params).__name__}")
+    return {str(k): _number(v, f"{what}: `{k}`") for k, v in params.items()}
 
 
 def grid(**axes: Any) -> dict[str, np.ndarray]:

@@ -45,7 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _hybc
-from ._model import _check_counts
+from ._model import _check_counts, _param_dict
 
 __all__ = ["function", "Function", "STATUS", "status_name"]
 
@@ -59,8 +59,11 @@ STATUS: dict[int, str] = {
     5: "max_events",  # max_events fired before t_end: final values NaN
     6: "fault",  # the integration failed (step size underflow, non-finite state, ...)
     7: "bad_param",  # an input is not finite or outside its declared range: all NaN
+    8: "non_finite",  # reached t_end, but a final state or output is NaN or infinite
 }
-OK, GRAZING, NOT_DIFFERENTIABLE, ZENO, STUCK, MAX_EVENTS, FAULT, BAD_PARAM = range(8)
+# The names (but bad_param, a refused input) are the words Model.simulate's Run.status and the
+# sweep rows print for the same run: one vocabulary (hybc::status::RunStatus).
+OK, GRAZING, NOT_DIFFERENTIABLE, ZENO, STUCK, MAX_EVENTS, FAULT, BAD_PARAM, NON_FINITE = range(9)
 
 _TARGET = "hybc_run"
 _registered = False
@@ -210,7 +213,7 @@ def function(
     if len(set(outputs)) != len(outputs):
         raise ValueError(f"outputs: a name is given twice in {outputs}")
     native = getattr(model, "_native", model)
-    fixed = {str(k): float(v) for k, v in (values or {}).items()}
+    fixed = _param_dict(values, "values")
     handle = _hybc.jax_register(native, params, outputs, events, fixed, **sim_kw)
     _register_target()
     return Function(model, params, outputs, events, handle)

@@ -56,7 +56,14 @@ impl SimKeywords {
             rtol,
             atol: positive("atol", self.atol.unwrap_or(base.atol))?,
             method,
-            max_events: self.max_events.unwrap_or(base.max_events),
+            // The caps and the refusal of 0 are the CLI's (`hybc::limits`).
+            max_events: hybc::limits::count(
+                "max_events",
+                self.max_events.unwrap_or(base.max_events),
+                1,
+                hybc::limits::MAX_EVENTS,
+            )
+            .map_err(|e| PyValueError::new_err(e.to_string()))?,
             max_steps: self.max_steps.unwrap_or(base.max_steps),
             graze_tol: positive("graze_tol", self.graze_tol.unwrap_or(base.graze_tol))?,
             sens_error_control: self.sens_error_control.unwrap_or(base.sens_error_control),

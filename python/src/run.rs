@@ -4,7 +4,8 @@
 //! - a derivative that does not exist (after a grazing event, ...) is NaN, and `warnings` says why;
 //! - after a `stop` event the final values are those at the stop and their derivatives are the
 //!   total ones that include the motion of the stopping time (as `hybc sweep` writes them);
-//! - a run that ended early (`status` not "ok": Zeno, max_events, stuck, a fault) has no final
+//! - `status` is one word of the vocabulary `hybc sweep` and `hybc.jax` use (`hybc::status`);
+//! - a run that ended early (`ok` false; status Zeno, max_events, stuck, a fault) has no final
 //!   values: `state`, `outputs`, `dstate`, `doutputs` are NaN, `t` is where it stopped and
 //!   `error` says why (the events up to there and the trajectory stay).
 
@@ -155,16 +156,16 @@ impl Run {
         self.run.stopped_by().name().to_string()
     }
 
-    /// "ok" (ended at t_end or by a stop event) or why it ended early, as `hybc sweep` writes it.
+    /// The run's status in the one vocabulary of sweep rows and `hybc.jax` (`hybc::status`):
+    /// "ok", "grazing", "not_differentiable", "non_finite" (complete runs), or "zeno", "stuck",
+    /// "max_events", "fault" (ended early).
     #[getter]
     fn status(&self) -> String {
-        if self.complete() {
-            "ok".into()
-        } else {
-            self.stopped_by()
-        }
+        hybc::status::RunStatus::of(self.info(), self.run.result()).name().into()
     }
 
+    /// Whether the run ended as asked (at t_end or by a stop event): its final values exist,
+    /// whatever `status` says of its derivatives.
     #[getter]
     fn ok(&self) -> bool {
         self.complete()

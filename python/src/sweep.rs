@@ -20,11 +20,9 @@ use hybc::sweep::{self, Columns, PointResult};
 
 use crate::errors::ParameterError;
 
-/// The same caps as `hybc sweep`: more points would not fit in memory on an ordinary machine
-/// (each keeps its result until the columns are built); more event columns or threads are typos.
-pub const MAX_POINTS: usize = 10_000_000;
-pub const MAX_EVENT_COLUMNS: usize = 10_000;
-pub const MAX_THREADS: usize = 1024;
+/// The caps of every interface (`hybc::limits`): a sweep from Python keeps all its rows, so its
+/// points are capped as a sweep held in memory; event columns and threads as `hybc sweep`'s.
+pub use hybc::limits::{MAX_EVENT_COLUMNS, MAX_SWEEP_POINTS_IN_MEMORY as MAX_POINTS, MAX_THREADS};
 /// Rows are turned into cells in parallel per chunk; the chunk bounds the memory the cells take.
 const CELL_CHUNK: usize = 4096;
 
@@ -146,12 +144,11 @@ pub fn sample_ranges(model: &hybc::Model, ranges: Option<RangeArgs>) -> PyResult
 
 /// The checks on `events` and `threads`, as `hybc sweep` makes them.
 pub fn check_counts(events: usize, threads: usize) -> PyResult<()> {
-    if events > MAX_EVENT_COLUMNS {
-        return Err(PyValueError::new_err(format!("events: at most {MAX_EVENT_COLUMNS}, found {events}")));
-    }
-    if threads > MAX_THREADS {
-        return Err(PyValueError::new_err(format!("threads: at most {MAX_THREADS}, found {threads}")));
-    }
+    let cap = |what, value, max| {
+        hybc::limits::count(what, value, 0, max).map_err(|e| PyValueError::new_err(e.to_string()))
+    };
+    cap("events", events, MAX_EVENT_COLUMNS)?;
+    cap("threads", threads, MAX_THREADS)?;
     Ok(())
 }
 

@@ -391,3 +391,26 @@ def test_max_events_and_fault_are_reported(ball_model):
     out, dx = jax.jvp(fs, (p,), (jnp.array([1.0, 0.0]),))
     assert hj.status_name(out["status"]) == "fault" and math.isnan(float(out["x"]))
     assert math.isnan(float(dx["x"]))
+
+
+def test_event_slots_have_the_cli_cap(ball_model):
+    # events=10**9 used to allocate gigabytes of slots; the cap is hybc sweep's --events (1000).
+    with pytest.raises(ValueError, match="events: at most 1000, found 1000000000"):
+        hj.function(ball_model, params=["e"], outputs=["energy"], events=10**9)
+    with pytest.raises(ValueError, match="max_events: at least 1, found 0"):
+        hj.function(ball_model, params=["e"], outputs=["energy"], max_events=0)
+    with pytest.raises(TypeError, match=r"values: `h0`: expected a number"):
+        hj.function(ball_model, params=["e"], outputs=["energy"], values={"h0": "1.0"})
+    assert hj.function(ball_model, params=["e"], outputs=["energy"], events=1000).events == 1000
+
+
+def test_one_status_vocabulary_with_model_simulate():
+    # The same grazing run: hybc.jax's status name is Model.simulate's Run.status.
+    model = hybc.Model(CEILING, file_name="ceiling_graze.hyb")
+    p = [0.815494392476045, 4.0]
+    out = hj.function(model, params=["H", "v0"], outputs=["y"], events=1)(jnp.array(p))
+    run = model.simulate({"H": p[0], "v0": p[1]}, grad=["H", "v0"])
+    assert hj.status_name(out["status"]) == run.status == "grazing"
+    assert set(hj.STATUS.values()) - {"bad_param"} == {
+        "ok", "grazing", "not_differentiable", "non_finite", "zeno", "stuck", "max_events", "fault"
+    }

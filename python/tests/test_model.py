@@ -107,7 +107,11 @@ def test_grazing_is_reported_with_nan_gradients():
     assert np.isnan(run.event_dtime[0]).all()
     # The state after the contact depends on its time: no derivative exists.
     assert np.isnan(run.dstate["v"]).all()
-    assert run.status == "ok"  # the run itself is fine; the gradients are what does not exist
+    # The run itself ended as asked (ok), but its status says what became of the gradients, in
+    # the word hybc.jax and the sweep rows use for the same run (issue 24: it used to say "ok").
+    assert run.ok and run.status == "grazing"
+    table = model.sweep({"v0": [4.0]}, grad=["v0"], events=1)
+    assert table["status"].tolist() == ["grazing"]
 
 
 def test_a_bad_model_raises_model_error_with_a_caret(tmp_path):
@@ -223,3 +227,48 @@ def test_a_stop_event_gives_values_at_the_stop_and_total_derivatives():
     np.testing.assert_allclose(run.dstate["y"], [-G, 1.0], rtol=1e-8)
     np.testing.assert_allclose(run.dstate["v"], [-G, 0.0], rtol=1e-8, atol=1e-12)
     np.testing.assert_allclose(run.event_dtime, [[1.0, 0.0]], atol=1e-12)
+
+
+# ---- issue 24, item 13: bad input gets a clear message ----
+
+
+def test_grad_must_be_a_sequence_of_names_not_a_string(ball):
+    # list("h0") would be the parameters `h` and `0`: a string is refused, naming the fix.
+    with pytest.raises(TypeError, match=r"grad: expected a sequence of parameter names such as \['h0'\], found the string 'h0'"):
+        ball.simulate(grad="h0")
+    with pytest.raises(TypeError, match="grad: expected a sequence of parameter names"):
+        ball.sweep({"e": [0.5]}, grad="e")
+    with pytest.raises(TypeError, match="grad: expected parameter names"):
+        ball.simulate(grad=[1])
+    # A one-name sequence is what it looks like.
+    run = ball.simulate(grad=("h0",))
+    assert run.grad == ["h0"] and run.dstate["y"].shape == (1,)
+
+
+def test_parameter_values_must_be_numbers(ball):
+    with pytest.raises(TypeError, match=r"params: `e`: expected a number, found str '0.9'"):
+        ball.simulate({"e": "0.9"})
+    with pytest.raises(TypeError, match=r"params: `e`: expected a number, found bool True"):
+        ball.simulate({"e": True})
+    with pytest.raises(TypeError, match=r"points: `h0`: expected numbers"):
+        ball.sweep({"e": [0.5], "h0": "1.0"})
+    with pytest.raises(TypeError, match=r"points: `e`: expected numbers"):
+        ball.sweep({"e": ["0.5"]})
+    with pytest.raises(TypeError, match=r"fixed: `h0`: expected a number"):
+        hybc.Samples(4, fixed={"h0": "2"})
+    # Python and NumPy numbers of any kind are numbers.
+    assert ball.simulate({"e": np.float32(0.5), "h0": 2}).params["h0"] == 2.0
+
+
+def test_counts_have_the_cli_caps(ball):
+    # The caps are hybc::limits, the CLI's (README, Limits); 0 events would still fire one.
+    with pytest.raises(ValueError, match="max_events: at least 1, found 0"):
+        ball.simulate(max_events=0)
+    with pytest.raises(ValueError, match="max_events: at most 1000000, found 1000001"):
+        ball.simulate(max_events=10**6 + 1)
+    with pytest.raises(ValueError, match="events: at most 1000, found 1001"):
+        ball.sweep({"e": [0.5]}, events=1001)
+    with pytest.raises(ValueError, match="threads: at most 1024, found 1025"):
+        ball.sweep({"e": [0.5]}, threads=1025)
+    run = ball.simulate(max_events=1)
+    assert run.status == "max_events" and len(run.event_times) == 1

@@ -14,7 +14,7 @@ use crate::fit::{self, Bounds, FitError, FitOptions, FitProblem, FitReport, Reje
 use crate::Model;
 
 /// The most trials `--max-iter` allows.
-pub(crate) const MAX_ITER: usize = 1_000_000;
+pub(crate) use crate::limits::MAX_FIT_ITER as MAX_ITER;
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum Format {

@@ -90,7 +90,7 @@ pub struct RunArgs {
     quiet: bool,
     /// After the run, check every reported derivative against finite differences of the same
     /// compiled model at p +/- h, h = 1e-5 |p| per parameter (one-sided at a declared bound), and
-    /// the events against a re-run at a tenth of the tolerances with steps of at most span/100;
+    /// the events against a re-run at a tenth of the tolerances with steps of at most span/10000;
     /// exit code 4 when a derivative disagrees by more than --check-tol and more than the
     /// differences resolve, or when the events change with the step size. Changed event
     /// sequences between p - h and p + h are reported as cusps, grazing events skipped.
@@ -127,30 +127,22 @@ pub(crate) fn parameter_values(model: &Model, sets: &[String]) -> Result<Params,
             return Err(format!("--set: `{name}` is set twice"));
         }
         seen.push(name);
-        let value: f64 = value
-            .trim()
-            .parse()
-            .ok()
-            .filter(|v: &f64| v.is_finite())
-            .ok_or_else(|| format!("--set: `{}` is not a finite number", value.trim()))?;
+        let value = crate::number::parse_number(value.trim()).map_err(|e| match e {
+            crate::number::NumberError::TooSmall { .. } => format!("--set {name}: {e}"),
+            _ => format!("--set: `{}` is not a finite number", value.trim()),
+        })?;
         params.set(name, value).map_err(|e| format!("--set: {e}"))?;
     }
     Ok(params)
 }
 
-/// The most events a run may record (`--max-events`): each record takes about 100 bytes plus 8 per
-/// gradient parameter, so 10^6 events stay well under a gigabyte.
-pub(crate) const MAX_EVENTS: usize = 1_000_000;
+pub(crate) use crate::limits::MAX_EVENTS;
 /// The most rows `--trajectory` with `--plot` keeps in memory for the figure.
 const MAX_PLOTTED_ROWS: f64 = crate::sim::MAX_SAMPLED_ROWS;
 
 /// `value` if it is at most `cap`, else a usage error naming the flag.
 pub(crate) fn at_most(flag: &str, value: usize, cap: usize) -> Result<usize, String> {
-    if value > cap {
-        Err(format!("{flag}: at most {cap}, found {value}"))
-    } else {
-        Ok(value)
-    }
+    crate::limits::count(flag, value, 0, cap).map_err(|e| e.to_string())
 }
 
 pub(crate) fn positive(name: &str, v: f64) -> Result<f64, String> {
@@ -178,7 +170,10 @@ pub(crate) fn sim_options(model: &Model, args: &SimFlags) -> Result<SimOptions, 
             MethodArg::Dopri5 => Method::Dopri5,
             MethodArg::Dop853 => Method::Dop853,
         },
-        max_events: at_most("--max-events", args.max_events, MAX_EVENTS)?,
+        // 0 would still fire the first event (the cap is checked after each instant), so it is
+        // refused rather than reported as 1.
+        max_events: crate::limits::count("--max-events", args.max_events, 1, MAX_EVENTS)
+            .map_err(|e| e.to_string())?,
         graze_tol: positive("--graze-tol", args.graze_tol)?,
         sens_error_control: !args.no_sens_error_control,
         ..base

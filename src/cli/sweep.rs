@@ -17,16 +17,15 @@ use crate::sim::SimOptions;
 use crate::sweep::{self, Axis, AxisSpec, Columns, Format, Grid, PointResult, Points, Samples};
 use crate::{Compiled, Model};
 
-/// Caps on the counts the flags accept (README, "Limits"). Rows are streamed, so the number of
-/// points costs time, not memory; the cap turns a typo (`--samples 10000000000000`) into a usage
-/// error rather than a run of years.
-pub(crate) const MAX_POINTS: usize = 1_000_000_000;
+/// Caps on the counts the flags accept (README, "Limits"), shared with the Python interface
+/// (`crate::limits`). Rows are streamed, so the number of points costs time, not memory; the cap
+/// turns a typo (`--samples 10000000000000`) into a usage error rather than a run of years.
+pub(crate) use crate::limits::MAX_SWEEP_POINTS as MAX_POINTS;
 /// With `--plot` every point's result is kept until the figure is drawn (about 4 KB each).
 const MAX_PLOT_POINTS: usize = 100_000;
 /// Caps on flags whose size is allocated per row or up front (columns per event, worker
 /// threads), so that a typo is a usage error rather than an out-of-memory abort.
-pub(crate) const MAX_EVENT_COLUMNS: usize = 1_000;
-pub(crate) const MAX_THREADS: usize = 1024;
+pub(crate) use crate::limits::{MAX_EVENT_COLUMNS, MAX_THREADS};
 /// Tangents drawn per panel of a sweep plot.
 const PLOT_TANGENTS: usize = 5;
 

@@ -172,13 +172,39 @@ pub struct FitResult {
     /// The start and every trial.
     pub iterations: Vec<Iteration>,
     pub cusps: Vec<Cusp>,
+    /// Why the solver stopped: a least-squares minimum (converged) or not.
     pub stop: FitStop,
+    /// Per target: the largest `|value - goal|` that counts as met ([`target_tolerance`]).
+    pub tolerances: Vec<f64>,
+    /// The box of each free parameter (the problem's), to tell which ended at a bound.
+    pub bounds: Vec<Bounds>,
+    /// Per target: whether `|value - goal|` at the end is within its tolerance.
+    pub met: Vec<bool>,
 }
 
 impl FitResult {
+    /// Converged: the solver reached a minimum and every target is met there. Targets are
+    /// equations, so a least-squares minimum that leaves one unmet (at a bound, between two event
+    /// sequences, or because the targets contradict each other) is not a converged fit.
     pub fn is_converged(&self) -> bool {
-        self.stop.is_converged()
+        self.stop.is_converged() && self.targets_met()
     }
+
+    /// Whether every target is within its tolerance at the end.
+    pub fn targets_met(&self) -> bool {
+        self.met.iter().all(|&m| m)
+    }
+}
+
+/// How far a target's model value may lie from its goal and still count as met:
+/// `100 (rtol max(|goal|, |value|) + atol)` with the run's tolerances. A run's values move with the
+/// parameters only as smoothly as the integrator's error control lets them (a different step
+/// sequence shifts them by about the local tolerance), so a fit can solve its equations to that
+/// level and no further; the factor 100 leaves room for the error accumulated over the steps and
+/// events, while a target missed by a bound or a jump misses by far more. The weight does not
+/// enter: it ranks residuals in the objective, the equation is the same.
+pub fn target_tolerance(goal: f64, value: f64, sim: &SimOptions) -> f64 {
+    100.0 * (sim.rtol * goal.abs().max(value.abs()) + sim.atol)
 }
 
 /// A fit that cannot start.
@@ -229,6 +255,19 @@ pub fn fit<S: HybridSystem>(problem: &FitProblem<'_, S>, opts: &FitOptions) -> R
         evaluate(&mut simulator, &with_free(x), &problem.targets)
     })
     .map_err(FitError::Start)?;
+    let tolerances: Vec<f64> = problem
+        .targets
+        .iter()
+        .zip(&solved.evaluation.values)
+        .map(|(t, &v)| target_tolerance(t.value, v, &problem.sim))
+        .collect();
+    let met = problem
+        .targets
+        .iter()
+        .zip(&solved.evaluation.values)
+        .zip(&tolerances)
+        .map(|((t, &v), &tol)| (v - t.value).abs() <= tol)
+        .collect();
     Ok(FitResult {
         params: with_free(&solved.x),
         condition: lm::condition_number(&solved.evaluation.jacobian),
@@ -236,5 +275,8 @@ pub fn fit<S: HybridSystem>(problem: &FitProblem<'_, S>, opts: &FitOptions) -> R
         iterations: solved.iterations,
         cusps: solved.cusps,
         stop: solved.stop,
+        tolerances,
+        bounds: problem.bounds.clone(),
+        met,
     })
 }

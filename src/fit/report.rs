@@ -7,6 +7,7 @@ use serde_json::{json, Map, Value};
 
 use super::{FitOptions, FitResult, FitStop, Outcome, StallCause, Target};
 use crate::report::num;
+use crate::sim::short;
 use crate::sim::SystemInfo;
 
 /// A fit's result with the names and settings needed to report it.
@@ -32,6 +33,69 @@ impl FitReport {
 
     /// One sentence: whether the fit converged and why it stopped.
     pub fn reason(&self) -> String {
+        let solver = self.solver_reason();
+        if self.result.stop.is_converged() && !self.result.targets_met() {
+            return format!("targets not met: {}", self.unmet_reason(&solver));
+        }
+        solver
+    }
+
+    /// Why a least-squares minimum is not a solution: each unmet target with its value, goal and
+    /// tolerance, the parameters held at a bound, and a cusp the final point sits on.
+    fn unmet_reason(&self, solver: &str) -> String {
+        let r = &self.result;
+        let unmet: Vec<String> = self
+            .targets
+            .iter()
+            .enumerate()
+            .filter(|&(i, _)| !r.met[i])
+            .map(|(i, t)| {
+                let value = r.evaluation.values[i];
+                format!(
+                    "{} = {} against the goal {} (off by {}, tolerance {:.1e})",
+                    t.label(&self.info),
+                    num(value),
+                    num(t.value),
+                    short(value - t.value),
+                    r.tolerances[i]
+                )
+            })
+            .collect();
+        // The solver's own sentence says how it stopped; "converged" would mislead here.
+        let how = solver.split_once(": ").map_or(solver, |(_, why)| why);
+        let mut out =
+            format!("the fit stopped at a least-squares minimum ({how}) that leaves {}", unmet.join("; "));
+        let held: Vec<String> = self
+            .free_names()
+            .iter()
+            .zip(&self.info.grad_params)
+            .zip(&r.bounds)
+            .filter(|((_, &j), b)| r.params[j] <= b.lower || r.params[j] >= b.upper)
+            .map(|((name, &j), _)| format!("{name} = {}", num(r.params[j])))
+            .collect();
+        if !held.is_empty() {
+            let _ = write!(out, "; held at a bound: {}", held.join(", "));
+        }
+        // The final point sits on a cusp when trials after it (none of them accepted) lay on
+        // another event sequence: the targets may be in the jump between the two.
+        let last_accepted =
+            r.iterations.iter().rev().find(|it| matches!(it.outcome, Outcome::Start | Outcome::Accepted));
+        let after = last_accepted.map_or(0, |it| it.iteration);
+        if let Some(c) = r.cusps.iter().rev().find(|c| c.iteration > after && !c.accepted) {
+            let _ = write!(
+                out,
+                "; it sits on a cusp: steps from it change the number of events ({} -> {} at iteration {})",
+                c.events_before, c.events_after, c.iteration
+            );
+        }
+        out.push_str(
+            "; the targets are unreachable from this start (try another start, or other free parameters)",
+        );
+        out
+    }
+
+    /// The solver's sentence: how it stopped, before the targets are checked.
+    fn solver_reason(&self) -> String {
         let o = &self.options;
         let trials = self.result.iterations.len() - 1;
         match &self.result.stop {
@@ -69,6 +133,8 @@ impl FitReport {
                     "value": r.evaluation.values[i],
                     "weight": t.weight,
                     "residual": r.evaluation.residuals[i],
+                    "tolerance": r.tolerances[i],
+                    "met": r.met[i],
                 })
             })
             .collect();
@@ -104,6 +170,7 @@ impl FitReport {
             })
             .collect();
         let reason = match &r.stop {
+            stop if stop.is_converged() && !r.targets_met() => "targets_not_met",
             FitStop::Gradient => "gradient",
             FitStop::Step => "step",
             FitStop::Objective => "objective",
@@ -174,17 +241,19 @@ impl FitReport {
         }
         let _ = writeln!(
             out,
-            "\n  {:<16}  {:>18}  {:>18}  {:>8}  {:>16}",
-            "target", "goal", "model", "weight", "residual"
+            "\n  {:<16}  {:>18}  {:>18}  {:>8}  {:>16}  {:>12}",
+            "target", "goal", "model", "weight", "residual", "tolerance"
         );
         for (i, (t, label)) in self.targets.iter().zip(&labels).enumerate() {
             let _ = writeln!(
                 out,
-                "  {label:<16}  {:>18}  {:>18}  {:>8}  {:>16}",
+                "  {label:<16}  {:>18}  {:>18}  {:>8}  {:>16}  {:>12.1e}{}",
                 num(t.value),
                 num(r.evaluation.values[i]),
                 num(t.weight),
-                sci(r.evaluation.residuals[i])
+                sci(r.evaluation.residuals[i]),
+                r.tolerances[i],
+                if r.met[i] { "" } else { "  not met" }
             );
         }
         let condition = if r.condition.is_finite() { num(r.condition) } else { "infinite".to_string() };

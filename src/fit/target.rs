@@ -33,6 +33,9 @@ pub enum TargetError {
     Malformed { text: String },
     #[error("`{text}` is not a finite number")]
     NotANumber { text: String },
+    /// A goal a double cannot hold (`1e-400` would round to 0).
+    #[error(transparent)]
+    Unrepresentable(crate::number::NumberError),
     #[error("weight `{text}` must be a positive finite number")]
     BadWeight { text: String },
     #[error(
@@ -61,7 +64,10 @@ impl Target {
         if name.is_empty() || value.is_empty() {
             return Err(malformed());
         }
-        let value = finite(value).ok_or_else(|| TargetError::NotANumber { text: value.to_string() })?;
+        let value = crate::number::parse_number(value).map_err(|e| match e {
+            crate::number::NumberError::TooSmall { .. } => TargetError::Unrepresentable(e),
+            _ => TargetError::NotANumber { text: value.to_string() },
+        })?;
         let weight = match weight {
             None => 1.0,
             Some(w) => finite(w)
@@ -88,7 +94,8 @@ impl Target {
 }
 
 fn finite(text: &str) -> Option<f64> {
-    text.parse::<f64>().ok().filter(|v| v.is_finite())
+    // A weight that rounds to 0 or overflows is not the number written.
+    crate::number::parse_number(text).ok()
 }
 
 fn event_time(name: &str, k: &str, text: &str, info: &SystemInfo) -> Result<Observable, TargetError> {

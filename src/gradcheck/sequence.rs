@@ -11,10 +11,15 @@ use crate::sim::{EventRecord, SimOptions, SimResult, StopReason, SystemInfo};
 /// The re-run's tolerances are the run's divided by this.
 pub const TIGHTER: f64 = 10.0;
 
-/// The re-run takes at most this many steps' worth of the span per step: `h_max = span / 100`.
-/// Every guard is then looked at, at each step's end and at its interior samples, at least a
-/// hundred times over the run, whatever sizes the error control would allow.
-pub const STEPS_PER_SPAN: f64 = 100.0;
+/// The re-run takes at most this many steps' worth of the span per step:
+/// `h_max = span / 10_000`. Every guard is then looked at, at each step's end and at its interior
+/// samples, at least ten thousand times over the run, whatever sizes the error control would
+/// allow. Why so many: where the solution is a low-degree polynomial the error control takes
+/// steps as long as the cap, and a guard that crosses twice within one step shows no sign change;
+/// with `span / 100` a run of 100 s re-ran with 1 s steps and missed, as the run did, the three
+/// crossings 0.1 s apart of `x = (t - 1)(t - 1.1)(t - 1.2)` (the check passed a run that found 1
+/// of 3 events). Crossings closer than about `span / 10_000` can still be missed by both runs.
+pub const STEPS_PER_SPAN: f64 = 10_000.0;
 
 /// The outcome of the event-sequence check.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -43,7 +48,7 @@ impl EventCheck {
     }
 }
 
-/// The options of the re-run: a tenth of the tolerances, steps capped at `span / 100` (or the
+/// The options of the re-run: a tenth of the tolerances, steps capped at `span / 10_000` (or the
 /// run's own cap if smaller), no trajectory.
 pub fn rerun_options(opts: &SimOptions) -> SimOptions {
     let span = (opts.t_end - opts.t_start).abs();

@@ -54,6 +54,20 @@ impl GradCheck {
                     if more > 0 { format!(" (and {more} more)") } else { String::new() }
                 );
             }
+            for t in &c.truncated {
+                let w = &t.comparison;
+                let _ = writeln!(
+                    out,
+                    "  truncation ({}): {}: reported {}, difference {} at h and {} at h/2, extrapolated {}: \
+                     the difference's own truncation error (it shrinks as h^2), not a wrong derivative",
+                    c.name,
+                    w.derivative,
+                    num(w.reported),
+                    num(w.central),
+                    num(t.half_step),
+                    num(t.extrapolated)
+                );
+            }
             if let Some(cusp) = &c.cusp {
                 let [a, b, d] = cusp.events;
                 let [x, y, z] = c.difference.point_names();
@@ -88,7 +102,21 @@ impl GradCheck {
         for note in &e.notes {
             let _ = writeln!(out, "  note (events): {note}");
         }
-        let mut failed: Vec<&str> = self.failures().map(|c| c.name.as_str()).collect();
+        // A failure names the derivative that disagrees (`d(y)/dv0`), not only its parameter, with
+        // both numbers: the parameter's other derivatives may well be right.
+        let failed: Vec<String> = self
+            .failures()
+            .filter_map(|c| c.worst.as_ref())
+            .map(|w| {
+                format!(
+                    "{} is {} but the difference gives {} (discrepancy {:.1e})",
+                    w.derivative,
+                    num(w.reported),
+                    num(w.central),
+                    w.discrepancy
+                )
+            })
+            .collect();
         if failed.is_empty() && e.is_consistent() {
             let _ = writeln!(out, "gradient check passed");
         } else {
@@ -97,8 +125,7 @@ impl GradCheck {
                 parts.push("the event sequence changes with the step size".to_string());
             }
             if !failed.is_empty() {
-                failed.dedup();
-                parts.push(format!("{} above the tolerance {tol:.0e}", failed.join(", ")));
+                parts.push(format!("{}; above the tolerance {tol:.0e}", failed.join("; ")));
             }
             let _ = writeln!(out, "gradient check FAILED: {}", parts.join("; "));
         }

@@ -225,8 +225,19 @@ impl<'a> Checker<'a> {
     }
 
     fn check_simulate(&mut self, s: &ast::SimulateDecl, out: &mut SimulateDefaults) {
+        let mut seen: Vec<(&str, Span)> = Vec::new();
         for setting in &s.settings {
             let v = setting.value.value;
+            let name = setting.name.name.as_str();
+            if let Some(&(_, first)) = seen.iter().find(|(n, _)| *n == name) {
+                self.errors.push(CheckError::DuplicateSetting {
+                    name: name.to_string(),
+                    span: setting.name.span,
+                    first,
+                });
+                continue;
+            }
+            seen.push((name, setting.name.span));
             let slot = match setting.name.name.as_str() {
                 "t_end" => &mut out.t_end,
                 "rtol" => &mut out.rtol,

@@ -41,6 +41,8 @@ pub enum CheckError {
     InitNotConstant { state: String, what: String, span: Span },
     #[error("model `{name}` has no states")]
     EmptyModel { name: String, span: Span },
+    #[error("`{name}` is set twice on the `simulate` line")]
+    DuplicateSetting { name: String, span: Span, first: Span },
     #[error("unknown simulate setting `{name}`")]
     UnknownSetting { name: String, span: Span },
     #[error("`{name} = {value}` is out of range")]
@@ -71,6 +73,7 @@ impl CheckError {
             | EmptyRange { span, .. }
             | InitNotConstant { span, .. }
             | EmptyModel { span, .. }
+            | DuplicateSetting { span, .. }
             | UnknownSetting { span, .. }
             | BadSetting { span, .. }
             | DiscontinuousGuard { span, .. } => *span,
@@ -136,6 +139,18 @@ impl CheckError {
                 ("expected an expression of parameters only (no `t`, no states)".to_string(), vec![])
             }
             EmptyModel { .. } => ("expected at least one `state NAME = ...`".to_string(), vec![]),
+            DuplicateSetting { first, .. } => {
+                let column = first.start
+                    - source[..first.start.min(source.len())].rfind('\n').map_or(0, |i| i + 1)
+                    + 1;
+                (
+                    format!(
+                        "expected each setting once; the first is at line {}, column {column}",
+                        line_of(*first)
+                    ),
+                    vec!["one value would silently win over the other".to_string()],
+                )
+            }
             UnknownSetting { .. } => ("expected `t_end`, `rtol` or `atol`".to_string(), vec![]),
             BadSetting { expected, .. } => (format!("expected {expected}"), vec![]),
             DiscontinuousGuard { .. } => (

@@ -170,7 +170,10 @@ fn validate(info: &SystemInfo, opts: &SimOptions) -> Result<(), SimError> {
     if opts.rtol.is_finite() && opts.rtol > 0.0 && opts.rtol < MIN_RTOL {
         return Err(SimError::ToleranceTooSmall { rtol: opts.rtol, floor: MIN_RTOL });
     }
-    let checks: [(&'static str, f64, bool); 6] = [
+    // `max_events = 0` is refused: the cap is checked after an instant's events, so a run would
+    // still fire one and report the cap as 1.
+    let checks: [(&'static str, f64, bool); 7] = [
+        ("max_events", opts.max_events as f64, opts.max_events >= 1),
         ("t_start", opts.t_start, opts.t_start.is_finite()),
         ("t_end", opts.t_end, opts.t_end.is_finite() && opts.t_end >= opts.t_start),
         ("rtol", opts.rtol, opts.rtol.is_finite() && opts.rtol > 0.0),

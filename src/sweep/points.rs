@@ -28,6 +28,9 @@ pub struct VarySpec {
 pub enum VaryError {
     #[error("`{text}` is not a finite number")]
     NotANumber { text: String },
+    /// A decimal a double cannot hold (`1e-400` would round to 0).
+    #[error(transparent)]
+    Unrepresentable(crate::number::NumberError),
     #[error("`{text}`: expected P=LO:HI:N, P=LO:HI, P=V1,V2,... or P")]
     Shape { text: String },
     #[error("`{text}`: the number of grid points must be an integer of at least 2")]
@@ -37,11 +40,11 @@ pub enum VaryError {
 }
 
 fn number(text: &str) -> Result<f64, VaryError> {
-    text.trim()
-        .parse()
-        .ok()
-        .filter(|v: &f64| v.is_finite())
-        .ok_or_else(|| VaryError::NotANumber { text: text.trim().to_string() })
+    use crate::number::NumberError;
+    crate::number::parse_number(text.trim()).map_err(|e| match e {
+        NumberError::TooSmall { .. } => VaryError::Unrepresentable(e),
+        _ => VaryError::NotANumber { text: text.trim().to_string() },
+    })
 }
 
 /// Parses one `--vary` value: `P=LO:HI:N`, `P=LO:HI`, `P=V1,V2,...` or `P`.

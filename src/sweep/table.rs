@@ -5,9 +5,12 @@
 //! Columns, in order (`K` = the number of events shown, grads = the differentiated parameters
 //! shown):
 //! - every parameter, in declaration order;
-//! - `status`: `ok` (ended at t_end or by a `stop` event), `non_finite` (ended as asked, but a
-//!   final state or output is NaN or infinite), `zeno`, `max_events`, `stuck`, `fault` (ended
-//!   early) or `error` (the run was refused);
+//! - `status` (`crate::status::RunStatus`, the vocabulary Python's `Run.status` and `hybc.jax`
+//!   share): `ok` (ended at t_end or by a `stop` event, every derivative exists), `grazing` (an
+//!   event grazed its guard: derivatives depending on its time are empty), `not_differentiable`
+//!   (some derivative stopped existing), `non_finite` (ended as asked, but a final state or output
+//!   is NaN or infinite), `zeno`, `max_events`, `stuck`, `fault` (ended early) or `error` (the run
+//!   was refused);
 //! - `events`: how many events fired;
 //! - for k = 1..=K: `event<k>` (its name), `t<k>` (its time), `dt<k>/d<p>` per grad;
 //! - `t_final`: the time the run ended;
@@ -128,12 +131,7 @@ impl<'a> Columns<'a> {
         let (n, k, m) = (self.info.n_states(), self.info.n_outputs(), self.info.n_grad());
         let complete = r.stopped_by.is_complete();
         let non_finite = if complete { self.non_finite(r) } else { None };
-        let status = match (complete, &non_finite) {
-            (true, None) => "ok",
-            (true, Some(_)) => "non_finite",
-            (false, _) => r.stopped_by.name(),
-        };
-        row.push(Cell::Text(status.into()));
+        row.push(Cell::Text(crate::status::RunStatus::of(self.info, r).name().into()));
         row.push(Cell::Count(r.events.len()));
         for slot in 0..self.events {
             match r.events.get(slot) {

@@ -76,18 +76,24 @@ fn ident(pair: Pair<Rule>) -> Ident {
 
 fn number(pair: Pair<Rule>) -> Result<Number, ParseError> {
     let span = span_of(&pair);
-    let value: f64 = pair.as_str().parse().map_err(|_| ParseError {
-        span,
-        message: format!("`{}` is not a number", pair.as_str()),
-        expected: String::new(),
-    })?;
-    if !value.is_finite() {
-        return Err(ParseError {
+    use crate::number::{parse_number, NumberError};
+    let text = pair.as_str();
+    let value = parse_number(text).map_err(|e| match e {
+        NumberError::TooLarge { .. } | NumberError::NotFinite { .. } => ParseError {
             span,
-            message: format!("number `{}` is too large", pair.as_str()),
+            message: format!("number `{text}` is too large"),
             expected: "a finite number".to_string(),
-        });
-    }
+        },
+        // A literal that rounds to 0 would silently be 0 (`param a = 1e-400`).
+        NumberError::TooSmall { .. } => ParseError {
+            span,
+            message: format!("number `{text}` is too small for a double: it would round to 0"),
+            expected: "a number of magnitude at least 4.9e-324, or 0".to_string(),
+        },
+        NumberError::NotANumber { .. } => {
+            ParseError { span, message: format!("`{text}` is not a number"), expected: String::new() }
+        }
+    })?;
     Ok(Number { value, span })
 }
 
@@ -485,7 +491,13 @@ fn found_at(source: &str, pos: usize) -> (String, usize) {
         return ("end of line".to_string(), 0);
     }
     if crate::diag::is_invisible(c) {
-        let kind = if c.is_control() { "control character" } else { "invisible character" };
+        let kind = if c.is_control() {
+            "control character"
+        } else if crate::diag::is_combining(c) {
+            "combining character"
+        } else {
+            "invisible character"
+        };
         return (format!("{kind} {}", crate::diag::escaped(c)), c.len_utf8());
     }
     let word: String =

@@ -178,6 +178,9 @@ fn bounds_hold_the_restitution_at_the_end_of_its_range() {
     let ball = Fixture::ball(&["e"]);
     let r = ball.fit(&[("e", 0.95)], &["energy=12"]);
     assert_eq!(r.stop, FitStop::Gradient);
+    // A least-squares minimum, but the equation energy = 12 is not solved there.
+    assert!(!r.is_converged() && !r.targets_met(), "{:?}", r.met);
+    assert_eq!(r.tolerances, vec![100.0 * (1e-10 * 12.0 + 1e-12)]);
     assert_eq!(ball.param(&r, "e"), 1.0);
     assert_relative_eq!(r.evaluation.residuals[0], G - 12.0, max_relative = 1e-9);
     for it in &r.iterations {
@@ -276,8 +279,12 @@ fn a_start_without_the_target_is_an_error_not_a_fit() {
 fn weights_pull_the_fit_towards_the_heavier_target() {
     // Two energies with weights 1 and 3: the minimum of (E - 2)^2 + 9 (E - 2.2)^2 is E = 2.18.
     let ball = Fixture::ball(&["e"]);
+    // The two targets contradict each other: the weighted least-squares minimum is found (inside
+    // the bounds), but neither equation holds there, so the fit is not converged.
     let r = ball.fit(&[], &["energy=2.0", "energy=2.2@3"]);
-    assert!(r.is_converged(), "{:?}", r.stop);
+    assert!(r.stop.is_converged(), "{:?}", r.stop);
+    assert!(!r.is_converged());
+    assert_eq!(r.met, vec![false, false]);
     assert_relative_eq!(ball.param(&r, "e"), (2.18 / G).powf(1.0 / 8.0), max_relative = 1e-8);
     assert_relative_eq!(r.evaluation.residuals[1], 3.0 * (2.18 - 2.2), max_relative = 1e-6);
 }
@@ -371,6 +378,46 @@ fn cli_exit_codes_for_no_convergence_and_a_bad_start() {
     assert_eq!(out.status.code(), Some(3));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("target `y` has no gradient: a grazing event"), "{stderr}");
+}
+
+#[test]
+fn cli_unreachable_targets_exit_4_naming_the_residuals_and_the_bound() {
+    // From e = 0.8 (4 bounces) E = 20 is beyond g h0 = 9.81, the most any e keeps: the fit crosses
+    // to the 3-bounce branch and stops at the bound e = 1, a least-squares minimum that misses the
+    // target by 10.19. Before issue 24 this printed "converged" and exited 0.
+    let out = hybc(&["fit", "models/ball.hyb", "--free", "e", "--target", "energy=20"]);
+    assert_eq!(out.status.code(), Some(4));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    for needle in [
+        "error: targets not met: the fit stopped at a least-squares minimum (the gradient vanishes",
+        "energy = 9.81 against the goal 20 (off by -10.19, tolerance 2.0e-7)",
+        "held at a bound: e = 1",
+    ] {
+        assert!(stderr.contains(needle), "missing `{needle}`:\n{stderr}");
+    }
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(table.contains("not met") && !table.contains("converged"), "{table}");
+
+    let (json, out) = fit_json(&["--free", "e", "--target", "energy=20"]);
+    assert_eq!(out.status.code(), Some(4));
+    assert_eq!(json["converged"], false);
+    assert_eq!(json["reason"], "targets_not_met");
+    assert_eq!(json["residuals"][0]["met"], false);
+    assert_relative_eq!(f(&json["residuals"][0]["tolerance"]), 100.0 * (1e-10 * 20.0 + 1e-12));
+    assert_relative_eq!(f(&json["residuals"][0]["value"]), G, max_relative = 1e-9);
+
+    // Contradictory targets inside the bounds: the weighted minimum E = 2.18 meets neither.
+    let out =
+        hybc(&["fit", "models/ball.hyb", "--free", "e", "--target", "energy=2", "--target", "energy=2.2@3"]);
+    assert_eq!(out.status.code(), Some(4));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("targets not met") && stderr.contains("energy = 2.18"), "{stderr}");
+    assert!(!stderr.contains("held at a bound"), "{stderr}");
+
+    // A met target still exits 0 and says so per residual.
+    let (json, out) = fit_json(&["--free", "e", "--target", "energy=2"]);
+    assert_eq!(out.status.code(), Some(0));
+    assert_eq!(json["residuals"][0]["met"], true);
 }
 
 #[test]

@@ -337,3 +337,112 @@ fn a_fault_without_the_model_at_hand_says_the_same_with_indices() {
     let fault = SimError::TooManySteps { t: 0.25, max_steps: 5, mode: 1, state: vec![0.1] };
     assert_eq!(fault.to_string(), "more than 5 steps at t = 0.25 in mode 1, state x[0] = 0.1");
 }
+
+// ---- issue 24, item 13: bad input gets a clear message ----
+
+/// `source` written to a file in `dir`, its path.
+fn model_file(dir: &tempfile::TempDir, source: &str) -> String {
+    let path = dir.path().join("m.hyb");
+    std::fs::write(&path, source).expect("model written");
+    path.to_str().expect("utf-8").to_string()
+}
+
+/// `hybc check` of `source`: exit 1 and the rendered diagnostics (stderr).
+fn check_error(source: &str) -> String {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = model_file(&dir, source);
+    let out = hybc(&["check", &path]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    err.replace(&path, "m.hyb")
+}
+
+#[test]
+fn max_events_0_is_refused_instead_of_reported_as_1() {
+    // The cap is checked after each instant, so 0 used to fire the first touchdown and say
+    // "reached --max-events 1". Refused everywhere, with the flag and the bound named.
+    usage_error(&["run", "models/ball.hyb", "--max-events", "0"], "--max-events: at least 1, found 0");
+    usage_error(
+        &["sweep", "models/ball.hyb", "--vary", "e=0.5", "--max-events", "0"],
+        "--max-events: at least 1",
+    );
+    usage_error(
+        &["fit", "models/ball.hyb", "--free", "e", "--target", "energy=1", "--max-events", "0"],
+        "--max-events: at least 1",
+    );
+    // The library refuses it too (Python's `max_events=0` and every other caller).
+    let model = hybc::Model::parse(include_str!("../../models/ball.hyb")).expect("ball checks");
+    let compiled = model.compile::<&str>(&[]).expect("compiles");
+    let opts = hybc::SimOptions { max_events: 0, ..model.sim_options() };
+    let err = compiled.simulate(&model.params(), &opts).expect_err("refused").to_string();
+    assert!(err.contains("max_events"), "{err}");
+    // 1 is the smallest cap and means what it says.
+    let out = hybc(&["run", "models/ball.hyb", "--max-events", "1"]);
+    assert!(stderr(&out).contains("reached --max-events 1 at t = 0.45"), "{}", stderr(&out));
+}
+
+#[test]
+fn a_simulate_setting_given_twice_is_an_error_at_the_second() {
+    let err = check_error("model m\nstate x = 1\nder(x) = 1\nsimulate t_end = 1, t_end = 2\n");
+    assert!(err.contains("error: `t_end` is set twice on the `simulate` line"), "{err}");
+    assert!(err.contains("m.hyb:4:21"), "{err}");
+    assert!(err.contains("expected each setting once; the first is at line 4, column 10"), "{err}");
+    // The caret is under the second `t_end`.
+    let line = err.lines().find(|l| l.contains("simulate t_end")).expect("source line");
+    let caret = err.lines().find(|l| l.contains('^')).expect("caret line");
+    assert_eq!(caret.find('^'), line.rfind("t_end"), "{err}");
+    assert_eq!(caret.matches('^').count(), "t_end".len(), "{err}");
+}
+
+#[test]
+fn numbers_a_double_cannot_hold_are_refused_not_rounded_to_0() {
+    // In the model text: a parse error with a caret under the literal.
+    let err = check_error("model m\nparam a = 1e-400\nstate x = a\nder(x) = 1\n");
+    assert!(err.contains("error: number `1e-400` is too small for a double: it would round to 0"), "{err}");
+    assert!(err.contains("m.hyb:2:11"), "{err}");
+    assert!(err.contains("expected a number of magnitude at least 4.9e-324, or 0"), "{err}");
+    let err = check_error("model m\nstate x = 1\nder(x) = 2.5e-999 * x\n");
+    assert!(err.contains("number `2.5e-999` is too small") && err.contains("m.hyb:3:10"), "{err}");
+    // A subnormal is a double: accepted. An explicit zero is zero.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = model_file(&dir, "model m\nparam a = 1e-310\nparam b = 0e-999\nstate x = a\nder(x) = b\n");
+    assert_eq!(hybc(&["check", &path]).status.code(), Some(0));
+    // On the command line: the flag and the value named.
+    usage_error(
+        &["run", "models/ball.hyb", "--set", "h0=1e-400"],
+        "--set h0: `1e-400` is too small for a double: it would round to 0",
+    );
+    usage_error(
+        &["sweep", "models/ball.hyb", "--vary", "h0=1e-400:1:3"],
+        "`1e-400` is too small for a double",
+    );
+    usage_error(
+        &["fit", "models/ball.hyb", "--free", "e", "--target", "energy=1e-400"],
+        "--target: `1e-400` is too small for a double",
+    );
+    usage_error(&["run", "models/ball.hyb", "--set", "h0=1e400"], "--set: `1e400` is not a finite number");
+}
+
+#[test]
+fn zero_width_and_combining_characters_are_escaped_in_diagnostics() {
+    // `e` + U+0301 used to print as `é` with no caret; U+200B (zero width) as nothing.
+    let err = check_error("model m\nstate x = 1\nder(x) = 1 + e\u{301} 2\n");
+    assert!(!err.contains('\u{301}'), "{err}");
+    assert!(err.contains("error: unexpected combining character <U+0301>"), "{err}");
+    assert!(err.contains("der(x) = 1 + e<U+0301> 2"), "{err}");
+    assert!(err.contains("m.hyb:3:15"), "{err}");
+    let caret = err.lines().find(|l| l.contains('^')).expect("caret line");
+    let line = err.lines().find(|l| l.contains("<U+0301>") && l.contains("der")).expect("line");
+    assert_eq!(caret.find('^'), line.find("<U+0301>"), "{err}");
+    for (c, tag) in [
+        ('\u{200B}', "<U+200B>"),
+        ('\u{200D}', "<U+200D>"),
+        ('\u{2060}', "<U+2060>"),
+        ('\u{FEFF}', "<U+FEFF>"),
+    ] {
+        let err = check_error(&format!("model m\nstate x = 1\nder(x) = 1 +{c} 2\n"));
+        assert!(!err.contains(c), "{tag}: {err}");
+        assert!(err.contains(&format!("unexpected invisible character {tag}")), "{tag}: {err}");
+        assert!(err.contains(&format!("der(x) = 1 +{tag} 2")), "{tag}: {err}");
+    }
+}

@@ -224,7 +224,8 @@ impl Function {
     }
 
     fn fill(&self, slot: Slots<'_>, result: &SimResult) {
-        let code = status::of_run(result);
+        // Both engines compile the same model: the names (for non-finite finals) are the same.
+        let code = status::of_run(self.plain.compiled.info(), result);
         *slot.status = code;
         *slot.n_events = i32::try_from(result.events.len()).unwrap_or(i32::MAX);
         let (m, k) = (self.n_inputs(), self.events);

@@ -58,6 +58,9 @@ pub fn jax_register(
         sens_error_control,
         h_max,
     };
+    // Each slot is a row of every output's Jacobian too: the cap of `hybc sweep --events`.
+    hybc::limits::count("events", events, 0, hybc::limits::MAX_EVENT_COLUMNS)
+        .map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))?;
     let inner = model.inner();
     let opts = keywords.options(inner)?;
     let checked = inner.checked();

@@ -1,8 +1,10 @@
 //! The `status` output of a JAX call: why a point's numbers are what they are, as a small integer
 //! (traced code cannot raise). The mapping is a contract shared with `hybc/jax.py` (`STATUS`) and
-//! the README; `python/tests/test_jax.py` reaches every code but `stuck`.
+//! the README; `python/tests/test_jax.py` reaches every code but `stuck` and `non_finite`
+//! (both decided by `hybc::status::RunStatus::of`; `non_finite` sweep rows: tests/it/limits.rs).
 
-use hybc::sim::{SimResult, SimWarning, StopReason};
+use hybc::sim::{SimResult, SystemInfo};
+use hybc::status::RunStatus;
 
 /// The run reached `t_end` (or a `stop` event) and every derivative asked for exists.
 pub const OK: i32 = 0;
@@ -24,26 +26,20 @@ pub const MAX_EVENTS: i32 = 5;
 pub const FAULT: i32 = 6;
 /// An input parameter is not finite or outside its declared range: nothing was run, all NaN.
 pub const BAD_PARAM: i32 = 7;
+/// The run is complete but a final state or output is NaN or infinite.
+pub const NON_FINITE: i32 = 8;
 
-/// The status of a finished run.
-pub fn of_run(result: &SimResult) -> i32 {
-    match &result.stopped_by {
-        StopReason::TEnd | StopReason::Event { .. } => {}
-        StopReason::Zeno { .. } => return ZENO,
-        StopReason::Stuck { .. } => return STUCK,
-        StopReason::MaxEvents { .. } => return MAX_EVENTS,
-        _ => return FAULT,
+/// The status of a finished run: the code of its `hybc::status::RunStatus`, the word Python's
+/// `Run.status` and the sweep rows print for the same run.
+pub fn of_run(info: &SystemInfo, result: &SimResult) -> i32 {
+    match RunStatus::of(info, result) {
+        RunStatus::Ok => OK,
+        RunStatus::Grazing => GRAZING,
+        RunStatus::NotDifferentiable => NOT_DIFFERENTIABLE,
+        RunStatus::NonFinite => NON_FINITE,
+        RunStatus::Zeno => ZENO,
+        RunStatus::Stuck => STUCK,
+        RunStatus::MaxEvents => MAX_EVENTS,
+        RunStatus::Fault => FAULT,
     }
-    let mut status = OK;
-    for warning in &result.warnings {
-        match warning {
-            SimWarning::Grazing { .. } => return GRAZING,
-            SimWarning::SwitchAtEvent { .. } | SimWarning::NotDifferentiable { .. } => {
-                status = NOT_DIFFERENTIABLE
-            }
-            // Exact gradients, valid in a smaller neighbourhood: not a failure.
-            SimWarning::NearGrazing { .. } => {}
-        }
-    }
-    status
 }

@@ -1,0 +1,58 @@
+//! The caps on counts every interface takes (the CLI's flags, the Python keywords, `hybc.jax`):
+//! one definition, so a count that is refused in one place is refused everywhere with the same
+//! cap. A count costs memory or time in proportion; a cap turns a typo (`events=10**9`) into a
+//! clear error instead of gigabytes allocated or a run of years. README "Limits" gives the table.
+//! No IO: callers name the flag or keyword in the message.
+
+/// Events a run may record (`max_events`, `--max-events`): each record takes about 100 bytes plus
+/// 8 per gradient parameter, so 10^6 events stay well under a gigabyte.
+pub const MAX_EVENTS: usize = 1_000_000;
+/// Event-time columns of a sweep row (`--events`, Python `events=`) and event slots of a
+/// `hybc.jax` function (`events=`): each row or call holds that many names and times (and, in
+/// JAX, that many rows of every Jacobian).
+pub const MAX_EVENT_COLUMNS: usize = 1_000;
+/// Worker threads of a sweep (`--threads`, Python `threads=`): one stack and one simulator each.
+pub const MAX_THREADS: usize = 1024;
+/// Points of a streamed sweep (`hybc sweep`, `hybc.dask.sweep`): rows are written as they
+/// complete, so points cost time, not memory.
+pub const MAX_SWEEP_POINTS: usize = 1_000_000_000;
+/// Points of a sweep whose rows are all kept (Python `Model.sweep` returns its columns; about
+/// 100 bytes per point and column).
+pub const MAX_SWEEP_POINTS_IN_MEMORY: usize = 10_000_000;
+/// Trials of a fit (`--max-iter`): every trial is kept for the report.
+pub const MAX_FIT_ITER: usize = 1_000_000;
+
+/// A count outside its allowed range: `{what}: at least {min}, found {value}` or
+/// `{what}: at most {max}, found {value}`, `what` naming the flag or keyword.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum CountError {
+    #[error("{what}: at least {min}, found {value}")]
+    TooFew { what: String, min: usize, value: usize },
+    #[error("{what}: at most {max}, found {value}")]
+    TooMany { what: String, max: usize, value: usize },
+}
+
+/// `value` if `min <= value <= max`, else the error naming `what`.
+pub fn count(what: &str, value: usize, min: usize, max: usize) -> Result<usize, CountError> {
+    if value < min {
+        Err(CountError::TooFew { what: what.to_string(), min, value })
+    } else if value > max {
+        Err(CountError::TooMany { what: what.to_string(), max, value })
+    } else {
+        Ok(value)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_count_names_what_and_the_bound_it_broke() {
+        assert_eq!(count("--events", 1000, 0, MAX_EVENT_COLUMNS), Ok(1000));
+        let e = count("events", 1001, 0, MAX_EVENT_COLUMNS).unwrap_err();
+        assert_eq!(e.to_string(), "events: at most 1000, found 1001");
+        let e = count("--max-events", 0, 1, MAX_EVENTS).unwrap_err();
+        assert_eq!(e.to_string(), "--max-events: at least 1, found 0");
+    }
+}
