@@ -51,7 +51,7 @@ impl RunStatus {
                 SimWarning::SwitchAtEvent { .. } | SimWarning::NotDifferentiable { .. } => {
                     status = RunStatus::NotDifferentiable
                 }
-                SimWarning::NearGrazing { .. } => {}
+                SimWarning::NearGrazing { .. } | SimWarning::StartsAcross { .. } => {}
             }
         }
         status

@@ -18,7 +18,7 @@ use super::recorder::{Point, PointKind, Recorder};
 use super::result::{EventRecord, FinalState, SimError, SimResult, SimStats, SimWarning, StopReason};
 use super::rk::Rk;
 use super::stepper::{Interpolant, Stepper};
-use super::system::{GuardShape, HybridSystem, SystemInfo};
+use super::system::{Direction, GuardShape, HybridSystem, SystemInfo};
 use super::zeno;
 
 const EPS: f64 = f64::EPSILON;
@@ -309,6 +309,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             }
             let (noise, speed_noise) = self.det.noise0(self.sys, self.info, self.mode, pos, self.p);
             if self.det.g0[pos].abs() > noise {
+                if einfo.direction != Direction::Either
+                    && clear_side(einfo.direction, self.det.g0[pos], noise) == Some(true)
+                {
+                    let (name, guard) = (einfo.name.clone(), self.det.g0[pos]);
+                    self.warnings.push(SimWarning::StartsAcross { event: ev, name, time: t, guard });
+                }
                 continue;
             }
             match moves_across(einfo.direction, self.det.dg0[pos], speed_noise) {

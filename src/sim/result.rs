@@ -153,6 +153,10 @@ pub enum SimWarning {
     /// The derivative `d state / d param` (and `count - 1` others) stopped existing at `time`:
     /// the flow's derivative, or the initial state's, is not finite at a finite state there.
     NotDifferentiable { time: f64, state: Arc<str>, param: Arc<str>, count: usize },
+    /// The run starts strictly on the crossed side of a directional guard (the ball below its
+    /// floor): the event fires only after the guard has gone back to its pre-crossing side, which
+    /// is rarely what the model means. The run goes on.
+    StartsAcross { event: usize, name: Arc<str>, time: f64, guard: f64 },
 }
 
 impl fmt::Display for SimWarning {
@@ -172,6 +176,12 @@ impl fmt::Display for SimWarning {
                 f,
                 "`{name}` was crossed at t = {time} together with an event that changed the state \
                  or the mode: no derivative exists from here on"
+            ),
+            SimWarning::StartsAcross { name, time, guard, .. } => write!(
+                f,
+                "the run starts on the crossed side of the guard of event `{name}` (t = {time}, guard \
+                 {guard:e}): it fires only after the guard has gone back across zero; check the initial \
+                 values"
             ),
             SimWarning::NotDifferentiable { time, state, param, count } => write!(
                 f,

@@ -472,3 +472,27 @@ fn a_pulse_train_is_integrated_on_the_branch_that_holds_over_a_sweep_of_its_freq
         }
     }
 }
+
+#[test]
+fn a_run_that_starts_on_the_crossed_side_of_a_directional_guard_is_warned() {
+    let ball = "model ball\nparam h0 = 1\nstate y = h0\nstate v = 0\nder(y) = v\nder(v) = -9.81\n\
+                event touchdown when y <= 0 {\n    v := -0.8 * v\n}\n";
+    let model = hybc::Model::parse(ball).unwrap();
+    let mut o = model.sim_options();
+    o.t_end = 1.0;
+    let compiled = model.compile::<&str>(&[]).unwrap();
+    let below = compiled.simulate(&model.params().with("h0", -1.0).unwrap(), &o).unwrap();
+    let warned = |r: &hybc::Run| r.warnings().iter().any(|w| matches!(w, hybc::sim::SimWarning::StartsAcross { .. }));
+    assert!(warned(&below), "{:?}", below.warnings());
+    assert!(below.events().is_empty());
+    // Above the floor, or on it (the flow decides, rule 5): no such warning.
+    for h0 in [1.0, 0.0] {
+        let r = compiled.simulate(&model.params().with("h0", h0).unwrap(), &o).unwrap();
+        assert!(!warned(&r), "h0 = {h0}: {:?}", r.warnings());
+    }
+    // A `crosses` guard has no crossed side.
+    let either = ball.replace("y <= 0", "y crosses 0");
+    let model = hybc::Model::parse(&either).unwrap();
+    let r = model.compile::<&str>(&[]).unwrap().simulate(&model.params().with("h0", -1.0).unwrap(), &o).unwrap();
+    assert!(!warned(&r), "{:?}", r.warnings());
+}
