@@ -48,9 +48,9 @@ impl RunStatus {
         for warning in &result.warnings {
             match warning {
                 SimWarning::Grazing { .. } => return RunStatus::Grazing,
-                SimWarning::SwitchAtEvent { .. } | SimWarning::NotDifferentiable { .. } => {
-                    status = RunStatus::NotDifferentiable
-                }
+                SimWarning::SwitchAtEvent { .. }
+                | SimWarning::NotDifferentiable { .. }
+                | SimWarning::ResetOntoGuard { .. } => status = RunStatus::NotDifferentiable,
                 SimWarning::NearGrazing { .. } | SimWarning::StartsAcross { .. } => {}
             }
         }

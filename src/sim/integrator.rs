@@ -175,6 +175,11 @@ pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = R
     /// The first time past the flow switches crossed at the current instant where their new
     /// branches hold (see `cross_switch`).
     switch_post: Option<f64>,
+    /// Events of the next cascade round whose guard the last round reset onto zero to round-off
+    /// (firing because the flow carries them across): their time derivative does not exist.
+    reset_onto_guard: Vec<usize>,
+    /// Their `dt/dp` (NaN where a parameter moves the instant or the guard).
+    onto_guard_dte: Vec<f64>,
 }
 
 impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R, St> {
@@ -244,6 +249,8 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             done: None,
             land_before_switch: None,
             switch_post: None,
+            reset_onto_guard: Vec::new(),
+            onto_guard_dte: Vec::new(),
         };
         if it.z[..n].iter().any(|v| !v.is_finite()) {
             it.done = Some(it.fault_nonfinite());
@@ -732,6 +739,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             return false;
         }
         let mut enabled = false;
+        self.reset_onto_guard.clear();
         let (x_before, g_before) = &mut *self.before;
         g_before.resize(ne, 0.0);
         self.sys.guards(self.mode, t, x_before, self.p, &mut g_before[..ne]);
@@ -751,7 +759,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 Some(true) => g_before[pos].signum(),
                 Some(false) => continue,
                 None => match moves_across(dir, self.det.dg0[pos], speed_noise) {
-                    Some(sigma) => sigma,
+                    Some(sigma) => {
+                        self.reset_onto_guard.push(ev);
+                        sigma
+                    }
                     None => {
                         if self.det.dg0[pos].abs() <= speed_noise {
                             reset_onto.push(pos);
@@ -884,7 +895,28 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             }
             let mode_before = self.mode;
             let mode_after = einfo.target_mode.unwrap_or(mode_before);
+            let onto_guard = cascade && self.reset_onto_guard.contains(&ev);
+            if onto_guard {
+                // Put on its guard by a reset, to round-off: a parameter change lands the state
+                // before the guard (the event fires later, by the flow) or across it (now), with
+                // different derivatives on the two sides. None exists where the parameter moves
+                // the instant or this guard; where it moves neither, 0.
+                let (mut gx, mut gp) = (vec![0.0; n], vec![0.0; self.m]);
+                self.sys.guard_grad(ev, t, x, self.p, &mut gx, &mut gp);
+                self.onto_guard_dte.clear();
+                for j in 0..self.m {
+                    let moved = dot_nonzero(&gx, &s[j * n..(j + 1) * n]) + gp[j];
+                    let still = moved == 0.0 && self.instant_dte.get(j).is_none_or(|&d| d == 0.0);
+                    self.onto_guard_dte.push(if still { 0.0 } else { f64::NAN });
+                }
+                self.warnings.push(SimWarning::ResetOntoGuard {
+                    event: ev,
+                    name: einfo.name.clone(),
+                    time: t,
+                });
+            }
             let given = match self.instant {
+                Some(speed) if onto_guard => Some((&self.onto_guard_dte[..], speed)),
                 Some(speed) if cascade => Some((&self.instant_dte[..], speed)),
                 _ => None,
             };

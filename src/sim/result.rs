@@ -157,6 +157,12 @@ pub enum SimWarning {
     /// floor): the event fires only after the guard has gone back to its pre-crossing side, which
     /// is rarely what the model means. The run goes on.
     StartsAcross { event: usize, name: Arc<str>, time: f64, guard: f64 },
+    /// A cascade: the event fired at an instant because a reset there put the state on its guard
+    /// to round-off, with the flow carrying it across. Parameter changes that land the state
+    /// before the guard make it fire later, by the flow; across it, at the instant: the one-sided
+    /// derivatives differ, so its time derivative does not exist, nor does any later derivative
+    /// that depends on it.
+    ResetOntoGuard { event: usize, name: Arc<str>, time: f64 },
 }
 
 impl fmt::Display for SimWarning {
@@ -176,6 +182,12 @@ impl fmt::Display for SimWarning {
                 f,
                 "`{name}` was crossed at t = {time} together with an event that changed the state \
                  or the mode: no derivative exists from here on"
+            ),
+            SimWarning::ResetOntoGuard { name, time, .. } => write!(
+                f,
+                "event `{name}` fired at t = {time} because a reset put the state on its guard (to \
+                 round-off): derivatives that depend on its time do not exist (they differ on the two \
+                 sides of the guard)"
             ),
             SimWarning::StartsAcross { name, time, guard, .. } => write!(
                 f,

@@ -482,7 +482,8 @@ fn a_run_that_starts_on_the_crossed_side_of_a_directional_guard_is_warned() {
     o.t_end = 1.0;
     let compiled = model.compile::<&str>(&[]).unwrap();
     let below = compiled.simulate(&model.params().with("h0", -1.0).unwrap(), &o).unwrap();
-    let warned = |r: &hybc::Run| r.warnings().iter().any(|w| matches!(w, hybc::sim::SimWarning::StartsAcross { .. }));
+    let warned =
+        |r: &hybc::Run| r.warnings().iter().any(|w| matches!(w, hybc::sim::SimWarning::StartsAcross { .. }));
     assert!(warned(&below), "{:?}", below.warnings());
     assert!(below.events().is_empty());
     // Above the floor, or on it (the flow decides, rule 5): no such warning.
@@ -493,6 +494,33 @@ fn a_run_that_starts_on_the_crossed_side_of_a_directional_guard_is_warned() {
     // A `crosses` guard has no crossed side.
     let either = ball.replace("y <= 0", "y crosses 0");
     let model = hybc::Model::parse(&either).unwrap();
-    let r = model.compile::<&str>(&[]).unwrap().simulate(&model.params().with("h0", -1.0).unwrap(), &o).unwrap();
+    let r =
+        model.compile::<&str>(&[]).unwrap().simulate(&model.params().with("h0", -1.0).unwrap(), &o).unwrap();
     assert!(!warned(&r), "{:?}", r.warnings());
+}
+
+#[test]
+fn a_cascade_that_lands_exactly_on_another_guard_has_no_time_derivative() {
+    // At t = 1 `jump` resets x to 1, exactly onto `shift`'s guard x >= b at b = 1, and the flow
+    // carries it across: shift fires in the cascade and doubles y's rate. For b = 1 + d, d > 0,
+    // shift fires at 1 + d (dy(2)/db = -1); for d < 0 at the instant (dy/db = 0): no derivative.
+    // c moves nothing at the instant (dy/dc = 1 exactly, from y's rate before it).
+    let text = "model onto\nparam b = 1\nparam c = 1\nstate x = -5\nstate y = 0\nstate k = c\n\
+                der(x) = 1\nder(y) = k\nder(k) = 0\n\
+                event jump when t >= 1 {\n    x := 1\n}\nevent shift when x >= b {\n    k := 2 * k\n}\n";
+    let r = run(text, &["b", "c"], |o| o.t_end = 2.0);
+    assert_eq!(crate::support::runs::names(&r), ["jump", "shift"]);
+    // y(2) = c + 2 c: exact, with dy/dc = 3; dy/db does not exist.
+    assert_relative_eq!(r.state("y").unwrap(), 3.0, max_relative = 1e-12);
+    assert_relative_eq!(r.dstate("y", "c").unwrap(), 3.0, max_relative = 1e-12);
+    let onto = r.warnings().iter().any(|w| matches!(w, hybc::sim::SimWarning::ResetOntoGuard { .. }));
+    assert!(onto, "{:?}", r.warnings());
+    assert!(r.dstate("y", "b").is_none_or(f64::is_nan), "{:?}", r.dstate("y", "b"));
+    assert!(r.dstate("y", "c").is_some_and(f64::is_finite), "{:?}", r.dstate("y", "c"));
+    // The other side: a reset clearly across the guard fires it at the instant with the
+    // instant's derivative, no warning.
+    let across = text.replace("x := 1\n", "x := 1.5\n");
+    let r = run(&across, &["b"], |o| o.t_end = 2.0);
+    assert!(r.warnings().is_empty(), "{:?}", r.warnings());
+    assert!(r.dstate("y", "b").is_some_and(f64::is_finite));
 }
