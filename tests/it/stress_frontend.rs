@@ -1,6 +1,7 @@
 //! Generated models that stress the front end: 5,000 chained `let`s (in both declaration
-//! orders), 60 `let`s that each use their predecessor twice, a chain of 10,000 states, 700 states
-//! that each read one shared sum (a dense Jacobian), and a chain of `let`s nested past
+//! orders), 60 `let`s that each use their predecessor twice, 20,000 `let`s that square their
+//! predecessor (a derivative nested 20,000 deep for `hybc derive`), a chain of 10,000 states, 700
+//! states that each read one shared sum (a dense Jacobian), and a chain of `let`s nested past
 //! `MAX_EXPR_DEPTH`. Each gives its closed form, through the library and
 //! through the `hybc` command with generous time and peak-memory limits (the real figures are
 //! in the README's Limits section, with their commands).
@@ -14,7 +15,7 @@ use crate::support::measured::{assert_bounded, hybc_measured};
 
 #[path = "../../benches/support/stress_models.rs"]
 mod stress_models;
-use stress_models::{doubling_lets, let_chain, shared_sum, state_chain};
+use stress_models::{doubling_lets, let_chain, shared_sum, squaring_lets, state_chain};
 
 #[test]
 fn five_thousand_chained_lets_give_their_closed_form_in_either_order() {
@@ -64,6 +65,38 @@ fn sixty_doubling_lets_stay_a_dag() {
     let line = out.lines().find(|l| l.contains("big =")).expect("the output line");
     assert!(line.len() < hybc::lower::SHOWN_CHARS + 40 && line.ends_with("..."), "{line}");
     assert_bounded("60 doubling lets, hybc check", elapsed, peak, Duration::from_secs(20), 200.0);
+}
+
+#[test]
+fn twenty_thousand_squaring_lets_derive_in_linear_time_and_memory() {
+    let n = 20_000;
+    let text = squaring_lets(n);
+    let (out, err, code, elapsed, peak) = hybc_measured(&text, &["derive"]);
+    assert_eq!(code, Some(0), "{err}");
+    // Every a_k but the last is used more than once (twice by a_(k+1), and by the derivative),
+    // so each is hoisted into a `let` of the mode block; the derivative df/dc nests n deep: one
+    // line of O(n) characters. Printing kept the text of every partial derivative, O(n^2)
+    // characters (out of memory at 4 GB for this model).
+    let lets = out.lines().filter(|l| l.trim_start().starts_with("let w")).count();
+    assert_eq!(lets, n - 1);
+    let f_c = out.lines().find(|l| l.trim_start().starts_with("f_c = [1 + 2 * ")).expect("f_c");
+    assert!(f_c.matches("1 + 2 * ").count() >= n - 1000, "{}", &f_c[..200]);
+    assert!(out.len() < 100 * n, "{} bytes", out.len());
+    assert_bounded("20,000 squaring lets, hybc derive", elapsed, peak, Duration::from_secs(60), 400.0);
+
+    // One flow entry whose sensitivity kernel computes 140,000 nodes: 36 s to compile with the
+    // backtracking allocator (release build), a fraction of a second with the single-pass one
+    // that `RegAlloc::Auto` now picks past `AUTO_REGALLOC_NODE_LIMIT`.
+    let model = Model::parse(&text).expect("checks");
+    let started = std::time::Instant::now();
+    let compiled = model.compile(&["c"]).expect("compiles");
+    let compile_time = started.elapsed();
+    assert!(compile_time < Duration::from_secs(20), "compile took {compile_time:?}");
+    let run = compiled.simulate(&model.params(), &model.sim_options()).expect("runs");
+    let c: f64 = 0.01;
+    let root = (1.0 - 4.0 * c).sqrt();
+    assert_relative_eq!(run.state("x").unwrap(), (1.0 - root) / 2.0, max_relative = 1e-12);
+    assert_relative_eq!(run.dstate("x", "c").unwrap(), 1.0 / root, max_relative = 1e-12);
 }
 
 #[test]
