@@ -2,11 +2,9 @@
 //! a table or as the JSON object whose field names are a documented contract (README).
 //! Knows `sim`'s results and shapes; no IO.
 
-use std::fmt::Write as _;
-
 use serde_json::{json, Map, Value};
 
-use crate::sim::{SimResult, StopReason, SystemInfo};
+use crate::sim::{EventRecord, SimResult, StopReason, SystemInfo};
 
 /// The result of one run, with the names needed to report it.
 #[derive(Clone, Debug)]
@@ -74,30 +72,78 @@ impl RunReport {
             .flatten()
     }
 
-    /// The JSON object documented in the README.
+    /// The JSON object documented in the README, as one value (the library's and Python's
+    /// `to_json`). `write_json` writes the same text without building it.
     pub fn to_json(&self) -> Value {
+        let fields = self.json_fields();
+        let map: Map<String, Value> = fields
+            .into_iter()
+            .map(|(key, field)| {
+                let value = match field {
+                    JsonField::Value(v) => v,
+                    JsonField::Events => {
+                        Value::Array(self.result.events.iter().map(|e| self.event_json(e)).collect())
+                    }
+                };
+                (key.to_string(), value)
+            })
+            .collect();
+        Value::Object(map)
+    }
+
+    /// Writes the text of `to_json` (compact, as `Value`'s `Display` prints it), with `extra`
+    /// fields appended, one event at a time: a run at the `--max-events` cap (10^6) holds its
+    /// `SimResult` and one event's value, not a tree of 10^6 objects (about 4 KB each).
+    pub fn write_json(&self, out: &mut impl std::io::Write, extra: &[(&str, Value)]) -> std::io::Result<()> {
+        let fields = self.json_fields();
+        let extra = extra.iter().map(|(key, value)| (*key, JsonField::Value(value.clone())));
+        out.write_all(b"{")?;
+        for (i, (key, field)) in fields.into_iter().chain(extra).enumerate() {
+            if i > 0 {
+                out.write_all(b",")?;
+            }
+            serde_json::to_writer(&mut *out, key)?;
+            out.write_all(b":")?;
+            match field {
+                JsonField::Value(v) => serde_json::to_writer(&mut *out, &v)?,
+                JsonField::Events => {
+                    out.write_all(b"[")?;
+                    for (k, e) in self.result.events.iter().enumerate() {
+                        if k > 0 {
+                            out.write_all(b",")?;
+                        }
+                        serde_json::to_writer(&mut *out, &self.event_json(e))?;
+                    }
+                    out.write_all(b"]")?;
+                }
+            }
+        }
+        out.write_all(b"}")
+    }
+
+    /// One event record of the JSON contract.
+    fn event_json(&self, e: &EventRecord) -> Value {
+        json!({
+            "index": e.index,
+            "name": e.name,
+            "time": e.time,
+            "mode_before": self.mode_name(e.mode_before),
+            "mode_after": self.mode_name(e.mode_after),
+            "dtime": e.dtime.as_ref().map(|d| self.by_param(d, 1, 0)),
+            "grazing": e.grazing,
+            "margin": e.margin,
+            "denominator": e.denominator,
+        })
+    }
+
+    /// The JSON contract's top-level fields in their order, the events left to the writer: the one
+    /// definition behind `to_json` and `write_json`.
+    fn json_fields(&self) -> Vec<(&'static str, JsonField)> {
         let r = &self.result;
         let f = &r.final_state;
         let grad = self.grad_names();
         let params: Map<String, Value> =
             self.info.param_names.iter().zip(&self.params).map(|(n, v)| (n.clone(), json!(v))).collect();
-        let events: Vec<Value> = r
-            .events
-            .iter()
-            .map(|e| {
-                json!({
-                    "index": e.index,
-                    "name": e.name,
-                    "time": e.time,
-                    "mode_before": self.mode_name(e.mode_before),
-                    "mode_after": self.mode_name(e.mode_after),
-                    "dtime": e.dtime.as_ref().map(|d| self.by_param(d, 1, 0)),
-                    "grazing": e.grazing,
-                    "margin": e.margin,
-                    "denominator": e.denominator,
-                })
-            })
-            .collect();
         let named = |names: &[String], v: &[f64]| -> Value {
             Value::Object(names.iter().zip(v).map(|(n, x)| (n.clone(), number_json(*x))).collect())
         };
@@ -117,33 +163,43 @@ impl RunReport {
         let mut warnings: Vec<String> = r.warnings.iter().map(|w| w.to_string()).collect();
         warnings.extend(self.failure());
         warnings.extend(self.non_finite());
-        json!({
-            "model": self.model,
-            "t_end": self.t_end,
-            "params": params,
-            "grad": grad,
-            "events": events,
-            "final": fin,
-            "stopped_by": stopped_by,
-            "warnings": warnings,
-            "stats": {
-                "steps": r.stats.steps,
-                "rejected": r.stats.rejected,
-                "rhs_calls": r.stats.rhs_calls,
-                "events": r.stats.events,
-                "switches": r.stats.switches,
-                "compile_seconds": self.compile_seconds,
-                "run_seconds": self.run_seconds,
-            },
-        })
+        vec![
+            ("model", JsonField::Value(json!(self.model))),
+            ("t_end", JsonField::Value(json!(self.t_end))),
+            ("params", JsonField::Value(Value::Object(params))),
+            ("grad", JsonField::Value(json!(grad))),
+            ("events", JsonField::Events),
+            ("final", JsonField::Value(fin)),
+            ("stopped_by", JsonField::Value(stopped_by)),
+            ("warnings", JsonField::Value(json!(warnings))),
+            (
+                "stats",
+                JsonField::Value(json!({
+                    "steps": r.stats.steps,
+                    "rejected": r.stats.rejected,
+                    "rhs_calls": r.stats.rhs_calls,
+                    "events": r.stats.events,
+                    "switches": r.stats.switches,
+                    "compile_seconds": self.compile_seconds,
+                    "run_seconds": self.run_seconds,
+                })),
+            ),
+        ]
     }
 
     /// The human-readable table `hybc run` prints by default.
     pub fn to_table(&self) -> String {
+        let mut out = String::new();
+        let _ = self.write_table(&mut out);
+        out
+    }
+
+    /// Writes the text of `to_table` a line at a time (a run at the `--max-events` cap prints
+    /// 10^6 event lines, about 90 MB, better not held whole).
+    pub fn write_table<W: std::fmt::Write>(&self, out: &mut W) -> std::fmt::Result {
         let r = &self.result;
         let f = &r.final_state;
         let grad = self.grad_names();
-        let mut out = String::new();
         let params: Vec<String> = self
             .info
             .param_names
@@ -151,11 +207,11 @@ impl RunReport {
             .zip(&self.params)
             .map(|(n, v)| format!("{n} = {}", num(*v)))
             .collect();
-        let _ = writeln!(out, "model {}   t_end = {}   {}", self.model, num(self.t_end), params.join(", "));
+        writeln!(out, "model {}   t_end = {}   {}", self.model, num(self.t_end), params.join(", "))?;
         let dcols: String = grad.iter().map(|p| format!("  {:>18}", format!("dt/d{p}"))).collect();
-        let _ = writeln!(out, "\nevents: {}", r.events.len());
+        writeln!(out, "\nevents: {}", r.events.len())?;
         if !r.events.is_empty() {
-            let _ = writeln!(out, "  {:>4}  {:>18}  {:<14}  {:<22}{dcols}", "#", "time", "event", "mode");
+            writeln!(out, "  {:>4}  {:>18}  {:<14}  {:<22}{dcols}", "#", "time", "event", "mode")?;
         }
         for e in &r.events {
             let (before, after) = (self.mode_name(e.mode_before), self.mode_name(e.mode_after));
@@ -169,13 +225,12 @@ impl RunReport {
                 (false, Some(margin)) => format!("  near-grazing (margin {margin:e})"),
                 (false, None) => String::new(),
             };
-            let _ =
-                writeln!(out, "  {:>4}  {:>18}  {:<14}  {:<22}{d}{flag}", e.index, num(e.time), e.name, mode);
+            writeln!(out, "  {:>4}  {:>18}  {:<14}  {:<22}{d}{flag}", e.index, num(e.time), e.name, mode)?;
         }
         let dcols: String = grad.iter().map(|p| format!("  {:>18}", format!("d/d{p}"))).collect();
-        let _ = writeln!(out, "\nfinal: t = {}, mode {}", num(f.time), self.mode_name(f.mode));
-        let _ = writeln!(out, "  {:<14}  {:>18}{dcols}", "", "value");
-        let rows = |out: &mut String, names: &[String], v: &[f64], d: &Option<Vec<f64>>| {
+        writeln!(out, "\nfinal: t = {}, mode {}", num(f.time), self.mode_name(f.mode))?;
+        writeln!(out, "  {:<14}  {:>18}{dcols}", "", "value")?;
+        let rows = |out: &mut W, names: &[String], v: &[f64], d: &Option<Vec<f64>>| -> std::fmt::Result {
             for (i, (n, x)) in names.iter().zip(v).enumerate() {
                 let ds: String = match d {
                     Some(d) => (0..grad.len())
@@ -183,22 +238,23 @@ impl RunReport {
                         .collect(),
                     None => grad.iter().map(|_| format!("  {:>18}", "-")).collect(),
                 };
-                let _ = writeln!(out, "  {n:<14}  {:>18}{ds}", num(*x));
+                writeln!(out, "  {n:<14}  {:>18}{ds}", num(*x))?;
             }
+            Ok(())
         };
-        rows(&mut out, &self.info.state_names, &f.state, &f.dstate);
-        rows(&mut out, &self.info.output_names, &f.outputs, &f.doutputs);
+        rows(out, &self.info.state_names, &f.state, &f.dstate)?;
+        rows(out, &self.info.output_names, &f.outputs, &f.doutputs)?;
         if let StopReason::Event { name, .. } = &r.stopped_by {
-            let _ = writeln!(out, "\nstopped by event {name}; total derivatives at the stopping instant:");
-            rows(&mut out, &self.info.state_names, &f.state, &f.dstate_total);
-            rows(&mut out, &self.info.output_names, &f.outputs, &f.doutputs_total);
+            writeln!(out, "\nstopped by event {name}; total derivatives at the stopping instant:")?;
+            rows(out, &self.info.state_names, &f.state, &f.dstate_total)?;
+            rows(out, &self.info.output_names, &f.outputs, &f.doutputs_total)?;
         }
         let switches = match r.stats.switches {
             0 => String::new(),
             1 => ", 1 flow switch crossed".to_string(),
             k => format!(", {k} flow switches crossed"),
         };
-        let _ = writeln!(
+        writeln!(
             out,
             "\n{} steps ({} rejected), {} kernel calls{switches}, compile {:.2} ms, run {:.1} us",
             r.stats.steps,
@@ -206,9 +262,14 @@ impl RunReport {
             r.stats.rhs_calls,
             self.compile_seconds * 1e3,
             self.run_seconds * 1e6
-        );
-        out
+        )
     }
+}
+
+/// A top-level field of the JSON contract: a value, or the events (written one at a time).
+enum JsonField {
+    Value(Value),
+    Events,
 }
 
 /// A derivative as the table prints it: `-` where it does not exist (NaN).

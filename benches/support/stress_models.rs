@@ -42,3 +42,43 @@ pub fn state_chain(n: usize) -> String {
     text.push_str("simulate t_end = 1\n");
     text
 }
+
+/// `let a_k = a_(k-1) * a_(k-1) + c`, `n` times from `a0 = x`, and `der(x) = a_n`: each let uses
+/// its predecessor twice, and the derivative `da_n/dc = 1 + 2 a_(n-1) (1 + 2 a_(n-2) (...))` nests
+/// `n` deep (a text of `O(n)` characters, and `O(n^2)` if every partial text were kept). For
+/// `0 <= x << 1` and `c < 1/4` the iteration reaches its fixed point `a* = (1 - sqrt(1 - 4c)) / 2`
+/// within a few hundred lets, where `da*/dc = 1 / sqrt(1 - 4c)` and `da_n/dx` has underflowed to
+/// 0: x(T) = a* T, dx/dc = T / sqrt(1 - 4c).
+pub fn squaring_lets(n: usize) -> String {
+    let mut text = String::from("model squares\nparam c = 0.01\nstate x = 0\nlet a0 = x\n");
+    for k in 1..=n {
+        text.push_str(&format!("let a{k} = a{} * a{} + c\n", k - 1, k - 1));
+    }
+    text.push_str(&format!("der(x) = a{n}\nsimulate t_end = 1\n"));
+    text
+}
+
+/// `n` states that each read one shared sum of all of them: `der(x_i) = -k x_i + 0.001 s`,
+/// `s = x_0 + ... + x_(n-1)` (written as partial sums of 100 terms, since a line holds at most
+/// 4096 characters), x_i(0) = 1. The Jacobian `f_x` is dense, `n^2` entries. By symmetry every
+/// x_i stays equal: x' = (-k + 0.001 n) x, so x_i(t) = exp((0.001 n - k) t) and
+/// dx_i/dk = -t x_i(t).
+pub fn shared_sum(n: usize) -> String {
+    let mut text = String::from("model shared\nparam k = 1\n");
+    for i in 0..n {
+        text.push_str(&format!("state x{i} = 1\n"));
+    }
+    let chunks: Vec<Vec<usize>> =
+        (0..n).step_by(100).map(|start| (start..n.min(start + 100)).collect()).collect();
+    for (c, chunk) in chunks.iter().enumerate() {
+        let terms: Vec<String> = chunk.iter().map(|i| format!("x{i}")).collect();
+        text.push_str(&format!("let s{c} = {}\n", terms.join(" + ")));
+    }
+    let partial: Vec<String> = (0..chunks.len()).map(|c| format!("s{c}")).collect();
+    text.push_str(&format!("let s = {}\n", partial.join(" + ")));
+    for i in 0..n {
+        text.push_str(&format!("der(x{i}) = -k * x{i} + 0.001 * s\n"));
+    }
+    text.push_str("simulate t_end = 1\n");
+    text
+}

@@ -133,6 +133,20 @@ impl Run {
         }
     }
 
+    /// The report, taking this run's result rather than copying it (a run at the
+    /// `--max-events` cap holds 10^6 event records).
+    pub fn into_report(self) -> RunReport {
+        RunReport {
+            model: self.compiled.model().name().to_string(),
+            t_end: self.t_end,
+            info: self.info().clone(),
+            params: self.params,
+            result: self.result,
+            compile_seconds: self.compiled.compile_seconds(),
+            run_seconds: self.run_seconds,
+        }
+    }
+
     fn info(&self) -> &crate::sim::SystemInfo {
         self.compiled.info()
     }

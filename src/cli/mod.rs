@@ -136,6 +136,45 @@ pub(crate) fn parse_param_list(
 /// the reader has what it wanted.
 pub(crate) fn print_out(text: &str) {
     use std::io::Write as _;
-    let mut out = std::io::stdout().lock();
-    let _ = out.write_all(text.as_bytes()).and_then(|()| out.flush());
+    write_out(|out| out.write_all(text.as_bytes()));
+}
+
+/// A `fmt::Write` over an `io::Write`, keeping the IO error that `fmt::Error` cannot carry.
+pub(crate) struct FmtIo<'w, W: std::io::Write> {
+    inner: &'w mut W,
+    error: Option<std::io::Error>,
+}
+
+impl<'w, W: std::io::Write> FmtIo<'w, W> {
+    pub(crate) fn new(inner: &'w mut W) -> Self {
+        FmtIo { inner, error: None }
+    }
+
+    /// The outcome of a formatted write through this adapter, as an IO result.
+    pub(crate) fn result(self, written: std::fmt::Result) -> std::io::Result<()> {
+        match (self.error, written) {
+            (Some(e), _) => Err(e),
+            (None, Ok(())) => Ok(()),
+            (None, Err(_)) => Err(std::io::Error::other("formatting failed")),
+        }
+    }
+}
+
+impl<W: std::io::Write> std::fmt::Write for FmtIo<'_, W> {
+    fn write_str(&mut self, s: &str) -> std::fmt::Result {
+        self.inner.write_all(s.as_bytes()).map_err(|e| {
+            self.error = Some(e);
+            std::fmt::Error
+        })
+    }
+}
+
+/// Lets `write` stream to a buffered stdout, and ignores a closed pipe as `print_out` does (the
+/// first failed write ends the output).
+pub(crate) fn write_out(
+    write: impl FnOnce(&mut std::io::BufWriter<std::io::StdoutLock>) -> std::io::Result<()>,
+) {
+    use std::io::Write as _;
+    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
+    let _ = write(&mut out).and_then(|()| out.flush());
 }

@@ -1,6 +1,7 @@
 //! `hybc run FILE`: compile a model, simulate it with sensitivities and report events, final state,
 //! outputs and their gradients.
 
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
@@ -244,7 +245,7 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         // Rows go to the file as the run records them.
         (Some(path), None) => run_streaming(&compiled, &params, &opts, path)?,
         (trajectory, _) => {
-            let report = compiled.simulate(&params, &opts).map_err(|e| error_chain(&e))?.report();
+            let report = compiled.simulate(&params, &opts).map_err(|e| error_chain(&e))?.into_report();
             if let Some(path) = trajectory {
                 let rows = report.result.trajectory.as_deref().unwrap_or_default();
                 trajectory::write_kept(path, compiled.native(), &report.params, rows)
@@ -281,18 +282,28 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
     if !args.quiet {
         match args.format {
             Format::Table => {
-                super::print_out(&report.to_table());
+                // Streamed as the JSON is: 10^6 event lines are about 90 MB of text.
+                super::write_out(|out| {
+                    let mut out = super::FmtIo::new(out);
+                    let written = report.write_table(&mut out);
+                    out.result(written)
+                });
                 if let Some(check) = &check {
                     super::print_out(&format!("\n{}", check.to_table()));
                 }
             }
             Format::Json => {
-                let mut json = report.to_json();
+                let mut extra = Vec::new();
                 if let Some(check) = &check {
-                    json["check_grad"] = serde_json::json!(check);
-                    json["check_grad"]["passed"] = check.passed().into();
+                    let mut value = serde_json::json!(check);
+                    value["passed"] = check.passed().into();
+                    extra.push(("check_grad", value));
                 }
-                super::print_out(&format!("{json}\n"));
+                // Streamed: the text of 10^6 events is never held whole (README, Limits).
+                super::write_out(|out| {
+                    report.write_json(out, &extra)?;
+                    out.write_all(b"\n")
+                });
             }
         }
     }

@@ -12,7 +12,9 @@ use cranelift_module::{default_libcall_names, FuncId, Module};
 use super::lower::{declare_callees, define_driver, define_kernel};
 use super::plan::{plan_model, KernelPlan, Lens, ModelKernels, N_OUTS};
 use super::runtime::Callee;
-use super::{CodegenError, CompileOptions, OptLevel, RegAlloc, AUTO_REGALLOC_LIMIT};
+use super::{
+    CodegenError, CompileOptions, OptLevel, RegAlloc, AUTO_REGALLOC_LIMIT, AUTO_REGALLOC_NODE_LIMIT,
+};
 use crate::expr::ModelFunctions;
 use crate::sim::{HybridSystem, SystemInfo};
 
@@ -100,8 +102,11 @@ impl CompiledModel {
         crate::lower::classify_events(funcs, &mut info);
         let plan = plan_model(funcs, &info)?;
         let parts = plan.try_map(|k| Ok::<_, CodegenError>((k.name.clone(), k.parts(opts.max_part_size))))?;
-        let largest = parts.iter().flat_map(|(_, p)| p).map(KernelPlan::size).max().unwrap_or(0);
-        let mut module = new_module(opts, largest)?;
+        let all_parts = || parts.iter().flat_map(|(_, p)| p);
+        let largest = all_parts().map(KernelPlan::size).max().unwrap_or(0);
+        let most_nodes =
+            all_parts().map(|k| super::lower::needed_nodes(&funcs.store, k.roots()).len()).max().unwrap_or(0);
+        let mut module = new_module(opts, largest, most_nodes)?;
         match build_kernels(&mut module, funcs, &parts) {
             Ok(kernels) => Ok(CompiledModel {
                 info,
@@ -142,9 +147,14 @@ impl Drop for CompiledModel {
 }
 
 /// A JIT module with the chosen flags (the register allocator may depend on the size of the
-/// largest kernel) and every host wrapper registered, so no import can stay
-/// unresolved (which would panic inside `finalize_definitions`).
-fn new_module(opts: &CompileOptions, largest_kernel: usize) -> Result<JITModule, CodegenError> {
+/// largest kernel part and on the most expression nodes one part computes) and every host
+/// wrapper registered, so no import can stay unresolved (which would panic inside
+/// `finalize_definitions`).
+fn new_module(
+    opts: &CompileOptions,
+    largest_kernel: usize,
+    most_nodes: usize,
+) -> Result<JITModule, CodegenError> {
     let mut flags = settings::builder();
     let opt_level = match opts.opt_level {
         OptLevel::None => "none",
@@ -154,7 +164,9 @@ fn new_module(opts: &CompileOptions, largest_kernel: usize) -> Result<JITModule,
     let regalloc = match opts.regalloc {
         RegAlloc::Backtracking => "backtracking",
         RegAlloc::SinglePass => "single_pass",
-        RegAlloc::Auto if largest_kernel > AUTO_REGALLOC_LIMIT => "single_pass",
+        RegAlloc::Auto if largest_kernel > AUTO_REGALLOC_LIMIT || most_nodes > AUTO_REGALLOC_NODE_LIMIT => {
+            "single_pass"
+        }
         RegAlloc::Auto => "backtracking",
     };
     let verifier = if opts.verifier { "true" } else { "false" };

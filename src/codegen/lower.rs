@@ -466,7 +466,7 @@ fn ready_after(term: &Term) -> Option<ExprId> {
 
 /// The nodes reachable from `roots`, ascending by id: a valid evaluation order because children
 /// have smaller ids than their parents.
-fn needed_nodes(store: &ExprStore, roots: impl Iterator<Item = ExprId>) -> Vec<ExprId> {
+pub(crate) fn needed_nodes(store: &ExprStore, roots: impl Iterator<Item = ExprId>) -> Vec<ExprId> {
     // A set sized by the kernel, not by the store: a model with many events compiles many small
     // kernels against one large store.
     let mut seen = HashSet::new();

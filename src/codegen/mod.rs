@@ -46,8 +46,9 @@ pub enum RegAlloc {
     Backtracking,
     /// Linear compile time; slower code (1.3x to 2.7x on the chains measured below).
     SinglePass,
-    /// `Backtracking` unless the largest kernel part exceeds [`AUTO_REGALLOC_LIMIT`] operations,
-    /// then `SinglePass`: big models stay quick to compile, small ones get the better code.
+    /// `Backtracking` unless the largest kernel part exceeds [`AUTO_REGALLOC_LIMIT`] operations
+    /// or one part computes more than [`AUTO_REGALLOC_NODE_LIMIT`] expression nodes, then
+    /// `SinglePass`: big models stay quick to compile, small ones get the better code.
     Auto,
 }
 
@@ -64,6 +65,17 @@ pub enum RegAlloc {
 ///
 /// So the switch sits between 100 and 150 states; the shipped models' kernels have under 100.
 pub const AUTO_REGALLOC_LIMIT: usize = 1200;
+
+/// Most expression nodes one kernel part may compute before [`RegAlloc::Auto`] switches to the
+/// single-pass allocator, whatever the part's size: cutting into parts bounds the writes, not
+/// the expression of one write. A chain of `n` `let`s that square their predecessor
+/// (`stress_models::squaring_lets`) is one flow entry whose sensitivity kernel computes `7 n`
+/// nodes and keeps every link of the chain live until the derivative's end; with the
+/// backtracking allocator its compile time was quadratic (release build: 1.9 s at n = 5,000, 36 s
+/// at 20,000), with the single-pass one 0.06 s and 0.34 s. Parts of the models measured above
+/// (cut at [`MAX_PART_SIZE`]) compute a few thousand nodes (3,502 for 1000 states reading one
+/// shared sum), so they keep the backtracking allocator.
+pub const AUTO_REGALLOC_NODE_LIMIT: usize = 10_000;
 
 /// Default [`CompileOptions::max_part_size`]. The backtracking allocator's compile time grows
 /// faster than linearly with the size of one function, so big kernels are cut into parts of at

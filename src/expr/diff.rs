@@ -24,9 +24,8 @@
 //! (`0.5 * (2 * v)` becomes `v`), a reassociation that the store itself never does because it
 //! must not change the rounding of the user's expressions.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
-use super::eval::reachable;
 use super::node::{BinaryOp, ExprId, Node, UnaryOp};
 use super::store::ExprStore;
 
@@ -57,15 +56,25 @@ impl Differentiator {
     /// The derivative of `id` with respect to `wrt`.
     ///
     /// Works bottom-up over the nodes under `id` in ascending id order (children first), so deep
-    /// expressions need no recursion.
+    /// expressions need no recursion. Only nodes not yet differentiated by `wrt` are visited: a
+    /// Jacobian of `n` rows that share one sum of `n` states costs `O(n)` per entry for the first
+    /// row only, not for every entry (which made it cubic).
     pub fn diff(&mut self, store: &mut ExprStore, id: ExprId, wrt: Var) -> ExprId {
         if let Some(&d) = self.cache.get(&(id, wrt)) {
             return d;
         }
-        for node_id in reachable(store, &[id]) {
-            if self.cache.contains_key(&(node_id, wrt)) {
+        let mut seen = HashSet::new();
+        let mut stack = vec![id];
+        let mut todo = Vec::new();
+        while let Some(node_id) = stack.pop() {
+            if self.cache.contains_key(&(node_id, wrt)) || !seen.insert(node_id) {
                 continue;
             }
+            todo.push(node_id);
+            stack.extend(store.node(node_id).children());
+        }
+        todo.sort_unstable();
+        for node_id in todo {
             let d = self.diff_node(store, node_id, wrt);
             self.cache.insert((node_id, wrt), d);
         }

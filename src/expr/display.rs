@@ -7,8 +7,9 @@
 //! `-a * b` is printed for `-(a * b)`; the parser reads it as `(-a) * b`, which has the same value
 //! in IEEE arithmetic. Comparisons, `and`, `or`, `not` print as in conditions.
 //!
-//! Texts are built bottom-up in id order with one text per node, so printing is linear in the
-//! size of the printed text.
+//! Nodes are laid out bottom-up in id order as pieces (literal text and children), and texts are
+//! composed only when written, so printing is linear in the size of the DAG and of the printed
+//! text: a chain of `n` nested nodes is not `n` texts of up to `n` pieces each.
 
 use std::collections::{HashMap, HashSet};
 
@@ -92,12 +93,31 @@ pub fn format_number(v: f64) -> String {
     }
 }
 
+/// One piece of a node's text: literal text, or a child's text with parentheses if it binds looser
+/// than the given strength.
+enum Piece {
+    Text(String),
+    Child(ExprId, u8),
+}
+
+/// How a node prints, without its text: the pieces, its binding strength, the length of its
+/// text in characters and whether that text starts with `-`. Texts are composed only when written,
+/// so a chain of `n` nested nodes costs `O(n)` here rather than the `O(n^2)` of a text per node.
+struct Shape {
+    pieces: Vec<Piece>,
+    strength: u8,
+    len: usize,
+    starts_with_minus: bool,
+}
+
 struct Printer<'a> {
     store: &'a ExprStore,
     states: &'a [String],
     params: &'a [String],
-    /// Text and binding strength of each built node.
-    memo: HashMap<ExprId, (String, u8)>,
+    /// The shape of each built node.
+    shapes: HashMap<ExprId, Shape>,
+    /// With a cap: the capped text of each built node (at most `cap` characters and `...`).
+    capped: HashMap<ExprId, String>,
     /// Hoisted nodes and their `let` names.
     bound: HashMap<ExprId, String>,
     lets: Vec<(String, String)>,
@@ -113,12 +133,17 @@ impl<'a> Printer<'a> {
             store,
             states,
             params,
-            memo: HashMap::new(),
+            shapes: HashMap::new(),
+            capped: HashMap::new(),
             bound: HashMap::new(),
             lets: Vec::new(),
             taken: HashSet::new(),
             cap: usize::MAX,
         }
+    }
+
+    fn is_capped(&self) -> bool {
+        self.cap != usize::MAX
     }
 
     fn build(&mut self, roots: &[ExprId], hoist: bool) {
@@ -133,25 +158,34 @@ impl<'a> Printer<'a> {
             }
         }
         for id in nodes {
-            let mut rendered = self.render(id);
-            if let Some((cut, _)) = rendered.0.char_indices().nth(self.cap) {
-                rendered.0.truncate(cut);
-                rendered.0.push_str("...");
+            let mut shape = self.shape(id);
+            if self.is_capped() {
+                // Capped texts are short, so each is kept and composed from its children's.
+                let mut text = String::new();
+                self.write_pieces(&shape.pieces, &mut text);
+                if let Some((cut, _)) = text.char_indices().nth(self.cap) {
+                    text.truncate(cut);
+                    text.push_str("...");
+                }
+                shape.starts_with_minus = text.starts_with('-');
+                self.capped.insert(id, text);
             }
             let n_uses = uses.get(&id).copied().unwrap_or(0);
             let is_leaf = self.store.node(id).children().next().is_none();
             if hoist && !is_leaf && n_uses >= 2 {
                 let name = self.fresh_name();
-                let len = rendered.0.chars().count();
-                let inline = n_uses * len;
-                let hoisted = n_uses * name.len() + "let  = ".len() + name.len() + len + 1;
+                let len = shape.len;
+                let inline = n_uses.saturating_mul(len);
+                let hoisted = (n_uses * name.len() + "let  = ".len() + name.len() + 1).saturating_add(len);
                 if hoisted < inline {
-                    self.lets.push((name.clone(), rendered.0.clone()));
+                    let mut text = String::new();
+                    self.write_pieces(&shape.pieces, &mut text);
+                    self.lets.push((name.clone(), text));
                     self.bound.insert(id, name.clone());
                     self.taken.insert(name);
                 }
             }
-            self.memo.insert(id, rendered);
+            self.shapes.insert(id, shape);
         }
     }
 
@@ -162,24 +196,94 @@ impl<'a> Printer<'a> {
             .unwrap_or_default()
     }
 
-    /// The text of a built node and its binding strength (a hoisted node is an atom).
-    fn text(&self, id: ExprId) -> (&str, u8) {
-        if let Some(name) = self.bound.get(&id) {
-            return (name, P_ATOM);
+    /// The binding strength of a built node (a hoisted node is an atom).
+    fn strength(&self, id: ExprId) -> u8 {
+        if self.bound.contains_key(&id) {
+            return P_ATOM;
         }
-        match self.memo.get(&id) {
-            Some((t, p)) => (t, *p),
-            None => ("?", P_ATOM),
+        self.shapes.get(&id).map_or(P_ATOM, |s| s.strength)
+    }
+
+    /// Whether `id` printed at binding `min` gets parentheses.
+    fn is_wrapped(&self, id: ExprId, min: u8) -> bool {
+        self.strength(id) < min
+    }
+
+    /// Length in characters of `id` printed at binding `min`.
+    fn wrapped_len(&self, id: ExprId, min: u8) -> usize {
+        let len = match self.bound.get(&id) {
+            Some(name) => name.chars().count(),
+            None => self.shapes.get(&id).map_or(1, |s| s.len),
+        };
+        if self.is_wrapped(id, min) {
+            len.saturating_add(2)
+        } else {
+            len
         }
     }
 
-    /// The text of `id`, parenthesised if it binds looser than `min`.
+    /// Whether the text of `id` printed at binding `min` starts with `-`.
+    fn wrapped_starts_with_minus(&self, id: ExprId, min: u8) -> bool {
+        !self.is_wrapped(id, min)
+            && !self.bound.contains_key(&id)
+            && self.shapes.get(&id).is_some_and(|s| s.starts_with_minus)
+    }
+
+    /// The text of `id` (a root: never parenthesised).
     fn wrap(&self, id: ExprId, min: u8) -> String {
-        let (t, p) = self.text(id);
-        if p < min {
-            format!("({t})")
-        } else {
-            t.to_string()
+        let mut out = String::new();
+        self.write_pieces(&[Piece::Child(id, min)], &mut out);
+        out
+    }
+
+    /// Appends the text of `pieces` to `out`. Children's texts are written in place, with a work
+    /// list rather than recursion (a chain of `let`s nests as deep as it is long); with a cap,
+    /// children's capped texts are copied.
+    fn write_pieces<'s>(&'s self, pieces: &'s [Piece], out: &mut String) {
+        enum Work<'p> {
+            Text(&'p str),
+            Child(ExprId, u8),
+        }
+        let mut work: Vec<Work<'s>> = Vec::new();
+        for piece in pieces.iter().rev() {
+            match piece {
+                Piece::Text(t) => work.push(Work::Text(t)),
+                Piece::Child(id, min) => work.push(Work::Child(*id, *min)),
+            }
+        }
+        while let Some(w) = work.pop() {
+            let (id, min) = match w {
+                Work::Text(t) => {
+                    out.push_str(t);
+                    continue;
+                }
+                Work::Child(id, min) => (id, min),
+            };
+            let wrapped = self.is_wrapped(id, min);
+            if wrapped {
+                out.push('(');
+            }
+            if let Some(name) = self.bound.get(&id) {
+                out.push_str(name);
+            } else if let Some(text) = self.capped.get(&id) {
+                out.push_str(text);
+            } else if let Some(shape) = self.shapes.get(&id) {
+                if wrapped {
+                    work.push(Work::Text(")"));
+                }
+                for piece in shape.pieces.iter().rev() {
+                    work.push(match piece {
+                        Piece::Text(t) => Work::Text(t),
+                        Piece::Child(c, m) => Work::Child(*c, *m),
+                    });
+                }
+                continue;
+            } else {
+                out.push('?');
+            }
+            if wrapped {
+                out.push(')');
+            }
         }
     }
 
@@ -191,13 +295,13 @@ impl<'a> Printer<'a> {
         }
     }
 
-    /// `-x` in a sum: the text of `x`, if `id` prints as a negation.
-    fn subtrahend(&self, id: ExprId) -> Option<String> {
+    /// `-x` in a sum: the pieces of `x`, if `id` prints as a negation.
+    fn subtrahend(&self, id: ExprId) -> Option<Piece> {
         if let Some(a) = self.negated(id) {
-            return Some(self.wrap(a, P_PRODUCT));
+            return Some(Piece::Child(a, P_PRODUCT));
         }
         match self.store.const_value(id) {
-            Some(v) if v < 0.0 && !self.bound.contains_key(&id) => Some(format_number(-v)),
+            Some(v) if v < 0.0 && !self.bound.contains_key(&id) => Some(Piece::Text(format_number(-v))),
             _ => None,
         }
     }
@@ -206,60 +310,79 @@ impl<'a> Printer<'a> {
         self.store.const_value(id).is_some() && !self.bound.contains_key(&id)
     }
 
-    fn render(&self, id: ExprId) -> (String, u8) {
+    /// The shape of `id`, its children built.
+    fn shape(&self, id: ExprId) -> Shape {
+        let (pieces, strength) = self.pieces(id);
+        let piece_len = |p: &Piece| match p {
+            Piece::Text(t) => t.chars().count(),
+            Piece::Child(c, min) => self.wrapped_len(*c, *min),
+        };
+        let len = pieces.iter().fold(0usize, |sum, p| sum.saturating_add(piece_len(p)));
+        let starts_with_minus = match pieces.first() {
+            Some(Piece::Text(t)) => t.starts_with('-'),
+            Some(Piece::Child(c, min)) => self.wrapped_starts_with_minus(*c, *min),
+            None => false,
+        };
+        Shape { pieces, strength, len, starts_with_minus }
+    }
+
+    fn pieces(&self, id: ExprId) -> (Vec<Piece>, u8) {
+        use Piece::{Child, Text};
+        let text = |t: &str| Text(t.to_string());
         match *self.store.node(id) {
             Node::Const(bits) => {
                 let v = f64::from_bits(bits);
                 let p = if v.is_sign_negative() { P_NEG } else { P_ATOM };
-                (format_number(v), p)
+                (vec![Text(format_number(v))], p)
             }
-            Node::State(i) => (name_or(self.states, i, "x"), P_ATOM),
-            Node::Param(i) => (name_or(self.params, i, "p"), P_ATOM),
-            Node::Time => ("t".to_string(), P_ATOM),
+            Node::State(i) => (vec![Text(name_or(self.states, i, "x"))], P_ATOM),
+            Node::Param(i) => (vec![Text(name_or(self.params, i, "p"))], P_ATOM),
+            Node::Time => (vec![text("t")], P_ATOM),
             Node::Unary(UnaryOp::Neg, a) => {
                 // `-a * b` stays a product; anything looser than a product gets parentheses.
-                let (_, pa) = self.text(a);
-                let (min, mut p) = if pa == P_PRODUCT { (P_PRODUCT, P_PRODUCT) } else { (P_NEG, P_NEG) };
-                let mut inner = self.wrap(a, min);
-                if inner.starts_with('-') {
-                    inner = format!("({inner})");
-                    p = P_NEG;
+                let (min, p) =
+                    if self.strength(a) == P_PRODUCT { (P_PRODUCT, P_PRODUCT) } else { (P_NEG, P_NEG) };
+                if self.wrapped_starts_with_minus(a, min) {
+                    (vec![text("-("), Child(a, min), text(")")], P_NEG)
+                } else {
+                    (vec![text("-"), Child(a, min)], p)
                 }
-                (format!("-{inner}"), p)
             }
-            Node::Unary(UnaryOp::Not, a) => (format!("not {}", self.wrap(a, P_NOT)), P_NOT),
-            Node::Unary(op, a) => (format!("{}({})", unary_name(op), self.wrap(a, 0)), P_ATOM),
-            Node::Binary(op, a, b) => self.render_binary(op, a, b),
+            Node::Unary(UnaryOp::Not, a) => (vec![text("not "), Child(a, P_NOT)], P_NOT),
+            Node::Unary(op, a) => {
+                (vec![Text(format!("{}(", unary_name(op))), Child(a, 0), text(")")], P_ATOM)
+            }
+            Node::Binary(op, a, b) => self.binary_pieces(op, a, b),
             Node::Select(c, a, b) => (
-                format!("if {} then {} else {}", self.wrap(c, 0), self.wrap(a, 0), self.wrap(b, 0)),
+                vec![text("if "), Child(c, 0), text(" then "), Child(a, 0), text(" else "), Child(b, 0)],
                 P_SELECT,
             ),
         }
     }
 
-    fn render_binary(&self, op: BinaryOp, a: ExprId, b: ExprId) -> (String, u8) {
+    fn binary_pieces(&self, op: BinaryOp, a: ExprId, b: ExprId) -> (Vec<Piece>, u8) {
+        use Piece::{Child, Text};
         let infix = |sym: &str, p: u8, left: u8, right: u8| {
-            (format!("{} {sym} {}", self.wrap(a, left), self.wrap(b, right)), p)
+            (vec![Child(a, left), Text(format!(" {sym} ")), Child(b, right)], p)
         };
         match op {
             BinaryOp::Add => {
                 if let Some(rhs) = self.subtrahend(b) {
-                    (format!("{} - {rhs}", self.wrap(a, P_SUM)), P_SUM)
+                    (vec![Child(a, P_SUM), Text(" - ".to_string()), rhs], P_SUM)
                 } else if let Some(rhs) = self.subtrahend(a) {
                     // `-a + b` reads better as `b - a`; addition commutes exactly.
-                    (format!("{} - {rhs}", self.wrap(b, P_SUM)), P_SUM)
+                    (vec![Child(b, P_SUM), Text(" - ".to_string()), rhs], P_SUM)
                 } else {
                     infix("+", P_SUM, P_SUM, P_PRODUCT)
                 }
             }
             BinaryOp::Mul if self.is_constant_factor(b) && !self.is_constant_factor(a) => {
                 // Coefficients read first (`2 * x`); multiplication commutes exactly.
-                let text = format!("{} * {}", self.wrap(b, P_PRODUCT), self.wrap(a, P_NEG));
-                (text, P_PRODUCT)
+                (vec![Child(b, P_PRODUCT), Text(" * ".to_string()), Child(a, P_NEG)], P_PRODUCT)
             }
             BinaryOp::Mul => infix("*", P_PRODUCT, P_PRODUCT, P_NEG),
             BinaryOp::Div => infix("/", P_PRODUCT, P_PRODUCT, P_NEG),
-            BinaryOp::Pow => (format!("{}^{}", self.wrap(a, P_ATOM), self.wrap(b, P_POW)), P_POW),
+            BinaryOp::Pow => (vec![Child(a, P_ATOM), Text("^".to_string()), Child(b, P_POW)], P_POW),
             BinaryOp::Lt => infix("<", P_CMP, P_SUM, P_SUM),
             BinaryOp::Le => infix("<=", P_CMP, P_SUM, P_SUM),
             BinaryOp::And => infix("and", P_AND, P_AND, P_NOT),
@@ -271,7 +394,8 @@ impl<'a> Printer<'a> {
                     BinaryOp::Min => "min",
                     _ => "max",
                 };
-                (format!("{name}({}, {})", self.wrap(a, 0), self.wrap(b, 0)), P_ATOM)
+                let open = Text(format!("{name}("));
+                (vec![open, Child(a, 0), Text(", ".to_string()), Child(b, 0), Text(")".to_string())], P_ATOM)
             }
         }
     }

@@ -64,15 +64,18 @@ pub fn derive_report(
         }
     }
 
+    // Grouped once: a row looked up per output would scan every entry per output.
+    let (output_x, output_p) = (rows(&funcs.output_x), rows(&funcs.output_p));
     for (k, output) in model.outputs.iter().enumerate() {
         let Some(&h) = funcs.outputs.get(k) else {
             continue;
         };
         let mut block = Block::new(&format!("output {}", output.name));
         block.scalar("h", Some(h));
-        block.vector("h_x", row(&funcs.output_x, k as u32, funcs.n_states));
+        block.vector("h_x", dense_row(output_x.get(k), funcs.n_states));
+        let h_p = dense_row(output_p.get(k), funcs.n_params);
         for &p in wrt {
-            let entry = row(&funcs.output_p, k as u32, funcs.n_params).get(p.0 as usize).copied().flatten();
+            let entry = h_p.get(p.0 as usize).copied().flatten();
             block.scalar(&format!("h_{}", r.param_name(p)), entry);
         }
         if let Some(&(_, t)) = funcs.output_t.entries.iter().find(|&&(i, _)| i as usize == k) {
@@ -102,14 +105,26 @@ fn dense(v: &SparseVec, n: u32) -> Vec<Option<ExprId>> {
     out
 }
 
-/// Row `i` of a sparse matrix with `n_cols` columns.
-fn row(m: &SparseMat, i: u32, n_cols: u32) -> Vec<Option<ExprId>> {
+/// The entries of each row of a sparse matrix, `(column, entry)` in column order, in one pass.
+fn rows(m: &SparseMat) -> Vec<Vec<(u32, ExprId)>> {
+    let mut out = vec![Vec::new(); m.n_rows as usize];
+    for &(i, k, e) in &m.entries {
+        if let Some(row) = out.get_mut(i as usize) {
+            row.push((k, e));
+        }
+    }
+    for row in &mut out {
+        row.sort_by_key(|&(k, _)| k);
+    }
+    out
+}
+
+/// One row of `rows` as `n_cols` optional entries (a later entry of one column wins).
+fn dense_row(row: Option<&Vec<(u32, ExprId)>>, n_cols: u32) -> Vec<Option<ExprId>> {
     let mut out = vec![None; n_cols as usize];
-    for &(r, k, e) in &m.entries {
-        if r == i {
-            if let Some(slot) = out.get_mut(k as usize) {
-                *slot = Some(e);
-            }
+    for &(k, e) in row.into_iter().flatten() {
+        if let Some(slot) = out.get_mut(k as usize) {
+            *slot = Some(e);
         }
     }
     out
@@ -132,7 +147,9 @@ fn column(m: &SparseMat, j: u32, n_rows: u32) -> Vec<Option<ExprId>> {
 enum Shape {
     Scalar(Option<ExprId>),
     Vector(Vec<Option<ExprId>>),
-    Matrix(Vec<Vec<Option<ExprId>>>),
+    /// Rows of `(column, entry)`, `n_cols` columns: a matrix with `n` states has up to `n^2`
+    /// entries, and a dense grid of a sparse one would cost `n^2` for few.
+    Matrix(Vec<Vec<(u32, ExprId)>>, u32),
 }
 
 /// A titled group of lines that shares one set of `let`s.
@@ -152,8 +169,7 @@ impl Block {
         self.lines.push((label.to_string(), Shape::Vector(v)));
     }
     fn matrix(&mut self, label: &str, m: &SparseMat) {
-        let rows = (0..m.n_rows).map(|i| row(m, i, m.n_cols)).collect();
-        self.lines.push((label.to_string(), Shape::Matrix(rows)));
+        self.lines.push((label.to_string(), Shape::Matrix(rows(m), m.n_cols)));
     }
     fn roots(&self) -> Vec<ExprId> {
         let mut roots = Vec::new();
@@ -161,7 +177,7 @@ impl Block {
             match shape {
                 Shape::Scalar(e) => roots.extend(e),
                 Shape::Vector(v) => roots.extend(v.iter().flatten()),
-                Shape::Matrix(m) => roots.extend(m.iter().flatten().flatten()),
+                Shape::Matrix(m, _) => roots.extend(m.iter().flatten().map(|&(_, e)| e)),
             }
         }
         roots
@@ -245,10 +261,13 @@ impl Reporter<'_> {
                     let cells: Vec<String> = v.iter().map(&mut next).collect();
                     let _ = writeln!(out, "{inner}{label} = [{}]", cells.join(", "));
                 }
-                Shape::Matrix(m) if dense_ok => {
+                Shape::Matrix(m, n_cols) if dense_ok => {
                     let rows: Vec<String> = m
                         .iter()
-                        .map(|r| format!("[{}]", r.iter().map(&mut next).collect::<Vec<_>>().join(", ")))
+                        .map(|r| {
+                            let r = dense_row(Some(r), *n_cols);
+                            format!("[{}]", r.iter().map(&mut next).collect::<Vec<_>>().join(", "))
+                        })
                         .collect();
                     let _ = writeln!(out, "{inner}{label} = [{}]", rows.join(", "));
                 }
@@ -267,17 +286,17 @@ impl Reporter<'_> {
                         );
                     }
                 }
-                Shape::Matrix(m) => {
-                    let empty = m.iter().flatten().all(Option::is_none);
+                Shape::Matrix(m, _) => {
+                    let empty = m.iter().all(Vec::is_empty);
                     let _ = writeln!(out, "{inner}{label}:{}", if empty { " 0" } else { "" });
                     for (i, r) in m.iter().enumerate() {
-                        for (k, e) in r.iter().enumerate().filter(|(_, e)| e.is_some()) {
+                        for &(k, e) in r {
                             let row_name = states.get(i).map_or("?", |s| s.as_str());
                             let _ = writeln!(
                                 out,
                                 "{inner}  ({i}, {k}) {row_name}/{}: {}",
-                                states.get(k).map_or("?", |s| s.as_str()),
-                                next(e)
+                                states.get(k as usize).map_or("?", |s| s.as_str()),
+                                next(&Some(e))
                             );
                         }
                     }

@@ -1,65 +1,21 @@
 //! Generated models that stress the front end: 5,000 chained `let`s (in both declaration
-//! orders), 60 `let`s that each use their predecessor twice, a chain of 10,000 states, and a chain
-//! of `let`s nested past `MAX_EXPR_DEPTH`. Each gives its closed form, through the library and
+//! orders), 60 `let`s that each use their predecessor twice, 20,000 `let`s that square their
+//! predecessor (a derivative nested 20,000 deep for `hybc derive`), a chain of 10,000 states, 700
+//! states that each read one shared sum (a dense Jacobian), and a chain of `let`s nested past
+//! `MAX_EXPR_DEPTH`. Each gives its closed form, through the library and
 //! through the `hybc` command with generous time and peak-memory limits (the real figures are
 //! in the README's Limits section, with their commands).
 
-use std::io::Write;
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use approx::assert_relative_eq;
 use hybc::Model;
 
+use crate::support::measured::{assert_bounded, hybc_measured};
+
 #[path = "../../benches/support/stress_models.rs"]
 mod stress_models;
-use stress_models::{doubling_lets, let_chain, state_chain};
-
-/// Runs `hybc args` on `model_text`, polling its peak resident memory (VmHWM); returns stdout,
-/// stderr, the exit code, the wall time and the peak in MiB.
-fn hybc_measured(model_text: &str, args: &[&str]) -> (String, String, Option<i32>, Duration, f64) {
-    let dir = tempfile::tempdir().expect("temp dir");
-    let path = dir.path().join("stress.hyb");
-    std::fs::File::create(&path).and_then(|mut f| f.write_all(model_text.as_bytes())).expect("write");
-    let started = Instant::now();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_hybc"))
-        .arg(args[0])
-        .arg(&path)
-        .args(&args[1..])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("hybc starts");
-    let status_path = format!("/proc/{}/status", child.id());
-    let mut peak_kib = 0u64;
-    let (out, err) = {
-        let mut stdout = child.stdout.take().expect("stdout");
-        let mut stderr = child.stderr.take().expect("stderr");
-        let out = std::thread::spawn(move || std::io::read_to_string(&mut stdout).unwrap_or_default());
-        let err = std::thread::spawn(move || std::io::read_to_string(&mut stderr).unwrap_or_default());
-        while child.try_wait().expect("wait").is_none() {
-            if let Ok(status) = std::fs::read_to_string(&status_path) {
-                if let Some(kib) = status
-                    .lines()
-                    .find_map(|l| l.strip_prefix("VmHWM:"))
-                    .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
-                {
-                    peak_kib = peak_kib.max(kib);
-                }
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        }
-        (out.join().expect("stdout reader"), err.join().expect("stderr reader"))
-    };
-    let code = child.wait().expect("exit").code();
-    (out, err, code, started.elapsed(), peak_kib as f64 / 1024.0)
-}
-
-fn assert_bounded(what: &str, elapsed: Duration, peak_mib: f64, time_limit: Duration, mib_limit: f64) {
-    eprintln!("{what}: {elapsed:.2?}, peak {peak_mib:.0} MiB");
-    assert!(elapsed < time_limit, "{what} took {elapsed:?}");
-    assert!(peak_mib < mib_limit, "{what} peaked at {peak_mib:.0} MiB");
-}
+use stress_models::{doubling_lets, let_chain, shared_sum, squaring_lets, state_chain};
 
 #[test]
 fn five_thousand_chained_lets_give_their_closed_form_in_either_order() {
@@ -109,6 +65,62 @@ fn sixty_doubling_lets_stay_a_dag() {
     let line = out.lines().find(|l| l.contains("big =")).expect("the output line");
     assert!(line.len() < hybc::lower::SHOWN_CHARS + 40 && line.ends_with("..."), "{line}");
     assert_bounded("60 doubling lets, hybc check", elapsed, peak, Duration::from_secs(20), 200.0);
+}
+
+#[test]
+fn twenty_thousand_squaring_lets_derive_in_linear_time_and_memory() {
+    let n = 20_000;
+    let text = squaring_lets(n);
+    let (out, err, code, elapsed, peak) = hybc_measured(&text, &["derive"]);
+    assert_eq!(code, Some(0), "{err}");
+    // Every a_k but the last is used more than once (twice by a_(k+1), and by the derivative),
+    // so each is hoisted into a `let` of the mode block; the derivative df/dc nests n deep: one
+    // line of O(n) characters. Printing kept the text of every partial derivative, O(n^2)
+    // characters (out of memory at 4 GB for this model).
+    let lets = out.lines().filter(|l| l.trim_start().starts_with("let w")).count();
+    assert_eq!(lets, n - 1);
+    let f_c = out.lines().find(|l| l.trim_start().starts_with("f_c = [1 + 2 * ")).expect("f_c");
+    assert!(f_c.matches("1 + 2 * ").count() >= n - 1000, "{}", &f_c[..200]);
+    assert!(out.len() < 100 * n, "{} bytes", out.len());
+    assert_bounded("20,000 squaring lets, hybc derive", elapsed, peak, Duration::from_secs(60), 400.0);
+
+    // One flow entry whose sensitivity kernel computes 140,000 nodes: 36 s to compile with the
+    // backtracking allocator (release build), a fraction of a second with the single-pass one
+    // that `RegAlloc::Auto` now picks past `AUTO_REGALLOC_NODE_LIMIT`.
+    let model = Model::parse(&text).expect("checks");
+    let started = std::time::Instant::now();
+    let compiled = model.compile(&["c"]).expect("compiles");
+    let compile_time = started.elapsed();
+    assert!(compile_time < Duration::from_secs(20), "compile took {compile_time:?}");
+    let run = compiled.simulate(&model.params(), &model.sim_options()).expect("runs");
+    let c: f64 = 0.01;
+    let root = (1.0 - 4.0 * c).sqrt();
+    assert_relative_eq!(run.state("x").unwrap(), (1.0 - root) / 2.0, max_relative = 1e-12);
+    assert_relative_eq!(run.dstate("x", "c").unwrap(), 1.0 / root, max_relative = 1e-12);
+}
+
+#[test]
+fn states_reading_one_shared_sum_compile_in_time_linear_in_their_dense_jacobian() {
+    // f_x has n^2 = 490,000 entries: "linear in the model's size" means in those. Lowering took
+    // O(n^3) (every entry's derivative re-walked the whole sum): 3.7 s at n = 200, 22-43 s at
+    // 500, over 300 s at 1000 (release builds); now about 5 s here.
+    let n = 700;
+    let text = shared_sum(n);
+    let (out, err, code, elapsed, peak) =
+        hybc_measured(&text, &["run", "--grad", "k", "--format", "json", "--quiet"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(out.is_empty(), "{out}");
+    assert_bounded("700 states reading one sum, hybc run", elapsed, peak, Duration::from_secs(60), 400.0);
+
+    let model = Model::parse(&text).expect("checks");
+    let compiled = model.compile(&["k"]).expect("compiles");
+    let run = compiled.simulate(&model.params(), &model.sim_options()).expect("runs");
+    let x = (0.001 * n as f64 - 1.0).exp();
+    for i in [0, n / 2, n - 1] {
+        let name = format!("x{i}");
+        assert_relative_eq!(run.state(&name).unwrap(), x, max_relative = 1e-6);
+        assert_relative_eq!(run.dstate(&name, "k").unwrap(), -x, max_relative = 1e-6);
+    }
 }
 
 #[test]

@@ -4,6 +4,7 @@ pub mod cli;
 pub mod expr;
 pub mod hand_functions;
 pub mod hand_systems;
+pub mod measured;
 pub mod models;
 pub mod printed;
 pub mod reference;
