@@ -186,6 +186,53 @@ fn extremum_may_cross(dir: Direction, g0: f64, g1: f64, dg0: f64, dg1: f64) -> b
     }
 }
 
+/// The times in `(0, 1)` (as fractions of the step) where the cubic Hermite interpolant of a
+/// guard, through its end values `g0`, `g1` and end slopes `m0`, `m1` (speeds times the step),
+/// has an extremum, in order, with the cubic's value there.
+fn hermite_extrema(g0: f64, g1: f64, m0: f64, m1: f64) -> ([(f64, f64); 2], usize) {
+    let c2 = 3.0 * (g1 - g0) - 2.0 * m0 - m1;
+    let c3 = 2.0 * (g0 - g1) + m0 + m1;
+    let value = |s: f64| ((c3 * s + c2) * s + m0) * s + g0;
+    // H'(s) = 3 c3 s^2 + 2 c2 s + m0.
+    let (a, b, c) = (3.0 * c3, 2.0 * c2, m0);
+    let mut roots = [f64::NAN; 2];
+    if a == 0.0 {
+        if b != 0.0 {
+            roots[0] = -c / b;
+        }
+    } else {
+        let disc = b * b - 4.0 * a * c;
+        if disc > 0.0 {
+            // The root of larger magnitude first (no cancellation), the other from the product.
+            let q = -0.5 * (b + b.signum() * disc.sqrt());
+            roots = [q / a, if q != 0.0 { c / q } else { f64::NAN }];
+        }
+    }
+    roots.sort_by(|x, y| x.total_cmp(y));
+    let mut out = [(0.0, 0.0); 2];
+    let mut k = 0;
+    for s in roots {
+        if s > 0.0 && s < 1.0 {
+            out[k] = (s, value(s));
+            k += 1;
+        }
+    }
+    (out, k)
+}
+
+/// Whether the cubic Hermite interpolant of an affine guard over the step crosses zero in `dir`
+/// between two extrema that the speeds at the step's ends and stages do not show: a state that
+/// is a polynomial of the time (a cart under constant jerk) is integrated exactly, steps are
+/// long, and both sign changes of the guard's speed can fall between the stages.
+fn cubic_hides_crossing(dir: Direction, g0: f64, g1: f64, m0: f64, m1: f64) -> bool {
+    let (ext, k) = hermite_extrema(g0, g1, m0, m1);
+    if k < 2 {
+        return false;
+    }
+    let values = [g0, ext[0].1, ext[1].1, g1];
+    values.windows(2).any(|w| crossing_sign(dir, w[0], w[1]).is_some())
+}
+
 /// Whether values of sign `sigma` are on the pre-crossing side for `dir`.
 fn allows(dir: Direction, sigma: f64) -> bool {
     match dir {
@@ -584,6 +631,10 @@ impl Detector {
                 || self.pending[pos] != Pending::None
                 || self.speed_changes[pos] >= 2
                 || crossing_sign(einfo.direction, g0, g1).is_some()
+                || (einfo.guard == GuardShape::Affine && {
+                    let h = self.span.1 - self.span.0;
+                    cubic_hides_crossing(einfo.direction, g0, g1, h * self.dg0[pos], h * self.dg1[pos])
+                })
                 || extremum_may_cross(einfo.direction, g0, g1, self.dg0[pos], self.dg1[pos]);
             if look {
                 self.candidates.push(pos);
@@ -777,6 +828,18 @@ impl Detector {
                 _ if self.speed_changes[pos] >= 2 => {
                     self.samples.push(Sample { t: t1, g: g1, dg: dg1, extremum: false });
                     self.add_extrema_between_stages(sys, ev, mode, ne, pos, stepper, n, p);
+                }
+                _ if cubic_hides_crossing(dir, g0, g1, dense.h() * dg0, dense.h() * dg1) => {
+                    // Two extrema that the stage speeds missed: the guard on the dense output at
+                    // the cubic's extrema brackets the crossings between them.
+                    let (ext, _) = hermite_extrema(g0, g1, dense.h() * dg0, dense.h() * dg1);
+                    for (s, _) in ext {
+                        let te = t0 + s * dense.h();
+                        let ge = self.guard_on_dense(sys, mode, ne, pos, te, dense, p);
+                        let dge = self.speed_on_dense(sys, ev, te, dense, p);
+                        self.samples.push(Sample { t: te, g: ge, dg: dge, extremum: false });
+                    }
+                    self.samples.push(Sample { t: t1, g: g1, dg: dg1, extremum: false });
                 }
                 _ => {
                     // At most one extremum, where the end speeds differ: searched only when it

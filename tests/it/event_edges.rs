@@ -524,3 +524,42 @@ fn a_cascade_that_lands_exactly_on_another_guard_has_no_time_derivative() {
     assert!(r.warnings().is_empty(), "{:?}", r.warnings());
     assert!(r.dstate("y", "b").is_some_and(f64::is_finite));
 }
+
+#[test]
+fn an_affine_guard_on_a_cubic_state_sees_all_three_crossings_in_one_step() {
+    // A cart under constant jerk: x = (t - r1)(t - r2)(t - r3) is integrated exactly, so steps
+    // are long and both sign changes of the guard's speed x' can fall between the stages.
+    // Crossings at r1 (rising), r2 (falling), r3 (rising); dt/dr_j = 1 for its own root.
+    let text = "model jerk\nparam r1 = 1\nparam r2 = 1.1\nparam r3 = 1.2\n\
+                state x = -r1 * r2 * r3\nstate v = r1 * r2 + r1 * r3 + r2 * r3\nstate a = -2 * (r1 + r2 + r3)\n\
+                der(x) = v\nder(v) = a\nder(a) = 6\nevent pass when x DIR 0\n";
+    for (dir, picks) in [("crosses", &[0, 1, 2][..]), (">=", &[0, 2]), ("<=", &[1])] {
+        let model = hybc::Model::parse(&text.replace("DIR", dir)).unwrap();
+        let compiled = model.compile(&["r1", "r2", "r3"]).unwrap();
+        let mut o = model.sim_options();
+        o.t_end = 30.0;
+        for (gap1, gap2) in [(0.1, 0.1), (0.01, 0.2), (0.3, 0.003), (1e-3, 1e-3), (2.0, 5.0)] {
+            for r1 in [0.5, 1.0, 7.0] {
+                let roots = [r1, r1 + gap1, r1 + gap1 + gap2];
+                let params = model.params().with("r1", roots[0]).unwrap().with("r2", roots[1]).unwrap();
+                let params = params.with("r3", roots[2]).unwrap();
+                let run = compiled.simulate(&params, &o).unwrap();
+                let at = format!("{dir}, roots {roots:?}");
+                assert_eq!(run.events().len(), picks.len(), "{at}: {:?}", times(&run));
+                for (e, &k) in run.events().iter().zip(picks) {
+                    // Located to the guard's accuracy over its crossing speed x'(r_k).
+                    let speed: f64 = (0..3).filter(|&j| j != k).map(|j| roots[k] - roots[j]).product();
+                    let tol = 1e-9 * roots[k] + 10.0 * o.atol / speed.abs();
+                    assert!((e.time - roots[k]).abs() <= tol, "{at}: {} for {}", e.time, roots[k]);
+                    let name = ["r1", "r2", "r3"][k];
+                    // Roots 1e-3 apart cross at speed 2e-6: grazing at the default tolerances
+                    // (rule 12), with no time gradient; the others have theirs.
+                    match run.devent_time(e.index, name) {
+                        Some(d) if !d.is_nan() => assert_relative_eq!(d, 1.0, max_relative = 1e-6),
+                        _ => assert!(e.grazing && gap1.min(gap2) <= 1e-3, "{at}: no dt/d{name}"),
+                    }
+                }
+            }
+        }
+    }
+}
