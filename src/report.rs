@@ -159,6 +159,17 @@ impl RunReport {
             fin["dstate_total"] = self.named_rows(&self.info.state_names, &f.dstate_total);
             fin["doutputs_total"] = self.named_rows(&self.info.output_names, &f.doutputs_total);
         }
+        if let Some(c) = &r.end_cusp {
+            // The other side of a cusp at t_end: the final values had the events there not fired.
+            let events: Vec<&str> = c.events.iter().map(|&ev| self.info.events[ev].name.as_ref()).collect();
+            fin["without_end_events"] = json!({
+                "events": events,
+                "state": named(&self.info.state_names, &c.state),
+                "dstate": self.named_rows(&self.info.state_names, &c.dstate),
+                "outputs": named(&self.info.output_names, &c.outputs),
+                "doutputs": self.named_rows(&self.info.output_names, &c.doutputs),
+            });
+        }
         let stopped_by = json!(r.stopped_by.name());
         let mut warnings: Vec<String> = r.warnings.iter().map(|w| w.to_string()).collect();
         warnings.extend(self.failure());
@@ -244,6 +255,17 @@ impl RunReport {
         };
         rows(out, &self.info.state_names, &f.state, &f.dstate)?;
         rows(out, &self.info.output_names, &f.outputs, &f.doutputs)?;
+        if let Some(c) = &r.end_cusp {
+            let names: Vec<&str> = c.events.iter().map(|&ev| self.info.events[ev].name.as_ref()).collect();
+            writeln!(
+                out,
+                "\na cusp: {} fired at t_end; had it not (a parameter change that moves it later), the final \
+                 values would be:",
+                names.join(", ")
+            )?;
+            rows(out, &self.info.state_names, &c.state, &c.dstate)?;
+            rows(out, &self.info.output_names, &c.outputs, &c.doutputs)?;
+        }
         if let StopReason::Event { name, .. } = &r.stopped_by {
             writeln!(out, "\nstopped by event {name}; total derivatives at the stopping instant:")?;
             rows(out, &self.info.state_names, &f.state, &f.dstate_total)?;

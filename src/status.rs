@@ -51,7 +51,9 @@ impl RunStatus {
                 SimWarning::SwitchAtEvent { .. }
                 | SimWarning::NotDifferentiable { .. }
                 | SimWarning::ResetOntoGuard { .. } => status = RunStatus::NotDifferentiable,
-                SimWarning::NearGrazing { .. } | SimWarning::StartsAcross { .. } => {}
+                SimWarning::NearGrazing { .. }
+                | SimWarning::StartsAcross { .. }
+                | SimWarning::NearBreakpoint { .. } => {}
             }
         }
         status

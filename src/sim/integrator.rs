@@ -10,12 +10,16 @@
 //! setup the step loop allocates nothing unless a trajectory is recorded or an event fires.
 //! Knows nothing of Cranelift, expressions or the model's text.
 
+use std::sync::Arc;
+
 use super::breakpoints::Breakpoints;
 use super::events::{clear_side, moves_across, Crossing, Detector, Pending, Selection};
 use super::jump::{dot_nonzero, CrossingContext, Jump, JumpOutcome};
 use super::options::SimOptions;
 use super::recorder::{Point, PointKind, Recorder};
-use super::result::{EventRecord, FinalState, SimError, SimResult, SimStats, SimWarning, StopReason};
+use super::result::{
+    EndCusp, EventRecord, FinalState, SimError, SimResult, SimStats, SimWarning, StopReason,
+};
 use super::rk::Rk;
 use super::stepper::{Interpolant, Stepper};
 use super::system::{Direction, GuardShape, HybridSystem, SystemInfo};
@@ -40,6 +44,10 @@ const AFTER_RESET_GROWTH: f64 = 1000.0;
 const SWITCH_SIDE_TRIES: usize = 40;
 /// Retries of one step landing before a flow switch it crossed (each lands earlier than the last).
 const SWITCH_RETRIES: u8 = 4;
+/// Events this close to a breakpoint, relative to `max(|t|, 1)`, are flagged: their derivatives
+/// hold only while they stay on their side of it (the resolution at which Zeno tells instants
+/// apart, `zeno::ACCUMULATION_RESOLUTION`).
+const NEAR_BREAKPOINT: f64 = 1e-9;
 /// A switch this many spacings of `t` past a step that landed before it (by the guard's value
 /// over its speed) is crossed at the step's end.
 const SWITCH_NEAR: f64 = 64.0;
@@ -180,6 +188,8 @@ pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = R
     reset_onto_guard: Vec<usize>,
     /// Their `dt/dp` (NaN where a parameter moves the instant or the guard).
     onto_guard_dte: Vec<f64>,
+    /// The state and sensitivities just before an instant at `t_end` (for `SimResult::end_cusp`).
+    before_end: Option<(Vec<f64>, usize)>,
 }
 
 impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R, St> {
@@ -251,6 +261,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             switch_post: None,
             reset_onto_guard: Vec::new(),
             onto_guard_dte: Vec::new(),
+            before_end: None,
         };
         if it.z[..n].iter().any(|v| !v.is_finite()) {
             it.done = Some(it.fault_nonfinite());
@@ -662,6 +673,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         self.fired.clear();
         self.before.0.clear();
         self.before.0.extend_from_slice(&self.z[..n]);
+        if on_breakpoint(self.t, self.opts.t_end) {
+            // An instant at t_end: the other side of the cusp is the run without it.
+            self.before_end = Some((self.z.to_vec(), first));
+        }
         let mut rounds = 0;
         let mut estimate;
         let mut reset_onto: Vec<usize> = Vec::new();
@@ -1147,34 +1162,34 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         self.sys.outputs(t, x, self.p, &mut outputs);
         let (yx, yp, yt) = &mut *self.output_jac;
         self.sys.output_jac(t, x, self.p, yx, yp, yt);
-        // y_x S_j + y_p_j (+ y_t dt_j for totals), column per parameter.
-        let chain = |sens: &[f64], dte: Option<&[f64]>| {
-            let mut out = vec![0.0; k * m];
-            for j in 0..m {
-                for i in 0..k {
-                    let row = &yx[i * n..(i + 1) * n];
-                    let mut v = yp[j * k + i];
-                    v += dot_nonzero(row, &sens[j * n..(j + 1) * n]);
-                    if let Some(d) = dte {
-                        if yt[i] != 0.0 {
-                            v += yt[i] * d[j];
-                        }
-                    }
-                    out[j * k + i] = v;
-                }
-            }
-            out
+        let chain = |jac: &(Vec<f64>, Vec<f64>, Vec<f64>), sens: &[f64], dte: Option<&[f64]>| {
+            output_sens((n, m, k), jac, sens, dte)
         };
-        let (dstate, doutputs) = (existing(s), existing(&chain(s, None)));
+        let (dstate, doutputs) = (existing(s), existing(&chain(&*self.output_jac, s, None)));
         let (dstate_total, doutputs_total) = match self.stop_total {
             Some((total, dte)) => {
-                let dy = chain(&total, Some(&dte));
+                let dy = chain(&*self.output_jac, &total, Some(&dte));
                 (existing(&total), existing(&dy))
             }
             None => (None, None),
         };
         let mut stats = self.stats;
         stats.rhs_calls = self.stepper.rhs_calls();
+        let mut warnings = self.warnings;
+        near_breakpoints(self.info, &self.events, self.opts.t_end, &mut warnings);
+        let end_cusp = match self.before_end {
+            Some((z, first)) if matches!(stopped_by, StopReason::TEnd) && first < self.events.len() => {
+                let (xb, sb) = z.split_at(n);
+                let mut outputs = vec![0.0; k];
+                self.sys.outputs(t, xb, self.p, &mut outputs);
+                let (yx, yp, yt) = &mut *self.output_jac;
+                self.sys.output_jac(t, xb, self.p, yx, yp, yt);
+                let doutputs = existing(&chain(&*self.output_jac, sb, None));
+                let events = self.events[first..].iter().map(|e| e.event).collect();
+                Some(EndCusp { events, state: xb.to_vec(), dstate: existing(sb), outputs, doutputs })
+            }
+            _ => None,
+        };
         SimResult {
             events: self.events,
             final_state: FinalState {
@@ -1188,9 +1203,79 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 doutputs_total,
             },
             stopped_by,
-            warnings: self.warnings,
+            warnings,
             stats,
             trajectory: None,
+            end_cusp,
+        }
+    }
+}
+
+/// Whether `t` is on the breakpoint `at` to round-off (16 spacings of `t`, as the guards'
+/// round-off of rule 11: an event at `t_end` is located a few spacings before it when round-off
+/// in the state puts the guard across early): there the event is on the breakpoint itself, a cusp.
+fn on_breakpoint(t: f64, at: f64) -> bool {
+    (at - t).abs() <= 16.0 * (at.abs().next_up() - at.abs())
+}
+
+/// `y_x S_j + y_p_j` (`+ y_t dt_j` for totals), column per parameter, for `k` outputs of `n`
+/// states and `m` parameters, from the output Jacobians `(y_x, y_p, y_t)`.
+fn output_sens(
+    (n, m, k): (usize, usize, usize),
+    (yx, yp, yt): &(Vec<f64>, Vec<f64>, Vec<f64>),
+    sens: &[f64],
+    dte: Option<&[f64]>,
+) -> Vec<f64> {
+    let mut out = vec![0.0; k * m];
+    for j in 0..m {
+        for i in 0..k {
+            let row = &yx[i * n..(i + 1) * n];
+            let mut v = yp[j * k + i];
+            v += dot_nonzero(row, &sens[j * n..(j + 1) * n]);
+            if let Some(d) = dte {
+                if yt[i] != 0.0 {
+                    v += yt[i] * d[j];
+                }
+            }
+            out[j * k + i] = v;
+        }
+    }
+    out
+}
+
+/// Events within the resolution at which instants are told apart (`1e-9 max(|t|, 1)`, as for
+/// Zeno) before `t_end`, or of a time event they are not a time event with: their derivatives
+/// hold only while they stay on their side (`SimWarning::NearBreakpoint`). Time events fire on
+/// their breakpoint by construction and are not warned about themselves.
+fn near_breakpoints(info: &SystemInfo, events: &[EventRecord], t_end: f64, warnings: &mut Vec<SimWarning>) {
+    let near = |a: f64, b: f64| (a - b).abs() <= NEAR_BREAKPOINT * a.abs().max(b.abs()).max(1.0);
+    let is_time = |e: &EventRecord| info.events[e.event].guard == GuardShape::Time;
+    // Only the events near the end or near a time event matter: scan the neighbours in time.
+    for (k, e) in events.iter().enumerate() {
+        if is_time(e) {
+            continue;
+        }
+        let mut breakpoint: Option<(Arc<str>, f64)> = None;
+        if near(e.time, t_end) {
+            breakpoint = Some(("t_end".into(), t_end));
+        }
+        let neighbours = events[k.saturating_sub(8)..(k + 9).min(events.len())].iter();
+        // Not one at the very same instant: a cascade from the time event's reset moves with
+        // the instant (rule 7), and a group fires in declaration order either way.
+        for other in neighbours.filter(|o| is_time(o) && o.time != e.time && near(o.time, e.time)) {
+            if breakpoint.is_none() {
+                breakpoint = Some((format!("the time event `{}`", other.name).into(), other.time));
+            }
+        }
+        if let Some((name, at)) = breakpoint {
+            let margin = if on_breakpoint(e.time, at) { 0.0 } else { (at - e.time).abs() };
+            warnings.push(SimWarning::NearBreakpoint {
+                event: e.event,
+                name: e.name.clone(),
+                time: e.time,
+                breakpoint: name,
+                margin,
+            });
         }
     }
 }

@@ -163,6 +163,13 @@ pub enum SimWarning {
     /// derivatives differ, so its time derivative does not exist, nor does any later derivative
     /// that depends on it.
     ResetOntoGuard { event: usize, name: Arc<str>, time: f64 },
+    /// The event fired within `margin` (round-off, below `1e-9 max(|t|, 1)`) before a breakpoint
+    /// where the run's values jump or end: `t_end`, or a time event. A parameter change that
+    /// moves it past the breakpoint changes the final values by a jump (it leaves the run, or
+    /// fires in the other order), so its derivatives hold only while the event moves by less
+    /// than `margin`; `margin` 0 is on the breakpoint itself (a cusp; at `t_end` the other side's
+    /// values are in `SimResult::end_cusp`).
+    NearBreakpoint { event: usize, name: Arc<str>, time: f64, breakpoint: Arc<str>, margin: f64 },
 }
 
 impl fmt::Display for SimWarning {
@@ -182,6 +189,21 @@ impl fmt::Display for SimWarning {
                 f,
                 "`{name}` was crossed at t = {time} together with an event that changed the state \
                  or the mode: no derivative exists from here on"
+            ),
+            SimWarning::NearBreakpoint { name, time, breakpoint, margin, .. } if *margin == 0.0 => write!(
+                f,
+                "event `{name}` fired at t = {time}, on {breakpoint}: the final values are a cusp in the \
+                 parameters (derivatives on the side where it fires{})",
+                if breakpoint.as_ref() == "t_end" {
+                    "; the other side's: final.without_end_events"
+                } else {
+                    ""
+                }
+            ),
+            SimWarning::NearBreakpoint { name, time, breakpoint, margin, .. } => write!(
+                f,
+                "event `{name}` fired at t = {time}, {margin:e} before {breakpoint}: its derivatives hold \
+                 only while parameter changes move it by less than that"
             ),
             SimWarning::ResetOntoGuard { name, time, .. } => write!(
                 f,
@@ -380,4 +402,20 @@ pub struct SimResult {
     pub warnings: Vec<SimWarning>,
     pub stats: SimStats,
     pub trajectory: Option<Vec<TrajectoryRow>>,
+    /// Events fired at `t_end` itself make the final values a cusp in the parameters: a change
+    /// that moves them later takes them out of the run. `final` is the side with them; this is
+    /// the other side, the final values and derivatives had they not fired.
+    pub end_cusp: Option<EndCusp>,
+}
+
+/// The final values of a run without the events it fired at `t_end` (see `SimResult::end_cusp`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct EndCusp {
+    /// The events fired at `t_end` (ids).
+    pub events: Vec<usize>,
+    pub state: Vec<f64>,
+    /// As `FinalState::dstate`.
+    pub dstate: Option<Vec<f64>>,
+    pub outputs: Vec<f64>,
+    pub doutputs: Option<Vec<f64>>,
 }

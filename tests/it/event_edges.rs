@@ -563,3 +563,65 @@ fn an_affine_guard_on_a_cubic_state_sees_all_three_crossings_in_one_step() {
         }
     }
 }
+
+#[test]
+fn an_event_on_t_end_is_a_cusp_with_both_sides_and_one_just_before_has_a_margin() {
+    use hybc::sim::SimWarning;
+    let ball = "model ball\nparam h0 = 1\nstate y = h0\nstate v = 0\nder(y) = v\nder(v) = -9.81\n\
+                event touchdown when y <= 0 {\n    v := -0.8 * v\n}\n";
+    let model = hybc::Model::parse(ball).unwrap();
+    let compiled = model.compile(&["h0"]).unwrap();
+    let t1 = (2.0f64 / 9.81).sqrt();
+    let near = |r: &hybc::Run| {
+        r.warnings().iter().find_map(|w| match w {
+            SimWarning::NearBreakpoint { margin, breakpoint, .. } => Some((*margin, breakpoint.to_string())),
+            _ => None,
+        })
+    };
+    let run_to = |t_end: f64| {
+        let mut o = model.sim_options();
+        o.t_end = t_end;
+        compiled.simulate(&model.params(), &o).unwrap()
+    };
+    // On t_end: a cusp. The side where it fires is `final`; the other is the fall without the
+    // bounce: y = h0 - g t^2 / 2 = 0, v = -g t1, dy/dh0 = 1, dv/dh0 = 0.
+    let r = run_to(t1);
+    assert_eq!(r.events().len(), 1);
+    assert_eq!(near(&r), Some((0.0, "t_end".to_string())));
+    let other = r.result().end_cusp.as_ref().expect("the other side");
+    assert!(other.state[0].abs() < 1e-12);
+    assert_relative_eq!(other.state[1], -9.81 * t1, max_relative = 1e-12);
+    let d = other.dstate.as_ref().unwrap();
+    assert_relative_eq!(d[0], 1.0, max_relative = 1e-12);
+    assert!(d[1].abs() < 1e-12);
+    assert_relative_eq!(r.state("v").unwrap(), 0.8 * 9.81 * t1, max_relative = 1e-12);
+    // 3e-14 before t_end (about 500 spacings): exact derivatives, with that margin.
+    let r = run_to(t1 + 3e-14);
+    let (margin, at) = near(&r).expect("a margin");
+    assert_eq!(at, "t_end");
+    assert!(margin > 1e-14 && margin < 5e-14, "{margin:e}");
+    assert!(r.result().end_cusp.is_none());
+    // Clearly before: nothing to say.
+    let r = run_to(t1 + 1e-6);
+    assert_eq!(near(&r), None);
+    assert!(r.result().end_cusp.is_none());
+}
+
+#[test]
+fn a_state_event_at_the_instant_of_a_time_event_is_flagged() {
+    use hybc::sim::SimWarning;
+    // hit (x = 3 t >= 3 tau) is located a few spacings before tick (t >= tau = 0.3), as two
+    // instants: the order of the two can flip under a parameter change: a cusp, margin 0.
+    // Apart: no flag. (Events of one group, at the same float time, are not flagged: a cascade
+    // from the time event's reset moves with the instant.)
+    let text = "model both\nparam r = 3\nparam tau = 0.3\nparam c = 0\nstate x = 0\nstate m = 0\n\
+                der(x) = r\nder(m) = 0\nevent tick when t >= tau {\n    m := m + 1\n}\n\
+                event hit when x >= r * tau + c {\n    m := 2 * m\n}\n";
+    let flagged = |r: &hybc::Run| {
+        r.warnings().iter().any(|w| matches!(w, SimWarning::NearBreakpoint { name, margin, .. } if name.as_ref() == "hit" && *margin == 0.0))
+    };
+    let r = run(text, &["r"], |o| o.t_end = 1.0);
+    assert!(flagged(&r), "{:?}", r.warnings());
+    let r = run(&text.replace("param c = 0", "param c = 0.1"), &["r"], |o| o.t_end = 1.0);
+    assert!(r.warnings().is_empty(), "{:?}", r.warnings());
+}
