@@ -378,14 +378,7 @@ impl Detector {
         pos: usize,
         p: &[f64],
     ) -> (f64, f64) {
-        if self.noise0[pos].is_nan() {
-            let ev = info.modes[mode].events[pos];
-            let (t, x, f) = (self.at[0].0, &self.at[0].1, &self.at[0].2);
-            let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
-            self.noise0[pos] = round_off(&self.gx, x, gt, t);
-            self.speed_noise0[pos] = round_off(&self.gx, f, gt, 1.0);
-        }
-        (self.noise0[pos], self.speed_noise0[pos])
+        self.noise_at(0, sys, info, mode, pos, p)
     }
 
     /// [`Self::noise0`] at the end of the step.
@@ -397,14 +390,31 @@ impl Detector {
         pos: usize,
         p: &[f64],
     ) -> (f64, f64) {
-        if self.noise1[pos].is_nan() {
+        self.noise_at(1, sys, info, mode, pos, p)
+    }
+
+    /// The round-off bounds at the step's start (`end` 0) or end (1), computed on first use.
+    fn noise_at<S: HybridSystem + ?Sized>(
+        &mut self,
+        end: usize,
+        sys: &S,
+        info: &SystemInfo,
+        mode: usize,
+        pos: usize,
+        p: &[f64],
+    ) -> (f64, f64) {
+        let (noise, speed_noise) = match end {
+            0 => (&mut self.noise0, &mut self.speed_noise0),
+            _ => (&mut self.noise1, &mut self.speed_noise1),
+        };
+        if noise[pos].is_nan() {
             let ev = info.modes[mode].events[pos];
-            let (t, x, f) = (self.at[1].0, &self.at[1].1, &self.at[1].2);
+            let (t, x, f) = (self.at[end].0, &self.at[end].1, &self.at[end].2);
             let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
-            self.noise1[pos] = round_off(&self.gx, x, gt, t);
-            self.speed_noise1[pos] = round_off(&self.gx, f, gt, 1.0);
+            noise[pos] = round_off(&self.gx, x, gt, t);
+            speed_noise[pos] = round_off(&self.gx, f, gt, 1.0);
         }
-        (self.noise1[pos], self.speed_noise1[pos])
+        (noise[pos], speed_noise[pos])
     }
 
     /// At the end of a step that ends the run with nothing selected: the events whose guard is
