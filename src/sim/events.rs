@@ -835,21 +835,26 @@ impl Detector {
                     self.samples.push(Sample { t: t1, g: g1, dg: dg1, extremum: false });
                     self.add_extrema_between_samples(sys, ev, mode, ne, pos, dense, p);
                 }
-                _ if self.speed_changes[pos] >= 2 => {
-                    self.samples.push(Sample { t: t1, g: g1, dg: dg1, extremum: false });
-                    self.add_extrema_between_stages(sys, ev, mode, ne, pos, stepper, n, p);
-                }
-                _ if cubic_hides_crossing(dir, g0, g1, dense.h() * dg0, dense.h() * dg1) => {
-                    // Two extrema that the stage speeds missed: the guard on the dense output at
-                    // the cubic's extrema brackets the crossings between them.
-                    let (ext, _) = hermite_extrema(g0, g1, dense.h() * dg0, dense.h() * dg1);
-                    for (s, _) in ext {
+                _ if self.speed_changes[pos] >= 2
+                    || cubic_hides_crossing(dir, g0, g1, dense.h() * dg0, dense.h() * dg1) =>
+                {
+                    // The guard on the dense output at the extrema of its cubic through the step's
+                    // ends, besides those between stages whose speeds differ in sign: the stage
+                    // speeds are those of the stages' own low-order states, not samples of the
+                    // solution, and can show sign changes where there are none and miss two that
+                    // are there (a cubic state integrated exactly in long steps).
+                    let (ext, k) = hermite_extrema(g0, g1, dense.h() * dg0, dense.h() * dg1);
+                    for &(s, _) in &ext[..k] {
                         let te = t0 + s * dense.h();
                         let ge = self.guard_on_dense(sys, mode, ne, pos, te, dense, p);
                         let dge = self.speed_on_dense(sys, ev, te, dense, p);
                         self.samples.push(Sample { t: te, g: ge, dg: dge, extremum: false });
                     }
                     self.samples.push(Sample { t: t1, g: g1, dg: dg1, extremum: false });
+                    if self.speed_changes[pos] >= 2 {
+                        self.add_extrema_between_stages(sys, ev, mode, ne, pos, stepper, n, p);
+                    }
+                    self.samples.sort_by(|a, b| a.t.total_cmp(&b.t));
                 }
                 _ => {
                     // At most one extremum, where the end speeds differ: searched only when it

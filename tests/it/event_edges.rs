@@ -533,18 +533,23 @@ fn an_affine_guard_on_a_cubic_state_sees_all_three_crossings_in_one_step() {
     let text = "model jerk\nparam r1 = 1\nparam r2 = 1.1\nparam r3 = 1.2\n\
                 state x = -r1 * r2 * r3\nstate v = r1 * r2 + r1 * r3 + r2 * r3\nstate a = -2 * (r1 + r2 + r3)\n\
                 der(x) = v\nder(v) = a\nder(a) = 6\nevent pass when x DIR 0\n";
-    for (dir, picks) in [("crosses", &[0, 1, 2][..]), (">=", &[0, 2]), ("<=", &[1])] {
+    let methods = [hybc::sim::Method::Dopri5, hybc::sim::Method::Dop853];
+    for (method, (dir, picks)) in methods
+        .into_iter()
+        .flat_map(|m| [("crosses", &[0, 1, 2][..]), (">=", &[0, 2][..]), ("<=", &[1][..])].map(|d| (m, d)))
+    {
         let model = hybc::Model::parse(&text.replace("DIR", dir)).unwrap();
         let compiled = model.compile(&["r1", "r2", "r3"]).unwrap();
         let mut o = model.sim_options();
         o.t_end = 30.0;
+        o.method = method;
         for (gap1, gap2) in [(0.1, 0.1), (0.01, 0.2), (0.3, 0.003), (1e-3, 1e-3), (2.0, 5.0)] {
             for r1 in [0.5, 1.0, 7.0] {
                 let roots = [r1, r1 + gap1, r1 + gap1 + gap2];
                 let params = model.params().with("r1", roots[0]).unwrap().with("r2", roots[1]).unwrap();
                 let params = params.with("r3", roots[2]).unwrap();
                 let run = compiled.simulate(&params, &o).unwrap();
-                let at = format!("{dir}, roots {roots:?}");
+                let at = format!("{method:?}, {dir}, roots {roots:?}");
                 assert_eq!(run.events().len(), picks.len(), "{at}: {:?}", times(&run));
                 for (e, &k) in run.events().iter().zip(picks) {
                     // Located to the guard's accuracy over its crossing speed x'(r_k).
