@@ -302,3 +302,23 @@ pub fn analyze(
         errors,
     })
 }
+
+/// The whole analysis, for a library caller: runs `compiled` at every row of `design` (see
+/// [`evaluate`]) and analyses each output (see [`analyze`]). The indices come per output, an
+/// output without them (its policy refused the missing rows) as its error.
+pub fn indices(
+    compiled: &crate::Compiled,
+    design: &Design,
+    outputs: &[Output],
+    opts: &SimOptions,
+    how: &Analysis,
+    threads: usize,
+) -> Result<(Evaluated, Vec<Result<OutputIndices, AnalysisError>>), SweepError> {
+    let evaluated = evaluate(compiled.native(), design, outputs, opts, threads, &|| ())?;
+    let results = outputs
+        .iter()
+        .enumerate()
+        .map(|(k, o)| analyze(&o.label, &evaluated.values, outputs.len(), k, how))
+        .collect();
+    Ok((evaluated, results))
+}
