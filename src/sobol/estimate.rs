@@ -136,12 +136,21 @@ pub fn bootstrap(blocks: &Blocks<'_>, points: &[u32], centre: f64, resamples: us
     let mut rng = ChaCha8Rng::from_seed(key);
     rng.set_stream(BOOTSTRAP_STREAM);
     let n = points.len();
-    let mut sample = vec![0u32; n];
+    let mut counts = vec![0u32; n];
+    let mut sample = Vec::with_capacity(n);
     let mut sum = Indices::default();
     let mut sum_sq = Indices::default();
     for _ in 0..resamples {
-        for s in sample.iter_mut() {
-            *s = points[((rng.next_u64() as u128 * n as u128) >> 64) as usize];
+        counts.fill(0);
+        for _ in 0..n {
+            counts[((rng.next_u64() as u128 * n as u128) >> 64) as usize] += 1;
+        }
+        // The drawn points in ascending order (each as often as drawn): the same multiset, read
+        // in memory order rather than at random (a random walk over the values cost more than
+        // the runs of a small model).
+        sample.clear();
+        for (&point, &count) in points.iter().zip(&counts) {
+            sample.extend(std::iter::repeat_n(point, count as usize));
         }
         let est = indices(blocks, &sample, centre);
         accumulate(&mut sum, &mut sum_sq, &est);
