@@ -14,6 +14,7 @@ use super::run::{at_most, parameter_values, sim_options, SimFlags};
 use super::sweep::progress_bar;
 use super::{compile_model, load_model, usage_error, ModelArg, EXIT_SIM_STOPPED};
 use crate::limits::{MAX_BOOTSTRAP, MAX_SOBOL_BASE_POINTS, MAX_SOBOL_VALUES, MAX_SWEEP_POINTS, MAX_THREADS};
+use crate::plot::{SobolFigure, SobolPanel};
 use crate::sobol::{self, Analysis, AnalysisError, Design, OnFail, Output, OutputIndices, Prior};
 use crate::Model;
 
@@ -75,6 +76,9 @@ pub struct SobolArgs {
     /// [BA_1..BA_D], B per base point) to this CSV file, to check the indices with SALib.
     #[arg(long, value_name = "FILE.csv")]
     design_out: Option<PathBuf>,
+    /// Draw the indices as bars with their intervals, a panel per output, into this file.
+    #[arg(long, value_name = "FILE.svg|.png")]
+    plot: Option<PathBuf>,
 }
 
 pub fn run(args: &SobolArgs) -> ExitCode {
@@ -167,6 +171,9 @@ fn sobol_model(model: &Model, args: &SobolArgs) -> Result<ExitCode, String> {
     if !args.n.is_power_of_two() {
         eprintln!("note: -n {} is not a power of 2; the Sobol' points are balanced at powers of 2", args.n);
     }
+    if let Some(path) = &args.plot {
+        crate::plot::ImageFormat::from_path(path).map_err(|e| format!("--plot: {e}"))?;
+    }
     if let Some(path) = &args.design_out {
         write_design(&design, model, path)?;
     }
@@ -196,6 +203,28 @@ fn sobol_model(model: &Model, args: &SobolArgs) -> Result<ExitCode, String> {
         FormatArg::Json => json_report(&head, &results) + "\n",
     };
     super::print_out(&text);
+    if let Some(path) = &args.plot {
+        let conf = |v: &[f64], e: Option<&[f64]>| -> Vec<(f64, f64)> {
+            v.iter().enumerate().map(|(i, v)| (*v, e.map_or(f64::NAN, |e| Z_95 * e[i]))).collect()
+        };
+        let panels = results
+            .iter()
+            .flatten()
+            .map(|r| SobolPanel {
+                name: r.label.clone(),
+                s1: conf(&r.indices.s1, r.errors.as_ref().map(|e| e.s1.as_slice())),
+                st: conf(&r.indices.st, r.errors.as_ref().map(|e| e.st.as_slice())),
+            })
+            .collect();
+        let title = format!(
+            "{}: Sobol' indices, S1 (blue) and ST (orange){}, N = {}",
+            model.name(),
+            if args.bootstrap > 0 { " with 95% intervals" } else { "" },
+            design.n()
+        );
+        let figure = SobolFigure { title, params: names.iter().map(|n| n.to_string()).collect(), panels };
+        crate::plot::plot_sobol(&figure, path).map_err(|e| format!("--plot: {e}"))?;
+    }
     let failed: Vec<&AnalysisError> = results.iter().filter_map(|r| r.as_ref().err()).collect();
     for e in &failed {
         eprintln!("error: {e}");

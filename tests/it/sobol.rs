@@ -310,3 +310,43 @@ fn bad_flags_are_usage_errors_naming_the_flag() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--vary: `h0=x:1`: `x` is not a finite number"));
 }
+
+#[test]
+fn the_plot_has_a_bar_per_index_and_refuses_an_unknown_format() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("indices.svg");
+    let mut args = BALL_ARGS.to_vec();
+    args.extend(["64", "--output", "energy,touchdown#last", "--bootstrap", "20", "--plot"]);
+    args.push(path.to_str().expect("utf-8"));
+    let out = sobol_cli(&args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let svg = std::fs::read_to_string(&path).expect("plot written");
+    let bars = |c: plotters::style::RGBColor| {
+        let fill = format!("fill=\"#{:02X}{:02X}{:02X}\"", c.0, c.1, c.2);
+        svg.split("<rect").skip(1).filter(|el| el.split('>').next().unwrap_or("").contains(&fill)).count()
+    };
+    // Two outputs, three parameters: an S1 bar and an ST bar each.
+    assert_eq!(bars(hybc::plot::DATA_COLOR), 6);
+    assert_eq!(bars(hybc::plot::TANGENT_COLOR), 6);
+    let texts: Vec<&str> = svg
+        .split("<text")
+        .skip(1)
+        .filter_map(|el| el.split_once('>').and_then(|(_, rest)| rest.split("</text>").next()))
+        .map(str::trim)
+        .collect();
+    for name in ["h0", "e", "g", "energy: S1, ST", "touchdown#last: S1, ST"] {
+        assert!(texts.contains(&name), "{name} in {texts:?}");
+    }
+
+    let bad = dir.path().join("indices.pdf");
+    let mut args = BALL_ARGS.to_vec();
+    args.extend(["8", "--output", "energy", "--plot", bad.to_str().expect("utf-8")]);
+    let out = sobol_cli(&args);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("--plot: "),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(out.stdout.is_empty() && !bad.exists());
+}
