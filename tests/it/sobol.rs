@@ -350,3 +350,44 @@ fn the_plot_has_a_bar_per_index_and_refuses_an_unknown_format() {
     );
     assert!(out.stdout.is_empty() && !bad.exists());
 }
+
+#[test]
+fn normal_and_log_uniform_priors_reach_the_design_rows() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("design.csv");
+    let args = [
+        "models/ball.hyb",
+        "--vary",
+        "g=normal:9.81:0.2",
+        "--vary",
+        "h0=loguniform:0.5:2",
+        "--output",
+        "energy",
+        "-n",
+        "1024",
+        "--bootstrap",
+        "0",
+        "--design-out",
+        path.to_str().expect("utf-8"),
+    ];
+    let out = sobol_cli(&args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = std::fs::read_to_string(&path).expect("written");
+    let rows: Vec<Vec<f64>> =
+        text.lines().skip(1).map(|l| l.split(',').map(|v| v.parse().expect("number")).collect()).collect();
+    assert_eq!(rows.len(), 1024 * 4);
+    let n = rows.len() as f64;
+    let mean = |f: &dyn Fn(&Vec<f64>) -> f64| rows.iter().map(f).sum::<f64>() / n;
+    // g: mean 9.81 and standard deviation 0.2; the Sobol' points put the sample moments far
+    // closer than a random sample's (standard error 0.003 of the mean for 4096 draws).
+    let g_mean = mean(&|r| r[0]);
+    let g_sd = mean(&|r| (r[0] - g_mean).powi(2)).sqrt();
+    assert!((g_mean - 9.81).abs() < 0.003 && (g_sd - 0.2).abs() < 0.004, "{g_mean} {g_sd}");
+    // log h0 uniform on [log 0.5, log 2]: within the range, its mean in the middle (0), its
+    // variance (log 4)^2 / 12.
+    assert!(rows.iter().all(|r| (0.5..=2.0).contains(&r[1])));
+    let l_mean = mean(&|r| r[1].ln());
+    let l_var = mean(&|r| (r[1].ln() - l_mean).powi(2));
+    assert!(l_mean.abs() < 0.01, "{l_mean}");
+    approx::assert_relative_eq!(l_var, 4f64.ln().powi(2) / 12.0, max_relative = 0.01);
+}
