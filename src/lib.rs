@@ -43,6 +43,7 @@ pub mod plot;
 pub mod report;
 pub mod sema;
 pub mod sim;
+pub mod sobol;
 mod stack;
 pub mod status;
 pub mod sweep;

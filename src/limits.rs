@@ -19,6 +19,16 @@ pub const MAX_SWEEP_POINTS: usize = 1_000_000_000;
 /// Points of a sweep whose rows are all kept (Python `Model.sweep` returns its columns; about
 /// 100 bytes per point and column).
 pub const MAX_SWEEP_POINTS_IN_MEMORY: usize = 10_000_000;
+/// Base points of a Sobol' analysis (`hybc sobol -n`): it keeps every row's outputs
+/// (`N (D + 2)` or `N (2 D + 2)` numbers per output), 2^22 base points of 3 parameters are
+/// 21 million rows. The rows are also capped by [`MAX_SWEEP_POINTS`], the kept numbers by
+/// [`MAX_SOBOL_VALUES`].
+pub const MAX_SOBOL_BASE_POINTS: usize = 1 << 22;
+/// Output values a Sobol' analysis keeps (rows x outputs): 8 bytes each, so at most 800 MB.
+pub const MAX_SOBOL_VALUES: usize = 100_000_000;
+/// Bootstrap resamples of a Sobol' analysis (`--bootstrap`): each recomputes every index over
+/// all base points.
+pub const MAX_BOOTSTRAP: usize = 100_000;
 /// Trials of a fit (`--max-iter`): every trial is kept for the report.
 pub const MAX_FIT_ITER: usize = 1_000_000;
 

@@ -5,6 +5,7 @@ mod check;
 mod derive;
 mod fit;
 mod run;
+mod sobol;
 mod sweep;
 mod trajectory;
 
@@ -35,6 +36,9 @@ enum Command {
     Fit(fit::FitArgs),
     /// Run a model at many parameter points in parallel; one CSV or JSON row per point.
     Sweep(sweep::SweepArgs),
+    /// Sobol' indices (first order, total, optionally second order) of outputs over parameter
+    /// priors, from a Saltelli design; bootstrap intervals.
+    Sobol(sobol::SobolArgs),
 }
 
 /// Exit codes, as documented in the README.
@@ -61,6 +65,7 @@ pub fn main() -> ExitCode {
         Command::Run(args) => run::run(&args),
         Command::Fit(args) => fit::run(&args),
         Command::Sweep(args) => sweep::run(&args),
+        Command::Sobol(args) => sobol::run(&args),
     }
 }
 

@@ -196,7 +196,7 @@ fn points(model: &Model, args: &SweepArgs) -> Result<(Points, Vec<usize>), Strin
 }
 
 /// A progress bar on stderr when stderr is a terminal, else a hidden one.
-fn progress_bar(points: usize) -> ProgressBar {
+pub(super) fn progress_bar(points: usize) -> ProgressBar {
     if std::io::stderr().is_terminal() {
         let style = ProgressStyle::with_template("{bar:40} {pos}/{len} points, eta {eta}")
             .unwrap_or_else(|_| ProgressStyle::default_bar());

@@ -17,6 +17,18 @@ pub enum Observable {
     EventTime { name_event: usize, occurrence: usize },
 }
 
+impl Observable {
+    /// Parses `NAME` (an output or a state; prefix `output:` or `state:` when a name is both) or
+    /// `EVENT#K` against the names in `info`, as a target's left side (`hybc sobol --output`).
+    pub fn parse(name: &str, info: &SystemInfo) -> Result<Observable, TargetError> {
+        let name = name.trim();
+        match name.split_once('#') {
+            Some((event, k)) => event_time(event.trim(), k.trim(), name, info),
+            None => named_value(name, info),
+        }
+    }
+}
+
 /// One residual: `weight * (observed - value)`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Target {

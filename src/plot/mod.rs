@@ -9,6 +9,7 @@
 
 mod font;
 mod run_plot;
+mod sobol_plot;
 mod sweep_plot;
 
 use std::path::{Path, PathBuf};
@@ -17,6 +18,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 pub use run_plot::{plot_run, RunFigure};
+pub use sobol_plot::{plot_sobol, SobolFigure, SobolPanel};
 pub use sweep_plot::{plot_sweep, SweepFigure, SweepSeries, Tangent};
 
 /// Width of every plot, in pixels.

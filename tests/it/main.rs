@@ -30,6 +30,7 @@ mod plot;
 mod run_gradients;
 mod sim_ball;
 mod sim_events;
+mod sobol;
 mod stress_events;
 mod stress_frontend;
 mod sweep;

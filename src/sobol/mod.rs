@@ -1,0 +1,324 @@
+//! Global sensitivity: Sobol' indices of a model's outputs over parameter priors. A tool on the
+//! front door beside `sweep/` and `fit/`: it runs a compiled model at the rows of a Saltelli
+//! design and reads the results; it knows no `sim` internals and no CLI.
+//!
+//! Code map: `sequence` (the scrambled Sobol' sequence, point `i` from `i`), `joe_kuo` (its
+//! direction numbers), `design` (priors, the Saltelli design in SALib's row order, row `r` from
+//! `r`), `estimate` (S1, ST, S2 and bootstrap errors over one output's values), this file (the
+//! outputs a row reports, running the design in parallel keeping only those numbers, the policy
+//! for rows without a value, and [`analyze`], which takes the values however they were computed).
+//!
+//! Seams for other callers: a shard (Dask) computes rows `Design::fill(r)` for its range of `r`
+//! and returns the outputs; [`analyze`] turns the values of all rows into indices.
+
+pub mod design;
+pub mod estimate;
+mod joe_kuo;
+pub mod sequence;
+
+use rayon::prelude::*;
+
+pub use design::{parse_prior, Design, Prior, PriorError, RowKind, TooManyVaried, MAX_VARIED};
+pub use estimate::{Blocks, Indices};
+
+use crate::fit::{Observable, TargetError};
+use crate::sim::{self, HybridSystem, SimOptions, SimResult, SystemInfo};
+use crate::status::RunStatus;
+use crate::sweep::SweepError;
+
+/// A number one run reports, whose indices are asked for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Quantity {
+    /// A final output or state, or the time of the K-th firing of an event (`touchdown#2`).
+    Observable(Observable),
+    /// The time of the last firing of an event (`touchdown#last`).
+    LastFiring { name_event: usize },
+}
+
+/// One `--output` of an analysis: what it reads and its label as the user wrote it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Output {
+    pub label: String,
+    pub quantity: Quantity,
+}
+
+impl Output {
+    /// Parses `NAME` (an output or a state), `EVENT#K` (K from 1) or `EVENT#last`.
+    pub fn parse(text: &str, info: &SystemInfo) -> Result<Output, TargetError> {
+        let text = text.trim();
+        let quantity = match text.split_once('#') {
+            Some((event, "last")) => match Observable::parse(&format!("{event}#1"), info)? {
+                Observable::EventTime { name_event, .. } => Quantity::LastFiring { name_event },
+                _ => unreachable!("EVENT#1 parses as an event time"),
+            },
+            _ => Quantity::Observable(Observable::parse(text, info)?),
+        };
+        Ok(Output { label: text.to_string(), quantity })
+    }
+
+    /// Its value in a run that ended as asked, NaN where it does not exist (the event fired fewer
+    /// times) or is not finite.
+    pub fn value(&self, info: &SystemInfo, r: &SimResult) -> f64 {
+        let fired = |name_event: usize| {
+            let name = &info.events[name_event].name;
+            r.events.iter().filter(move |e| e.name == *name)
+        };
+        let v = match self.quantity {
+            Quantity::Observable(Observable::Output(i)) => r.final_state.outputs[i],
+            Quantity::Observable(Observable::State(i)) => r.final_state.state[i],
+            Quantity::Observable(Observable::EventTime { name_event, occurrence }) => {
+                fired(name_event).nth(occurrence - 1).map_or(f64::NAN, |e| e.time)
+            }
+            Quantity::LastFiring { name_event } => fired(name_event).next_back().map_or(f64::NAN, |e| e.time),
+        };
+        if v.is_finite() {
+            v
+        } else {
+            f64::NAN
+        }
+    }
+}
+
+/// What to do with rows that have no value for an output: the run ended early (Zeno, stuck,
+/// `max_events`, a fault, refused), the event did not fire that often, or the value is not finite.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum OnFail {
+    /// No indices for an output with any such row (the default: every index is then an estimate
+    /// over the whole prior, as asked).
+    Error,
+    /// Leave out every base point with such a row (its block is needed together): the indices
+    /// are then those of the output conditioned on the region where it exists.
+    Drop,
+    /// Use this number for the missing value.
+    Value(f64),
+}
+
+impl OnFail {
+    /// `error`, `drop` or `value=X`.
+    pub fn parse(text: &str) -> Option<OnFail> {
+        match text.trim() {
+            "error" => Some(OnFail::Error),
+            "drop" => Some(OnFail::Drop),
+            t => t
+                .strip_prefix("value=")
+                .and_then(|x| crate::number::parse_number(x.trim()).ok())
+                .map(OnFail::Value),
+        }
+    }
+}
+
+/// The outputs of every row of a design, and how its runs ended.
+#[derive(Clone, Debug, Default)]
+pub struct Evaluated {
+    /// Row-major: row `r`'s value of output `k` is `values[r * outputs + k]`, NaN where missing.
+    pub values: Vec<f64>,
+    pub outputs: usize,
+    /// Runs that did not end as asked, by status word (`zeno`, `fault`, ...; `error` for a run
+    /// that was refused), in the order of [`RunStatus`].
+    pub ended_early: Vec<(&'static str, usize)>,
+    /// The first row whose run ended early.
+    pub first_ended_early: Option<usize>,
+}
+
+/// Base points per unit of work: a few hundred runs, so the scheduling costs nothing beside them.
+const CHUNK_POINTS: usize = 64;
+
+/// Runs `sys` at every row of `design` with `opts` on `threads` workers (0: one per core),
+/// keeping only the values of `outputs` (memory: `rows x outputs` numbers, never a run's
+/// record). Each row is an independent run of a reused `Simulator` (bit for bit a fresh run), and
+/// its values land in its own slots, so the result does not depend on the thread count; rayon's
+/// work stealing keeps the other workers going while one grinds through a Zeno row. `progress`
+/// is called once per row.
+pub fn evaluate<S: HybridSystem + ?Sized>(
+    sys: &S,
+    design: &Design,
+    outputs: &[Output],
+    opts: &SimOptions,
+    threads: usize,
+    progress: &(dyn Fn() + Sync),
+) -> Result<Evaluated, SweepError> {
+    let k = outputs.len();
+    let rows = design.rows().expect("the caller capped the base points");
+    let block = design.block();
+    let info = sys.info();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|source| SweepError::ThreadPool { threads, source })?;
+    let mut values = vec![f64::NAN; rows * k];
+    let chunk = (CHUNK_POINTS * block * k).max(1);
+    /// Per status word (RunStatus order, then `error`), and the first row ended early.
+    type Tally = ([usize; 9], Option<usize>);
+    let tally: Tally = pool.install(|| {
+        values
+            .par_chunks_mut(chunk)
+            .enumerate()
+            .map_init(
+                || (sim::Simulator::new(sys, opts), vec![0.0; design.width()]),
+                |(simulator, p), (c, slots)| {
+                    let mut tally: Tally = ([0; 9], None);
+                    let first_row = c * CHUNK_POINTS * block;
+                    for (j, row_slots) in slots.chunks_mut(k.max(1)).enumerate() {
+                        let row = first_row + j;
+                        design.fill(row, p);
+                        let result = match simulator {
+                            Ok(simulator) => simulator.run(p),
+                            Err(e) => Err(e.clone()),
+                        };
+                        progress();
+                        let slot = match &result {
+                            Ok(r) if r.stopped_by.is_complete() => {
+                                for (o, v) in outputs.iter().zip(row_slots.iter_mut()) {
+                                    *v = o.value(info, r);
+                                }
+                                None
+                            }
+                            Ok(r) => Some(RunStatus::of(info, r) as usize),
+                            Err(_) => Some(8),
+                        };
+                        if let Some(s) = slot {
+                            tally.0[s] += 1;
+                            tally.1.get_or_insert(row);
+                        }
+                    }
+                    tally
+                },
+            )
+            .reduce(
+                || ([0; 9], None),
+                |mut a, b| {
+                    for (x, y) in a.0.iter_mut().zip(b.0) {
+                        *x += y;
+                    }
+                    a.1 = match (a.1, b.1) {
+                        (Some(x), Some(y)) => Some(x.min(y)),
+                        (x, y) => x.or(y),
+                    };
+                    a
+                },
+            )
+    });
+    let words = [
+        RunStatus::Ok,
+        RunStatus::Grazing,
+        RunStatus::NotDifferentiable,
+        RunStatus::NonFinite,
+        RunStatus::Zeno,
+        RunStatus::Stuck,
+        RunStatus::MaxEvents,
+        RunStatus::Fault,
+    ]
+    .map(RunStatus::name);
+    let ended_early =
+        words.iter().copied().chain(["error"]).zip(tally.0).filter(|(_, count)| *count > 0).collect();
+    Ok(Evaluated { values, outputs: k, ended_early, first_ended_early: tally.1 })
+}
+
+/// One output's indices and what went into them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OutputIndices {
+    pub label: String,
+    /// Rows without a value (the run ended early, the event did not fire, not finite).
+    pub failed_rows: usize,
+    /// Base points left out (`OnFail::Drop`), and those the indices use.
+    pub dropped_points: usize,
+    pub used_points: usize,
+    pub indices: Indices,
+    /// Bootstrap standard errors (the same shape), when resamples were asked for.
+    pub errors: Option<Indices>,
+}
+
+/// Why an output has no indices.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum AnalysisError {
+    #[error(
+        "output `{label}`: {failed_rows} of {rows} rows have no value (the first is row {first_row}); \
+         choose --on-fail drop or --on-fail value=X to analyse anyway"
+    )]
+    Failed { label: String, failed_rows: usize, rows: usize, first_row: usize },
+    #[error("output `{label}`: {used} base points left after dropping {dropped}; at least 2 are needed")]
+    TooFewPoints { label: String, used: usize, dropped: usize },
+}
+
+/// What [`analyze`] needs besides the values.
+#[derive(Clone, Copy, Debug)]
+pub struct Analysis {
+    pub d: usize,
+    pub second_order: bool,
+    pub on_fail: OnFail,
+    /// Bootstrap resamples (0: none).
+    pub bootstrap: usize,
+    pub seed: u64,
+}
+
+/// The indices of output `offset` of row-major `values` (`stride` values per row, `block` rows
+/// per base point in SALib's order), NaN marking a missing value, under the policy of `how`.
+pub fn analyze(
+    label: &str,
+    values: &[f64],
+    stride: usize,
+    offset: usize,
+    how: &Analysis,
+) -> Result<OutputIndices, AnalysisError> {
+    let mut owned;
+    let mut blocks = Blocks { y: values, stride, offset, d: how.d, second_order: how.second_order };
+    let block = if how.second_order { 2 * how.d + 2 } else { how.d + 2 };
+    let n = blocks.n();
+    let missing = |b: &Blocks<'_>, p: usize| (0..block).filter(|&j| b.at(p, j).is_nan()).count();
+    let failed_rows: usize = (0..n).map(|p| missing(&blocks, p)).sum();
+    let mut points: Vec<u32> = (0..n as u32).collect();
+    match how.on_fail {
+        OnFail::Error if failed_rows > 0 => {
+            let first = (0..n * block).find(|&r| values[r * stride + offset].is_nan()).unwrap_or(0);
+            return Err(AnalysisError::Failed {
+                label: label.to_string(),
+                failed_rows,
+                rows: n * block,
+                first_row: first + 1,
+            });
+        }
+        OnFail::Drop => points.retain(|&p| missing(&blocks, p as usize) == 0),
+        OnFail::Value(x) if failed_rows > 0 => {
+            owned = (0..n * block).map(|r| values[r * stride + offset]).collect::<Vec<f64>>();
+            owned.iter_mut().filter(|v| v.is_nan()).for_each(|v| *v = x);
+            blocks = Blocks { y: &owned, stride: 1, offset: 0, ..blocks };
+        }
+        _ => {}
+    }
+    let dropped = n - points.len();
+    if points.len() < 2 {
+        return Err(AnalysisError::TooFewPoints { label: label.to_string(), used: points.len(), dropped });
+    }
+    let centre = estimate::centre(&blocks, &points);
+    let indices = estimate::indices(&blocks, &points, centre);
+    let errors =
+        (how.bootstrap > 0).then(|| estimate::bootstrap(&blocks, &points, centre, how.bootstrap, how.seed));
+    Ok(OutputIndices {
+        label: label.to_string(),
+        failed_rows,
+        dropped_points: dropped,
+        used_points: points.len(),
+        indices,
+        errors,
+    })
+}
+
+/// The whole analysis, for a library caller: runs `compiled` at every row of `design` (see
+/// [`evaluate`]) and analyses each output (see [`analyze`]). The indices come per output, an
+/// output without them (its policy refused the missing rows) as its error.
+pub fn indices(
+    compiled: &crate::Compiled,
+    design: &Design,
+    outputs: &[Output],
+    opts: &SimOptions,
+    how: &Analysis,
+    threads: usize,
+) -> Result<(Evaluated, Vec<Result<OutputIndices, AnalysisError>>), SweepError> {
+    let evaluated = evaluate(compiled.native(), design, outputs, opts, threads, &|| ())?;
+    let results = outputs
+        .iter()
+        .enumerate()
+        .map(|(k, o)| analyze(&o.label, &evaluated.values, outputs.len(), k, how))
+        .collect();
+    Ok((evaluated, results))
+}
