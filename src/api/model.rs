@@ -146,7 +146,9 @@ impl Model {
         let checked = &self.inner.checked;
         let mut known: Vec<String> =
             checked.params.iter().filter(|p| !p.name.contains('[')).map(|p| p.name.clone()).collect();
-        known.extend(checked.vectors.iter().map(|v| format!("{0}[0] .. {0}[{1}]", v.name, v.len - 1)));
+        known.extend(
+            checked.vectors.iter().map(|v| format!("{0}[0] .. {0}[{1}]", v.name, v.len.saturating_sub(1))),
+        );
         let candidates = checked.params.iter().filter(|p| !p.name.contains('[')).map(|p| p.name.as_str());
         let hint =
             sema::closest_name(name, candidates.chain(checked.vectors.iter().map(|v| v.name.as_str())));

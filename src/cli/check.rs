@@ -48,7 +48,7 @@ pub fn summary(model: &Model) -> String {
         let range = p.range.map(|(lo, hi)| format!("  in [{lo}, {hi}]")).unwrap_or_default();
         match vectors.next_if(|v| v.first.0 as usize == k) {
             Some(v) => {
-                let last = v.len - 1;
+                let last = v.len.saturating_sub(1);
                 let _ =
                     writeln!(out, "  {}[{}] = {}{range}  ({0}[0] .. {0}[{last}])", v.name, v.len, p.default);
                 k += v.len as usize;

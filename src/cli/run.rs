@@ -141,15 +141,19 @@ pub(crate) fn parameter_values(model: &Model, sets: &[String]) -> Result<Params,
                     values.len()
                 ));
             }
-            if !v.elements().all(|p| seen.insert(p)) {
-                return Err(format!("--set: `{name}` is set twice"));
+            if let Some(p) = v.elements().find(|p| !seen.insert(*p)) {
+                let element = &model.checked().params[p.0 as usize].name;
+                return Err(format!(
+                    "--set: `{element}` is set twice (`--set {name}=...` sets every element)"
+                ));
             }
             params.set_vector(name, &values).map_err(|e| format!("--set: {e}"))?;
             continue;
         }
         let idx = model.param_index(name).map_err(|e| format!("--set: {e}"))?;
         if !seen.insert(idx) {
-            return Err(format!("--set: `{name}` is set twice"));
+            let whole = name.split_once('[').map(|(v, _)| format!(" (`--set {v}=...` sets every element)"));
+            return Err(format!("--set: `{name}` is set twice{}", whole.unwrap_or_default()));
         }
         let value = number(name, value)?;
         params.set(name, value).map_err(|e| format!("--set: {e}"))?;

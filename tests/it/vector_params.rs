@@ -128,7 +128,7 @@ fn the_cli_sets_and_differentiates_vectors_by_name() {
     ]);
     // `w` and `w[4]` both set: refused, the second would silently win.
     assert_eq!(code, 2, "{err}");
-    assert_eq!(err.trim(), "error: --set: `w` is set twice");
+    assert_eq!(err.trim(), "error: --set: `w[4]` is set twice (`--set w=...` sets every element)");
     assert!(json.is_empty());
     let (code, json, err) = stdout(&[
         "run",
@@ -173,6 +173,19 @@ fn the_cli_sets_and_differentiates_vectors_by_name() {
     let (code, _, err) = stdout(&["sweep", path, "--vary", "u=0:1:3"]);
     assert_eq!(code, 2);
     assert!(err.contains("`u` is a vector of 5 parameters"), "{err}");
+    // `hybc fit --free u` fits every element: sum(u) to 2 (underdetermined: the damped steps
+    // move all elements alike from equal starts, to 0.4 each).
+    let (code, json, err) =
+        stdout(&["fit", path, "--free", "u", "--target", "s=2", "--format", "json", "--t-end", "1"]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&json).expect("json");
+    let free: Vec<&str> =
+        v["free"].as_array().expect("free").iter().map(|f| f.as_str().expect("name")).collect();
+    assert_eq!(free, ["u[0]", "u[1]", "u[2]", "u[3]", "u[4]"]);
+    for k in 0..5 {
+        let value = v["params"][format!("u[{k}]")].as_f64().expect("fitted value");
+        assert!((value - 0.4).abs() < 1e-6, "u[{k}] = {value}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
