@@ -79,6 +79,12 @@ class Model:
     def modes(self) -> list[str]:
         return self._native.modes
 
+    @property
+    def vectors(self) -> list[tuple[str, int]]:
+        """Vector parameters (``param u[N]``) and their lengths, in declaration order; their
+        elements are in :attr:`params` as ``u[0]`` .."""
+        return self._native.vectors
+
     def simulate(
         self,
         params: Mapping[str, float] | None = None,
@@ -87,7 +93,9 @@ class Model:
         trajectory: None | str | float = None,
         **options: Any,
     ) -> "_hybc.Run":
-        """One run at ``params`` (the others at their defaults).
+        """One run at ``params`` (the others at their defaults). A vector parameter (``param
+        u[N]``) takes a 1-D array of its N values (``params={"u": np.zeros(N)}``), or one element
+        by name (``{"u[3]": 1.0}``); in ``grad`` its name means every element, ``u[0]`` ..
 
         ``grad``: parameters to differentiate with respect to (the gradient column order).
         ``trajectory``: None, ``"steps"`` (every accepted step and both sides of every event) or a
@@ -97,8 +105,12 @@ class Model:
         the defaults of ``hybc run``. The GIL is released while the model compiles and runs.
         """
         _check_counts(options)
+        vectors = dict(self._native.vectors)
         return self._native.simulate(
-            _param_dict(params), grad=_names(grad, "grad"), trajectory=trajectory, **options
+            _param_dict(_expand_vectors(params, vectors)),
+            grad=_expand_names(_names(grad, "grad"), vectors),
+            trajectory=trajectory,
+            **options,
         )
 
     def sweep(
@@ -279,6 +291,38 @@ def _number(value: Any, what: str) -> float:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise TypeError(f"{what}: expected a number, found {type(value).__name__} {value!r}")
     return float(value)
+
+
+def _expand_vectors(params: Any, vectors: dict[str, int]) -> Any:
+    """``params`` with each vector parameter's array replaced by its elements ``u[0]`` .., after
+    checking that it is 1-D with one value per element."""
+    if not isinstance(params, Mapping) or not any(k in vectors for k in params):
+        return params
+    out: dict[str, Any] = {}
+    for name, value in params.items():
+        if name not in vectors:
+            out[name] = value
+            continue
+        array = np.asarray(value)
+        # float() and NumPy would turn "0.9" into 0.9: text is not a parameter value.
+        if array.dtype.kind not in "iuf":
+            raise TypeError(f"params: `{name}`: expected numbers, found {value!r}")
+        if array.shape != (vectors[name],):
+            raise ValueError(
+                f"params: `{name}` is a vector of {vectors[name]} parameters: expected a 1-D array of "
+                f"{vectors[name]} values, found shape {array.shape}"
+            )
+        for k, v in enumerate(array.tolist()):
+            out[f"{name}[{k}]"] = v
+    return out
+
+
+def _expand_names(names: list[str], vectors: dict[str, int]) -> list[str]:
+    """A vector parameter's name stands for all its elements, in order (as ``--grad u``)."""
+    out: list[str] = []
+    for name in names:
+        out.extend([f"{name}[{k}]" for k in range(vectors[name])] if name in vectors else [name])
+    return out
 
 
 def _param_dict(params: Mapping[str, float] | None, what: str = "params") -> dict[str, float]:

@@ -97,6 +97,13 @@ impl Model {
         self.model.params().iter().map(|(n, v)| (n.to_string(), v)).collect()
     }
 
+    /// Vector parameters (`param u[N]`) and their lengths, in declaration order; their elements
+    /// are in `params` as `u[0]` ..
+    #[getter]
+    fn vectors(&self) -> Vec<(String, usize)> {
+        self.model.checked().vectors.iter().map(|v| (v.name.clone(), v.len as usize)).collect()
+    }
+
     #[getter]
     fn states(&self) -> Vec<String> {
         self.model.state_names().map(String::from).collect()

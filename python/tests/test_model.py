@@ -272,3 +272,37 @@ def test_counts_have_the_cli_caps(ball):
         ball.sweep({"e": [0.5]}, threads=1025)
     run = ball.simulate(max_events=1)
     assert run.status == "max_events" and len(run.event_times) == 1
+
+
+VECTOR_MODEL = """model dot
+param u[5] = 0 in [-5, 5]
+param w[5] = 1
+state x = 0
+der(x) = dot(u, w)
+output s = sum(u)
+"""
+
+
+def test_a_vector_parameter_takes_an_array():
+    # der(x) = dot(u, w): x(T) = T sum u_k w_k, dx/du_k = T w_k, exactly.
+    model = hybc.Model(VECTOR_MODEL)
+    assert model.vectors == [("u", 5), ("w", 5)]
+    assert list(model.params)[:6] == ["u[0]", "u[1]", "u[2]", "u[3]", "u[4]", "w[0]"]
+    u = np.array([0.5, -1.0, 2.0, 3.0, -0.25])
+    w = np.arange(1.0, 6.0)
+    run = model.simulate({"u": u, "w": w}, grad=["u", "w[4]"], t_end=2.0)
+    assert math.isclose(run.state["x"], 2.0 * float(u @ w), rel_tol=1e-12)
+    assert math.isclose(run.outputs["s"], float(u.sum()), rel_tol=1e-12)
+    np.testing.assert_allclose(run.dstate["x"], list(2.0 * w) + [2.0 * u[4]], rtol=1e-12)
+    one = model.simulate({"u[3]": 1.0}, t_end=1.0)
+    assert math.isclose(one.state["x"], 1.0, rel_tol=1e-12)
+
+
+def test_a_vector_parameter_refuses_a_wrong_shape_or_range():
+    model = hybc.Model(VECTOR_MODEL)
+    with pytest.raises(ValueError, match=r"`u` is a vector of 5 parameters: expected a 1-D array of 5 values, found shape \(3,\)"):
+        model.simulate({"u": np.zeros(3)})
+    with pytest.raises(TypeError, match="expected numbers"):
+        model.simulate({"u": ["a"] * 5})
+    with pytest.raises(hybc.ParameterError, match=r"u\[2\] = 9 is outside its range"):
+        model.simulate({"u": [0, 0, 9, 0, 0]})

@@ -62,6 +62,15 @@ pub enum ParamError {
     OutOfRange { name: String, value: f64, lo: f64, hi: f64 },
     #[error("parameter `{name}` is named twice")]
     Duplicate { name: String },
+    /// A vector parameter named where one scalar is meant (`set("u", 1.0)`).
+    #[error("`{name}` is a vector of {len} parameters; name one element, `{name}[0]` .. `{name}[{}]`", len.saturating_sub(1))]
+    IsVector { name: String, len: u32 },
+    /// A vector's values of the wrong count.
+    #[error("`{name}` is a vector of {len} parameters, but {found} value{} given", if *found == 1 { " was" } else { "s were" })]
+    VectorLength { name: String, len: u32, found: usize },
+    /// Vector values for a name that is not a vector parameter.
+    #[error("model `{model}` has no vector parameter `{name}`")]
+    NotAVector { model: String, name: String },
     #[error("the parameter values are for model `{found}`, not `{expected}`")]
     OtherModel { expected: String, found: String },
 }

@@ -125,14 +125,33 @@ impl Model {
     }
 
     /// The index of parameter `name`, or an error that lists the model's parameters.
+    /// An element of a vector parameter is named `u[3]` (no spaces, no leading zeros); the vector's
+    /// own name is refused here with a word on how to name its elements.
     pub fn param_index(&self, name: &str) -> Result<ParamIdx, ParamError> {
-        self.inner.checked.param_index(name).ok_or_else(|| self.unknown_param(name))
+        let checked = &self.inner.checked;
+        if let Some(v) = checked.vector(name) {
+            return Err(ParamError::IsVector { name: name.to_string(), len: v.len });
+        }
+        checked.param_index(name).ok_or_else(|| self.unknown_param(name))
     }
 
-    /// "no parameter `name`", with the closest name and the list of parameters.
+    /// The vector parameter `name` (`param u[N]`), if the model has one.
+    pub fn vector(&self, name: &str) -> Option<&sema::ParamVector> {
+        self.inner.checked.vector(name)
+    }
+
+    /// "no parameter `name`", with the closest name and the list of parameters (a vector listed
+    /// once, as `u[0] .. u[20]`).
     pub(crate) fn unknown_param(&self, name: &str) -> ParamError {
-        let known: Vec<String> = self.param_names().map(String::from).collect();
-        let hint = sema::closest_name(name, known.iter().map(String::as_str));
+        let checked = &self.inner.checked;
+        let mut known: Vec<String> =
+            checked.params.iter().filter(|p| !p.name.contains('[')).map(|p| p.name.clone()).collect();
+        known.extend(
+            checked.vectors.iter().map(|v| format!("{0}[0] .. {0}[{1}]", v.name, v.len.saturating_sub(1))),
+        );
+        let candidates = checked.params.iter().filter(|p| !p.name.contains('[')).map(|p| p.name.as_str());
+        let hint =
+            sema::closest_name(name, candidates.chain(checked.vectors.iter().map(|v| v.name.as_str())));
         ParamError::Unknown { model: self.name().to_string(), name: name.to_string(), hint, known }
     }
 
@@ -145,9 +164,11 @@ impl Model {
     /// [`Self::compile`] with explicit code-generation options.
     pub fn compile_with<S: AsRef<str>>(&self, grad: &[S], opts: &CompileOptions) -> Result<Compiled, Error> {
         let mut indices: Vec<ParamIdx> = Vec::with_capacity(grad.len());
+        // A set, not a scan of `indices`: `--grad u` on a long vector names thousands.
+        let mut seen = std::collections::HashSet::new();
         for name in grad {
             let idx = self.param_index(name.as_ref())?;
-            if indices.contains(&idx) {
+            if !seen.insert(idx) {
                 return Err(ParamError::Duplicate { name: name.as_ref().to_string() }.into());
             }
             indices.push(idx);

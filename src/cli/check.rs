@@ -39,9 +39,25 @@ pub fn summary(model: &Model) -> String {
     );
     let show = crate::lower::ExprPrinter::new(model);
     let _ = writeln!(out, "parameters");
-    for p in &model.params {
+    // A vector is one line, as declared (its elements share default and range): a listing of
+    // 1000 elements would bury the rest of the summary.
+    let mut vectors = model.vectors.iter().peekable();
+    let mut k = 0;
+    while k < model.params.len() {
+        let p = &model.params[k];
         let range = p.range.map(|(lo, hi)| format!("  in [{lo}, {hi}]")).unwrap_or_default();
-        let _ = writeln!(out, "  {} = {}{range}", p.name, p.default);
+        match vectors.next_if(|v| v.first.0 as usize == k) {
+            Some(v) => {
+                let last = v.len.saturating_sub(1);
+                let _ =
+                    writeln!(out, "  {}[{}] = {}{range}  ({0}[0] .. {0}[{last}])", v.name, v.len, p.default);
+                k += v.len as usize;
+            }
+            None => {
+                let _ = writeln!(out, "  {} = {}{range}", p.name, p.default);
+                k += 1;
+            }
+        }
     }
     let _ = writeln!(out, "states");
     for s in &model.states {

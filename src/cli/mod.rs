@@ -117,7 +117,8 @@ pub(crate) fn usage_error(message: &str) -> ExitCode {
     ExitCode::from(EXIT_USAGE_ERROR)
 }
 
-/// Parses a comma-separated list of parameter names, or `all`, for the flag `flag`.
+/// Parses a comma-separated list of parameter names, or `all`, for the flag `flag`. A vector
+/// parameter's name stands for all its elements, in order; `u[3]` for one.
 pub(crate) fn parse_param_list(
     model: &crate::Model,
     list: &str,
@@ -127,11 +128,19 @@ pub(crate) fn parse_param_list(
         return Ok((0..model.checked().params.len()).map(|i| ParamIdx(i as u32)).collect());
     }
     let mut out: Vec<ParamIdx> = Vec::new();
+    // A set, not a scan of `out`: a vector of 10^5 elements would make the check quadratic.
+    let mut seen = std::collections::HashSet::new();
     for name in list.split(',').map(str::trim).filter(|n| !n.is_empty()) {
-        match model.param_index(name) {
-            Ok(p) if out.contains(&p) => return Err(format!("{flag}: `{name}` is named twice")),
-            Ok(p) => out.push(p),
-            Err(e) => return Err(format!("{flag}: {e}")),
+        let indices: Vec<ParamIdx> = match model.vector(name) {
+            Some(v) => v.elements().collect(),
+            None => vec![model.param_index(name).map_err(|e| format!("{flag}: {e}"))?],
+        };
+        for p in indices {
+            if !seen.insert(p) {
+                let element = &model.checked().params[p.0 as usize].name;
+                return Err(format!("{flag}: `{element}` is named twice"));
+            }
+            out.push(p);
         }
     }
     Ok(out)

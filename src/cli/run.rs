@@ -114,24 +114,48 @@ pub fn run(args: &RunArgs) -> ExitCode {
 }
 
 /// Parameter values: the defaults with every `--set P=VALUE` applied and range-checked; a
-/// parameter set twice is a usage error (the second value would silently win).
+/// parameter set twice is a usage error (the second value would silently win). A vector
+/// parameter takes all its values at once, `--set u=0,0.5,1` (exactly as many as it has
+/// elements), or one element, `--set u[3]=1`.
 pub(crate) fn parameter_values(model: &Model, sets: &[String]) -> Result<Params, String> {
     let mut params = model.params();
-    let mut seen: Vec<&str> = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    let number = |name: &str, text: &str| {
+        crate::number::parse_number(text.trim()).map_err(|e| match e {
+            crate::number::NumberError::TooSmall { .. } => format!("--set {name}: {e}"),
+            _ => format!("--set: `{}` is not a finite number", text.trim()),
+        })
+    };
     for s in sets {
         let Some((name, value)) = s.split_once('=') else {
             return Err(format!("--set: expected P=VALUE, found `{s}`"));
         };
         let name = name.trim();
-        model.param_index(name).map_err(|e| format!("--set: {e}"))?;
-        if seen.contains(&name) {
-            return Err(format!("--set: `{name}` is set twice"));
+        if let Some(v) = model.vector(name) {
+            let values: Vec<f64> =
+                value.split(',').map(|text| number(name, text)).collect::<Result<_, _>>()?;
+            if values.len() != v.len as usize {
+                return Err(format!(
+                    "--set {name}: expected {} comma-separated values, one per element of `{name}`, found {}",
+                    v.len,
+                    values.len()
+                ));
+            }
+            if let Some(p) = v.elements().find(|p| !seen.insert(*p)) {
+                let element = &model.checked().params[p.0 as usize].name;
+                return Err(format!(
+                    "--set: `{element}` is set twice (`--set {name}=...` sets every element)"
+                ));
+            }
+            params.set_vector(name, &values).map_err(|e| format!("--set: {e}"))?;
+            continue;
         }
-        seen.push(name);
-        let value = crate::number::parse_number(value.trim()).map_err(|e| match e {
-            crate::number::NumberError::TooSmall { .. } => format!("--set {name}: {e}"),
-            _ => format!("--set: `{}` is not a finite number", value.trim()),
-        })?;
+        let idx = model.param_index(name).map_err(|e| format!("--set: {e}"))?;
+        if !seen.insert(idx) {
+            let whole = name.split_once('[').map(|(v, _)| format!(" (`--set {v}=...` sets every element)"));
+            return Err(format!("--set: `{name}` is set twice{}", whole.unwrap_or_default()));
+        }
+        let value = number(name, value)?;
         params.set(name, value).map_err(|e| format!("--set: {e}"))?;
     }
     Ok(params)

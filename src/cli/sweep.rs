@@ -101,7 +101,11 @@ fn points(model: &Model, args: &SweepArgs) -> Result<(Points, Vec<usize>), Strin
         if specs.iter().any(|s| s.0 == idx) {
             return Err(format!("--vary: `{}` is varied twice", spec.name));
         }
-        let set_too = args.set.iter().any(|s| s.split_once('=').is_some_and(|(n, _)| n.trim() == spec.name));
+        // `--set u=...` sets every element of `u`, `u[3]` among them.
+        let set_too = args.set.iter().filter_map(|s| s.split_once('=')).any(|(n, _)| {
+            let n = n.trim();
+            n == spec.name || model.vector(n).is_some_and(|v| v.elements().any(|p| p.0 as usize == idx))
+        });
         if set_too {
             return Err(format!("`{}` is given both by --set and by --vary", spec.name));
         }

@@ -173,22 +173,46 @@ impl Lowerer {
 
     /// Structurally non-zero `d rows[i] / d var_k`, ascending by row then column. Only the
     /// variables a row mentions are tried, so the cost follows the number of non-zeros rather
-    /// than rows x columns.
+    /// than rows x columns; and each is differentiated along the nodes between its leaf and the
+    /// row only (`Differentiator::diff_along`), so a row that reads many variables through one
+    /// sum (`sum(u)` of a vector parameter) costs the sum's depth per entry, not its size.
     fn jacobian(&mut self, rows: &[ExprId], jac: Jac) -> SparseMat {
         let (n_cols, var) = self.vars(jac);
         let mut entries = Vec::new();
         for (i, &row) in rows.iter().enumerate() {
-            let mut mentioned: Vec<u32> = reachable(&self.store, &[row])
-                .into_iter()
-                .filter_map(|id| match (*self.store.node(id), jac) {
-                    (Node::State(k), Jac::States) | (Node::Param(k), Jac::Params) => Some(k),
-                    _ => None,
-                })
-                .filter(|&k| k < n_cols)
-                .collect();
+            let under = reachable(&self.store, &[row]);
+            let mut parents: HashMap<ExprId, Vec<ExprId>> = HashMap::new();
+            let mut mentioned: Vec<(u32, ExprId)> = Vec::new();
+            for &id in &under {
+                let node = *self.store.node(id);
+                for c in node.children() {
+                    parents.entry(c).or_default().push(id);
+                }
+                match (node, jac) {
+                    (Node::State(k), Jac::States) | (Node::Param(k), Jac::Params) if k < n_cols => {
+                        mentioned.push((k, id))
+                    }
+                    _ => {}
+                }
+            }
             mentioned.sort_unstable();
-            for k in mentioned {
-                let d = self.diff.diff(&mut self.store, row, var(k));
+            for (k, leaf) in mentioned {
+                // The nodes that depend on this variable: its leaf and everything above it.
+                let mut path = vec![leaf];
+                let mut seen = std::collections::HashSet::from([leaf]);
+                let mut at = 0;
+                while at < path.len() {
+                    for &p in parents.get(&path[at]).map(Vec::as_slice).unwrap_or(&[]) {
+                        if seen.insert(p) {
+                            path.push(p);
+                        }
+                    }
+                    at += 1;
+                }
+                path.sort_unstable();
+                debug_assert_eq!(path.last(), Some(&row));
+                let d =
+                    self.diff.diff_along(&mut self.store, &path, var(k)).expect("the leaf is on the path");
                 if !self.store.is_zero(d) {
                     entries.push((i as u32, k, d));
                 }

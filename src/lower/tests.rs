@@ -23,6 +23,7 @@ fn ball() -> Model {
     Model {
         name: "ball".into(),
         params: vec![param("g", 9.81), param("e", 0.8), param("h0", 1.0)],
+        vectors: vec![],
         states: vec![
             State { name: "y".into(), init: h0, span },
             State { name: "v".into(), init: Expr::Num(0.0), span },

@@ -45,6 +45,7 @@ impl<'a> Checker<'a> {
     fn check_file(&mut self, file: &'a ast::File) -> Model {
         let global = ScopeId::GLOBAL;
         let mut params = Vec::new();
+        let mut vectors = Vec::new();
         let mut states: Vec<(&ast::StateDecl, StateIdx)> = Vec::new();
         let mut mode_decls: Vec<&ast::ModeDecl> = Vec::new();
         let mut top_flows: Vec<&ast::DerEq> = Vec::new();
@@ -58,11 +59,7 @@ impl<'a> Checker<'a> {
         // Pass 1: declare every name, so that order of declaration does not matter.
         for item in &file.items {
             match item {
-                ast::Item::Param(p) => {
-                    let idx = ParamIdx(params.len() as u32);
-                    self.declare(global, &p.name, Binding::Param(idx), "parameter");
-                    params.push(self.check_param(p));
-                }
+                ast::Item::Param(p) => self.declare_param(p, &mut params, &mut vectors),
                 ast::Item::State(s) => {
                     let idx = StateIdx(states.len() as u32);
                     self.scopes.push_state_name(&s.name.name);
@@ -167,6 +164,7 @@ impl<'a> Checker<'a> {
         Model {
             name: file.model.name.clone(),
             params,
+            vectors,
             states,
             modes,
             initial_mode,
@@ -177,7 +175,10 @@ impl<'a> Checker<'a> {
     }
 
     fn check_reserved(&mut self, name: &ast::Ident) -> bool {
-        let reserved = name.name == "t" || name.name == "pi" || Func::from_name(&name.name).is_some();
+        let reserved = name.name == "t"
+            || name.name == "pi"
+            || Func::from_name(&name.name).is_some()
+            || VectorFunc::from_name(&name.name).is_some();
         if reserved {
             self.errors.push(CheckError::Reserved { name: name.name.clone(), span: name.span });
         }
@@ -203,6 +204,53 @@ impl<'a> Checker<'a> {
     fn declare_let(&mut self, scope: ScopeId, decl: &'a ast::LetDecl) {
         let id = self.scopes.add_let(decl, scope);
         self.declare(scope, &decl.name, Binding::Let(id), "let");
+    }
+
+    /// Declares a scalar parameter, or a vector's `len` elements (consecutive indices, named
+    /// `u[0]` ..) and the vector's name, which only `u[k]`, `sum` and `dot` may use. A length out of
+    /// bounds, or one that would pass `MAX_PARAMS`, is reported and the name declared with no
+    /// elements, so its uses raise no further errors.
+    fn declare_param(
+        &mut self,
+        p: &'a ast::ParamDecl,
+        params: &mut Vec<Param>,
+        vectors: &mut Vec<ParamVector>,
+    ) {
+        let first = ParamIdx(params.len() as u32);
+        let param = self.check_param(p);
+        let Some(size) = &p.size else {
+            if params.len() >= MAX_PARAMS {
+                self.too_many_params(p.name.span);
+                // Declared without elements, so its uses raise no further errors.
+                self.declare(ScopeId::GLOBAL, &p.name, Binding::Vector { first, len: 0 }, "parameter");
+                return;
+            }
+            self.declare(ScopeId::GLOBAL, &p.name, Binding::Param(first), "parameter");
+            params.push(param);
+            return;
+        };
+        let mut len = 0;
+        if size.len == 0 || size.len > MAX_PARAMS as u64 {
+            self.errors.push(CheckError::BadVectorLength {
+                name: p.name.name.clone(),
+                len: size.text.clone(),
+                span: size.span,
+            });
+        } else if params.len() + size.len as usize > MAX_PARAMS {
+            self.too_many_params(size.span);
+        } else {
+            len = size.len as u32;
+        }
+        self.declare(ScopeId::GLOBAL, &p.name, Binding::Vector { first, len }, "vector parameter");
+        params.extend((0..len).map(|k| Param { name: element_name(&param.name, k), ..param.clone() }));
+        vectors.push(ParamVector { name: param.name, first, len, span: p.span });
+    }
+
+    /// Reported once: every later declaration would repeat it.
+    fn too_many_params(&mut self, span: Span) {
+        if !self.errors.iter().any(|e| matches!(e, CheckError::TooManyParams { .. })) {
+            self.errors.push(CheckError::TooManyParams { span });
+        }
     }
 
     fn check_param(&mut self, p: &ast::ParamDecl) -> Param {

@@ -49,6 +49,20 @@ pub enum CheckError {
     BadSetting { name: String, value: f64, expected: &'static str, span: Span },
     #[error("the guard of event `{event}` jumps where an `if` or `sign` in it switches")]
     DiscontinuousGuard { event: String, span: Span },
+    #[error("vector parameter `{name}` has length {len}")]
+    BadVectorLength { name: String, len: String, span: Span },
+    #[error("the model declares more than {} parameters", super::model::MAX_PARAMS)]
+    TooManyParams { span: Span },
+    #[error("index {index} is out of range for `{name}`, a vector of {len}")]
+    IndexOutOfRange { name: String, index: f64, len: u32, span: Span },
+    #[error("the index of `{name}` must be an integer literal")]
+    BadIndex { name: String, len: u32, span: Span },
+    #[error("`{name}` is a vector of {len} parameters")]
+    VectorAsScalar { name: String, len: u32, span: Span },
+    #[error("`{func}` takes vector parameters")]
+    NotAVector { func: &'static str, span: Span },
+    #[error("`dot` of vectors of different lengths: `{a}` has {len_a}, `{b}` has {len_b}")]
+    VectorLengths { a: String, len_a: u32, b: String, len_b: u32, span: Span },
 }
 
 impl CheckError {
@@ -76,7 +90,14 @@ impl CheckError {
             | DuplicateSetting { span, .. }
             | UnknownSetting { span, .. }
             | BadSetting { span, .. }
-            | DiscontinuousGuard { span, .. } => *span,
+            | DiscontinuousGuard { span, .. }
+            | BadVectorLength { span, .. }
+            | TooManyParams { span }
+            | IndexOutOfRange { span, .. }
+            | BadIndex { span, .. }
+            | VectorAsScalar { span, .. }
+            | NotAVector { span, .. }
+            | VectorLengths { span, .. } => *span,
         }
     }
 
@@ -101,7 +122,9 @@ impl CheckError {
                 format!("expected a new name; the {what} was first declared on line {}", line_of(*first)),
                 vec![],
             ),
-            Reserved { .. } => ("expected a name other than `t`, `pi` or a function name".into(), vec![]),
+            Reserved { .. } => {
+                ("expected a name other than `t`, `pi`, `sum`, `dot` or a function name".into(), vec![])
+            }
             WrongKind { expected, .. } => (format!("expected a {expected} here"), vec![]),
             MissingFlow { state, .. } => (format!("expected `der({state}) = ...` in this mode"), vec![]),
             DuplicateFlow { first, .. } => (
@@ -164,6 +187,30 @@ impl CheckError {
                         .to_string(),
                 ],
             ),
+            BadVectorLength { .. } => {
+                (format!("expected a length from 1 to {}", super::model::MAX_PARAMS), vec![])
+            }
+            TooManyParams { .. } => (
+                format!(
+                    "expected at most {} parameters in all, counting every element of a vector",
+                    super::model::MAX_PARAMS
+                ),
+                vec![],
+            ),
+            IndexOutOfRange { len, .. } | BadIndex { len, .. } => (
+                format!("expected an integer from 0 to {}", len.saturating_sub(1)),
+                vec![
+                    "an index is a constant: `u[3]`; `sum(u)` and `dot(u, w)` take every element".to_string()
+                ],
+            ),
+            VectorAsScalar { name, .. } => (
+                format!("expected a number: index it (`{name}[k]`) or use `sum({name})`, `dot({name}, w)`"),
+                vec![],
+            ),
+            NotAVector { .. } => {
+                ("expected the name of a vector parameter (`param u[N] = ...`)".to_string(), vec![])
+            }
+            VectorLengths { .. } => ("expected two vectors of the same length".to_string(), vec![]),
         };
         Diagnostic { message: self.to_string(), span: self.span(), label, notes }
     }

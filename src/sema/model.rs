@@ -26,7 +26,10 @@ pub struct EventIdx(pub u32);
 #[derive(Clone, Debug, PartialEq)]
 pub struct Model {
     pub name: String,
+    /// Every parameter, a vector's elements among them (named `u[0]` .. `u[N-1]`, consecutive).
     pub params: Vec<Param>,
+    /// The vector parameters (`param u[N]`), in declaration order: which runs of `params` they are.
+    pub vectors: Vec<ParamVector>,
     pub states: Vec<State>,
     pub modes: Vec<Mode>,
     pub initial_mode: ModeId,
@@ -43,6 +46,39 @@ pub struct Param {
     pub range: Option<(f64, f64)>,
     pub span: Span,
 }
+
+/// `param u[N] = ...`: the parameters `first .. first + len`, named `u[0]` .. `u[len-1]`. Every
+/// later stage sees only those scalars; this record is for names at the front end, the CLI and
+/// reports.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamVector {
+    pub name: String,
+    pub first: ParamIdx,
+    pub len: u32,
+    pub span: Span,
+}
+
+impl ParamVector {
+    /// The parameter index of element `k < len`.
+    pub fn element(&self, k: u32) -> ParamIdx {
+        ParamIdx(self.first.0 + k)
+    }
+
+    /// The elements' indices, in order.
+    pub fn elements(&self) -> impl Iterator<Item = ParamIdx> + '_ {
+        (0..self.len).map(|k| self.element(k))
+    }
+}
+
+/// The name of element `k` of vector `name`: `u[3]`, as `--set`, `--grad`, tables and JSON say it.
+pub fn element_name(name: &str, k: u32) -> String {
+    format!("{name}[{k}]")
+}
+
+/// How many parameters a model may declare, counting every element of a vector. It bounds the
+/// memory of the checked model and of a run with `--grad` on all of them (sensitivities are
+/// states x parameters).
+pub const MAX_PARAMS: usize = 100_000;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct State {
@@ -322,6 +358,35 @@ impl Func {
     }
 }
 
+/// The functions of vector parameters, expanded by `sema` into sums over their elements.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum VectorFunc {
+    /// `sum(u)`: `u[0] + ... + u[N-1]`.
+    Sum,
+    /// `dot(u, w)`: `u[0] w[0] + ... + u[N-1] w[N-1]`, both of length `N`.
+    Dot,
+}
+
+impl VectorFunc {
+    pub fn name(self) -> &'static str {
+        match self {
+            VectorFunc::Sum => "sum",
+            VectorFunc::Dot => "dot",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<VectorFunc> {
+        [VectorFunc::Sum, VectorFunc::Dot].into_iter().find(|f| f.name() == name)
+    }
+
+    pub fn arity(self) -> usize {
+        match self {
+            VectorFunc::Sum => 1,
+            VectorFunc::Dot => 2,
+        }
+    }
+}
+
 /// A resolved boolean expression (in `if` and event conditions).
 #[derive(Clone, Debug, PartialEq)]
 pub enum Cond {
@@ -346,8 +411,22 @@ impl Model {
     pub fn n_params(&self) -> usize {
         self.params.len()
     }
+    /// The index of parameter `name`: a scalar's name or an element's, `u[3]` (the text exactly
+    /// as `element_name` writes it: no spaces, no leading zeros).
     pub fn param_index(&self, name: &str) -> Option<ParamIdx> {
+        // An element is found through its vector, so a lookup does not scan every element.
+        if let Some((base, rest)) = name.split_once('[') {
+            let text = rest.strip_suffix(']')?;
+            let v = self.vector(base)?;
+            let k: u32 = text.parse().ok()?;
+            // `u[03]` and `u[+3]` parse as 3 but are not the element's name.
+            return (k < v.len && k.to_string() == text).then(|| v.element(k));
+        }
         self.params.iter().position(|p| p.name == name).map(|i| ParamIdx(i as u32))
+    }
+    /// The vector parameter `name`, if there is one.
+    pub fn vector(&self, name: &str) -> Option<&ParamVector> {
+        self.vectors.iter().find(|v| v.name == name)
     }
     pub fn mode_index(&self, name: &str) -> Option<ModeId> {
         self.modes.iter().position(|m| m.name == name).map(|i| ModeId(i as u16))

@@ -26,11 +26,18 @@ pub enum Binding {
     Param(ParamIdx),
     State(StateIdx),
     Let(LetId),
+    /// `param u[len]`: the parameters `first .. first + len`. A length refused by the checker is
+    /// declared as 0, and uses of such a vector raise no further errors.
+    Vector {
+        first: ParamIdx,
+        len: u32,
+    },
 }
 
 impl Binding {
     pub fn kind_name(self) -> &'static str {
         match self {
+            Binding::Vector { .. } => "vector parameter",
             Binding::Param(_) => "parameter",
             Binding::State(_) => "state",
             Binding::Let(_) => "let",
@@ -63,6 +70,9 @@ pub struct Scopes<'a> {
     let_stack: Vec<LetId>,
     /// Whether a `let` over `MAX_EXPR_DEPTH` has been reported (the ones built on it are not).
     too_deep_reported: bool,
+    /// `sum(u)` and `dot(u, w)`, built once per vector (pair) and shared by every use, keyed by
+    /// the vectors' first elements (`u32::MAX` for `sum`'s missing second).
+    vector_sums: HashMap<(u32, u32), Expr>,
 }
 
 impl Default for Scopes<'_> {
@@ -73,6 +83,7 @@ impl Default for Scopes<'_> {
             state_names: Vec::new(),
             let_stack: Vec::new(),
             too_deep_reported: false,
+            vector_sums: HashMap::new(),
         }
     }
 }
@@ -241,6 +252,12 @@ pub fn resolve_names(
             Some(Binding::Param(i)) => Expr::Param(i),
             Some(Binding::State(i)) => Expr::State(i),
             Some(Binding::Let(id)) => resolve_let(scopes, errors, id, Some(e.span)),
+            Some(Binding::Vector { len, .. }) => {
+                if len > 0 {
+                    errors.push(CheckError::VectorAsScalar { name: name.clone(), len, span: e.span });
+                }
+                Expr::Num(0.0)
+            }
             None if name == "t" => Expr::Time,
             None if name == "pi" => Expr::Num(std::f64::consts::PI),
             None if Func::from_name(name).is_some() => {
@@ -270,6 +287,11 @@ pub fn resolve_names(
             let a = resolve_names(scopes, errors, a, scope);
             let b = resolve_names(scopes, errors, b, scope);
             Expr::Binary(op, Box::new(a), Box::new(b))
+        }
+        ast::ExprKind::Index(name, at) => resolve_index(scopes, errors, name, at, scope),
+        ast::ExprKind::Call(name, args) if VectorFunc::from_name(&name.name).is_some() => {
+            let func = VectorFunc::from_name(&name.name).expect("matched above");
+            resolve_vector_call(scopes, errors, func, args, e.span, scope)
         }
         ast::ExprKind::Call(name, args) => {
             let args: Vec<Expr> = args.iter().map(|a| resolve_names(scopes, errors, a, scope)).collect();
@@ -309,6 +331,134 @@ pub fn resolve_names(
             Expr::If(Box::new(c), Box::new(a), Box::new(b))
         }
     }
+}
+
+/// `u[k]`: the parameter of element `k`, with `k` an integer literal in range. A constant index is
+/// what makes `u[k]` an ordinary parameter for every later stage.
+fn resolve_index(
+    scopes: &mut Scopes,
+    errors: &mut Vec<CheckError>,
+    name: &ast::Ident,
+    at: &ast::Expr,
+    scope: ScopeId,
+) -> Expr {
+    let (first, len) = match scopes.lookup(scope, &name.name) {
+        Some(Binding::Vector { first, len }) => (first, len),
+        Some(other) => {
+            errors.push(CheckError::WrongKind {
+                name: name.name.clone(),
+                found: other.kind_name(),
+                expected: "vector parameter",
+                span: name.span,
+            });
+            return Expr::Num(0.0);
+        }
+        None => {
+            let suggestion = scopes.suggest(scope, &name.name);
+            errors.push(CheckError::UnknownName { name: name.name.clone(), span: name.span, suggestion });
+            return Expr::Num(0.0);
+        }
+    };
+    if len == 0 {
+        return Expr::Num(0.0);
+    }
+    let k = match at.kind {
+        ast::ExprKind::Num(k) => k,
+        _ => {
+            errors.push(CheckError::BadIndex { name: name.name.clone(), len, span: at.span });
+            return Expr::Num(0.0);
+        }
+    };
+    if k.fract() != 0.0 {
+        errors.push(CheckError::BadIndex { name: name.name.clone(), len, span: at.span });
+        return Expr::Num(0.0);
+    }
+    if !(0.0..f64::from(len)).contains(&k) {
+        errors.push(CheckError::IndexOutOfRange { name: name.name.clone(), index: k, len, span: at.span });
+        return Expr::Num(0.0);
+    }
+    Expr::Param(ParamIdx(first.0 + k as u32))
+}
+
+/// `sum(u)` or `dot(u, w)`: the sum over the elements, built as a balanced tree (depth
+/// `log2 N`, far under `MAX_EXPR_DEPTH` for any length) and shared by all uses like a `let`.
+fn resolve_vector_call(
+    scopes: &mut Scopes,
+    errors: &mut Vec<CheckError>,
+    func: VectorFunc,
+    args: &[ast::Expr],
+    span: Span,
+    scope: ScopeId,
+) -> Expr {
+    if args.len() != func.arity() {
+        errors.push(CheckError::Arity {
+            func: func.name().to_string(),
+            expected: func.arity(),
+            found: args.len(),
+            span,
+        });
+        return Expr::Num(0.0);
+    }
+    let mut vectors: Vec<(&str, ParamIdx, u32)> = Vec::new();
+    for arg in args {
+        match &arg.kind {
+            ast::ExprKind::Name(n) => match scopes.lookup(scope, n) {
+                Some(Binding::Vector { first, len }) => vectors.push((n, first, len)),
+                Some(_) => errors.push(CheckError::NotAVector { func: func.name(), span: arg.span }),
+                None => {
+                    let suggestion = scopes.suggest(scope, n);
+                    errors.push(CheckError::UnknownName { name: n.clone(), span: arg.span, suggestion });
+                }
+            },
+            _ => errors.push(CheckError::NotAVector { func: func.name(), span: arg.span }),
+        }
+    }
+    if vectors.len() != args.len() || vectors.iter().any(|v| v.2 == 0) {
+        return Expr::Num(0.0);
+    }
+    let (a, first_a, len_a) = vectors[0];
+    let (second, len_b) = match vectors.get(1) {
+        Some(&(b, first_b, len_b)) => {
+            if len_b != len_a {
+                errors.push(CheckError::VectorLengths {
+                    a: a.to_string(),
+                    len_a,
+                    b: b.to_string(),
+                    len_b,
+                    span,
+                });
+                return Expr::Num(0.0);
+            }
+            (Some(first_b), len_b)
+        }
+        None => (None, len_a),
+    };
+    let key = (first_a.0, second.map_or(u32::MAX, |b| b.0));
+    if let Some(e) = scopes.vector_sums.get(&key) {
+        return e.clone();
+    }
+    debug_assert_eq!(len_a, len_b);
+    let terms: Vec<Expr> = (0..len_a)
+        .map(|k| {
+            let u = Expr::Param(ParamIdx(first_a.0 + k));
+            match second {
+                Some(b) => Expr::Binary(BinOp::Mul, Box::new(u), Box::new(Expr::Param(ParamIdx(b.0 + k)))),
+                None => u,
+            }
+        })
+        .collect();
+    let e = Expr::Shared(Shared::new(balanced_sum(terms)));
+    scopes.vector_sums.insert(key, e.clone());
+    e
+}
+
+/// `terms[0] + ... + terms[n-1]` (n >= 1) as a balanced tree, left to right.
+fn balanced_sum(mut terms: Vec<Expr>) -> Expr {
+    if terms.len() == 1 {
+        return terms.pop().expect("one term");
+    }
+    let right = terms.split_off(terms.len() / 2);
+    Expr::Binary(BinOp::Add, Box::new(balanced_sum(terms)), Box::new(balanced_sum(right)))
 }
 
 pub fn resolve_cond(

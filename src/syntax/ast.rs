@@ -36,8 +36,19 @@ pub enum Item {
 #[derive(Clone, Debug, PartialEq)]
 pub struct ParamDecl {
     pub name: Ident,
+    /// `param u[N]`: a vector of `N` parameters; `None` for a scalar.
+    pub size: Option<Size>,
     pub default: Number,
     pub range: Option<Range>,
+    pub span: Span,
+}
+
+/// The length written in `param u[N]`: its digits as written, and their value saturated at
+/// `u64::MAX` (sema caps it far below).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Size {
+    pub text: String,
+    pub len: u64,
     pub span: Span,
 }
 
@@ -154,6 +165,8 @@ pub enum ExprKind {
     Neg(Box<Expr>),
     Binary(BinOp, Box<Expr>, Box<Expr>),
     Call(Ident, Vec<Expr>),
+    /// `u[k]`: an element of a vector parameter.
+    Index(Ident, Box<Expr>),
     If(Box<Cond>, Box<Expr>, Box<Expr>),
 }
 

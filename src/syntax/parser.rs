@@ -118,7 +118,16 @@ fn build_item(pair: Pair<Rule>) -> Result<Item, ParseError> {
         Rule::param_decl => {
             let mut it = pair.into_inner().skip(1);
             let name = ident(it.next().expect("grammar: param name"));
-            let default = number(it.next().expect("grammar: param default"))?;
+            let mut next = it.next().expect("grammar: param default");
+            let mut size = None;
+            if next.as_rule() == Rule::size {
+                let count = next.into_inner().next().expect("grammar: size count");
+                // More digits than a u64 holds is simply too long; sema caps the length anyway.
+                let len = count.as_str().parse::<u64>().unwrap_or(u64::MAX);
+                size = Some(Size { text: count.as_str().to_string(), len, span: span_of(&count) });
+                next = it.next().expect("grammar: param default");
+            }
+            let default = number(next)?;
             let range = match it.next() {
                 Some(r) => {
                     let rspan = span_of(&r);
@@ -129,7 +138,7 @@ fn build_item(pair: Pair<Rule>) -> Result<Item, ParseError> {
                 }
                 None => None,
             };
-            Item::Param(ParamDecl { name, default, range, span })
+            Item::Param(ParamDecl { name, size, default, range, span })
         }
         Rule::state_decl => {
             let mut it = pair.into_inner().skip(1);
@@ -311,6 +320,12 @@ fn build_primary(pair: Pair<Rule>) -> Result<Expr, ParseError> {
             let args = it.map(build_expr).collect::<Result<Vec<_>, _>>()?;
             ExprKind::Call(name, args)
         }
+        Rule::index => {
+            let mut it = pair.into_inner();
+            let name = ident(it.next().expect("grammar: index name"));
+            let at = build_expr(it.next().expect("grammar: index expression"))?;
+            ExprKind::Index(name, Box::new(at))
+        }
         Rule::if_expr => {
             let mut it = pair
                 .into_inner()
@@ -397,6 +412,8 @@ fn describe(rule: Rule) -> Option<&'static str> {
         Rule::event_block => "`{`",
         Rule::setting => "a setting `name = value`",
         Rule::call => "a function call",
+        Rule::index => "an element `u[k]`",
+        Rule::size | Rule::count => "a length `[N]`",
         Rule::if_expr => "an expression",
         Rule::EOI => FILE_END,
         Rule::nl => LINE_END,
@@ -460,6 +477,7 @@ fn furthest_attempt(
         }
     }
     let mut has_operator = false;
+    let mut has_bracket = false;
     for token in attempts.expected_tokens() {
         let token = token.to_string();
         match token.as_str() {
@@ -467,12 +485,17 @@ fn furthest_attempt(
             "#" | "_" | "." | "" => {}
             "+" | "-" | "*" | "/" | "^" => has_operator = true,
             "(" if found.iter().any(|f| f == "an expression") => {}
+            // After a name, `[` would make it an element `u[k]`: true but never what was missed
+            // where an operator could follow (dropped below, once the operators are known).
+            "[" => has_bracket = true,
             t if t.chars().all(|c| c.is_ascii_punctuation()) => found.push(format!("`{t}`")),
             _ => {}
         }
     }
     if has_operator {
         found.push("an operator".to_string());
+    } else if has_bracket {
+        found.push("`[`".to_string());
     }
     found.dedup();
     if found.is_empty() {

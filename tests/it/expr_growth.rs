@@ -29,6 +29,7 @@ fn chain() -> Model {
     Model {
         name: "chain".into(),
         params: (0..N).map(|i| Param { name: format!("k{i}"), default: 1.0, range: None, span }).collect(),
+        vectors: vec![],
         states: (0..N).map(|i| State { name: format!("x{i}"), init: Expr::Num(1.0), span }).collect(),
         modes: vec![Mode { name: "main".into(), flows: (0..N).map(flow).collect(), events: vec![], span }],
         initial_mode: ModeId(0),

@@ -36,3 +36,4 @@ mod stress_frontend;
 mod sweep;
 mod sweep_stream;
 mod tutorial;
+mod vector_params;
