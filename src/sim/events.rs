@@ -381,18 +381,6 @@ impl Detector {
         self.noise_at(0, sys, info, mode, pos, p)
     }
 
-    /// [`Self::noise0`] at the end of the step.
-    fn noise1<S: HybridSystem + ?Sized>(
-        &mut self,
-        sys: &S,
-        info: &SystemInfo,
-        mode: usize,
-        pos: usize,
-        p: &[f64],
-    ) -> (f64, f64) {
-        self.noise_at(1, sys, info, mode, pos, p)
-    }
-
     /// The round-off bounds at the step's start (`end` 0) or end (1), computed on first use.
     fn noise_at<S: HybridSystem + ?Sized>(
         &mut self,
@@ -438,7 +426,7 @@ impl Detector {
             if einfo.implicit || !g.is_finite() || g * speed >= 0.0 {
                 continue;
             }
-            let (noise, speed_noise) = self.noise1(sys, info, mode, pos, p);
+            let (noise, speed_noise) = self.noise_at(1, sys, info, mode, pos, p);
             let located = 4.0 * speed.abs() * (t.abs().next_up() - t.abs());
             if g.abs() > noise + located {
                 continue;
