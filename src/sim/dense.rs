@@ -134,6 +134,9 @@ impl Interpolant for Dense {
     fn eval_deriv(&self, t: f64, out: &mut [f64]) {
         Dense::eval_deriv(self, t, out)
     }
+    fn degree(&self) -> usize {
+        self.n_coef - 1
+    }
 }
 
 #[cfg(test)]

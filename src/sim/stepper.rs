@@ -33,6 +33,9 @@ pub trait Interpolant {
     fn eval(&self, t: f64, out: &mut [f64]);
     /// Time derivatives of the first `out.len()` components at `t`.
     fn eval_deriv(&self, t: f64, out: &mut [f64]);
+    /// The degree of the interpolating polynomial in time (an affine guard along it is a
+    /// polynomial of that degree, known exactly from that many samples plus one).
+    fn degree(&self) -> usize;
 }
 
 /// A time-stepping method with error control and dense output.
