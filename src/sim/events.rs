@@ -136,12 +136,6 @@ pub(crate) struct Detector {
     /// [`Detector::penetrated`]).
     bounced: Vec<Option<f64>>,
     gtmp: Vec<f64>,
-    /// The interpolated states at the current step's start and then at its Chebyshev points
-    /// (`n` each), and each state's polynomial along the step from them: built at most once per
-    /// step, for the affine guards examined exactly (`extrema_on_dense`).
-    node_x: Vec<f64>,
-    state_polys: Vec<Poly>,
-    state_polys_built: bool,
     gx: Vec<f64>,
     gp: Vec<f64>,
     x: Vec<f64>,
@@ -281,9 +275,6 @@ impl Detector {
             group: Vec::with_capacity(ne),
             bounced: vec![None; ne],
             gtmp: per_event(),
-            node_x: Vec::new(),
-            state_polys: vec![Poly::constant(0.0); nx],
-            state_polys_built: false,
             gx: vec![0.0; nx],
             gp: vec![0.0; m],
             x: vec![0.0; nx],
@@ -770,7 +761,6 @@ impl Detector {
         let evs = &info.modes[mode].events;
         let ne = evs.len();
         let t0 = dense.t0();
-        self.state_polys_built = false;
         for c in 0..self.candidates.len() {
             let pos = self.candidates[c];
             let ev = evs[pos];
@@ -1131,12 +1121,11 @@ impl Detector {
 
     /// Adds the extrema of the affine guard at `pos` (event `ev`) inside the step to `samples`.
     /// Along the dense output the guard is `g0 + g_x (P(s) - P(0)) + g_t h s` with constant `g_x`
-    /// and `g_t`: a polynomial of the interpolant's degree, the same combination of the states'
-    /// polynomials. Those are interpolated once per step, whatever the number of guards examined,
-    /// from the dense output at that many Chebyshev points plus one (exact to round-off); each
-    /// guard then costs one gradient call and a combination of `n` short polynomials: a mode with
-    /// 10,000 guards evaluates none of the others. The roots of the guard polynomial's derivative
-    /// in the step (`Poly::roots_01`) are its extrema.
+    /// and `g_t`: a polynomial of the interpolant's degree, which the interpolant gives in the
+    /// power basis (`Interpolant::linear_form`). Each guard costs one gradient call and that
+    /// combination: a mode with 10,000 guards evaluates none of the others. The roots of its
+    /// derivative in the step (`Poly::roots_01`) are its extrema, where the guard is evaluated on
+    /// the dense output itself.
     #[allow(clippy::too_many_arguments)]
     fn extrema_on_dense<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
@@ -1148,60 +1137,30 @@ impl Detector {
         p: &[f64],
     ) {
         let (t0, h) = (dense.t0(), dense.h());
-        if !self.state_polys_built {
-            self.build_state_polys(n, dense);
-        }
-        let (base, _) = self.node_x.split_at(n);
-        let gt = sys.guard_grad(ev, t0, base, p, &mut self.gx, &mut self.gp);
-        let mut guard = Poly::constant(self.g0[pos]);
-        for (&w, q) in self.gx.iter().zip(&self.state_polys) {
-            if w != 0.0 {
-                guard.add_scaled(q, w);
-            }
-        }
+        dense.eval(t0, &mut self.x[..n]);
+        let gt = sys.guard_grad(ev, t0, &self.x, p, &mut self.gx, &mut self.gp);
+        let mut coef = [0.0; poly::CAP];
+        let len = dense.linear_form(&self.gx, &mut coef);
+        let mut guard = Poly::from_coefficients(&coef, len);
         guard.add_linear(gt * h);
         let speed = guard.derivative();
+        let start = self.g0[pos];
         for &s in speed.roots_01().as_slice() {
             let te = t0 + s * h;
             if te > t0 && te < t0 + h {
                 // The value from the dense output itself, not from the power basis: that sums
                 // terms of the guard's size over the whole step, and a bounce a billionth of a
                 // long step wide has its apex far below their round-off.
-                dense.eval(te, &mut self.x);
-                let (base, _) = self.node_x.split_at(n);
+                dense.eval(t0, &mut self.dx[..n]);
+                dense.eval(te, &mut self.x[..n]);
                 let moved: f64 =
-                    self.gx.iter().zip(self.x.iter().zip(base)).map(|(g, (x, b))| g * (x - b)).sum();
-                let g = self.g0[pos] + moved + gt * (te - t0);
+                    self.gx.iter().zip(self.x.iter().zip(&self.dx)).map(|(g, (x, b))| g * (x - b)).sum();
+                let g = start + moved + gt * (te - t0);
                 if g.is_finite() {
                     self.samples.push(Sample { t: te, g, dg: speed.eval(s) / h, extremum: true });
                 }
             }
         }
-    }
-
-    /// The polynomials `P_i(s) - P_i(0)` of every state along the current step's dense output
-    /// (`state_polys`), from its values at Chebyshev points (`node_x` keeps `P(0)` first).
-    fn build_state_polys<I: Interpolant>(&mut self, n: usize, dense: &I) {
-        let (t0, h) = (dense.t0(), dense.h());
-        let count = (dense.degree() + 1).min(poly::CAP);
-        let mut nodes = [0.0; poly::CAP];
-        for (k, s) in nodes[..count].iter_mut().enumerate() {
-            *s = poly::chebyshev_node(k, count);
-        }
-        self.node_x.resize((count + 1) * n, 0.0);
-        let (base, at_nodes) = self.node_x.split_at_mut(n);
-        dense.eval(t0, base);
-        for (xk, s) in at_nodes.chunks_exact_mut(n).zip(&nodes) {
-            dense.eval(t0 + s * h, xk);
-        }
-        let mut values = [0.0; poly::CAP];
-        for (i, q) in self.state_polys.iter_mut().enumerate() {
-            for (k, v) in values[..count].iter_mut().enumerate() {
-                *v = self.node_x[(k + 1) * n + i] - self.node_x[i];
-            }
-            *q = Poly::through(&nodes[..count], &values[..count]);
-        }
-        self.state_polys_built = true;
     }
 
     /// The earliest flow switch (implicit event) the scan found crossing in the step, located on

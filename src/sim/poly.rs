@@ -5,7 +5,7 @@
 //! of guards.
 
 /// Most coefficients of a [`Poly`]: degree 7, DOP853's dense output.
-pub(crate) const CAP: usize = 8;
+pub const CAP: usize = 8;
 
 /// A polynomial of degree below [`CAP`] in the power basis: `c[k]` multiplies `s^k`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -73,19 +73,15 @@ impl Poly {
         Poly { c, len }
     }
 
-    /// The constant `c`.
-    pub fn constant(c: f64) -> Poly {
-        let mut p = Poly { c: [0.0; CAP], len: 1 };
-        p.c[0] = c;
-        p
+    /// The polynomial with coefficients `c[..len]` (`len <= CAP`).
+    pub fn from_coefficients(c: &[f64; CAP], len: usize) -> Poly {
+        Poly { c: *c, len: len.min(CAP) }
     }
 
-    /// Adds `w q` (a linear combination: the guard's polynomial from its states').
-    pub fn add_scaled(&mut self, q: &Poly, w: f64) {
-        self.len = self.len.max(q.len);
-        for (a, b) in self.c.iter_mut().zip(&q.c[..q.len]) {
-            *a += w * b;
-        }
+    /// Writes the coefficients to `out`; returns how many there are.
+    pub fn write_to(&self, out: &mut [f64; CAP]) -> usize {
+        *out = self.c;
+        self.len
     }
 
     /// Adds `slope s`.
@@ -94,11 +90,18 @@ impl Poly {
         self.c[1] += slope;
     }
 
-    /// The coefficients up to the last non-zero one.
+    /// The coefficients up to the last one that counts: a leading coefficient below the
+    /// round-off of the whole (`eps sum |c_k|`, the error of any evaluation on `[0, 1]`) changes
+    /// no value there. An interpolant of degree 7 of a parabola has six such tails of ~1e-17,
+    /// whose roots would only be round-off.
     fn coefficients(&self) -> &[f64] {
+        let total: f64 = self.c[..self.len].iter().map(|c| c.abs()).sum();
         let mut len = self.len;
-        while len > 0 && self.c[len - 1] == 0.0 {
+        while len > 1 && self.c[len - 1].abs() <= f64::EPSILON * total {
             len -= 1;
+        }
+        if len == 1 && self.c[0] == 0.0 {
+            len = 0;
         }
         &self.c[..len]
     }
@@ -139,12 +142,13 @@ impl Poly {
             }
             _ => {}
         }
-        let turning = self.derivative().roots_01();
+        let slope = self.derivative();
+        let turning = slope.roots_01();
         let mut points = [0.0; CAP + 1];
         points[1..=turning.len].copy_from_slice(turning.as_slice());
         points[turning.len + 1] = 1.0;
         for w in points[..turning.len + 2].windows(2) {
-            let (mut lo, mut hi) = (w[0], w[1]);
+            let (lo, hi) = (w[0], w[1]);
             let (flo, fhi) = (self.eval(lo), self.eval(hi));
             if flo == 0.0 {
                 if lo > 0.0 {
@@ -155,24 +159,61 @@ impl Poly {
             if fhi == 0.0 || flo.signum() == fhi.signum() {
                 continue;
             }
-            // At most ~1100 halvings separate two doubles; the loop ends when the midpoint is
-            // one of the ends.
-            loop {
-                let mid = 0.5 * (lo + hi);
-                if !(mid > lo && mid < hi) {
-                    break;
-                }
-                if self.eval(mid).signum() == flo.signum() {
-                    lo = mid;
-                } else {
-                    hi = mid;
-                }
-            }
-            out.push(0.5 * (lo + hi));
+            out.push(self.root_in(&slope, lo, hi, flo));
         }
         out
     }
 }
+
+impl Poly {
+    /// The root in `(lo, hi)`, where the polynomial is monotone and changes sign (`flo` its value
+    /// at `lo`): Newton's method from the middle, kept inside the shrinking bracket and halving it
+    /// where a Newton step would leave it, until the iterate stops moving or the bracket holds
+    /// adjacent doubles. A handful of iterations where bisection alone took some fifty.
+    fn root_in(&self, slope: &Poly, mut lo: f64, mut hi: f64, flo: f64) -> f64 {
+        let mut x = 0.5 * (lo + hi);
+        // Each pass at least halves the bracket or moves by Newton; 1100 halvings span any two
+        // doubles, so the count only guards against a pathological cycle.
+        for _ in 0..1100 {
+            let fx = self.eval(x);
+            if fx == 0.0 {
+                return x;
+            }
+            if fx.signum() == flo.signum() {
+                lo = x;
+            } else {
+                hi = x;
+            }
+            let mid = 0.5 * (lo + hi);
+            if !(mid > lo && mid < hi) {
+                break;
+            }
+            let newton = x - fx / slope.eval(x);
+            let next = if newton > lo && newton < hi { newton } else { mid };
+            if next == x {
+                break;
+            }
+            x = next;
+        }
+        x
+    }
+}
+
+/// Pascal's triangle up to `CAP - 1`, as doubles (exact: the largest is C(7, 3) = 35).
+const BINOMIAL: [[f64; CAP]; CAP] = {
+    let mut t = [[0.0; CAP]; CAP];
+    let mut i = 0;
+    while i < CAP {
+        t[i][0] = 1.0;
+        let mut k = 1;
+        while k <= i {
+            t[i][k] = t[i - 1][k - 1] + if k < i { t[i - 1][k] } else { 0.0 };
+            k += 1;
+        }
+        i += 1;
+    }
+    t
+};
 
 /// Whether the polynomial `a` (power basis) may vanish on `[0, 1]`: false when its Bernstein
 /// coefficients there all have one strict sign, since the polynomial lies in their convex hull.
@@ -183,13 +224,7 @@ fn may_vanish_01(a: &[f64]) -> bool {
         len => len - 1,
     };
     // b_i = sum_{k <= i} C(i, k) / C(d, k) a_k.
-    let mut binom = [[0.0f64; CAP]; CAP];
-    for i in 0..=d {
-        binom[i][0] = 1.0;
-        for k in 1..=i {
-            binom[i][k] = binom[i - 1][k - 1] + if k < i { binom[i - 1][k] } else { 0.0 };
-        }
-    }
+    let binom = &BINOMIAL;
     let mut sign = 0.0;
     for i in 0..=d {
         let b: f64 = (0..=i).map(|k| binom[i][k] / binom[d][k] * a[k]).sum();
