@@ -10,6 +10,7 @@
 //! Dormand-Prince 5(4) has one correction (4th-order accurate), DOP853 four, built from three extra
 //! stages (7th-order accurate). Because of the Hermite part, `P'` matches `f` at both ends.
 
+use super::poly::CAP;
 use super::stepper::Interpolant;
 use super::sums::centred_sum;
 use super::tableau::{DenseKind, Tableau};
@@ -134,6 +135,45 @@ impl Interpolant for Dense {
     fn eval_deriv(&self, t: f64, out: &mut [f64]) {
         Dense::eval_deriv(self, t, out)
     }
+    fn degree(&self) -> usize {
+        self.n_coef - 1
+    }
+    /// From the nested form: `P(s) - P(0) = s (r1 + (1-s) (r2 + s (r3 + (1-s) (r4 + ...))))`,
+    /// combined over the components first (`n` multiply-adds per coefficient), then expanded
+    /// from the innermost term out (`O(K^2)` for `K` coefficients).
+    fn linear_form(&self, w: &[f64], coef: &mut [f64; CAP]) -> usize {
+        let nc = self.n_coef;
+        let mut rho = [0.0; CAP];
+        for (r, &wi) in self.r.chunks_exact(MAX_COEF).zip(w) {
+            if wi != 0.0 {
+                for (acc, &rk) in rho[1..nc].iter_mut().zip(&r[1..nc]) {
+                    *acc += wi * rk;
+                }
+            }
+        }
+        // q = rho[nc-1]; then q = rho[k] + m_k q with m_k = (1 - s) for odd k, s for even k.
+        let mut q = [0.0; CAP];
+        q[0] = rho[nc - 1];
+        let mut len = 1;
+        for k in (1..nc - 1).rev() {
+            // Multiply q by s (shift up), and for odd k by (1 - s) = 1 - s: q - s q.
+            let mut shifted = [0.0; CAP];
+            shifted[1..=len].copy_from_slice(&q[..len]);
+            if k % 2 == 1 {
+                for (a, b) in q.iter_mut().zip(&shifted).take(len + 1) {
+                    *a -= b;
+                }
+            } else {
+                q = shifted;
+            }
+            len += 1;
+            q[0] += rho[k];
+        }
+        // Times s.
+        coef.fill(0.0);
+        coef[1..=len].copy_from_slice(&q[..len]);
+        len + 1
+    }
 }
 
 #[cfg(test)]
@@ -179,5 +219,40 @@ mod tests {
         // O(h^8): halving h divides the error by about 256.
         assert!(e1 / e2 > 120.0, "ratio {}", e1 / e2);
         assert!(e2 < 1e-11 && d2 < 1e-9, "{e2} {d2}");
+    }
+
+    #[test]
+    fn a_linear_form_in_the_power_basis_is_the_dense_output_combined() {
+        // Two components (y' = cos t, z' = t^2 sin t), combined as 2 y - 3 z: the power basis
+        // from the nested form agrees with the interpolant at eleven points, for both methods.
+        use super::super::poly::{Poly, CAP};
+        use super::super::stepper::Interpolant;
+        for tab in [&DOPRI5, &DOP853] {
+            let mut rk = Rk::new(tab, 2, 2, 2, 1e-8, 1e-8);
+            let mut rhs = |t: f64, _y: &[f64], dy: &mut [f64]| {
+                dy[0] = t.cos();
+                dy[1] = t * t * t.sin();
+            };
+            let (t0, h, y0) = (0.3, 0.7, [0.1, -0.4]);
+            rk.restart(t0, &y0, &mut rhs);
+            rk.attempt(t0, &y0, h, &mut rhs);
+            rk.build_interpolant(t0, &y0, &mut rhs);
+            let dense = rk.interpolant();
+            let w = [2.0, -3.0];
+            let mut coef = [0.0; CAP];
+            let len = dense.linear_form(&w, &mut coef);
+            assert_eq!(len, dense.degree() + 1);
+            let form = Poly::from_coefficients(&coef, len);
+            let combine = |t: f64| {
+                let mut v = [0.0; 2];
+                dense.eval(t, &mut v);
+                w[0] * v[0] + w[1] * v[1]
+            };
+            for i in 0..=10 {
+                let s = i as f64 / 10.0;
+                let want = combine(t0 + s * h) - combine(t0);
+                assert!((form.eval(s) - want).abs() < 1e-14, "{s}: {} vs {want}", form.eval(s));
+            }
+        }
     }
 }

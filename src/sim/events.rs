@@ -24,6 +24,7 @@
 //! and `16 eps (sum_i |g_x,i f_i| + |g_t|)` for its speed, so a large state the guard does not
 //! read changes nothing.
 
+use super::poly::{self, Poly};
 use super::roots::{extremum_time, hermite_root, illinois};
 use super::stepper::{Interpolant, Stepper};
 use super::system::{Direction, GuardShape, HybridSystem, SystemInfo};
@@ -121,6 +122,8 @@ pub(crate) struct Detector {
     speed_noise1: Vec<f64>,
     /// Sign changes of an affine guard's speed over the step's stages and ends.
     speed_changes: Vec<u8>,
+    /// The largest magnitude of an affine guard's speed over the step's stages and ends.
+    speed_max: Vec<f64>,
     /// Nonlinear guards: values and speeds at the [`INTERIOR`] points of the step.
     interior: [(Vec<f64>, Vec<f64>); 2],
     pub pending: Vec<Pending>,
@@ -186,53 +189,6 @@ fn extremum_may_cross(dir: Direction, g0: f64, g1: f64, dg0: f64, dg1: f64) -> b
     }
 }
 
-/// The times in `(0, 1)` (as fractions of the step) where the cubic Hermite interpolant of a
-/// guard, through its end values `g0`, `g1` and end slopes `m0`, `m1` (speeds times the step),
-/// has an extremum, in order, with the cubic's value there.
-fn hermite_extrema(g0: f64, g1: f64, m0: f64, m1: f64) -> ([(f64, f64); 2], usize) {
-    let c2 = 3.0 * (g1 - g0) - 2.0 * m0 - m1;
-    let c3 = 2.0 * (g0 - g1) + m0 + m1;
-    let value = |s: f64| ((c3 * s + c2) * s + m0) * s + g0;
-    // H'(s) = 3 c3 s^2 + 2 c2 s + m0.
-    let (a, b, c) = (3.0 * c3, 2.0 * c2, m0);
-    let mut roots = [f64::NAN; 2];
-    if a == 0.0 {
-        if b != 0.0 {
-            roots[0] = -c / b;
-        }
-    } else {
-        let disc = b * b - 4.0 * a * c;
-        if disc > 0.0 {
-            // The root of larger magnitude first (no cancellation), the other from the product.
-            let q = -0.5 * (b + b.signum() * disc.sqrt());
-            roots = [q / a, if q != 0.0 { c / q } else { f64::NAN }];
-        }
-    }
-    roots.sort_by(|x, y| x.total_cmp(y));
-    let mut out = [(0.0, 0.0); 2];
-    let mut k = 0;
-    for s in roots {
-        if s > 0.0 && s < 1.0 {
-            out[k] = (s, value(s));
-            k += 1;
-        }
-    }
-    (out, k)
-}
-
-/// Whether the cubic Hermite interpolant of an affine guard over the step crosses zero in `dir`
-/// between two extrema that the speeds at the step's ends and stages do not show: a state that
-/// is a polynomial of the time (a cart under constant jerk) is integrated exactly, steps are
-/// long, and both sign changes of the guard's speed can fall between the stages.
-fn cubic_hides_crossing(dir: Direction, g0: f64, g1: f64, m0: f64, m1: f64) -> bool {
-    let (ext, k) = hermite_extrema(g0, g1, m0, m1);
-    if k < 2 {
-        return false;
-    }
-    let values = [g0, ext[0].1, ext[1].1, g1];
-    values.windows(2).any(|w| crossing_sign(dir, w[0], w[1]).is_some())
-}
-
 /// Whether values of sign `sigma` are on the pre-crossing side for `dir`.
 fn allows(dir: Direction, sigma: f64) -> bool {
     match dir {
@@ -271,16 +227,19 @@ pub(crate) fn moves_across(dir: Direction, speed: f64, noise: f64) -> Option<f64
 struct SignChanges {
     last: f64,
     changes: u8,
+    /// The largest magnitude pushed.
+    max_abs: f64,
 }
 
 impl SignChanges {
     fn new(first: f64) -> SignChanges {
-        let mut counter = SignChanges { last: 0.0, changes: 0 };
+        let mut counter = SignChanges { last: 0.0, changes: 0, max_abs: 0.0 };
         counter.push(first);
         counter
     }
 
     fn push(&mut self, v: f64) {
+        self.max_abs = self.max_abs.max(v.abs());
         if v != 0.0 && !v.is_nan() {
             if self.last != 0.0 && v.signum() != self.last.signum() {
                 self.changes = self.changes.saturating_add(1);
@@ -326,6 +285,7 @@ impl Detector {
             span: (0.0, 0.0),
             at: [(0.0, vec![0.0; nx], vec![0.0; nx]), (0.0, vec![0.0; nx], vec![0.0; nx])],
             stage_signs: vec![SignChanges::default(); ne],
+            speed_max: vec![0.0; ne],
             candidates: Vec::with_capacity(ne),
             estimates: Vec::with_capacity(ne),
             next_crossing: None,
@@ -510,6 +470,7 @@ impl Detector {
                 let mut counter = self.stage_signs[pos];
                 counter.push(self.dg1[pos]);
                 self.speed_changes[pos] = counter.changes;
+                self.speed_max[pos] = counter.max_abs;
             }
         }
     }
@@ -544,16 +505,16 @@ impl Detector {
                 self.noise1[pos] = f64::NAN;
                 self.speed_noise1[pos] = f64::NAN;
             }
-            self.speed_changes[pos] = if shape == GuardShape::Affine {
+            (self.speed_changes[pos], self.speed_max[pos]) = if shape == GuardShape::Affine {
                 let mut counter = SignChanges::new(self.dg0[pos]);
                 let gx = &self.gx;
                 stepper.visit_interior(|_, k| {
                     counter.push(gx.iter().zip(k).fold(gt, |acc, (a, b)| acc + a * b))
                 });
                 counter.push(speed);
-                counter.changes
+                (counter.changes, counter.max_abs)
             } else {
-                0
+                (0, 0.0)
             };
         }
     }
@@ -629,10 +590,7 @@ impl Detector {
                 || self.pending[pos] != Pending::None
                 || self.speed_changes[pos] >= 2
                 || crossing_sign(einfo.direction, g0, g1).is_some()
-                || (einfo.guard == GuardShape::Affine && {
-                    let h = self.span.1 - self.span.0;
-                    cubic_hides_crossing(einfo.direction, g0, g1, h * self.dg0[pos], h * self.dg1[pos])
-                })
+                || (einfo.guard == GuardShape::Affine && self.may_come_near(pos))
                 || extremum_may_cross(einfo.direction, g0, g1, self.dg0[pos], self.dg1[pos]);
             if look {
                 self.candidates.push(pos);
@@ -788,21 +746,18 @@ impl Detector {
         round_off(&self.gx, &self.x, gt, t)
     }
 
-    /// Scans every guard of `mode` over the step of `dense` (the stepper's last attempt, whose
-    /// stages give the affine guards' speeds) into `found`. The step ends at `t1` exactly (a
-    /// breakpoint it landed on; `t0 + h` may round elsewhere).
-    #[allow(clippy::too_many_arguments)]
-    pub fn scan<S: HybridSystem + ?Sized, St: Stepper>(
+    /// Scans every guard of `mode` over the step of `dense` (the stepper's last attempt) into
+    /// `found`. The step ends at `t1` exactly (a breakpoint it landed on; `t0 + h` may round
+    /// elsewhere).
+    pub fn scan<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
         sys: &S,
         info: &SystemInfo,
         mode: usize,
-        stepper: &St,
-        n: usize,
+        dense: &I,
         p: &[f64],
         t1: f64,
     ) {
-        let dense = stepper.interpolant();
         let evs = &info.modes[mode].events;
         let ne = evs.len();
         let t0 = dense.t0();
@@ -823,25 +778,16 @@ impl Detector {
                     self.samples.push(Sample { t: t1, g: g1, dg: dg1, extremum: false });
                     self.add_extrema_between_samples(sys, ev, mode, ne, pos, dense, p);
                 }
-                _ if self.speed_changes[pos] >= 2
-                    || cubic_hides_crossing(dir, g0, g1, dense.h() * dg0, dense.h() * dg1) =>
-                {
-                    // The guard on the dense output at the extrema of its cubic through the step's
-                    // ends, besides those between stages whose speeds differ in sign: the stage
-                    // speeds are those of the stages' own low-order states, not samples of the
-                    // solution, and can show sign changes where there are none and miss two that
-                    // are there (a cubic state integrated exactly in long steps).
-                    let (ext, k) = hermite_extrema(g0, g1, dense.h() * dg0, dense.h() * dg1);
-                    for &(s, _) in &ext[..k] {
-                        let te = t0 + s * dense.h();
-                        let ge = self.guard_on_dense(sys, mode, ne, pos, te, dense, p);
-                        let dge = self.speed_on_dense(sys, ev, te, dense, p);
-                        self.samples.push(Sample { t: te, g: ge, dg: dge, extremum: false });
-                    }
+                GuardShape::Affine if self.speed_changes[pos] >= 2 || self.may_come_near(pos) => {
+                    // Along the dense output an affine guard is a polynomial of the interpolant's
+                    // degree, known exactly from that many samples plus one: its extrema in the
+                    // step (the roots of its derivative) split the step into monotone pieces,
+                    // each with at most one crossing. The stage speeds alone are those of the
+                    // stages' own low-order states, not samples of the solution: they showed
+                    // sign changes where there were none and missed two that were there (a
+                    // state polynomial in `t`, integrated exactly in long steps).
+                    self.extrema_on_dense(sys, ev, pos, self.x.len(), dense, p);
                     self.samples.push(Sample { t: t1, g: g1, dg: dg1, extremum: false });
-                    if self.speed_changes[pos] >= 2 {
-                        self.add_extrema_between_stages(sys, ev, mode, ne, pos, stepper, n, p);
-                    }
                     self.samples.sort_by(|a, b| a.t.total_cmp(&b.t));
                 }
                 _ => {
@@ -880,45 +826,6 @@ impl Detector {
             if a.dg * b.dg < 0.0 {
                 let te = extremum_time(a.t, a.dg, b.t, b.dg, |t| self.speed_on_dense(sys, ev, t, dense, p));
                 if te > a.t && te < b.t {
-                    let ge = self.guard_on_dense(sys, mode, ne, pos, te, dense, p);
-                    self.samples.push(Sample { t: te, g: ge, dg: 0.0, extremum: true });
-                }
-            }
-        }
-        self.samples.sort_by(|a, b| a.t.total_cmp(&b.t));
-    }
-
-    /// For an affine guard whose speed changes sign more than the ends show: the extrema between
-    /// consecutive stages (in time order) whose speeds differ in sign.
-    #[allow(clippy::too_many_arguments)]
-    fn add_extrema_between_stages<S: HybridSystem + ?Sized, St: Stepper>(
-        &mut self,
-        sys: &S,
-        ev: usize,
-        mode: usize,
-        ne: usize,
-        pos: usize,
-        stepper: &St,
-        n: usize,
-        p: &[f64],
-    ) {
-        let dense = stepper.interpolant();
-        let (t0, h) = (dense.t0(), dense.h());
-        // The step's end (exactly: a landed breakpoint), pushed as the second sample.
-        let t1 = self.samples[1].t;
-        // The speed at each sampled stage, with `g_x` and `g_t` from any point (they are
-        // constants), then at the end.
-        let gt = sys.guard_grad(ev, t0, &self.x, p, &mut self.gx, &mut self.gp);
-        let mut speeds: Vec<(f64, f64)> = vec![(t0, self.dg0[pos])];
-        let gx = &self.gx;
-        stepper.visit_interior(|c, f| speeds.push((t0 + c * h, dot(gx, &f[..n]) + gt)));
-        speeds.push((t1, self.dg1[pos]));
-        speeds.retain(|&(_, s)| s != 0.0);
-        for pair in speeds.windows(2) {
-            let ((ta, sa), (tb, sb)) = (pair[0], pair[1]);
-            if sa * sb < 0.0 && tb > ta {
-                let te = extremum_time(ta, sa, tb, sb, |t| self.speed_on_dense(sys, ev, t, dense, p));
-                if te > t0 && te < t1 {
                     let ge = self.guard_on_dense(sys, mode, ne, pos, te, dense, p);
                     self.samples.push(Sample { t: te, g: ge, dg: 0.0, extremum: true });
                 }
@@ -1196,6 +1103,62 @@ impl Detector {
             }
             Finding::Nothing | Finding::NotFinite { .. } | Finding::Stuck => {
                 unreachable!("only brackets and located crossings are selected")
+            }
+        }
+    }
+
+    /// Whether an affine guard, at the step's ends no farther from zero than twice what it moves
+    /// over the step (the step times the largest speed at the ends and stages, or its change),
+    /// may reach zero inside it: then its dense polynomial is examined exactly. Farther away, a
+    /// crossing would need an excursion of more than twice what the speeds show.
+    fn may_come_near(&self, pos: usize) -> bool {
+        let (g0, g1) = (self.g0[pos], self.g1[pos]);
+        let h = self.span.1 - self.span.0;
+        let speed = self.speed_max[pos].max(self.dg0[pos].abs()).max(self.dg1[pos].abs());
+        let reach = (h * speed).max((g1 - g0).abs());
+        g0.abs().min(g1.abs()) <= 2.0 * reach
+    }
+
+    /// Adds the extrema of the affine guard at `pos` (event `ev`) inside the step to `samples`.
+    /// Along the dense output the guard is `g0 + g_x (P(s) - P(0)) + g_t h s` with constant `g_x`
+    /// and `g_t`: a polynomial of the interpolant's degree, which the interpolant gives in the
+    /// power basis (`Interpolant::linear_form`). Each guard costs one gradient call and that
+    /// combination: a mode with 10,000 guards evaluates none of the others. The roots of its
+    /// derivative in the step (`Poly::roots_01`) are its extrema, where the guard is evaluated on
+    /// the dense output itself.
+    #[allow(clippy::too_many_arguments)]
+    fn extrema_on_dense<S: HybridSystem + ?Sized, I: Interpolant>(
+        &mut self,
+        sys: &S,
+        ev: usize,
+        pos: usize,
+        n: usize,
+        dense: &I,
+        p: &[f64],
+    ) {
+        let (t0, h) = (dense.t0(), dense.h());
+        dense.eval(t0, &mut self.x[..n]);
+        let gt = sys.guard_grad(ev, t0, &self.x, p, &mut self.gx, &mut self.gp);
+        let mut coef = [0.0; poly::CAP];
+        let len = dense.linear_form(&self.gx, &mut coef);
+        let mut guard = Poly::from_coefficients(&coef, len);
+        guard.add_linear(gt * h);
+        let speed = guard.derivative();
+        let start = self.g0[pos];
+        for &s in speed.roots_01().as_slice() {
+            let te = t0 + s * h;
+            if te > t0 && te < t0 + h {
+                // The value from the dense output itself, not from the power basis: that sums
+                // terms of the guard's size over the whole step, and a bounce a billionth of a
+                // long step wide has its apex far below their round-off.
+                dense.eval(t0, &mut self.dx[..n]);
+                dense.eval(te, &mut self.x[..n]);
+                let moved: f64 =
+                    self.gx.iter().zip(self.x.iter().zip(&self.dx)).map(|(g, (x, b))| g * (x - b)).sum();
+                let g = start + moved + gt * (te - t0);
+                if g.is_finite() {
+                    self.samples.push(Sample { t: te, g, dg: speed.eval(s) / h, extremum: true });
+                }
             }
         }
     }

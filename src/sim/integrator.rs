@@ -410,7 +410,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         }
         self.stepper.build_interpolant(t0, self.z, rhs);
         self.det.check_resolution(self.sys, self.info, self.mode, self.stepper.interpolant(), self.p);
-        self.det.scan(self.sys, self.info, self.mode, &*self.stepper, n, self.p, t1);
+        self.det.scan(self.sys, self.info, self.mode, self.stepper.interpolant(), self.p, t1);
         let retry = self.retry_before_switch(t0);
         self.det.forget_findings();
         retry
@@ -587,7 +587,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let h_next = self.stepper.grow(err).min(h_try * guard_factor);
         self.stats.steps += 1;
         let mut selection = if for_events {
-            self.det.scan(self.sys, self.info, self.mode, &*self.stepper, n, self.p, t1);
+            self.det.scan(self.sys, self.info, self.mode, self.stepper.interpolant(), self.p, t1);
             if let Some(pos) = self.det.stuck() {
                 return StepOutcome::Done(self.stuck_on_guard(self.info.modes[self.mode].events[pos]));
             }

@@ -4,9 +4,10 @@
 //! Code map: `options` (what to ask); `stepper` (the seam any method implements), `tableau`,
 //! `sums`, `rk` and `dense` (the explicit Runge-Kutta pairs and their interpolants);
 //! `integrator` (the state of a run and its `step`), `breakpoints` (times landed on exactly),
-//! `events` (detection), `roots` (root finding), `jump` (event-time gradients and saltation),
-//! `zeno` (accumulating events), `recorder` (trajectories through an observer); `run` (a run
-//! from start to end, the reusable `Simulator`), `result` (what a run reports).
+//! `events` (detection), `poly` (a guard along a dense output), `roots` (root finding), `jump`
+//! (event-time gradients and saltation), `zeno` (accumulating events), `recorder` (trajectories
+//! through an observer); `run` (a run from start to end, the reusable `Simulator`), `result`
+//! (what a run reports).
 
 mod breakpoints;
 mod dense;
@@ -14,6 +15,7 @@ mod events;
 mod integrator;
 mod jump;
 mod options;
+mod poly;
 mod recorder;
 mod result;
 mod rk;

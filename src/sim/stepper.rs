@@ -9,6 +9,8 @@
 //! parameter. Which leading components enter the error norm is the stepper's construction
 //! argument.
 
+use super::poly::{chebyshev_node, Poly, CAP};
+
 /// The right-hand side `dz = F(t, z)` a stepper integrates: the current mode's flow with its
 /// sensitivity equations. Any `FnMut(f64, &[f64], &mut [f64])` is one.
 ///
@@ -33,6 +35,28 @@ pub trait Interpolant {
     fn eval(&self, t: f64, out: &mut [f64]);
     /// Time derivatives of the first `out.len()` components at `t`.
     fn eval_deriv(&self, t: f64, out: &mut [f64]);
+    /// The degree of the interpolating polynomial in time (an affine guard along it is a
+    /// polynomial of that degree, known exactly from that many samples plus one).
+    fn degree(&self) -> usize;
+    /// The power-basis coefficients, in `s = (t - t0) / h`, of `sum_i w_i (P_i(s) - P_i(0))` over
+    /// the first `w.len()` components (an affine guard's motion along the step), written to
+    /// `coef[..k]`; returns `k`, the degree plus one (at most `poly::CAP`). The default
+    /// interpolates the dense output at `k` Chebyshev points; a method whose interpolant has
+    /// coefficients of its own converts them exactly and without evaluating it.
+    fn linear_form(&self, w: &[f64], coef: &mut [f64; CAP]) -> usize {
+        let count = (self.degree() + 1).min(CAP);
+        let (t0, h) = (self.t0(), self.h());
+        let mut at = vec![0.0; w.len()];
+        self.eval(t0, &mut at);
+        let base: f64 = w.iter().zip(&at).map(|(a, b)| a * b).sum();
+        let (mut nodes, mut values) = ([0.0; CAP], [0.0; CAP]);
+        for k in 0..count {
+            nodes[k] = chebyshev_node(k, count);
+            self.eval(t0 + nodes[k] * h, &mut at);
+            values[k] = w.iter().zip(&at).map(|(a, b)| a * b).sum::<f64>() - base;
+        }
+        Poly::through(&nodes[..count], &values[..count]).write_to(coef)
+    }
 }
 
 /// A time-stepping method with error control and dense output.
@@ -81,4 +105,45 @@ pub trait Stepper {
     /// approximation of the method's order, good for sampling the signs of a guard's speed). An
     /// explicit method has them for free in its stages.
     fn visit_interior<V: FnMut(f64, &[f64])>(&self, visit: V);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two components, `x0 = t^3 - t` and `x1 = 2 t^2` on a step from `t0 = 1` of size `h = 0.5`,
+    /// with nothing but values: the default `linear_form` samples it.
+    struct Cubic;
+
+    impl Interpolant for Cubic {
+        fn t0(&self) -> f64 {
+            1.0
+        }
+        fn h(&self) -> f64 {
+            0.5
+        }
+        fn eval(&self, t: f64, out: &mut [f64]) {
+            out[0] = t * t * t - t;
+            out[1] = 2.0 * t * t;
+        }
+        fn eval_deriv(&self, t: f64, out: &mut [f64]) {
+            out[0] = 3.0 * t * t - 1.0;
+            out[1] = 4.0 * t;
+        }
+        fn degree(&self) -> usize {
+            3
+        }
+    }
+
+    #[test]
+    fn the_default_linear_form_is_the_sampled_polynomial() {
+        // With t = 1 + s / 2: x0 = s + 3 s^2 / 4 + s^3 / 8 and x1 = 2 + 2 s + s^2 / 2, so
+        // 3 x0 - x1 less its value at s = 0 is s + 7 s^2 / 4 + 3 s^3 / 8.
+        let mut coef = [0.0; CAP];
+        let len = Cubic.linear_form(&[3.0, -1.0], &mut coef);
+        assert_eq!(len, 4);
+        for (got, want) in coef[..4].iter().zip([0.0, 1.0, 1.75, 0.375]) {
+            assert!((got - want).abs() < 1e-13, "{coef:?}");
+        }
+    }
 }
