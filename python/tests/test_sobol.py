@@ -136,6 +136,17 @@ def test_rows_without_a_third_touchdown_are_the_closed_forms(ball):
     assert value["touchdown#3"]["base_points"] == 64 and value["touchdown#3"]["on_fail"] == "value=1.6"
 
 
+def test_the_tutorial_s_zeno_rows_are_those_the_closed_form_predicts(ball):
+    # docs/tutorial.md, section 7: the rows whose accumulation time t* = t1 (1 + 2 e / (1 - e))
+    # comes before T = 2.5 end by Zeno, and no other (the closest t* is 9e-5 from T).
+    problem = {"names": ["h0", "e", "g"], "bounds": [[0.5, 1.5], [0.6, 0.9], [9, 10.5]]}
+    h0, e, g = ball.sobol_design(problem, 2048, seed=1).T
+    t_star = np.sqrt(2 * h0 / g) * (1 + 2 * e / (1 - e))
+    res = ball.sobol(problem, ["energy"], 2048, seed=1, on_fail="value=0")
+    assert res.ended_early == {"zeno": 3318} == {"zeno": (t_star < 2.5).sum()}
+    np.testing.assert_array_equal(np.isnan(res["energy"]["Y"]), t_star < 2.5)
+
+
 def test_runs_that_end_early_are_counted(ball):
     res = ball.sobol(BALL_PROBLEM, ["energy"], 32, seed=3, t_end=5, on_fail="drop")
     assert set(res.ended_early) == {"zeno"}
