@@ -23,23 +23,17 @@ pub type PriorArg = (String, String, Vec<f64>);
 /// The prior SALib's `dists` entry `dist` with `bounds` describes. SALib's names: `unif` and
 /// `logunif` take `[lower, upper]`, `norm` `[mean, sd]`, `lognorm` the mean and sd of the log.
 fn prior(i: usize, name: &str, dist: &str, bounds: &[f64]) -> PyResult<Prior> {
-    let kind = |a: f64, b: f64| match dist {
-        "unif" => Some(Prior::Uniform { lo: a, hi: b }),
-        "logunif" => Some(Prior::LogUniform { lo: a, hi: b }),
-        "norm" => Some(Prior::Normal { mu: a, sigma: b }),
-        "lognorm" => Some(Prior::LogNormal { mu: a, sigma: b }),
-        _ => None,
-    };
-    let Some(prior) = kind(0.0, 1.0) else {
-        return Err(ParameterError::new_err(format!(
-            "problem: dists[{i}] = {dist:?} for `{name}`: hybc's priors are \"unif\", \"logunif\", \"norm\" \
-             and \"lognorm\" (SALib's names)"
-        )));
-    };
-    let what = match prior {
-        Prior::Uniform { .. } | Prior::LogUniform { .. } => "[lower, upper]",
-        Prior::Normal { .. } => "[mean, standard deviation]",
-        Prior::LogNormal { .. } => "[mean, standard deviation] of the log",
+    let (make, what): (fn(f64, f64) -> Prior, &str) = match dist {
+        "unif" => (|lo, hi| Prior::Uniform { lo, hi }, "[lower, upper]"),
+        "logunif" => (|lo, hi| Prior::LogUniform { lo, hi }, "[lower, upper]"),
+        "norm" => (|mu, sigma| Prior::Normal { mu, sigma }, "[mean, standard deviation]"),
+        "lognorm" => (|mu, sigma| Prior::LogNormal { mu, sigma }, "[mean, standard deviation] of the log"),
+        _ => {
+            let known = "\"unif\", \"logunif\", \"norm\" and \"lognorm\" (SALib's names)";
+            return Err(ParameterError::new_err(format!(
+                "problem: dists[{i}] = {dist:?} for `{name}`: hybc's priors are {known}"
+            )));
+        }
     };
     let &[a, b] = bounds else {
         return Err(ParameterError::new_err(format!(
@@ -47,7 +41,7 @@ fn prior(i: usize, name: &str, dist: &str, bounds: &[f64]) -> PyResult<Prior> {
             bounds.len()
         )));
     };
-    let prior = kind(a, b).expect("a known name");
+    let prior = make(a, b);
     prior.check().map_err(|problem| {
         ParameterError::new_err(format!("problem: bounds[{i}] = [{a}, {b}] for `{name}` ({dist}): {problem}"))
     })?;
