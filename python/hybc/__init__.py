@@ -6,6 +6,6 @@ imported on demand, so that neither Dask nor JAX is needed to import ``hybc``.
 """
 
 from ._hybc import ModelError, ParameterError, Run, __version__
-from ._model import Model, Samples, grid
+from ._model import Model, Samples, SobolError, SobolResult, grid
 
-__all__ = ["Model", "ModelError", "ParameterError", "Run", "Samples", "grid", "__version__"]
+__all__ = ["Model", "ModelError", "ParameterError", "Run", "Samples", "SobolError", "SobolResult", "grid", "__version__"]

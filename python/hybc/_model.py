@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -138,6 +139,221 @@ class Model:
         """
         names, matrix, fixed = normalise_points(self, points, names)
         return sweep_matrix(self, names, matrix, fixed, dict(grad=grad, events=events, threads=threads, **options))
+
+    def sobol(
+        self,
+        problem: Mapping[str, Any],
+        outputs: Sequence[str],
+        n: int,
+        *,
+        seed: int = 0,
+        second_order: bool = False,
+        bootstrap: int = 100,
+        on_fail: str = "error",
+        fixed: Mapping[str, float] | None = None,
+        threads: int = 0,
+        **options: Any,
+    ) -> "SobolResult":
+        """Sobol' indices of ``outputs`` over the priors of SALib's ``problem`` (the runs of
+        ``hybc sobol``, in parallel with the GIL released).
+
+        ``problem``: ``{"names": [...], "bounds": [[a, b], ...], "dists": [...]}`` (``dists``
+        optional, default uniform) with SALib's distribution names: ``"unif"`` and ``"logunif"``
+        (bounds ``[lower, upper]``), ``"norm"`` (``[mean, sd]``), ``"lognorm"`` (``[mean, sd]`` of
+        the log); a prior must stay within the parameter's declared range. ``outputs``: outputs or
+        states (final values), ``"EVENT#K"`` (time of the K-th firing), ``"EVENT#last"``. ``n``:
+        base points; the model runs ``n (D + 2)`` times, ``n (2 D + 2)`` with ``second_order``.
+        ``seed`` seeds the scrambled Sobol' sequence and the bootstrap; ``bootstrap``: resamples
+        for the intervals (0: none); ``on_fail``: ``"error"``, ``"drop"`` or ``"value=X"``, what
+        to do with rows without a value (docs/sobol.md). ``fixed``: values of other parameters;
+        ``threads`` (0: one per core) and ``options`` (``t_end``, ``rtol``, ...) as in
+        :meth:`sweep`.
+
+        Returns a :class:`SobolResult`: per output a dict with SALib's keys (``S1``, ``S1_conf``,
+        ``ST``, ``ST_conf``, and ``S2``, ``S2_conf`` with ``second_order``) and the counts. An output
+        without indices (under ``on_fail="error"`` any row without a value; under ``"drop"``
+        fewer than 2 base points left) raises :class:`SobolError`, whose ``result`` holds the
+        other outputs' indices.
+        """
+        spec = _sobol_spec(self, problem, outputs, n, seed, second_order, bootstrap, on_fail, fixed)
+        _check_counts({"threads": threads, **options})
+        values, early, first = self._native.sobol_evaluate(
+            *spec.design_args(), spec.outputs, 0, spec.rows, threads=threads, **options
+        )
+        return sobol_result(spec, values, [(early, first)])
+
+    def sobol_design(
+        self,
+        problem: Mapping[str, Any],
+        n: int,
+        *,
+        seed: int = 0,
+        second_order: bool = False,
+        fixed: Mapping[str, float] | None = None,
+    ) -> np.ndarray:
+        """The rows :meth:`sobol` runs with these arguments: the varied parameters' values, one
+        row per run (``n (D + 2)`` rows, ``n (2 D + 2)`` with ``second_order``) in SALib's order
+        (``A, AB_1 .. AB_D, [BA_1 .. BA_D], B`` per base point), columns in ``problem["names"]``
+        order: the ``X`` of ``SALib.sample.sobol.sample``, from hybc's own scrambled sequence."""
+        spec = _sobol_spec(self, problem, ("",), n, seed, second_order, 0, "error", fixed)
+        return self._native.sobol_design(*spec.design_args(), 0, spec.rows)
+
+
+class SobolError(ValueError):
+    """An output has no indices: rows without a value under ``on_fail="error"``, or fewer than
+    2 base points left under ``"drop"``. The message names each such output and its counts;
+    ``result`` is the
+    :class:`SobolResult` (the refused outputs hold ``error`` and ``Y`` only)."""
+
+    def __init__(self, message: str, result: "SobolResult"):
+        super().__init__(message)
+        self.result = result
+
+
+class SobolSpec(NamedTuple):
+    """A checked Sobol' analysis, as it travels to Dask workers (no model, no values)."""
+
+    names: list[str]
+    priors: list[tuple[str, str, list[float]]]
+    outputs: list[str]
+    n: int
+    rows: int
+    second_order: bool
+    seed: int
+    bootstrap: int
+    on_fail: str
+    fixed: dict[str, float]
+
+    def design_args(self) -> tuple[Any, ...]:
+        return (self.priors, self.n, self.second_order, self.seed, self.fixed)
+
+
+class SobolResult(dict):
+    """Sobol' indices per output: ``result["energy"]["S1"]``. A dict output name -> dict with
+    SALib's keys as NumPy arrays (``S1``, ``ST`` of shape (D,), ``S1_conf``, ``ST_conf`` the
+    half-widths of the 95% intervals, 1.96 bootstrap standard errors, absent with
+    ``bootstrap=0``; with ``second_order`` ``S2`` and ``S2_conf`` of shape (D, D), NaN off the
+    upper triangle as SALib's), ``variance``, ``failed_rows`` (rows without a value),
+    ``dropped_base_points``, ``base_points`` (used), ``on_fail`` (the policy applied) and ``Y``
+    (the output at every row of the design, NaN where none: the ``Y`` SALib's analyze takes), or
+    ``error`` and ``Y`` for an output ``on_fail="error"`` refused.
+
+    Attributes: ``names`` (the varied parameters, in ``problem`` order), ``n``, ``runs``,
+    ``second_order``, ``seed``, ``bootstrap``, ``on_fail``, ``conf_level`` (0.95),
+    ``ended_early`` (runs that did not end as asked, by status word: ``{"zeno": 12}``) and
+    ``first_ended_early_row`` (1-based, None if none)."""
+
+    __slots__ = (
+        "names", "n", "runs", "second_order", "seed", "bootstrap", "on_fail", "conf_level",
+        "ended_early", "first_ended_early_row",
+    )
+
+    def __repr__(self) -> str:
+        early = ", ".join(f"{w} {c}" for w, c in self.ended_early.items()) or "none"
+        lines = [f"<hybc.SobolResult over {', '.join(self.names)}: n = {self.n}, {self.runs} runs, "
+                 f"ended early: {early}, on_fail={self.on_fail!r}>"]
+        for label, r in self.items():
+            if "error" in r:
+                lines.append(f"  {label}: {r['error']}")
+            else:
+                lines.append(f"  {label}: S1 {np.round(r['S1'], 4)}, ST {np.round(r['ST'], 4)} "
+                             f"({r['failed_rows']} rows without a value)")
+        return "\n".join(lines)
+
+
+def _count(value: Any, what: str, low: int = 0) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+        raise ValueError(f"{what}: expected an integer >= {low}, found {value!r}")
+    return int(value)
+
+
+def _salib_priors(problem: Any) -> list[tuple[str, str, list[float]]]:
+    """``(name, dist, bounds)`` per parameter of SALib's ``problem`` dict, its shape checked here
+    (the distributions and numbers are checked by the native side, with the model)."""
+    if not isinstance(problem, Mapping):
+        raise TypeError(f"problem: expected SALib's dict with names and bounds, found {type(problem).__name__}")
+    if problem.get("groups") is not None:
+        raise ValueError("problem: groups are not supported; hybc's indices are per parameter")
+    for key in ("names", "bounds"):
+        if key not in problem:
+            raise ValueError(f"problem: no {key!r}; SALib's problem has 'names' and 'bounds'")
+    names = _names(problem["names"], "problem['names']")
+    if not names:
+        raise ValueError("problem: 'names' is empty; vary at least one parameter")
+    if "num_vars" in problem and problem["num_vars"] != len(names):
+        raise ValueError(f"problem: num_vars is {problem['num_vars']!r} for {len(names)} names")
+    bounds = problem["bounds"]
+    dists = problem.get("dists")
+    dists = ["unif"] * len(names) if dists is None else list(dists)
+    for key, entries in (("bounds", bounds), ("dists", dists)):
+        if isinstance(entries, (str, bytes)) or len(entries) != len(names):
+            raise ValueError(f"problem: {key} has {len(entries)} entries for {len(names)} names")
+    priors = []
+    for i, (name, b, dist) in enumerate(zip(names, bounds, dists)):
+        if not isinstance(dist, str):
+            raise TypeError(f"problem: dists[{i}]: expected a distribution name, found {dist!r}")
+        if isinstance(b, (str, bytes)) or not isinstance(b, Sequence | np.ndarray):
+            raise TypeError(f"problem: bounds[{i}]: expected a list of numbers, found {b!r}")
+        priors.append((name, dist, [_number(v, f"problem: bounds[{i}]") for v in b]))
+    return priors
+
+
+def _sobol_spec(
+    model: Model, problem: Any, outputs: Any, n: Any, seed: Any, second_order: Any, bootstrap: Any,
+    on_fail: Any, fixed: Any,
+) -> SobolSpec:
+    """The checked arguments of :meth:`Model.sobol` (the native side checks them again, with the
+    model: names, ranges, priors, outputs, caps)."""
+    priors = _salib_priors(problem)
+    outputs = _names(outputs, "outputs")
+    n = _count(n, "n", 2)
+    if not isinstance(second_order, bool):
+        raise TypeError(f"second_order: expected True or False, found {second_order!r}")
+    if not isinstance(on_fail, str):
+        raise TypeError(f'on_fail: expected "error", "drop" or "value=X", found {on_fail!r}')
+    if n & (n - 1):
+        warnings.warn(f"n = {n} is not a power of 2; the Sobol' points are balanced at powers of 2",
+                      stacklevel=3)
+    d = len(priors)
+    rows = n * (2 * d + 2 if second_order else d + 2)
+    return SobolSpec(
+        names=[p[0] for p in priors], priors=priors, outputs=outputs, n=n, rows=rows,
+        second_order=second_order, seed=_count(seed, "seed"), bootstrap=_count(bootstrap, "bootstrap"),
+        on_fail=on_fail.strip(), fixed=_param_dict(fixed, "fixed"),
+    )
+
+
+def sobol_result(spec: SobolSpec, values: np.ndarray, tallies: list[tuple[Any, Any]]) -> SobolResult:
+    """The indices of ``values`` (every row of the design, in order) by the library's
+    estimators, and the tallies of runs that ended early, one per shard, added up."""
+    analysed = _hybc.sobol_analyze(
+        np.ascontiguousarray(values), spec.outputs, len(spec.priors), spec.second_order, spec.on_fail,
+        spec.bootstrap, spec.seed,
+    )
+    result = SobolResult()
+    early: dict[str, int] = {}
+    firsts = []
+    for words, first in tallies:
+        for word, count in words:
+            early[word] = early.get(word, 0) + count
+        if first is not None:
+            firsts.append(first)
+    result.names, result.n, result.runs = list(spec.names), spec.n, spec.rows
+    result.second_order, result.seed, result.bootstrap = spec.second_order, spec.seed, spec.bootstrap
+    result.on_fail, result.conf_level, result.ended_early = spec.on_fail, 0.95, early
+    result.first_ended_early_row = min(firsts) + 1 if firsts else None
+    refused = []
+    for j, (label, entry) in enumerate(zip(spec.outputs, analysed)):
+        entry["Y"] = values[:, j]
+        if "error" in entry:
+            refused.append(entry["error"])
+        else:
+            entry["on_fail"] = spec.on_fail
+        result[label] = entry
+    if refused:
+        raise SobolError("; ".join(refused), result)
+    return result
+
 
 
 def sweep_matrix(

@@ -1,4 +1,5 @@
-"""Sweeps sharded over a Dask distributed cluster: ``hybc.dask.sweep(model, points, client=...)``.
+"""Sweeps and Sobol' analyses sharded over a Dask distributed cluster:
+``hybc.dask.sweep(model, points, client=...)``, ``hybc.dask.sobol(model, problem, outputs, n, ...)``.
 
 Same points, keywords and result as :meth:`hybc.Model.sweep`, and the result equals the local
 sweep exactly (every point is an independent run; a run's result depends only on its point).
@@ -10,6 +11,11 @@ of the seeded stream (the same points as the whole draw). Each worker process ke
 :class:`hybc.Model` per model text in a module-level cache, and the model keeps one compiled form
 per gradient set, so a worker compiles once however many shards it runs. The shards' columns are
 concatenated in input order.
+
+:func:`sobol` shards the rows of the Saltelli design the same way: only the analysis's
+description travels, each task computes its rows from their indices (``hybc::sobol::Design``) and
+returns their outputs; the client puts them end to end in row order and runs the same estimator
+as :meth:`hybc.Model.sobol`, so the indices are identical to the local ones.
 
 Each task runs its shard on one thread unless ``threads=`` is given: the parallelism comes from
 Dask's worker processes and threads. Dask is an optional dependency (``pip install ./python[dask]``).
@@ -23,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from ._model import Model, Samples, normalise_points, sweep_matrix
+from ._model import Model, Samples, SobolResult, SobolSpec, _sobol_spec, _check_counts, normalise_points, sobol_result, sweep_matrix
 
 # One Model per (text, file name) in this process (a Dask worker). Guarded: a worker runs tasks
 # on several threads.
@@ -85,6 +91,58 @@ def sweep(
     parts = client.gather(futures)
     return {name: np.concatenate([part[name] for part in parts]) for name in parts[0]}
 
+
+def sobol(
+    model: Model,
+    problem: Mapping[str, Any],
+    outputs: Sequence[str],
+    n: int,
+    *,
+    client: Any = None,
+    shards: int | None = None,
+    seed: int = 0,
+    second_order: bool = False,
+    bootstrap: int = 100,
+    on_fail: str = "error",
+    fixed: Mapping[str, float] | None = None,
+    **kw: Any,
+) -> SobolResult:
+    """:meth:`hybc.Model.sobol` on a Dask cluster, with an identical result.
+
+    ``client``: a ``distributed.Client`` (default: the current one). ``shards``: the number of
+    tasks (default: four per worker thread, at most one per row), each a range of the design's
+    rows. Other arguments as :meth:`hybc.Model.sobol` (``t_end``, ``rtol``, ...; ``threads``
+    per task, default 1).
+    """
+    from distributed import default_client
+
+    client = client if client is not None else default_client()
+    spec = _sobol_spec(model, problem, outputs, n, seed, second_order, bootstrap, on_fail, fixed)
+    kw = {"threads": 1, **kw}
+    _check_counts(kw)
+    # Every error a task could raise (problem, outputs, options) is raised here first.
+    model._native.sobol_evaluate(*spec.design_args(), spec.outputs, 0, 0, check_only=True, **kw)
+    if shards is None:
+        shards = 4 * (sum(client.nthreads().values()) or 1)
+    if not isinstance(shards, int) or isinstance(shards, bool) or shards < 1:
+        raise ValueError(f"shards: expected a positive integer, found {shards!r}")
+    bounds = np.linspace(0, spec.rows, min(shards, spec.rows) + 1).round().astype(np.int64)
+    futures = [
+        client.submit(_sobol_shard, model.source, model.file_name, spec, int(a), int(b), kw, pure=False)
+        for a, b in zip(bounds[:-1], bounds[1:])
+    ]
+    parts = client.gather(futures)
+    values = np.concatenate([part[0] for part in parts])
+    return sobol_result(spec, values, [(part[1], part[2]) for part in parts])
+
+
+def _sobol_shard(
+    text: str, file_name: str, spec: SobolSpec, start: int, stop: int, kw: dict[str, Any]
+) -> tuple[np.ndarray, list[tuple[str, int]], int | None]:
+    """The outputs of rows ``[start, stop)`` of the design, computed on this worker from their
+    indices, with the runs that ended early among them."""
+    model = _worker_model(text, file_name)
+    return model._native.sobol_evaluate(*spec.design_args(), spec.outputs, start, stop, **kw)
 
 def _worker_model(text: str, file_name: str) -> Model:
     key = (text, file_name)

@@ -3,7 +3,8 @@
 //! Code map: `errors` (the exception classes and how library errors map onto them), `model`
 //! (a checked model and its per-gradient-set compile cache), `options` (keyword arguments to
 //! `SimOptions`), `run` (one run's result as Python values and NumPy arrays), `sweep` (many points
-//! in parallel, the columns of `hybc sweep`). Every call that integrates releases the GIL.
+//! in parallel, the columns of `hybc sweep`), `sobol` (Sobol' indices: the library's design and
+//! estimators, a shard of rows at a time). Every call that integrates releases the GIL.
 //!
 //! Where the JAX primitive plugs in (branch `jax`): a module `jax_ffi` declared below next to the
 //! others, registered by one line in [`_hybc`]; it reaches compiled models through
@@ -14,6 +15,7 @@ mod jax_ffi;
 mod model;
 mod options;
 mod run;
+mod sobol;
 mod sweep;
 
 use pyo3::prelude::*;
@@ -23,6 +25,7 @@ fn _hybc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     errors::register(m)?;
     m.add_class::<model::Model>()?;
     m.add_class::<run::Run>()?;
+    m.add_function(wrap_pyfunction!(sobol::sobol_analyze, m)?)?;
     jax_ffi::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

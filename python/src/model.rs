@@ -12,6 +12,7 @@ use pyo3::types::PyDict;
 use crate::errors::{self, ParameterError};
 use crate::options::{trajectory_request, SimKeywords};
 use crate::run::Run;
+use crate::sobol;
 use crate::sweep;
 
 /// A checked model. Compiling is the costly step (milliseconds to seconds), so each gradient set
@@ -269,6 +270,85 @@ impl Model {
         let compiled = self.compiled(py, &grad)?;
         let request = sweep::SweepRequest { grad_len: grad.len(), events, threads, opts };
         sweep::run(py, &compiled, rows, &request)
+    }
+
+    /// Rows `[start, stop)` of the Saltelli design of `Model.sobol`: the varied parameters'
+    /// values, one row per run in SALib's order (SALib's `X`). `priors` are `(name, dist,
+    /// bounds)` with SALib's distribution names; `fixed` sets other parameters.
+    #[pyo3(signature = (priors, n, second_order, seed, fixed, start, stop))]
+    #[allow(clippy::too_many_arguments)]
+    fn sobol_design<'py>(
+        &self,
+        py: Python<'py>,
+        priors: Vec<sobol::PriorArg>,
+        n: usize,
+        second_order: bool,
+        seed: u64,
+        fixed: Option<HashMap<String, f64>>,
+        start: usize,
+        stop: usize,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let fixed = fixed.unwrap_or_default();
+        let base = self.param_values(Some(fixed.clone()))?.values().to_vec();
+        let design = sobol::design(&self.model, base, &fixed, &priors, n, second_order, seed)?;
+        sobol::rows(py, &design, start, stop)
+    }
+
+    /// Runs rows `[start, stop)` of the design (GIL released) and returns `(values, ended_early,
+    /// first_ended_early)`: one row of `outputs` values per run (NaN where a row has none), the
+    /// runs that ended early by status word, the first such row (0-based). With `check_only`,
+    /// everything is checked (problem, outputs, options) and nothing is run: `None` comes back.
+    #[pyo3(signature = (priors, n, second_order, seed, fixed, outputs, start, stop, *, threads = 0,
+        check_only = false, t_end = None, rtol = None, atol = None, max_events = None, max_steps = None,
+        method = None, graze_tol = None, sens_error_control = None, h_max = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn sobol_evaluate<'py>(
+        &self,
+        py: Python<'py>,
+        priors: Vec<sobol::PriorArg>,
+        n: usize,
+        second_order: bool,
+        seed: u64,
+        fixed: Option<HashMap<String, f64>>,
+        outputs: Vec<String>,
+        start: usize,
+        stop: usize,
+        threads: usize,
+        check_only: bool,
+        t_end: Option<f64>,
+        rtol: Option<f64>,
+        atol: Option<f64>,
+        max_events: Option<usize>,
+        max_steps: Option<usize>,
+        method: Option<String>,
+        graze_tol: Option<f64>,
+        sens_error_control: Option<bool>,
+        h_max: Option<f64>,
+    ) -> PyResult<Option<sobol::Evaluated<'py>>> {
+        let keywords = SimKeywords {
+            t_end,
+            rtol,
+            atol,
+            max_events,
+            max_steps,
+            method,
+            graze_tol,
+            sens_error_control,
+            h_max,
+        };
+        let opts = keywords.options(&self.model)?;
+        sweep::check_counts(0, threads)?;
+        let fixed = fixed.unwrap_or_default();
+        let base = self.param_values(Some(fixed.clone()))?.values().to_vec();
+        let design = sobol::design(&self.model, base, &fixed, &priors, n, second_order, seed)?;
+        // Compiled without gradient parameters: indices need values only, and a run without
+        // sensitivities is several times cheaper (as `hybc sobol`).
+        let compiled = self.compiled(py, &[])?;
+        let outputs = sobol::outputs(&compiled, &outputs, &design)?;
+        if check_only {
+            return Ok(None);
+        }
+        sobol::evaluate(py, &compiled, &design, &outputs, (start, stop), &opts, threads).map(Some)
     }
 }
 

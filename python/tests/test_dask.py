@@ -66,3 +66,28 @@ def test_samples_are_drawn_on_the_workers_and_equal_the_local_draw(client, ball)
     local = ball.sweep(samples, grad=["h0"], events=2)
     remote = hybc.dask.sweep(ball, samples, client=client, shards=9, grad=["h0"], events=2)
     assert_tables_equal(remote, local)
+
+
+def test_sobol_equals_the_local_analysis(client, ball):
+    # T = 5: Zeno rows in some shards and not others, the drop policy and second order.
+    problem = {"names": ["h0", "e", "g"], "bounds": [[0.5, 1.5], [0.75, 0.9], [9.0, 10.5]]}
+    kw = dict(seed=7, second_order=True, on_fail="drop", t_end=5, bootstrap=50)
+    local = ball.sobol(problem, ["energy", "touchdown#last"], 128, **kw)
+    assert local.ended_early["zeno"] > 0
+    remote = hybc.dask.sobol(ball, problem, ["energy", "touchdown#last"], 128, client=client, shards=7, **kw)
+    assert list(remote) == list(local)
+    assert (remote.ended_early, remote.first_ended_early_row, remote.runs) == (
+        local.ended_early, local.first_ended_early_row, local.runs)
+    for label in local:
+        assert list(remote[label]) == list(local[label])
+        for key, value in local[label].items():
+            np.testing.assert_array_equal(remote[label][key], value, err_msg=f"{label} {key}")
+
+
+def test_sobol_errors_are_raised_before_any_task(client, ball):
+    with pytest.raises(hybc.ParameterError, match="declared range"):
+        hybc.dask.sobol(ball, {"names": ["e"], "bounds": [[0.5, 2.0]]}, ["energy"], 8, client=client)
+    with pytest.raises(ValueError, match="outputs"):
+        hybc.dask.sobol(ball, {"names": ["e"], "bounds": [[0.5, 0.9]]}, ["nothing"], 8, client=client)
+    with pytest.raises(ValueError, match="shards"):
+        hybc.dask.sobol(ball, {"names": ["e"], "bounds": [[0.5, 0.9]]}, ["energy"], 8, client=client, shards=0)

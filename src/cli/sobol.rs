@@ -15,11 +15,10 @@ use super::sweep::progress_bar;
 use super::{compile_model, load_model, usage_error, ModelArg, EXIT_SIM_STOPPED};
 use crate::limits::{MAX_BOOTSTRAP, MAX_SOBOL_BASE_POINTS, MAX_SOBOL_VALUES, MAX_SWEEP_POINTS, MAX_THREADS};
 use crate::plot::{SobolFigure, SobolPanel};
-use crate::sobol::{self, Analysis, AnalysisError, Design, OnFail, Output, OutputIndices, Prior};
+use crate::sobol::{
+    self, Analysis, AnalysisError, Design, OnFail, Output, OutputIndices, Prior, VaryError, Z_95,
+};
 use crate::Model;
-
-/// The confidence intervals are `estimate +/- Z se`, the normal 95% interval (SALib's `conf`).
-const Z_95: f64 = 1.959963984540054;
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum FormatArg {
@@ -95,37 +94,20 @@ pub fn run(args: &SobolArgs) -> ExitCode {
 /// The design the flags describe.
 fn design(model: &Model, args: &SobolArgs) -> Result<Design, String> {
     let base = parameter_values(model, &args.set)?.values().to_vec();
-    let checked = model.checked();
     let mut varied: Vec<(usize, Prior)> = Vec::new();
     for text in &args.vary {
         let (name, prior) = sobol::parse_prior(text).map_err(|e| format!("--vary: {e}"))?;
-        let idx = model.param_index(&name).map_err(|e| format!("--vary: {e}"))?.0 as usize;
+        let (idx, prior) = sobol::vary(model, &name, prior).map_err(|e| match e {
+            VaryError::Param(e) => format!("--vary: {e}"),
+            VaryError::NoRange { .. } => format!("--vary {text}: {e} (--vary {name}=LO:HI)"),
+            VaryError::OutsideRange { .. } => format!("--vary {text}: {e}"),
+        })?;
         if varied.iter().any(|v| v.0 == idx) {
             return Err(format!("--vary: `{name}` is varied twice"));
         }
         if args.set.iter().any(|s| s.split_once('=').is_some_and(|(n, _)| n.trim() == name)) {
             return Err(format!("`{name}` is given both by --set and by --vary"));
         }
-        let range = checked.params[idx].range;
-        let prior = match (prior, range) {
-            (Some(prior), None) => prior,
-            (None, Some((lo, hi))) => Prior::Uniform { lo, hi },
-            (None, None) => {
-                return Err(format!(
-                    "--vary {text}: `{name}` has no declared range; give its prior (--vary {name}=LO:HI)"
-                ))
-            }
-            (Some(prior), Some((lo, hi))) => {
-                let (from, to) = prior.support();
-                if from < lo || to > hi {
-                    return Err(format!(
-                        "--vary {text}: the prior reaches [{from}, {to}], outside `{name}`'s declared range \
-                         [{lo}, {hi}]"
-                    ));
-                }
-                prior
-            }
-        };
         varied.push((idx, prior));
     }
     Design::new(base, varied, args.n, args.second_order, args.seed).map_err(|e| format!("--vary: {e}"))

@@ -53,40 +53,59 @@ pub fn parse_prior(text: &str) -> Result<(String, Option<Prior>), PriorError> {
             .map_err(|_| PriorError::NotANumber { text: text.to_string(), number: s.to_string() })
     };
     let prior = match parts.as_slice() {
-        [lo, hi] => {
-            let (lo, hi) = (num(lo)?, num(hi)?);
-            if lo >= hi {
-                return Err(PriorError::EmptyRange { text: text.to_string() });
-            }
-            Prior::Uniform { lo, hi }
-        }
-        ["loguniform", lo, hi] => {
-            let (lo, hi) = (num(lo)?, num(hi)?);
-            if lo <= 0.0 {
-                return Err(PriorError::NotPositive { text: text.to_string() });
-            }
-            if lo >= hi {
-                return Err(PriorError::EmptyRange { text: text.to_string() });
-            }
-            Prior::LogUniform { lo, hi }
-        }
-        [kind @ ("normal" | "lognormal"), mu, sigma] => {
-            let (mu, sigma) = (num(mu)?, num(sigma)?);
-            if sigma <= 0.0 {
-                return Err(PriorError::BadSigma { text: text.to_string() });
-            }
-            if *kind == "normal" {
-                Prior::Normal { mu, sigma }
-            } else {
-                Prior::LogNormal { mu, sigma }
-            }
-        }
+        [lo, hi] => Prior::Uniform { lo: num(lo)?, hi: num(hi)? },
+        ["loguniform", lo, hi] => Prior::LogUniform { lo: num(lo)?, hi: num(hi)? },
+        ["normal", mu, sigma] => Prior::Normal { mu: num(mu)?, sigma: num(sigma)? },
+        ["lognormal", mu, sigma] => Prior::LogNormal { mu: num(mu)?, sigma: num(sigma)? },
         _ => return Err(shape()),
     };
+    let text = text.to_string();
+    prior.check().map_err(|problem| match problem {
+        // `num` refused every number that is not finite.
+        PriorProblem::NotFinite | PriorProblem::EmptyRange => PriorError::EmptyRange { text },
+        PriorProblem::NotPositive => PriorError::NotPositive { text },
+        PriorProblem::BadSigma => PriorError::BadSigma { text },
+    })?;
     Ok((name.to_string(), Some(prior)))
 }
 
+/// What is wrong with a prior's numbers (see [`Prior::check`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum PriorProblem {
+    #[error("its numbers must be finite")]
+    NotFinite,
+    #[error("the lower bound must be below the upper bound")]
+    EmptyRange,
+    #[error("a log-uniform range must be positive")]
+    NotPositive,
+    #[error("the standard deviation must be positive")]
+    BadSigma,
+}
+
 impl Prior {
+    /// Whether the numbers describe a distribution: finite, `lo < hi` (and `lo > 0` for
+    /// log-uniform), `sigma > 0`. Every interface that builds a prior (the CLI's `--vary`, the
+    /// Python `problem` dict) refuses one that fails this.
+    pub fn check(&self) -> Result<(), PriorProblem> {
+        let (a, b) = match *self {
+            Prior::Uniform { lo, hi } | Prior::LogUniform { lo, hi } => (lo, hi),
+            Prior::Normal { mu, sigma } | Prior::LogNormal { mu, sigma } => (mu, sigma),
+        };
+        if !(a.is_finite() && b.is_finite()) {
+            return Err(PriorProblem::NotFinite);
+        }
+        match *self {
+            Prior::LogUniform { lo, .. } if lo <= 0.0 => Err(PriorProblem::NotPositive),
+            Prior::Uniform { lo, hi } | Prior::LogUniform { lo, hi } if lo >= hi => {
+                Err(PriorProblem::EmptyRange)
+            }
+            Prior::Normal { sigma, .. } | Prior::LogNormal { sigma, .. } if sigma <= 0.0 => {
+                Err(PriorProblem::BadSigma)
+            }
+            _ => Ok(()),
+        }
+    }
+
     /// The parameter value at quantile `u` in `(0, 1)`.
     pub fn value(&self, u: f64) -> f64 {
         match *self {
@@ -329,6 +348,18 @@ mod tests {
         assert!(matches!(parse_prior("k=0:1:5"), Err(PriorError::Shape { .. })));
         assert!(matches!(parse_prior("k=cauchy:0:1"), Err(PriorError::Shape { .. })));
         assert!(matches!(parse_prior("=1:2"), Err(PriorError::Shape { .. })));
+    }
+
+    #[test]
+    fn a_prior_built_from_numbers_is_checked_as_a_parsed_one() {
+        assert_eq!(Prior::Uniform { lo: 0.0, hi: 1.0 }.check(), Ok(()));
+        assert_eq!(Prior::Uniform { lo: 1.0, hi: 1.0 }.check(), Err(PriorProblem::EmptyRange));
+        assert_eq!(Prior::Uniform { lo: 0.0, hi: f64::INFINITY }.check(), Err(PriorProblem::NotFinite));
+        assert_eq!(Prior::LogUniform { lo: 0.0, hi: 1.0 }.check(), Err(PriorProblem::NotPositive));
+        assert_eq!(Prior::LogUniform { lo: 2.0, hi: 1.0 }.check(), Err(PriorProblem::EmptyRange));
+        assert_eq!(Prior::Normal { mu: f64::NAN, sigma: 1.0 }.check(), Err(PriorProblem::NotFinite));
+        assert_eq!(Prior::LogNormal { mu: 0.0, sigma: -1.0 }.check(), Err(PriorProblem::BadSigma));
+        assert_eq!(Prior::Normal { mu: -3.0, sigma: 0.5 }.check(), Ok(()));
     }
 
     #[test]

@@ -18,13 +18,17 @@ pub mod sequence;
 
 use rayon::prelude::*;
 
-pub use design::{parse_prior, Design, Prior, PriorError, RowKind, TooManyVaried, MAX_VARIED};
+pub use design::{parse_prior, Design, Prior, PriorError, PriorProblem, RowKind, TooManyVaried, MAX_VARIED};
 pub use estimate::{Blocks, Indices};
 
 use crate::fit::{Observable, TargetError};
 use crate::sim::{self, HybridSystem, SimOptions, SimResult, SystemInfo};
 use crate::status::RunStatus;
 use crate::sweep::SweepError;
+
+/// The confidence intervals every interface reports are `estimate +/- Z_95 se` (`se` the bootstrap
+/// standard error): the normal 95% interval, SALib's `conf` at its default `conf_level`.
+pub const Z_95: f64 = 1.959963984540054;
 
 /// A number one run reports, whose indices are asked for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -107,6 +111,38 @@ impl OnFail {
     }
 }
 
+/// Why a parameter cannot be varied with a prior.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum VaryError {
+    #[error(transparent)]
+    Param(#[from] crate::ParamError),
+    #[error("`{name}` has no declared range; give its prior")]
+    NoRange { name: String },
+    #[error("the prior reaches [{from}, {to}], outside `{name}`'s declared range [{lo}, {hi}]")]
+    OutsideRange { name: String, from: f64, to: f64, lo: f64, hi: f64 },
+}
+
+/// The parameter `name` of `model` and its prior: `prior`, or uniform on its declared range for
+/// `None`. A prior whose support leaves the declared range is refused, not truncated: hybc never
+/// runs a parameter outside the range its model declares.
+pub fn vary(model: &crate::Model, name: &str, prior: Option<Prior>) -> Result<(usize, Prior), VaryError> {
+    let idx = model.param_index(name)?.0 as usize;
+    let range = model.checked().params[idx].range;
+    let prior = match (prior, range) {
+        (Some(prior), None) => prior,
+        (None, Some((lo, hi))) => Prior::Uniform { lo, hi },
+        (None, None) => return Err(VaryError::NoRange { name: name.to_string() }),
+        (Some(prior), Some((lo, hi))) => {
+            let (from, to) = prior.support();
+            if from < lo || to > hi {
+                return Err(VaryError::OutsideRange { name: name.to_string(), from, to, lo, hi });
+            }
+            prior
+        }
+    };
+    Ok((idx, prior))
+}
+
 /// The outputs of every row of a design, and how its runs ended.
 #[derive(Clone, Debug, Default)]
 pub struct Evaluated {
@@ -137,8 +173,30 @@ pub fn evaluate<S: HybridSystem + ?Sized>(
     threads: usize,
     progress: &(dyn Fn() + Sync),
 ) -> Result<Evaluated, SweepError> {
-    let k = outputs.len();
     let rows = design.rows().expect("the caller capped the base points");
+    evaluate_rows(sys, design, 0..rows, outputs, opts, threads, progress)
+}
+
+/// [`evaluate`] over the rows `range` of the design only (a shard): `values` holds those rows
+/// in order, `first_ended_early` is a row of the whole design. Since every row is an independent
+/// run computed from its index, the shards' values put end to end are the whole design's, bit
+/// for bit, however the rows are split.
+pub fn evaluate_rows<S: HybridSystem + ?Sized>(
+    sys: &S,
+    design: &Design,
+    range: std::ops::Range<usize>,
+    outputs: &[Output],
+    opts: &SimOptions,
+    threads: usize,
+    progress: &(dyn Fn() + Sync),
+) -> Result<Evaluated, SweepError> {
+    assert!(
+        range.end <= design.rows().unwrap_or(usize::MAX),
+        "rows {range:?} of a design of {:?} rows",
+        design.rows()
+    );
+    let k = outputs.len();
+    let rows = range.len();
     let block = design.block();
     let info = sys.info();
     let pool = rayon::ThreadPoolBuilder::new()
@@ -157,7 +215,7 @@ pub fn evaluate<S: HybridSystem + ?Sized>(
                 || (sim::Simulator::new(sys, opts), vec![0.0; design.width()]),
                 |(simulator, p), (c, slots)| {
                     let mut tally: Tally = ([0; 9], None);
-                    let first_row = c * CHUNK_POINTS * block;
+                    let first_row = range.start + c * CHUNK_POINTS * block;
                     for (j, row_slots) in slots.chunks_mut(k.max(1)).enumerate() {
                         let row = first_row + j;
                         design.fill(row, p);

@@ -116,6 +116,47 @@ fn ball_design(n: usize, seed: u64) -> (Model, Design) {
 }
 
 #[test]
+fn shards_of_rows_put_end_to_end_are_the_whole_design_bit_for_bit() {
+    // At T = 5 the rows with a low e reach their accumulation point (Zeno) first: shards then
+    // carry counts of runs that ended early, which must add up to the whole design's.
+    let (model, design) = ball_design(32, 3);
+    let compiled = model.compile::<&str>(&[]).expect("compiles");
+    let opts = SimOptions { t_end: 5.0, ..model.sim_options() };
+    let outputs: Vec<Output> = ["energy", "touchdown#last"]
+        .iter()
+        .map(|o| Output::parse(o, compiled.info()).expect("parses"))
+        .collect();
+    let whole = sobol::evaluate(compiled.native(), &design, &outputs, &opts, 2, &|| ()).expect("runs");
+    let rows = design.rows().expect("small");
+    assert!(!whole.ended_early.is_empty(), "some rows end by Zeno at T = 5");
+    let mut values = Vec::new();
+    let mut counts: Vec<(&str, usize)> = Vec::new();
+    let mut first: Option<usize> = None;
+    // Cuts inside base points' blocks too: a shard is any range of rows.
+    for range in [0..7, 7..8, 8..101, 101..rows] {
+        let part =
+            sobol::evaluate_rows(compiled.native(), &design, range.clone(), &outputs, &opts, 1, &|| ())
+                .expect("runs");
+        assert_eq!(part.values.len(), range.len() * outputs.len());
+        values.extend(part.values);
+        for (word, count) in part.ended_early {
+            match counts.iter_mut().find(|c| c.0 == word) {
+                Some(c) => c.1 += count,
+                None => counts.push((word, count)),
+            }
+        }
+        first = match (first, part.first_ended_early) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        };
+    }
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+    assert_eq!(bits(&values), bits(&whole.values));
+    assert_eq!(counts, whole.ended_early);
+    assert_eq!(first, whole.first_ended_early);
+}
+
+#[test]
 fn each_failure_policy_counts_the_rows_the_closed_form_says_have_no_value() {
     let (model, design) = ball_design(64, 0);
     let compiled = model.compile::<&str>(&[]).expect("compiles");
