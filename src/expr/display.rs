@@ -5,7 +5,8 @@
 //! right-associative and binds tighter than unary minus (`-x^2` is `-(x^2)`), `*` and `/` are
 //! left-associative, `a + (-b)` prints as `a - b`, a select prints as `if c then a else b`.
 //! `-a * b` is printed for `-(a * b)`; the parser reads it as `(-a) * b`, which has the same value
-//! in IEEE arithmetic. Comparisons, `and`, `or`, `not` print as in conditions.
+//! in IEEE arithmetic. Comparisons, `and`, `or`, `not` print as in conditions. A lookup prints as
+//! `pwl(u, s)`, `pwc(u, s)` or `pwl_slope(u, s)`: the vector and its knot position `s`.
 //!
 //! Nodes are laid out bottom-up in id order as pieces (literal text and children), and texts are
 //! composed only when written, so printing is linear in the size of the DAG and of the printed
@@ -14,7 +15,7 @@
 use std::collections::{HashMap, HashSet};
 
 use super::eval::reachable;
-use super::node::{BinaryOp, ExprId, Node, UnaryOp};
+use super::node::{BinaryOp, ExprId, LookupKind, Node, UnaryOp};
 use super::store::ExprStore;
 
 // Binding strength, loosest first.
@@ -353,6 +354,17 @@ impl<'a> Printer<'a> {
                 (vec![Text(format!("{}(", unary_name(op))), Child(a, 0), text(")")], P_ATOM)
             }
             Node::Binary(op, a, b) => self.binary_pieces(op, a, b),
+            Node::Lookup(l, pos) => {
+                let func = match l.kind {
+                    LookupKind::Pwl => "pwl",
+                    LookupKind::Pwc => "pwc",
+                    LookupKind::PwlSlope => "pwl_slope",
+                };
+                // The vector's name is its first element's without the index.
+                let first = name_or(self.params, l.base, "p");
+                let vector = first.strip_suffix("[0]").unwrap_or(&first).to_string();
+                (vec![Text(format!("{func}({vector}, ")), Child(pos, 0), text(")")], P_ATOM)
+            }
             Node::Select(c, a, b) => (
                 vec![text("if "), Child(c, 0), text(" then "), Child(a, 0), text(" else "), Child(b, 0)],
                 P_SELECT,
