@@ -180,7 +180,8 @@ impl<'a> Checker<'a> {
         let reserved = name.name == "t"
             || name.name == "pi"
             || Func::from_name(&name.name).is_some()
-            || VectorFunc::from_name(&name.name).is_some();
+            || VectorFunc::from_name(&name.name).is_some()
+            || InputKind::from_name(&name.name).is_some();
         if reserved {
             self.errors.push(CheckError::Reserved { name: name.name.clone(), span: name.span });
         }

@@ -135,7 +135,7 @@ impl CheckError {
                 vec![],
             ),
             Reserved { .. } => {
-                ("expected a name other than `t`, `pi`, `sum`, `dot` or a function name".into(), vec![])
+                ("expected a name other than `t`, `pi`, `sum`, `dot`, `pwl`, `pwc` or a function name".into(), vec![])
             }
             WrongKind { expected, .. } => (format!("expected a {expected} here"), vec![]),
             MissingFlow { state, .. } => (format!("expected `der({state}) = ...` in this mode"), vec![]),

@@ -1215,9 +1215,7 @@ impl Detector {
         let mut earliest: Option<(usize, Crossing)> = None;
         for c in 0..self.candidates.len() {
             let pos = self.candidates[c];
-            // A kink (a `pwl` knot) changes no branch: nothing to land before.
             if !info.events[evs[pos]].implicit
-                || info.events[evs[pos]].kink
                 || !matches!(self.found[pos], Finding::Bracket { .. } | Finding::Located(_))
             {
                 continue;

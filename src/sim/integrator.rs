@@ -1025,12 +1025,17 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// state before the switch is not on the interpolant any more: the gradients are then marked
     /// as not meaningful instead.
     fn cross_switch(&mut self, ev: usize, pos: usize, crossing: Crossing, after_an_event: bool) {
-        if self.info.events[ev].kink {
-            // A `pwl` knot: the step was landed on it, and the flow is continuous across it.
+        // A `pwl` knot: the flow is continuous across it, so nothing jumps; but its derivative
+        // (the sensitivities' right-hand side, when the knot moves with a parameter) does, so
+        // the run goes on past it like past a switch.
+        let kink = self.info.events[ev].kink;
+        let (n, t) = (self.n, self.t);
+        if kink && (after_an_event || crossing.on_guard) {
             return;
         }
-        let (n, t) = (self.n, self.t);
-        self.stats.switches += 1;
+        if !kink {
+            self.stats.switches += 1;
+        }
         if after_an_event || crossing.on_guard {
             // The flow before the switch is not known: no sensitivity survives it.
             if self.z[n..].iter().any(|v| !v.is_nan()) {
@@ -1055,8 +1060,11 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             gap = if gap == 0.0 { t_post.next_up() - t_post } else { 2.0 * gap };
             t_post = t + gap;
         }
-        let (x, s) = self.z.split_at_mut(n);
         self.switch_post = Some(self.switch_post.map_or(t_post, |tp| tp.max(t_post)));
+        if kink {
+            return;
+        }
+        let (x, s) = self.z.split_at_mut(n);
         let sides = ((crossing.t_pre, &x_pre[..]), (t_post, &x_post[..]));
         let out = self.jump.apply_switch(self.sys, ev, self.mode, t, x, sides, s, self.p, context);
         self.note_conditioning(ev, t, out);
