@@ -6,7 +6,7 @@
 //! left-associative, `a + (-b)` prints as `a - b`, a select prints as `if c then a else b`.
 //! `-a * b` is printed for `-(a * b)`; the parser reads it as `(-a) * b`, which has the same value
 //! in IEEE arithmetic. Comparisons, `and`, `or`, `not` print as in conditions. A lookup prints as
-//! `pwl(u, s)`, `pwc(u, s)` or `pwl_slope(u, s)`: the vector and its knot position `s`.
+//! `pwl(u @ s)`, `pwc(u @ s)` or `pwl_slope(u @ s)`: the vector read at knot position `s`.
 //!
 //! Nodes are laid out bottom-up in id order as pieces (literal text and children), and texts are
 //! composed only when written, so printing is linear in the size of the DAG and of the printed
@@ -363,7 +363,7 @@ impl<'a> Printer<'a> {
                 // The vector's name is its first element's without the index.
                 let first = name_or(self.params, l.base, "p");
                 let vector = first.strip_suffix("[0]").unwrap_or(&first).to_string();
-                (vec![Text(format!("{func}({vector}, ")), Child(pos, 0), text(")")], P_ATOM)
+                (vec![Text(format!("{func}({vector} @ ")), Child(pos, 0), text(")")], P_ATOM)
             }
             Node::Select(c, a, b) => (
                 vec![text("if "), Child(c, 0), text(" then "), Child(a, 0), text(" else "), Child(b, 0)],

@@ -126,7 +126,7 @@ pub fn system_info(model: &Model, grad_params: &[sema::ParamIdx]) -> SystemInfo 
                 is_stop: e.is_stop,
                 has_condition: e.condition.is_some(),
                 implicit: e.implicit,
-                kink: e.kink,
+                kink: e.is_kink(),
                 // Filled from the lowered functions by `classify_events` (the compiled model and
                 // the interpreter call it); until then the cautious defaults.
                 guard: sim::GuardShape::Nonlinear,

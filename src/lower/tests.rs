@@ -46,7 +46,7 @@ fn ball() -> Model {
             owner: None,
             span,
             implicit: false,
-            kink: false,
+            knot: None,
         }],
         outputs: vec![Output {
             name: "energy".into(),

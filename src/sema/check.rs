@@ -500,7 +500,7 @@ impl<'a> Checker<'a> {
             owner: pe.owner,
             span: d.name.span,
             implicit: false,
-            kink: false,
+            knot: None,
         }
     }
 

@@ -128,9 +128,26 @@ pub struct Event {
     /// Not declared but implied by a discontinuous flow (see `switches`): located and jumped
     /// over like an event, never reported as one.
     pub implicit: bool,
+    /// The input knot this implicit event is (see `switches`), if it is one.
+    pub knot: Option<Knot>,
+}
+
+impl Event {
     /// An implicit event where the flow only kinks (a knot of a `pwl` input): landed on, as a
     /// breakpoint, but nothing jumps there.
-    pub kink: bool,
+    pub fn is_kink(&self) -> bool {
+        self.knot.as_ref().is_some_and(|k| k.kind == InputKind::Pwl)
+    }
+}
+
+/// Knot `k` of an input of vector `vector` read in a mode's flows: where its knot position
+/// `position` (`Input::position`) equals `k`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Knot {
+    pub kind: InputKind,
+    pub k: u32,
+    pub position: Expr,
+    pub vector: String,
 }
 
 #[derive(Clone, Debug, PartialEq)]

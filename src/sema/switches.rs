@@ -20,7 +20,7 @@
 use std::collections::{HashMap, HashSet};
 
 use super::model::{
-    Cond, Direction, Event, EventIdx, Expr, Func, Input, InputKind, Model, ModeId, Shared, SharedDef,
+    Cond, Direction, Event, EventIdx, Expr, Func, Input, InputKind, Knot, Model, ModeId, Shared, SharedDef,
 };
 
 /// Appends the flow switches of every mode to `model.events` (after all declared events, so
@@ -52,7 +52,7 @@ pub(crate) fn add_flow_switches(model: &mut Model) {
                 owner: Some(super::ModeId(m as u16)),
                 span: mode.span,
                 implicit: true,
-                kink: false,
+                knot: None,
             })
             .collect();
         for input in &switches.inputs {
@@ -84,7 +84,7 @@ fn knot_events(model: &Model, mode: ModeId, input: &Input) -> Vec<Event> {
             owner: Some(mode),
             span,
             implicit: true,
-            kink: input.kind == InputKind::Pwl,
+            knot: Some(Knot { kind: input.kind, k, position: position.clone(), vector: vector.to_string() }),
         })
         .collect()
 }
