@@ -234,7 +234,11 @@ impl Translator<'_, '_> {
     fn translate_lookup(&mut self, l: Lookup, pos: ExprId) -> Result<Value, CodegenError> {
         let end = l.base as usize + l.len as usize;
         if l.len < 2 || end > self.lens.p {
-            return Err(CodegenError::IndexOutOfRange { what: "input vector".into(), index: end, len: self.lens.p });
+            return Err(CodegenError::IndexOutOfRange {
+                what: "input vector".into(),
+                index: end,
+                len: self.lens.p,
+            });
         }
         let pos = self.value(pos);
         let ptr = self.module.target_config().pointer_type();

@@ -235,7 +235,8 @@ impl Input {
     pub fn position(&self) -> Expr {
         let since = Expr::Binary(BinOp::Sub, Box::new(Expr::Time), Box::new(self.t0.clone()));
         let width = Expr::Binary(BinOp::Sub, Box::new(self.t1.clone()), Box::new(self.t0.clone()));
-        let scaled = Expr::Binary(BinOp::Mul, Box::new(since), Box::new(Expr::Num(f64::from(self.spacings()))));
+        let scaled =
+            Expr::Binary(BinOp::Mul, Box::new(since), Box::new(Expr::Num(f64::from(self.spacings()))));
         Expr::Binary(BinOp::Div, Box::new(scaled), Box::new(width))
     }
 

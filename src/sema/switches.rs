@@ -20,7 +20,7 @@
 use std::collections::{HashMap, HashSet};
 
 use super::model::{
-    Cond, Direction, Event, EventIdx, Expr, Func, Input, InputKind, Knot, Model, ModeId, Shared, SharedDef,
+    Cond, Direction, Event, EventIdx, Expr, Func, Input, InputKind, Knot, ModeId, Model, Shared, SharedDef,
 };
 
 /// Appends the flow switches of every mode to `model.events` (after all declared events, so
@@ -68,14 +68,19 @@ pub(crate) fn add_flow_switches(model: &mut Model) {
 /// The knots of `input` in `mode`'s flows as implicit time events (see the module comment).
 fn knot_events(model: &Model, mode: ModeId, input: &Input) -> Vec<Event> {
     let vector = model.vectors.iter().find(|v| v.first == input.first).map_or("?", |v| v.name.as_str());
-    let (func, mode_name, span) = (input.kind.name(), &model.modes[mode.0 as usize].name, model.modes[mode.0 as usize].span);
+    let (func, mode_name, span) =
+        (input.kind.name(), &model.modes[mode.0 as usize].name, model.modes[mode.0 as usize].span);
     // One position for all the knots: lowered once, read by every guard and by the value.
     let position = Expr::Shared(Shared::new(input.position()));
     input
         .knots()
         .map(|k| Event {
             name: format!("knot {k} of {func}(t, .., {vector}) in mode {mode_name}"),
-            guard: Expr::Binary(super::BinOp::Sub, Box::new(position.clone()), Box::new(Expr::Num(f64::from(k)))),
+            guard: Expr::Binary(
+                super::BinOp::Sub,
+                Box::new(position.clone()),
+                Box::new(Expr::Num(f64::from(k))),
+            ),
             direction: Direction::Either,
             condition: None,
             resets: Vec::new(),

@@ -124,7 +124,8 @@ fn a_free_final_time_differentiates_through_the_window_and_the_stop() {
     let compiled = model.compile(&names).expect("compiles");
     for big_t in [0.75, 2.0, 3.5] {
         let params = model.params().with_vector("u", &u).and_then(|p| p.with("T", big_t)).expect("in range");
-        let run = compiled.simulate(&params, &SimOptions { t_end: 10.0, ..SimOptions::default() }).expect("runs");
+        let run =
+            compiled.simulate(&params, &SimOptions { t_end: 10.0, ..SimOptions::default() }).expect("runs");
         let w = trapezoid(n, big_t / (n - 1) as f64);
         let x: f64 = w.iter().zip(&u).map(|(w, u)| w * u).sum();
         assert_eq!(run.events().len(), 1, "the stop fires once");
@@ -179,7 +180,9 @@ fn inputs_in_a_reset_an_output_and_a_guard() {
 /// The flow's instructions, and those of its derivative with respect to `u[k]`, for an input of
 /// `n` knots: what one evaluation costs.
 fn evaluation_sizes(n: usize, k: usize) -> (usize, usize) {
-    let src = format!("model big\nparam u[{n}] = 1\nstate x = 0\nder(x) = -x + pwl(t, 0, 7, u) * pwc(t, 0, 7, u)\n");
+    let src = format!(
+        "model big\nparam u[{n}] = 1\nstate x = 0\nder(x) = -x + pwl(t, 0, 7, u) * pwc(t, 0, 7, u)\n"
+    );
     let model = hybc::check_source(&src).expect("checks");
     let funcs = lower(&model);
     let flow = &funcs.modes[0];
@@ -309,9 +312,9 @@ fn check_shows_inputs_and_their_knots() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     for line in [
         "  f[6] = 5  in [0, 50]  (f[0] .. f[5])",
-        "    der(v) = (k * (L0 - y) - pwc(b @ 3 * t / T) * v + pwl(f @ 5 * t / T)) / m - g",
-        "  pwl(t, .., f) in mode stance: knots 0 .. 5 at 5 * t / T = k (kinks: steps land on them)",
-        "  pwc(t, .., b) in mode stance: knots 1 .. 2 at 3 * t / T = k (jumps: located like flow switches)",
+        "    der(v) = (k * (L0 - y) - pwc(b @ 3 * t / 2.5) * v + pwl(f @ 5 * t / 2.5)) / m - g",
+        "  pwl(t, .., f) in mode stance: knots 0 .. 5 at 5 * t / 2.5 = k (kinks: steps land on them)",
+        "  pwc(t, .., b) in mode stance: knots 1 .. 2 at 3 * t / 2.5 = k (jumps: located like flow switches)",
     ] {
         assert!(stdout.lines().any(|l| l == line), "missing `{line}` in:\n{stdout}");
     }
