@@ -95,13 +95,8 @@ pub fn apply_lookup(kind: LookupKind, pos: f64, u: &[f64]) -> f64 {
         LookupKind::Pwl => {
             let k = lookup_segment(pos, len - 2);
             let w = pos - k as f64;
-            let w = if w < 0.0 {
-                0.0
-            } else if w > 1.0 {
-                1.0
-            } else {
-                w
-            };
+            // As the JIT's two selects: NaN and -0.0 pass through.
+            let w = w.clamp(0.0, 1.0);
             (1.0 - w) * u[k] + w * u[k + 1]
         }
         LookupKind::Pwc => u[lookup_segment(pos, len - 1)],
