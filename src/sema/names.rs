@@ -477,7 +477,7 @@ fn resolve_input(
     if !matches!(&time.kind, ast::ExprKind::Name(n) if n == "t") {
         errors.push(CheckError::InputTime { func, span: time.span });
     }
-    let mut window = [t0, t1].map(|arg| {
+    let [t0, t1] = [t0, t1].map(|arg| {
         let e = resolve_names(scopes, errors, arg, scope);
         if let Some(what) = super::check::first_non_constant(&e, scopes) {
             errors.push(CheckError::InputWindow { func, what, span: arg.span });
@@ -512,7 +512,6 @@ fn resolve_input(
     if errors.len() > before {
         return Expr::Num(0.0);
     }
-    let [t0, t1] = std::mem::replace(&mut window, [Expr::Num(0.0), Expr::Num(0.0)]);
     Expr::Input(Box::new(Input { kind, t0, t1, first, len }))
 }
 

@@ -70,7 +70,8 @@ fn knot_events(model: &Model, mode: ModeId, input: &Input) -> Vec<Event> {
     let vector = model.vectors.iter().find(|v| v.first == input.first).map_or("?", |v| v.name.as_str());
     let (func, mode_name, span) =
         (input.kind.name(), &model.modes[mode.0 as usize].name, model.modes[mode.0 as usize].span);
-    // One position for all the knots: lowered once, read by every guard and by the value.
+    // One position for all the knots, lowered once; the value's own is the same node (hash-consing),
+    // so the guards and the value agree on the side of every knot to the last bit.
     let position = Expr::Shared(Shared::new(input.position()));
     input
         .knots()
