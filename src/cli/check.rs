@@ -96,7 +96,7 @@ pub fn summary(model: &Model) -> String {
             let _ = writeln!(out, "    stop");
         }
     }
-    let switches: Vec<_> = model.events.iter().filter(|e| e.implicit).collect();
+    let switches: Vec<_> = model.events.iter().filter(|e| e.implicit && e.knot.is_none()).collect();
     if !switches.is_empty() {
         let _ = writeln!(
             out,
@@ -104,6 +104,35 @@ pub fn summary(model: &Model) -> String {
         );
         for ev in switches {
             let _ = writeln!(out, "  {}: at {} = 0", ev.name, show.show(&ev.guard));
+        }
+    }
+    // An input's knots are one line per input and mode (an input may have thousands).
+    let knots: Vec<_> = model.events.iter().filter_map(|e| Some((e, e.knot.as_ref()?))).collect();
+    if !knots.is_empty() {
+        let _ = writeln!(out, "input knots (integrator breakpoints)");
+        let mut start = 0;
+        while start < knots.len() {
+            let (ev, first) = knots[start];
+            let same = |&(e, k): &(&crate::sema::Event, &crate::sema::Knot)| {
+                e.owner == ev.owner && k.position == first.position && k.kind == first.kind
+            };
+            let run = knots[start..].iter().take_while(|e| same(e)).count();
+            let last = knots[start + run - 1].1;
+            let mode = ev.owner.map_or("?", |m| model.modes[m.0 as usize].name.as_str());
+            let what = match first.kind {
+                crate::sema::InputKind::Pwl => "kinks: steps land on them",
+                crate::sema::InputKind::Pwc => "jumps: located like flow switches",
+            };
+            let _ = writeln!(
+                out,
+                "  {}(t, .., {}) in mode {mode}: knots {} .. {} at {} = k ({what})",
+                first.kind.name(),
+                first.vector,
+                first.k,
+                last.k,
+                show.show(&first.position),
+            );
+            start += run;
         }
     }
     let _ = writeln!(out, "outputs");

@@ -20,7 +20,7 @@ use cranelift_module::{FuncId, Linkage, Module};
 use super::plan::{KernelPlan, Lens, Term, Write, N_OUTS};
 use super::runtime::Callee;
 use super::CodegenError;
-use crate::expr::{BinaryOp, ExprId, ExprStore, Node, UnaryOp};
+use crate::expr::{BinaryOp, ExprId, ExprStore, Lookup, LookupKind, Node, UnaryOp};
 
 /// The uniform kernel signature (see the module comment).
 pub(crate) fn kernel_signature(module: &JITModule) -> Signature {
@@ -222,7 +222,73 @@ impl Translator<'_, '_> {
             Node::Unary(op, a) => self.translate_unary(op, a)?,
             Node::Binary(op, a, b) => self.translate_binary(op, a, b)?,
             Node::Select(c, a, b) => self.translate_select(c, a, b),
+            Node::Lookup(l, pos) => self.translate_lookup(l, pos)?,
         })
+    }
+
+    /// Recipe: a vector parameter read at a run-time index (`apply_lookup`, bit for bit). The
+    /// vector `p[base .. base + len]` is checked against the parameters' length here, at compile
+    /// time; the index `k` is the position truncated with saturation (NaN gives 0) and clamped
+    /// with integer `smax`/`smin` into `[0, last]` before any load, so no position, however
+    /// large, infinite or NaN, can read outside the vector. Then one or two loads at `p + 8 k`.
+    fn translate_lookup(&mut self, l: Lookup, pos: ExprId) -> Result<Value, CodegenError> {
+        let end = l.base as usize + l.len as usize;
+        if l.len < 2 || end > self.lens.p {
+            return Err(CodegenError::IndexOutOfRange {
+                what: "input vector".into(),
+                index: end,
+                len: self.lens.p,
+            });
+        }
+        let pos = self.value(pos);
+        let ptr = self.module.target_config().pointer_type();
+        let last = match l.kind {
+            LookupKind::Pwc => l.len - 1,
+            LookupKind::Pwl | LookupKind::PwlSlope => l.len - 2,
+        };
+        let k = self.b.ins().fcvt_to_sint_sat(ptr, pos);
+        let lo = self.b.ins().iconst(ptr, 0);
+        let hi = self.b.ins().iconst(ptr, i64::from(last));
+        let k = self.b.ins().smax(k, lo);
+        let k = self.b.ins().smin(k, hi);
+        let bytes = self.b.ins().ishl_imm_u(k, 3);
+        let addr = self.b.ins().iadd(self.p, bytes);
+        let flags = MemFlagsData::trusted().with_readonly();
+        let at = byte_offset(l.base, "input vector")?;
+        let u_k = self.b.ins().load(types::F64, flags, addr, at);
+        let value = match l.kind {
+            LookupKind::Pwc => u_k,
+            LookupKind::Pwl | LookupKind::PwlSlope => {
+                let next = byte_offset(l.base + 1, "input vector")?;
+                let u_next = self.b.ins().load(types::F64, flags, addr, next);
+                if l.kind == LookupKind::Pwl {
+                    // w = pos - k, clamped to [0, 1]; then (1 - w) u_k + w u_next.
+                    let kf = self.b.ins().fcvt_from_sint(types::F64, k);
+                    let w = self.b.ins().fsub(pos, kf);
+                    let (zero, one) = (self.constant(0.0f64.to_bits()), self.constant(1.0f64.to_bits()));
+                    let below = self.b.ins().fcmp(FloatCC::LessThan, w, zero);
+                    let w = self.b.ins().select(below, zero, w);
+                    let above = self.b.ins().fcmp(FloatCC::GreaterThan, w, one);
+                    let w = self.b.ins().select(above, one, w);
+                    let rest = self.b.ins().fsub(one, w);
+                    let a = self.b.ins().fmul(rest, u_k);
+                    let b = self.b.ins().fmul(w, u_next);
+                    self.b.ins().fadd(a, b)
+                } else {
+                    // Inside [0, len - 1) the segment's rise, else 0.
+                    let zero = self.constant(0.0f64.to_bits());
+                    let top = self.constant(f64::from(l.len - 1).to_bits());
+                    let rise = self.b.ins().fsub(u_next, u_k);
+                    let from_start = self.b.ins().fcmp(FloatCC::GreaterThanOrEqual, pos, zero);
+                    let before_end = self.b.ins().fcmp(FloatCC::LessThan, pos, top);
+                    let inside = self.b.ins().band(from_start, before_end);
+                    self.b.ins().select(inside, rise, zero)
+                }
+            }
+        };
+        // A NaN position gives NaN.
+        let nan = self.b.ins().fcmp(FloatCC::Unordered, pos, pos);
+        Ok(self.b.ins().select(nan, pos, value))
     }
 
     /// A value already translated; `needed_nodes` guarantees children come first.

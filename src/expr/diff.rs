@@ -13,7 +13,9 @@
 //!   the first operand's derivative;
 //! - `select(c, a, b)' = select(c, a', b')`: the jump where `c` switches is not a derivative
 //!   (events, not flows, are where hybc handles jumps);
-//! - `sign`, comparisons and boolean ops have derivative 0.
+//! - `sign`, comparisons and boolean ops have derivative 0;
+//! - a lookup (`pwl`, `pwc`): see [`diff_lookup`]; `pwc` is flat between its knots, where it
+//!   jumps the integrator applies the jump (knots are flow switches, `sema::switches`).
 //!
 //! Other points where the derivative does not exist give what the formula gives there: `sqrt(u)'`
 //! is `u' / (2 sqrt(u))` (infinite at 0), `asin`, `acos` divide by `sqrt(1 - u^2)`. For powers,
@@ -26,7 +28,7 @@
 
 use std::collections::{HashMap, HashSet};
 
-use super::node::{BinaryOp, ExprId, Node, UnaryOp};
+use super::node::{BinaryOp, ExprId, Lookup, LookupKind, Node, UnaryOp};
 use super::store::ExprStore;
 
 /// A variable to differentiate with respect to.
@@ -110,8 +112,10 @@ impl Differentiator {
             *slot = Some((c, self.cache.get(&(c, wrt)).copied().unwrap_or_else(|| s.zero())));
         }
         let d = |c: ExprId| known.iter().flatten().find(|(k, _)| *k == c).map(|(_, d)| *d).expect("a child");
-        // A node none of whose operands depend on `wrt` is constant: skip the rule.
-        if node.children().count() > 0 && node.children().all(|c| s.is_zero(d(c))) {
+        // A node none of whose operands depend on `wrt` is constant: skip the rule. A lookup
+        // also depends on the parameters it reads, which are not its operands.
+        let reads_wrt = matches!((node, wrt), (Node::Lookup(l, _), Var::Param(i)) if l.reads(i));
+        if !reads_wrt && node.children().count() > 0 && node.children().all(|c| s.is_zero(d(c))) {
             return s.zero();
         }
         match node {
@@ -125,6 +129,65 @@ impl Differentiator {
                 let (da, db) = (d(a), d(b));
                 s.select(c, da, db)
             }
+            Node::Lookup(l, pos) => diff_lookup(s, l, pos, d(pos), wrt),
+        }
+    }
+}
+
+/// `d Lookup(l, pos)` given `dpos`: through the position, the slope of `pwl`'s segment times
+/// `dpos` (`pwc` and the slope itself are flat between knots); and, for a parameter the lookup
+/// reads, the weight of that element at `pos` ([`element_weight`]). Each is O(1) nodes: a
+/// 1000-knot input's derivative with respect to one element reads its position, not the
+/// other 999 elements.
+fn diff_lookup(s: &mut ExprStore, l: Lookup, pos: ExprId, dpos: ExprId, wrt: Var) -> ExprId {
+    let through_pos = if l.kind == LookupKind::Pwl && !s.is_zero(dpos) {
+        let slope = s.lookup(Lookup { kind: LookupKind::PwlSlope, ..l }, pos);
+        prod(s, slope, dpos)
+    } else {
+        s.zero()
+    };
+    let direct = match wrt {
+        Var::Param(i) if l.reads(i) => element_weight(s, l, pos, i - l.base),
+        _ => s.zero(),
+    };
+    s.add(through_pos, direct)
+}
+
+/// `d Lookup(l, pos) / d u[j]` at a fixed position, matching `apply_lookup` piece by piece:
+/// - `Pwl`: the hat `max(0, 1 - |clamp(pos, 0, len - 1) - j|)` (`1 - w` at the segment's left
+///   knot, `w` at its right one, 0 elsewhere);
+/// - `Pwc`: 1 on knot `j`'s interval (`[j, j + 1)`, the first open to the left and the last to
+///   the right), else 0;
+/// - `PwlSlope`: +1 on the segment ending at knot `j`, -1 on the one starting there.
+fn element_weight(s: &mut ExprStore, l: Lookup, pos: ExprId, j: u32) -> ExprId {
+    let last = f64::from(l.len - 1);
+    let jf = f64::from(j);
+    match l.kind {
+        LookupKind::Pwl => {
+            let (zero, one, top, at) = (s.zero(), s.one(), s.constant(last), s.constant(jf));
+            let lo = s.binary(BinaryOp::Max, pos, zero);
+            let clamped = s.binary(BinaryOp::Min, lo, top);
+            let off = s.sub(clamped, at);
+            let dist = s.unary(UnaryOp::Abs, off);
+            let hat = s.sub(one, dist);
+            s.binary(BinaryOp::Max, hat, zero)
+        }
+        LookupKind::Pwc => {
+            let (start, end) = (s.constant(jf), s.constant(jf + 1.0));
+            let after_start = if j == 0 { s.one() } else { s.le(start, pos) };
+            let before_end = if j == l.len - 1 { s.one() } else { s.lt(pos, end) };
+            s.and(after_start, before_end)
+        }
+        LookupKind::PwlSlope => {
+            let segment = |s: &mut ExprStore, k: u32| {
+                let (start, end) = (s.constant(f64::from(k)), s.constant(f64::from(k) + 1.0));
+                let a = s.le(start, pos);
+                let b = s.lt(pos, end);
+                s.and(a, b)
+            };
+            let ending = if j >= 1 { segment(s, j - 1) } else { s.zero() };
+            let starting = if j + 1 < l.len { segment(s, j) } else { s.zero() };
+            s.sub(ending, starting)
         }
     }
 }

@@ -5,7 +5,11 @@
 //! right-associative and binds tighter than unary minus (`-x^2` is `-(x^2)`), `*` and `/` are
 //! left-associative, `a + (-b)` prints as `a - b`, a select prints as `if c then a else b`.
 //! `-a * b` is printed for `-(a * b)`; the parser reads it as `(-a) * b`, which has the same value
-//! in IEEE arithmetic. Comparisons, `and`, `or`, `not` print as in conditions.
+//! in IEEE arithmetic. Comparisons, `and`, `or`, `not` print as in conditions. A lookup prints as
+//! `pwl(u @ s)`, `pwc(u @ s)` or `pwl_slope(u @ s)`: the vector read at knot position `s`. A sum
+//! of every element of a vector parameter in order (`u[0]`, `u[1]`, ... named so by the caller)
+//! prints as `sum(u)`, and of their products with another vector's as `dot(u, w)`: the forms the
+//! checker expands.
 //!
 //! Nodes are laid out bottom-up in id order as pieces (literal text and children), and texts are
 //! composed only when written, so printing is linear in the size of the DAG and of the printed
@@ -14,7 +18,7 @@
 use std::collections::{HashMap, HashSet};
 
 use super::eval::reachable;
-use super::node::{BinaryOp, ExprId, Node, UnaryOp};
+use super::node::{BinaryOp, ExprId, LookupKind, Node, UnaryOp};
 use super::store::ExprStore;
 
 // Binding strength, loosest first.
@@ -125,6 +129,17 @@ struct Printer<'a> {
     taken: HashSet<String>,
     /// Longest text kept for one node, in characters.
     cap: usize,
+    /// The built nodes that are a sum over consecutive parameters (see [`Run`]).
+    runs: HashMap<ExprId, Run>,
+}
+
+/// A sum over a run of consecutive parameters: `p[a] + ... + p[a + count - 1]` (`b` is `None`),
+/// or `p[a] p[b] + ... + p[a + count - 1] p[b + count - 1]` (`a < b`), in any association.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Run {
+    a: u32,
+    b: Option<u32>,
+    count: u32,
 }
 
 impl<'a> Printer<'a> {
@@ -139,7 +154,52 @@ impl<'a> Printer<'a> {
             lets: Vec::new(),
             taken: HashSet::new(),
             cap: usize::MAX,
+            runs: HashMap::new(),
         }
+    }
+
+    /// The run `id` sums, from its children's (built before it).
+    fn run_of(&self, id: ExprId) -> Option<Run> {
+        match *self.store.node(id) {
+            Node::Param(i) => Some(Run { a: i, b: None, count: 1 }),
+            Node::Binary(BinaryOp::Mul, x, y) => match (*self.store.node(x), *self.store.node(y)) {
+                (Node::Param(i), Node::Param(j)) if i != j => {
+                    Some(Run { a: i.min(j), b: Some(i.max(j)), count: 1 })
+                }
+                _ => None,
+            },
+            Node::Binary(BinaryOp::Add, x, y) => {
+                let (l, r) = (*self.runs.get(&x)?, *self.runs.get(&y)?);
+                let follows = |l: Run, r: Run| {
+                    l.a.checked_add(l.count) == Some(r.a)
+                        && match (l.b, r.b) {
+                            (None, None) => true,
+                            (Some(lb), Some(rb)) => lb.checked_add(l.count) == Some(rb),
+                            _ => false,
+                        }
+                };
+                let (first, second) = if follows(l, r) {
+                    (l, r)
+                } else if follows(r, l) {
+                    (r, l)
+                } else {
+                    return None;
+                };
+                Some(Run { count: first.count + second.count, ..first })
+            }
+            _ => None,
+        }
+    }
+
+    /// The name of the vector whose elements are exactly the parameters `first .. first + count`
+    /// (named `v[0]` .. `v[count-1]`, and no `v[count]` after them).
+    fn whole_vector(&self, first: u32, count: u32) -> Option<String> {
+        let name = |i: u32| self.params.get(i as usize).map(String::as_str);
+        let vector = name(first)?.strip_suffix("[0]")?;
+        let last = first.checked_add(count - 1)?;
+        let whole = name(last) == Some(format!("{vector}[{}]", count - 1).as_str())
+            && name(last + 1) != Some(format!("{vector}[{count}]").as_str());
+        whole.then(|| vector.to_string())
     }
 
     fn is_capped(&self) -> bool {
@@ -158,6 +218,9 @@ impl<'a> Printer<'a> {
             }
         }
         for id in nodes {
+            if let Some(run) = self.run_of(id) {
+                self.runs.insert(id, run);
+            }
             let mut shape = self.shape(id);
             if self.is_capped() {
                 // Capped texts are short, so each is kept and composed from its children's.
@@ -352,11 +415,35 @@ impl<'a> Printer<'a> {
             Node::Unary(op, a) => {
                 (vec![Text(format!("{}(", unary_name(op))), Child(a, 0), text(")")], P_ATOM)
             }
+            Node::Binary(BinaryOp::Add, ..) if self.vector_sum(id).is_some() => {
+                (vec![Text(self.vector_sum(id).unwrap_or_default())], P_ATOM)
+            }
             Node::Binary(op, a, b) => self.binary_pieces(op, a, b),
+            Node::Lookup(l, pos) => {
+                let func = match l.kind {
+                    LookupKind::Pwl => "pwl",
+                    LookupKind::Pwc => "pwc",
+                    LookupKind::PwlSlope => "pwl_slope",
+                };
+                // The vector's name is its first element's without the index.
+                let first = name_or(self.params, l.base, "p");
+                let vector = first.strip_suffix("[0]").unwrap_or(&first).to_string();
+                (vec![Text(format!("{func}({vector} @ ")), Child(pos, 0), text(")")], P_ATOM)
+            }
             Node::Select(c, a, b) => (
                 vec![text("if "), Child(c, 0), text(" then "), Child(a, 0), text(" else "), Child(b, 0)],
                 P_SELECT,
             ),
+        }
+    }
+
+    /// `sum(u)` or `dot(u, w)` if `id` sums every element of whole vectors.
+    fn vector_sum(&self, id: ExprId) -> Option<String> {
+        let run = self.runs.get(&id)?;
+        let u = self.whole_vector(run.a, run.count)?;
+        match run.b {
+            None => Some(format!("sum({u})")),
+            Some(b) => Some(format!("dot({u}, {})", self.whole_vector(b, run.count)?)),
         }
     }
 

@@ -12,9 +12,10 @@
 //!   (`f64::signum` would give 1.0 at +0.0);
 //! - comparisons `Lt`, `Le` give 1.0 / 0.0 (false when either side is NaN);
 //! - `Not`, `And`, `Or` treat any value other than 0.0 as true (so NaN is true) and give 1.0 / 0.0;
-//! - `Select(c, a, b)` is `a` where `c != 0.0` (so a NaN condition takes `a`), else `b`.
+//! - `Select(c, a, b)` is `a` where `c != 0.0` (so a NaN condition takes `a`), else `b`;
+//! - `Lookup` ([`apply_lookup`]): a NaN position gives NaN.
 
-use super::node::{BinaryOp, ExprId, Node, UnaryOp};
+use super::node::{BinaryOp, ExprId, Lookup, LookupKind, Node, UnaryOp};
 use super::store::ExprStore;
 
 /// The value of a one-argument operation.
@@ -67,6 +68,49 @@ pub fn apply_select(c: f64, a: f64, b: f64) -> f64 {
     }
 }
 
+/// The segment of a lookup at knot position `pos`: `floor(pos)` clamped to `[0, last]`. The cast
+/// truncates towards zero and saturates (NaN gives 0), which is the floor wherever the clamp
+/// does not apply; the JIT's `fcvt_to_sint_sat` and `smin`/`smax` compute the same index.
+pub fn lookup_segment(pos: f64, last: usize) -> usize {
+    (pos as i64).clamp(0, last as i64) as usize
+}
+
+/// The value of `Lookup(kind, pos)` over the vector `u` (`u.len()` is the lookup's `len`):
+/// - `Pwl`: `(1 - w) u[k] + w u[k+1]` with `k` the segment (`last = len - 2`) and
+///   `w = pos - k` clamped to `[0, 1]`, so exactly `u[0]` before the first knot and `u[len-1]`
+///   after the last;
+/// - `Pwc`: `u[k]` with `last = len - 1`;
+/// - `PwlSlope`: `u[k+1] - u[k]` for `0 <= pos < len - 1`, else 0.
+///
+/// A NaN position gives NaN. A `Pwl` of one element is that element, its slope 0.
+pub fn apply_lookup(kind: LookupKind, pos: f64, u: &[f64]) -> f64 {
+    if pos.is_nan() {
+        return pos;
+    }
+    let len = u.len();
+    if len < 2 && kind != LookupKind::Pwc {
+        return if kind == LookupKind::Pwl { u[0] } else { 0.0 };
+    }
+    match kind {
+        LookupKind::Pwl => {
+            let k = lookup_segment(pos, len - 2);
+            let w = pos - k as f64;
+            // As the JIT's two selects: NaN and -0.0 pass through.
+            let w = w.clamp(0.0, 1.0);
+            (1.0 - w) * u[k] + w * u[k + 1]
+        }
+        LookupKind::Pwc => u[lookup_segment(pos, len - 1)],
+        LookupKind::PwlSlope => {
+            let k = lookup_segment(pos, len - 2);
+            if pos >= 0.0 && pos < (len - 1) as f64 {
+                u[k + 1] - u[k]
+            } else {
+                0.0
+            }
+        }
+    }
+}
+
 fn sign(x: f64) -> f64 {
     if x > 0.0 {
         1.0
@@ -97,6 +141,7 @@ enum Inst {
     Unary(UnaryOp, u32),
     Binary(BinaryOp, u32, u32),
     Select(u32, u32, u32),
+    Lookup(Lookup, u32),
 }
 
 /// The nodes needed by a set of roots, flattened into straight-line code in ascending id order
@@ -124,6 +169,7 @@ impl Tape {
                 Node::Unary(op, a) => Inst::Unary(op, s(a)),
                 Node::Binary(op, a, b) => Inst::Binary(op, s(a), s(b)),
                 Node::Select(c, a, b) => Inst::Select(s(c), s(a), s(b)),
+                Node::Lookup(l, a) => Inst::Lookup(l, s(a)),
             };
             slot[id.index()] = insts.len() as u32;
             insts.push(inst);
@@ -161,6 +207,10 @@ impl Tape {
                 Inst::Binary(op, a, b) => apply_binary(op, scratch[a as usize], scratch[b as usize]),
                 Inst::Select(c, a, b) => {
                     apply_select(scratch[c as usize], scratch[a as usize], scratch[b as usize])
+                }
+                Inst::Lookup(l, a) => {
+                    let u = &p[l.base as usize..(l.base + l.len) as usize];
+                    apply_lookup(l.kind, scratch[a as usize], u)
                 }
             };
             scratch.push(v);

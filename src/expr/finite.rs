@@ -12,7 +12,8 @@ use super::store::ExprStore;
 pub fn finite_at_finite_inputs(store: &ExprStore, root: ExprId) -> bool {
     reachable(store, &[root]).into_iter().all(|id| match *store.node(id) {
         Node::Const(bits) => f64::from_bits(bits).is_finite(),
-        Node::State(_) | Node::Param(_) | Node::Time | Node::Select(..) => true,
+        // A lookup of finite parameters is finite at any position but NaN (its slope a difference).
+        Node::State(_) | Node::Param(_) | Node::Time | Node::Select(..) | Node::Lookup(..) => true,
         Node::Unary(op, _) => matches!(
             op,
             UnaryOp::Neg

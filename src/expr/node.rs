@@ -107,6 +107,35 @@ impl BinaryOp {
     }
 }
 
+/// How a [`Node::Lookup`] reads its vector: the inputs `pwl` and `pwc` of the language and the
+/// slope of `pwl` (its derivative with respect to the knot position).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum LookupKind {
+    /// Linear between knots `k = floor(pos)` and `k + 1`, held at the end values outside
+    /// `[0, len - 1]`.
+    Pwl,
+    /// The value of knot `clamp(floor(pos), 0, len - 1)`.
+    Pwc,
+    /// `u[k+1] - u[k]` of `Pwl`'s segment for `0 <= pos < len - 1`, else 0 (a right derivative).
+    PwlSlope,
+}
+
+/// A run of parameters `base .. base + len` read at an index computed at run time (a vector
+/// parameter interpolated in time). `len >= 1` (`>= 2` for `Pwl`, `PwlSlope`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct Lookup {
+    pub kind: LookupKind,
+    pub base: u32,
+    pub len: u32,
+}
+
+impl Lookup {
+    /// Whether this lookup reads parameter `i`.
+    pub fn reads(&self, i: u32) -> bool {
+        i >= self.base && i - self.base < self.len
+    }
+}
+
 /// A node. `Const` holds the bit pattern of an f64 so nodes can be hashed; `-0.0` and `0.0` are
 /// distinct constants, and NaN constants are never created by simplification.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -119,6 +148,10 @@ pub enum Node {
     Binary(BinaryOp, ExprId, ExprId),
     /// `Select(c, a, b)` is `a` where `c != 0.0`, else `b`.
     Select(ExprId, ExprId, ExprId),
+    /// `Lookup(l, pos)`: the vector `l` read at the knot position `pos` (see
+    /// [`eval::apply_lookup`](super::eval::apply_lookup)). Its parameters are not children: the
+    /// index is known only at run time.
+    Lookup(Lookup, ExprId),
 }
 
 impl Node {
@@ -137,7 +170,7 @@ impl Node {
     pub fn children(&self) -> impl Iterator<Item = ExprId> {
         let (a, b, c) = match *self {
             Node::Const(_) | Node::State(_) | Node::Param(_) | Node::Time => (None, None, None),
-            Node::Unary(_, a) => (Some(a), None, None),
+            Node::Unary(_, a) | Node::Lookup(_, a) => (Some(a), None, None),
             Node::Binary(_, a, b) => (Some(a), Some(b), None),
             Node::Select(c, a, b) => (Some(c), Some(a), Some(b)),
         };

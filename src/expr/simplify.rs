@@ -22,7 +22,7 @@
 //! the folded form `0`; they compare equal).
 
 use super::eval::{apply_binary, apply_unary};
-use super::node::{BinaryOp, ExprId, Node, UnaryOp};
+use super::node::{BinaryOp, ExprId, Lookup, LookupKind, Node, UnaryOp};
 use super::store::ExprStore;
 
 impl ExprStore {
@@ -293,5 +293,19 @@ impl ExprStore {
             return a;
         }
         self.intern(Node::Select(c, a, b))
+    }
+
+    /// The vector `l` read at knot position `pos` (see [`apply_lookup`](super::eval::apply_lookup)).
+    /// A vector of one element is that parameter (a `Pwl` slope then 0); the parameters are not
+    /// constants, so nothing else folds.
+    pub fn lookup(&mut self, l: Lookup, pos: ExprId) -> ExprId {
+        assert!(l.len >= 1, "a lookup reads at least one parameter");
+        if l.len == 1 {
+            return match l.kind {
+                LookupKind::Pwl | LookupKind::Pwc => self.param(l.base),
+                LookupKind::PwlSlope => self.zero(),
+            };
+        }
+        self.intern(Node::Lookup(l, pos))
     }
 }

@@ -20,10 +20,10 @@ use std::collections::HashMap;
 
 use crate::expr::eval::reachable;
 use crate::expr::{
-    BinaryOp, Differentiator, EventFunctions, ExprId, ExprStore, ModeFunctions, ModelFunctions, Node,
-    SparseMat, SparseVec, UnaryOp, Var,
+    BinaryOp, Differentiator, EventFunctions, ExprId, ExprStore, Lookup, LookupKind, ModeFunctions,
+    ModelFunctions, Node, SparseMat, SparseVec, UnaryOp, Var,
 };
-use crate::sema::{self, BinOp, CmpOp, Cond, Expr, Func, Model, SharedDef};
+use crate::sema::{self, BinOp, CmpOp, Cond, Expr, Func, InputKind, Model, SharedDef};
 use crate::sim::{self, SystemInfo};
 
 /// Lowers every function of `model` and all their derivatives into one store.
@@ -126,6 +126,7 @@ pub fn system_info(model: &Model, grad_params: &[sema::ParamIdx]) -> SystemInfo 
                 is_stop: e.is_stop,
                 has_condition: e.condition.is_some(),
                 implicit: e.implicit,
+                kink: e.is_kink(),
                 // Filled from the lowered functions by `classify_events` (the compiled model and
                 // the interpreter call it); until then the cautious defaults.
                 guard: sim::GuardShape::Nonlinear,
@@ -192,14 +193,25 @@ impl Lowerer {
                     (Node::State(k), Jac::States) | (Node::Param(k), Jac::Params) if k < n_cols => {
                         mentioned.push((k, id))
                     }
+                    // A lookup reads its vector's parameters without them being nodes below it:
+                    // it is the leaf of each of them.
+                    (Node::Lookup(l, _), Jac::Params) => {
+                        mentioned.extend((l.base..l.base + l.len).filter(|&k| k < n_cols).map(|k| (k, id)))
+                    }
                     _ => {}
                 }
             }
             mentioned.sort_unstable();
-            for (k, leaf) in mentioned {
-                // The nodes that depend on this variable: its leaf and everything above it.
-                let mut path = vec![leaf];
-                let mut seen = std::collections::HashSet::from([leaf]);
+            let mut at_leaf = 0;
+            while at_leaf < mentioned.len() {
+                // A variable may have several leaves (a parameter and a lookup reading it).
+                let k = mentioned[at_leaf].0;
+                let leaves: Vec<ExprId> =
+                    mentioned[at_leaf..].iter().take_while(|m| m.0 == k).map(|m| m.1).collect();
+                at_leaf += leaves.len();
+                // The nodes that depend on this variable: its leaves and everything above them.
+                let mut path = leaves.clone();
+                let mut seen: std::collections::HashSet<ExprId> = leaves.into_iter().collect();
                 let mut at = 0;
                 while at < path.len() {
                     for &p in parents.get(&path[at]).map(Vec::as_slice).unwrap_or(&[]) {
@@ -266,6 +278,14 @@ impl Lowerer {
                 }
             }
             Expr::Call(func, args) => self.call(*func, args),
+            Expr::Input(input) => {
+                let pos = self.expr(&input.position());
+                let kind = match input.kind {
+                    InputKind::Pwl => LookupKind::Pwl,
+                    InputKind::Pwc => LookupKind::Pwc,
+                };
+                self.store.lookup(Lookup { kind, base: input.first.0, len: input.len }, pos)
+            }
             Expr::If(c, a, b) => {
                 let c = self.cond(c);
                 let (a, b) = (self.expr(a), self.expr(b));

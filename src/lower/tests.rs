@@ -46,6 +46,7 @@ fn ball() -> Model {
             owner: None,
             span,
             implicit: false,
+            knot: None,
         }],
         outputs: vec![Output {
             name: "energy".into(),

@@ -17,6 +17,8 @@ pub fn check(file: &ast::File) -> Result<Model, Vec<CheckError>> {
     for event in &model.events {
         if super::switches::jumps(&event.guard) {
             cx.errors.push(CheckError::DiscontinuousGuard { event: event.name.clone(), span: event.span });
+        } else if super::switches::reads_pwc(&event.guard) {
+            cx.errors.push(CheckError::PwcInGuard { event: event.name.clone(), span: event.span });
         }
     }
     if cx.errors.is_empty() {
@@ -178,7 +180,8 @@ impl<'a> Checker<'a> {
         let reserved = name.name == "t"
             || name.name == "pi"
             || Func::from_name(&name.name).is_some()
-            || VectorFunc::from_name(&name.name).is_some();
+            || VectorFunc::from_name(&name.name).is_some()
+            || InputKind::from_name(&name.name).is_some();
         if reserved {
             self.errors.push(CheckError::Reserved { name: name.name.clone(), span: name.span });
         }
@@ -497,6 +500,7 @@ impl<'a> Checker<'a> {
             owner: pe.owner,
             span: d.name.span,
             implicit: false,
+            knot: None,
         }
     }
 
@@ -523,7 +527,7 @@ impl<'a> Checker<'a> {
 }
 
 /// Names the first use of `t` or a state in `e`, if any.
-fn first_non_constant(e: &Expr, scopes: &Scopes) -> Option<String> {
+pub(super) fn first_non_constant(e: &Expr, scopes: &Scopes) -> Option<String> {
     NonConstant { scopes, searched: HashSet::new() }.find(e)
 }
 
@@ -551,6 +555,7 @@ impl NonConstant<'_, '_> {
             Expr::Binary(_, a, b) => self.find(a).or_else(|| self.find(b)),
             Expr::Call(_, args) => args.iter().find_map(|a| self.find(a)),
             Expr::If(c, a, b) => self.find_in_cond(c).or_else(|| self.find(a)).or_else(|| self.find(b)),
+            Expr::Input(_) => Some("an input (`pwl`, `pwc`), which varies with `t`".to_string()),
         }
     }
 

@@ -61,6 +61,14 @@ pub enum CheckError {
     VectorAsScalar { name: String, len: u32, span: Span },
     #[error("`{func}` takes vector parameters")]
     NotAVector { func: &'static str, span: Span },
+    #[error("the first argument of `{func}` must be `t`")]
+    InputTime { func: &'static str, span: Span },
+    #[error("the knot window of `{func}` depends on {what}")]
+    InputWindow { func: &'static str, what: String, span: Span },
+    #[error("`pwl` needs at least 2 knots, `{name}` has {len}")]
+    InputTooShort { name: String, len: u32, span: Span },
+    #[error("the guard of event `{event}` jumps at the knots of a `pwc` input")]
+    PwcInGuard { event: String, span: Span },
     #[error("`dot` of vectors of different lengths: `{a}` has {len_a}, `{b}` has {len_b}")]
     VectorLengths { a: String, len_a: u32, b: String, len_b: u32, span: Span },
 }
@@ -97,7 +105,11 @@ impl CheckError {
             | BadIndex { span, .. }
             | VectorAsScalar { span, .. }
             | NotAVector { span, .. }
-            | VectorLengths { span, .. } => *span,
+            | VectorLengths { span, .. }
+            | InputTime { span, .. }
+            | InputWindow { span, .. }
+            | InputTooShort { span, .. }
+            | PwcInGuard { span, .. } => *span,
         }
     }
 
@@ -123,7 +135,7 @@ impl CheckError {
                 vec![],
             ),
             Reserved { .. } => {
-                ("expected a name other than `t`, `pi`, `sum`, `dot` or a function name".into(), vec![])
+                ("expected a name other than `t`, `pi`, `sum`, `dot`, `pwl`, `pwc` or a function name".into(), vec![])
             }
             WrongKind { expected, .. } => (format!("expected a {expected} here"), vec![]),
             MissingFlow { state, .. } => (format!("expected `der({state}) = ...` in this mode"), vec![]),
@@ -211,6 +223,22 @@ impl CheckError {
                 ("expected the name of a vector parameter (`param u[N] = ...`)".to_string(), vec![])
             }
             VectorLengths { .. } => ("expected two vectors of the same length".to_string(), vec![]),
+            InputTime { func, .. } => (
+                "expected `t`".to_string(),
+                vec![format!("an input is a function of time: `{func}(t, t0, t1, u)`")],
+            ),
+            InputWindow { .. } => (
+                "expected an expression of parameters".to_string(),
+                vec!["the knots are fixed for a run: their times are computed from the parameters at its start"
+                    .to_string()],
+            ),
+            InputTooShort { .. } => ("expected a vector of at least 2 elements".to_string(), vec![]),
+            PwcInGuard { .. } => (
+                "expected a guard continuous in time and the state".to_string(),
+                vec!["a `pwc` input jumps at its knots: use `pwl`, or an event per knot time \
+                      (`event e when t >= T`)"
+                    .to_string()],
+            ),
         };
         Diagnostic { message: self.to_string(), span: self.span(), label, notes }
     }

@@ -82,6 +82,10 @@ impl StatesRead {
                 self.expr(b);
             }
             Expr::Call(_, args) => args.iter().for_each(|a| self.expr(a)),
+            Expr::Input(i) => {
+                self.expr(&i.t0);
+                self.expr(&i.t1);
+            }
             Expr::If(c, a, b) => {
                 self.cond(c);
                 self.expr(a);

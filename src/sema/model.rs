@@ -128,6 +128,26 @@ pub struct Event {
     /// Not declared but implied by a discontinuous flow (see `switches`): located and jumped
     /// over like an event, never reported as one.
     pub implicit: bool,
+    /// The input knot this implicit event is (see `switches`), if it is one.
+    pub knot: Option<Knot>,
+}
+
+impl Event {
+    /// An implicit event where the flow only kinks (a knot of a `pwl` input): landed on, as a
+    /// breakpoint, but nothing jumps there.
+    pub fn is_kink(&self) -> bool {
+        self.knot.as_ref().is_some_and(|k| k.kind == InputKind::Pwl)
+    }
+}
+
+/// Knot `k` of an input of vector `vector` read in a mode's flows: where its knot position
+/// `position` (`Input::position`) equals `k`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Knot {
+    pub kind: InputKind,
+    pub k: u32,
+    pub position: Expr,
+    pub vector: String,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -161,6 +181,73 @@ pub enum Expr {
     If(Box<Cond>, Box<Expr>, Box<Expr>),
     /// A use of a `let`: its resolved definition, shared by all its uses.
     Shared(Shared),
+    /// `pwl(t, t0, t1, u)` or `pwc(t, t0, t1, u)`: a vector parameter interpolated in time.
+    Input(Box<Input>),
+}
+
+/// How an input interpolates its vector.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum InputKind {
+    /// `pwl`: linear between `N` knots `t0 + k (t1 - t0) / (N - 1)`, `k = 0 .. N-1`; `u[0]`
+    /// before `t0`, `u[N-1]` after `t1`. Continuous; kinks at the knots.
+    Pwl,
+    /// `pwc`: `N` intervals of width `(t1 - t0) / N`; `u[k]` on `[t0 + k w, t0 + (k+1) w)`,
+    /// `u[0]` before, `u[N-1]` after. Jumps at the `N - 1` interior knots `t0 + k w`.
+    Pwc,
+}
+
+impl InputKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            InputKind::Pwl => "pwl",
+            InputKind::Pwc => "pwc",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<InputKind> {
+        [InputKind::Pwl, InputKind::Pwc].into_iter().find(|k| k.name() == name)
+    }
+}
+
+/// An input: the vector `first .. first + len` at the knots spread over `[t0, t1]` (both
+/// expressions of parameters only, checked by `sema`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Input {
+    pub kind: InputKind,
+    pub t0: Expr,
+    pub t1: Expr,
+    pub first: ParamIdx,
+    pub len: u32,
+}
+
+impl Input {
+    /// The number of knot spacings in `[t0, t1]`: `N - 1` for `pwl`, `N` for `pwc`.
+    pub fn spacings(&self) -> u32 {
+        match self.kind {
+            InputKind::Pwl => self.len - 1,
+            InputKind::Pwc => self.len,
+        }
+    }
+
+    /// The knot position `s = (t - t0) * spacings / (t1 - t0)`: knot `k` is at `s = k`. Every
+    /// later stage reads the input and its knots through this one expression, so a knot's
+    /// event and the value's segment agree to the last bit about which side of it `t` is on.
+    pub fn position(&self) -> Expr {
+        let since = Expr::Binary(BinOp::Sub, Box::new(Expr::Time), Box::new(self.t0.clone()));
+        let width = Expr::Binary(BinOp::Sub, Box::new(self.t1.clone()), Box::new(self.t0.clone()));
+        let scaled =
+            Expr::Binary(BinOp::Mul, Box::new(since), Box::new(Expr::Num(f64::from(self.spacings()))));
+        Expr::Binary(BinOp::Div, Box::new(scaled), Box::new(width))
+    }
+
+    /// The knots `k` (positions `s = k`) where the input is not smooth: `pwl`'s `0 .. N-1`
+    /// (kinks), `pwc`'s interior `1 .. N-1` (jumps).
+    pub fn knots(&self) -> std::ops::Range<u32> {
+        match self.kind {
+            InputKind::Pwl => 0..self.len,
+            InputKind::Pwc => 1..self.len,
+        }
+    }
 }
 
 /// How deep a checked expression may nest, counting through `let`s. It bounds the work and stack
@@ -216,6 +303,7 @@ impl Expr {
             Expr::Binary(_, a, b) => 1 + a.depth().max(b.depth()),
             Expr::Call(_, args) => 1 + args.iter().map(Expr::depth).max().unwrap_or(0),
             Expr::If(c, a, b) => 1 + c.depth().max(a.depth()).max(b.depth()),
+            Expr::Input(i) => 2 + i.t0.depth().max(i.t1.depth()),
         }
     }
 }
@@ -250,6 +338,10 @@ impl Drop for SharedDef {
                     Expr::If(c, a, b) => {
                         conds.push(*c);
                         work.extend([*a, *b]);
+                    }
+                    Expr::Input(i) => {
+                        let Input { t0, t1, .. } = *i;
+                        work.extend([t0, t1]);
                     }
                     Expr::Num(_) | Expr::State(_) | Expr::Param(_) | Expr::Time => {}
                 }

@@ -293,6 +293,10 @@ pub fn resolve_names(
             let func = VectorFunc::from_name(&name.name).expect("matched above");
             resolve_vector_call(scopes, errors, func, args, e.span, scope)
         }
+        ast::ExprKind::Call(name, args) if InputKind::from_name(&name.name).is_some() => {
+            let kind = InputKind::from_name(&name.name).expect("matched above");
+            resolve_input(scopes, errors, kind, args, e.span, scope)
+        }
         ast::ExprKind::Call(name, args) => {
             let args: Vec<Expr> = args.iter().map(|a| resolve_names(scopes, errors, a, scope)).collect();
             let Some(func) = Func::from_name(&name.name) else {
@@ -450,6 +454,65 @@ fn resolve_vector_call(
     let e = Expr::Shared(Shared::new(balanced_sum(terms)));
     scopes.vector_sums.insert(key, e.clone());
     e
+}
+
+/// `pwl(t, t0, t1, u)` or `pwc(t, t0, t1, u)`: the first argument is `t` itself, `t0` and `t1`
+/// expressions of parameters (the knots are fixed for a run), `u` a vector parameter (of at
+/// least 2 elements for `pwl`).
+fn resolve_input(
+    scopes: &mut Scopes,
+    errors: &mut Vec<CheckError>,
+    kind: InputKind,
+    args: &[ast::Expr],
+    span: Span,
+    scope: ScopeId,
+) -> Expr {
+    let func = kind.name();
+    let [time, t0, t1, u] = args else {
+        errors.push(CheckError::Arity { func: func.to_string(), expected: 4, found: args.len(), span });
+        return Expr::Num(0.0);
+    };
+    let before = errors.len();
+    // `t` cannot be declared, so the name is always the time.
+    if !matches!(&time.kind, ast::ExprKind::Name(n) if n == "t") {
+        errors.push(CheckError::InputTime { func, span: time.span });
+    }
+    let [t0, t1] = [t0, t1].map(|arg| {
+        let e = resolve_names(scopes, errors, arg, scope);
+        if let Some(what) = super::check::first_non_constant(&e, scopes) {
+            errors.push(CheckError::InputWindow { func, what, span: arg.span });
+        }
+        e
+    });
+    let vector = match &u.kind {
+        ast::ExprKind::Name(n) => match scopes.lookup(scope, n) {
+            Some(Binding::Vector { first, len }) => Some((n, first, len)),
+            Some(_) => {
+                errors.push(CheckError::NotAVector { func, span: u.span });
+                None
+            }
+            None => {
+                let suggestion = scopes.suggest(scope, n);
+                errors.push(CheckError::UnknownName { name: n.clone(), span: u.span, suggestion });
+                None
+            }
+        },
+        _ => {
+            errors.push(CheckError::NotAVector { func, span: u.span });
+            None
+        }
+    };
+    let Some((name, first, len)) = vector else { return Expr::Num(0.0) };
+    if len == 0 {
+        return Expr::Num(0.0);
+    }
+    if kind == InputKind::Pwl && len < 2 {
+        errors.push(CheckError::InputTooShort { name: name.clone(), len, span: u.span });
+    }
+    if errors.len() > before {
+        return Expr::Num(0.0);
+    }
+    Expr::Input(Box::new(Input { kind, t0, t1, first, len }))
 }
 
 /// `terms[0] + ... + terms[n-1]` (n >= 1) as a balanced tree, left to right.

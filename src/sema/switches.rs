@@ -9,10 +9,19 @@
 //! (`sim::EventInfo::implicit`), but does not report it as an event.
 //!
 //! `min`, `max` and `abs` are continuous: their kinks change no sensitivity and need no event.
+//!
+//! Inputs (`pwl`, `pwc`) in a mode's flows add one implicit event per knot, guard `s - k` on the
+//! input's knot position `s` (`Input::position`), which is a time event: its time
+//! `t0 + k (t1 - t0) / spacings` is a breakpoint computed from the parameters at the run's start.
+//! A `pwc` knot is a flow switch (the flow jumps there, and a knot that moves with a parameter
+//! moves the sensitivities by `(f- - f+) dt_k/dp`); a `pwl` knot is a kink (`Event::kink`): the
+//! steps land on it so that none straddles it, and nothing jumps.
 
 use std::collections::{HashMap, HashSet};
 
-use super::model::{Cond, Direction, Event, EventIdx, Expr, Func, Model, SharedDef};
+use super::model::{
+    Cond, Direction, Event, EventIdx, Expr, Func, Input, InputKind, Knot, ModeId, Model, Shared, SharedDef,
+};
 
 /// Appends the flow switches of every mode to `model.events` (after all declared events, so
 /// declared events fire first at a shared instant) and to the mode's event list.
@@ -25,7 +34,7 @@ pub(crate) fn add_flow_switches(model: &mut Model) {
         let guards = switches.found;
         let mode = &model.modes[m];
         let count = guards.len();
-        let new_events: Vec<Event> = guards
+        let mut new_events: Vec<Event> = guards
             .into_iter()
             .enumerate()
             .map(|(k, guard)| Event {
@@ -43,13 +52,47 @@ pub(crate) fn add_flow_switches(model: &mut Model) {
                 owner: Some(super::ModeId(m as u16)),
                 span: mode.span,
                 implicit: true,
+                knot: None,
             })
             .collect();
+        for input in &switches.inputs {
+            new_events.extend(knot_events(model, ModeId(m as u16), input));
+        }
         for event in new_events {
             model.modes[m].events.push(EventIdx(model.events.len() as u32));
             model.events.push(event);
         }
     }
+}
+
+/// The knots of `input` in `mode`'s flows as implicit time events (see the module comment).
+fn knot_events(model: &Model, mode: ModeId, input: &Input) -> Vec<Event> {
+    let vector = model.vectors.iter().find(|v| v.first == input.first).map_or("?", |v| v.name.as_str());
+    let (func, mode_name, span) =
+        (input.kind.name(), &model.modes[mode.0 as usize].name, model.modes[mode.0 as usize].span);
+    // One position for all the knots, lowered once; the value's own is the same node (hash-consing),
+    // so the guards and the value agree on the side of every knot to the last bit.
+    let position = Expr::Shared(Shared::new(input.position()));
+    input
+        .knots()
+        .map(|k| Event {
+            name: format!("knot {k} of {func}(t, .., {vector}) in mode {mode_name}"),
+            guard: Expr::Binary(
+                super::BinOp::Sub,
+                Box::new(position.clone()),
+                Box::new(Expr::Num(f64::from(k))),
+            ),
+            direction: Direction::Either,
+            condition: None,
+            resets: Vec::new(),
+            target: None,
+            is_stop: false,
+            owner: Some(mode),
+            span,
+            implicit: true,
+            knot: Some(Knot { kind: input.kind, k, position: position.clone(), vector: vector.to_string() }),
+        })
+        .collect()
 }
 
 /// Whether `e` jumps somewhere in time or the state: it has an `if` comparison or a `sign`
@@ -60,12 +103,21 @@ pub(crate) fn jumps(e: &Expr) -> bool {
     !switches.found.is_empty()
 }
 
+/// Whether `e` reads a `pwc` input (a guard like that jumps at its knots and is refused).
+pub(crate) fn reads_pwc(e: &Expr) -> bool {
+    let mut switches = Switches::default();
+    switches.collect(e);
+    switches.inputs.iter().any(|i| i.kind == InputKind::Pwc)
+}
+
 /// The switch functions found so far, without repeats, and what has been learnt about shared
 /// `let` definitions: each is searched once and its `moves` answer kept, so a model whose `let`s
 /// share subexpressions costs its size, not the size of the expanded tree.
 #[derive(Default)]
 struct Switches {
     found: Vec<Expr>,
+    /// The inputs found, without repeats: their knots are implicit events too.
+    inputs: Vec<Input>,
     searched: HashSet<*const SharedDef>,
     moving: HashMap<*const SharedDef, bool>,
 }
@@ -96,6 +148,11 @@ impl Switches {
                 self.collect_cond(c);
                 self.collect(a);
                 self.collect(b);
+            }
+            Expr::Input(input) => {
+                if !self.inputs.contains(input) {
+                    self.inputs.push((**input).clone());
+                }
             }
         }
     }
@@ -138,6 +195,7 @@ impl Switches {
             Expr::Binary(_, a, b) => self.moves(a) || self.moves(b),
             Expr::Call(_, args) => args.iter().any(|a| self.moves(a)),
             Expr::If(c, a, b) => self.cond_moves(c) || self.moves(a) || self.moves(b),
+            Expr::Input(_) => true,
         }
     }
 

@@ -295,6 +295,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             gx.resize(n, 0.0);
             self.instant_dte.resize(self.m, 0.0);
             self.sys.guards(mode, 0.0, &self.z[..n], self.p, &mut g[..ne]);
+            let mut switches = Vec::new();
             for (pos, &ev) in evs.iter().enumerate() {
                 if self.info.events[ev].guard != GuardShape::Time {
                     continue;
@@ -302,12 +303,51 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 let slope =
                     self.sys.guard_grad(ev, 0.0, &self.z[..n], self.p, &mut gx[..n], self.instant_dte);
                 let t_event = -g[pos] / slope;
+                if self.info.events[ev].implicit && t_event.is_finite() {
+                    switches.push((pos, t_event, slope));
+                } else if t_event > self.opts.t_start && t_event < self.opts.t_end {
+                    self.breakpoints.add(t_event);
+                }
+            }
+            for (pos, t_est, slope) in switches {
+                let t_event = self.first_time_across(mode, pos, t_est, slope);
                 if t_event > self.opts.t_start && t_event < self.opts.t_end {
                     self.breakpoints.add(t_event);
                 }
             }
         }
         self.breakpoints.sort();
+    }
+
+    /// The first time, within a few spacings of `t` from `t_est`, where the time-event guard at
+    /// `pos` of `mode` (moving with `slope`) is across zero (`>= 0` rising). `-g(0) / slope`
+    /// rounds: a flow switch landed on an ulp short of it (a `pwc` knot at
+    /// `(t - 0.1) * 4 / 0.8 = 0.9999999999999999` at t = 0.3) would be crossed just inside the
+    /// next step, whose first stage then reads the old branch and later ones the new.
+    fn first_time_across(&mut self, mode: usize, pos: usize, t_est: f64, slope: f64) -> f64 {
+        const NUDGES: usize = 64;
+        let n = self.n;
+        let ne = self.info.modes[mode].events.len();
+        let mut g = vec![0.0; ne];
+        let mut across = |sys: &S, t: f64, z: &[f64]| {
+            sys.guards(mode, t, &z[..n], self.p, &mut g);
+            slope.signum() * g[pos] >= 0.0
+        };
+        let mut t = t_est;
+        for _ in 0..NUDGES {
+            if across(self.sys, t, self.z) {
+                break;
+            }
+            t = t.next_up();
+        }
+        for _ in 0..NUDGES {
+            let before = t.next_down();
+            if !across(self.sys, before, self.z) {
+                break;
+            }
+            t = before;
+        }
+        t
     }
 
     /// Events whose guard the run starts on, with the flow carrying it to the crossed side, fire
@@ -985,8 +1025,17 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// state before the switch is not on the interpolant any more: the gradients are then marked
     /// as not meaningful instead.
     fn cross_switch(&mut self, ev: usize, pos: usize, crossing: Crossing, after_an_event: bool) {
+        // A `pwl` knot: the flow is continuous across it, so nothing jumps; but its derivative
+        // (the sensitivities' right-hand side, when the knot moves with a parameter) does, so
+        // the run goes on past it like past a switch.
+        let kink = self.info.events[ev].kink;
         let (n, t) = (self.n, self.t);
-        self.stats.switches += 1;
+        if kink && (after_an_event || crossing.on_guard) {
+            return;
+        }
+        if !kink {
+            self.stats.switches += 1;
+        }
         if after_an_event || crossing.on_guard {
             // The flow before the switch is not known: no sensitivity survives it.
             if self.z[n..].iter().any(|v| !v.is_nan()) {
@@ -1011,8 +1060,11 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             gap = if gap == 0.0 { t_post.next_up() - t_post } else { 2.0 * gap };
             t_post = t + gap;
         }
-        let (x, s) = self.z.split_at_mut(n);
         self.switch_post = Some(self.switch_post.map_or(t_post, |tp| tp.max(t_post)));
+        if kink {
+            return;
+        }
+        let (x, s) = self.z.split_at_mut(n);
         let sides = ((crossing.t_pre, &x_pre[..]), (t_post, &x_post[..]));
         let out = self.jump.apply_switch(self.sys, ev, self.mode, t, x, sides, s, self.p, context);
         self.note_conditioning(ev, t, out);

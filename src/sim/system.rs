@@ -45,6 +45,9 @@ pub struct EventInfo {
     /// it the state is kept, the sensitivities jump by `(f- - f+) dt/dp` with the flow evaluated
     /// on each side, and nothing is recorded as an event.
     pub implicit: bool,
+    /// An implicit event where the flow only kinks (a knot of a `pwl` input): a time event the
+    /// steps land on, so none straddles the kink, but nothing jumps and nothing is recorded.
+    pub kink: bool,
     /// How the guard depends on time and the state, which decides how its crossings are searched.
     pub guard: GuardShape,
     /// Whether the reset acts on the guard's motion: it assigns a state that the guard or its

@@ -405,6 +405,7 @@ impl Ripple {
                     is_stop: false,
                     has_condition: false,
                     implicit: false,
+                    kink: false,
                     guard: GuardShape::Affine,
                     contact: false,
                 }],

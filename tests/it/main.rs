@@ -21,6 +21,7 @@ mod frontend;
 mod frontend_props;
 mod gradient_existence;
 mod hostile_input;
+mod inputs;
 mod jit_ball;
 mod jit_diff;
 mod jit_errors;

@@ -40,6 +40,7 @@ impl Ball {
             is_stop: floor_stop,
             has_condition: false,
             implicit: false,
+            kink: false,
             guard: GuardShape::Affine,
             contact: true,
         }];
@@ -52,6 +53,7 @@ impl Ball {
                 is_stop: false,
                 has_condition: true,
                 implicit: false,
+                kink: false,
                 guard: GuardShape::Affine,
                 contact: true,
             });
@@ -184,6 +186,7 @@ impl Thermostat {
             is_stop: false,
             has_condition: false,
             implicit: false,
+            kink: false,
             guard: GuardShape::Affine,
             contact: false,
         };
@@ -294,6 +297,7 @@ impl Counter {
             is_stop: false,
             has_condition: false,
             implicit: false,
+            kink: false,
             guard: GuardShape::Affine,
             contact: false,
         };
@@ -419,6 +423,7 @@ impl Oscillator {
                     is_stop: false,
                     has_condition: false,
                     implicit: false,
+                    kink: false,
                     guard: GuardShape::Affine,
                     contact: false,
                 }],
