@@ -2,7 +2,8 @@
 //! all three parameters (the README's headline figure), plus the same without gradients. Each is
 //! timed twice: through `sim::run` (a fresh `Simulator` per run: options checked and scratch
 //! buffers allocated every time) and through one `Simulator` reused for every run, which is what
-//! sweeps, fits and gradient checks do.
+//! sweeps, fits and gradient checks do. Last, the reused run with gradients and 100 `--at` samples
+//! from the dense output, against the same run without (`_at100`).
 //! Run: `cargo bench --bench ball_run`.
 
 use std::hint::black_box;
@@ -28,6 +29,14 @@ fn ball_run(c: &mut Criterion) {
         c.bench_function(&format!("ball_run_T2.5_rtol1e-10_{label}_reused_simulator"), |b| {
             b.iter(|| sim.run(black_box(&p)).expect("runs"))
         });
+        if label == "grad_all" {
+            let at: Vec<f64> = (0..100).map(|k| 2.5 * k as f64 / 99.0).collect();
+            let sampled = SimOptions { at, ..opts.clone() };
+            let mut sim = Simulator::new(&compiled, &sampled).expect("valid options");
+            c.bench_function("ball_run_T2.5_rtol1e-10_grad_all_reused_simulator_at100", |b| {
+                b.iter(|| sim.run(black_box(&p)).expect("runs"))
+            });
+        }
     }
 }
 

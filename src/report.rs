@@ -4,7 +4,7 @@
 
 use serde_json::{json, Map, Value};
 
-use crate::sim::{EventRecord, SimResult, StopReason, SystemInfo};
+use crate::sim::{EventRecord, Sample, SimResult, StopReason, SystemInfo};
 
 /// The result of one run, with the names needed to report it.
 #[derive(Clone, Debug)]
@@ -84,6 +84,9 @@ impl RunReport {
                     JsonField::Events => {
                         Value::Array(self.result.events.iter().map(|e| self.event_json(e)).collect())
                     }
+                    JsonField::Samples => {
+                        Value::Array(self.result.samples.iter().map(|s| self.sample_json(s)).collect())
+                    }
                 };
                 (key.to_string(), value)
             })
@@ -116,9 +119,37 @@ impl RunReport {
                     }
                     out.write_all(b"]")?;
                 }
+                JsonField::Samples => {
+                    out.write_all(b"[")?;
+                    for (k, sample) in self.result.samples.iter().enumerate() {
+                        if k > 0 {
+                            out.write_all(b",")?;
+                        }
+                        serde_json::to_writer(&mut *out, &self.sample_json(sample))?;
+                    }
+                    out.write_all(b"]")?;
+                }
             }
         }
         out.write_all(b"}")
+    }
+
+    /// One sample of the JSON contract (`--at`): values and derivatives at a fixed time.
+    fn sample_json(&self, s: &Sample) -> Value {
+        let named = |names: &[String], v: &[f64]| -> Value {
+            Value::Object(names.iter().zip(v).map(|(n, x)| (n.clone(), number_json(*x))).collect())
+        };
+        json!({
+            "time": s.time,
+            "reached": s.reached,
+            "mode": if s.reached { json!(self.mode_name(s.mode)) } else { Value::Null },
+            "after_events": s.after_events,
+            "near_event": s.near_event,
+            "state": named(&self.info.state_names, &s.state),
+            "dstate": self.named_rows(&self.info.state_names, &s.dstate),
+            "outputs": named(&self.info.output_names, &s.outputs),
+            "doutputs": self.named_rows(&self.info.output_names, &s.doutputs),
+        })
     }
 
     /// One event record of the JSON contract.
@@ -174,7 +205,7 @@ impl RunReport {
         let mut warnings: Vec<String> = r.warnings.iter().map(|w| w.to_string()).collect();
         warnings.extend(self.failure());
         warnings.extend(self.non_finite());
-        vec![
+        let mut fields = vec![
             ("model", JsonField::Value(json!(self.model))),
             ("t_end", JsonField::Value(json!(self.t_end))),
             ("params", JsonField::Value(Value::Object(params))),
@@ -195,7 +226,12 @@ impl RunReport {
                     "run_seconds": self.run_seconds,
                 })),
             ),
-        ]
+        ];
+        // Only when asked for (`--at`): the contract of a run without samples is unchanged.
+        if !r.samples.is_empty() {
+            fields.insert(6, ("samples", JsonField::Samples));
+        }
+        fields
     }
 
     /// The human-readable table `hybc run` prints by default.
@@ -271,6 +307,9 @@ impl RunReport {
             rows(out, &self.info.state_names, &f.state, &f.dstate_total)?;
             rows(out, &self.info.output_names, &f.outputs, &f.doutputs_total)?;
         }
+        if !r.samples.is_empty() {
+            self.write_samples_table(out)?;
+        }
         let switches = match r.stats.switches {
             0 => String::new(),
             1 => ", 1 flow switch crossed".to_string(),
@@ -288,10 +327,45 @@ impl RunReport {
     }
 }
 
-/// A top-level field of the JSON contract: a value, or the events (written one at a time).
+impl RunReport {
+    /// The `--at` samples as a table: time, then every output and state (their derivatives are
+    /// in the JSON and `--samples-out`). A sample at an event instant is marked `+` (after its
+    /// events), one within an event's time resolution `~` (a cusp: its derivatives hold on one
+    /// side), one the run did not reach shows `-`.
+    fn write_samples_table<W: std::fmt::Write>(&self, out: &mut W) -> std::fmt::Result {
+        let r = &self.result;
+        let names: Vec<&String> = self.info.output_names.iter().chain(&self.info.state_names).collect();
+        writeln!(
+            out,
+            "\nsamples: {} (+ after an event at that instant, ~ within an event's time resolution)",
+            r.samples.len()
+        )?;
+        let head: String = names.iter().map(|n| format!("  {n:>18}")).collect();
+        writeln!(out, "  {:>18}  {:<2}{head}", "time", "")?;
+        for s in &r.samples {
+            let flag = match (s.after_events, s.near_event) {
+                (true, _) => "+",
+                (false, Some(_)) => "~",
+                _ => "",
+            };
+            let values: String = s
+                .outputs
+                .iter()
+                .chain(&s.state)
+                .map(|v| format!("  {:>18}", if s.reached { num(*v) } else { "-".to_string() }))
+                .collect();
+            writeln!(out, "  {:>18}  {flag:<2}{values}", num(s.time))?;
+        }
+        Ok(())
+    }
+}
+
+/// A top-level field of the JSON contract: a value, or the events or samples (written one at a
+/// time).
 enum JsonField {
     Value(Value),
     Events,
+    Samples,
 }
 
 /// A derivative as the table prints it: `-` where it does not exist (NaN).

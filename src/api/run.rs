@@ -3,7 +3,7 @@
 
 use super::Compiled;
 use crate::report::RunReport;
-use crate::sim::{EventRecord, SimResult, SimWarning, StopReason};
+use crate::sim::{EventRecord, Sample, SimResult, SimWarning, StopReason};
 
 /// The result of one simulation, read by name.
 ///
@@ -32,6 +32,11 @@ impl Run {
     /// The events that fired, in order.
     pub fn events(&self) -> &[EventRecord] {
         &self.result.events
+    }
+
+    /// The values at `SimOptions::at`, one per time asked for, in order.
+    pub fn samples(&self) -> &[Sample] {
+        &self.result.samples
     }
 
     /// Why the run ended.

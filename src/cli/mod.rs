@@ -5,6 +5,7 @@ mod check;
 mod derive;
 mod fit;
 mod run;
+mod samples;
 mod sobol;
 mod sweep;
 mod trajectory;

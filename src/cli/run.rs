@@ -83,6 +83,15 @@ pub struct RunArgs {
     /// Sample the trajectory every DT using the dense output.
     #[arg(long, value_name = "DT", requires = "trajectory")]
     sample: Option<f64>,
+    /// Report every output and state with its derivatives at these times, from the dense output
+    /// (the steps are not cut): `LO:HI:N` (N evenly spaced, ends included) or `T1,T2,...`
+    /// ascending. In the table, the JSON `samples` field and --samples-out. A time at an event
+    /// instant gets the values after its events.
+    #[arg(long, value_name = "LO:HI:N|T1,T2,...")]
+    at: Option<String>,
+    /// Write the --at samples, with their derivatives, to this CSV file.
+    #[arg(long, value_name = "FILE.csv", requires = "at")]
+    samples_out: Option<PathBuf>,
     /// Plot states and outputs against time, with event lines and mode bands, into this file.
     #[arg(long, value_name = "FILE.svg|.png")]
     plot: Option<PathBuf>,
@@ -258,6 +267,9 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
     let params = parameter_values(model, &args.set)?;
     let mut opts = sim_options(model, &args.sim)?;
     opts.trajectory = trajectory_request(args, &opts)?;
+    if let Some(at) = &args.at {
+        opts.at = super::samples::parse_at(at)?;
+    }
     plot_trajectory(args, &mut opts)?;
     let check_opts = check_options(&opts, args)?;
 
@@ -280,6 +292,9 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
     };
     if let Some(path) = &args.plot {
         crate::plot::plot_run(&report, path).map_err(|e| format!("--plot: {e}"))?;
+    }
+    if let Some(path) = &args.samples_out {
+        super::samples::write_csv(path, &report)?;
     }
     // A run into a Zeno point grazes ever more often; the first few warnings say it all.
     const SHOWN_WARNINGS: usize = 3;

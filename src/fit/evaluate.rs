@@ -41,6 +41,8 @@ pub enum Rejection {
     MissingEvent { target: String, fired: usize },
     /// A target's gradient does not exist: a grazing event came at or before it.
     NoGradient { target: String },
+    /// A `NAME@TIME` target's time is after the run's stop (a `stop` event).
+    NotReached { target: String },
     /// A target's value or gradient is not a finite number.
     NonFinite { target: String },
     /// Every residual is finite but `0.5 * sum(residual^2)` overflows: the objective, its
@@ -66,6 +68,9 @@ impl fmt::Display for Rejection {
                  zero) came at or before it"
             ),
             Rejection::NonFinite { target } => write!(f, "target `{target}` is not a finite number"),
+            Rejection::NotReached { target } => {
+                write!(f, "target `{target}` does not exist: the run stopped before its time")
+            }
             Rejection::ObjectiveOverflow { target, residual } => write!(
                 f,
                 "the objective 0.5 sum(residual^2) overflows a double (residual {} for target `{target}`): \
@@ -106,6 +111,7 @@ pub fn evaluate<S: HybridSystem + ?Sized>(
             read(&result, info, &finals, target.observable).map_err(|missing| match missing {
                 Missing::Event { fired } => Rejection::MissingEvent { target: label(), fired },
                 Missing::Gradient => Rejection::NoGradient { target: label() },
+                Missing::Time => Rejection::NotReached { target: label() },
             })?;
         let residual = target.weight * (value - target.value);
         if !residual.is_finite() || gradient.iter().any(|d| !d.is_finite()) {
@@ -139,8 +145,12 @@ struct Finals<'r> {
 }
 
 enum Missing {
-    Event { fired: usize },
+    Event {
+        fired: usize,
+    },
     Gradient,
+    /// The run stopped before a `NAME@TIME` target's time.
+    Time,
 }
 
 /// One target's value and its gradient over the free parameters.
@@ -171,6 +181,25 @@ fn read(
             let record = firings.get(occurrence - 1).ok_or(Missing::Event { fired: firings.len() })?;
             let d = record.dtime.as_ref().ok_or(Missing::Gradient)?;
             Ok((record.time, existing(d.clone())?))
+        }
+        Observable::LastFiring { name_event } => {
+            let name = &info.events[name_event].name;
+            let record = result.events.iter().rfind(|e| info.events[e.event].name == *name);
+            let record = record.ok_or(Missing::Event { fired: 0 })?;
+            let d = record.dtime.as_ref().ok_or(Missing::Gradient)?;
+            Ok((record.time, existing(d.clone())?))
+        }
+        Observable::At { output, index, time } => {
+            // `fit` samples every target's time; one the run did not reach has no value.
+            let sample = result.samples.iter().find(|s| s.time == time).filter(|s| s.reached);
+            let sample = sample.ok_or(Missing::Time)?;
+            let (values, d, rows) = if output {
+                (&sample.outputs, &sample.doutputs, info.n_outputs())
+            } else {
+                (&sample.state, &sample.dstate, info.n_states())
+            };
+            let d = d.as_ref().ok_or(Missing::Gradient)?;
+            Ok((values[index], existing(row(d, rows, index))?))
         }
     }
 }

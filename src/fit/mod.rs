@@ -20,7 +20,7 @@ mod target;
 
 pub use evaluate::{evaluate, Evaluation, Rejection};
 pub use report::FitReport;
-pub use target::{Observable, Target, TargetError};
+pub use target::{sample_times, Observable, Target, TargetError};
 
 use crate::sim::{HybridSystem, SimOptions, Simulator};
 
@@ -249,7 +249,10 @@ pub fn fit<S: HybridSystem>(problem: &FitProblem<'_, S>, opts: &FitOptions) -> R
         }
         p
     };
-    let mut simulator = Simulator::new(problem.system, &problem.sim)
+    // `NAME@TIME` targets are read off the run's samples at their times.
+    let sampled =
+        SimOptions { at: sample_times(problem.targets.iter().map(|t| &t.observable)), ..problem.sim.clone() };
+    let mut simulator = Simulator::new(problem.system, &sampled)
         .map_err(|e| FitError::Start(Rejection::RunStopped { message: e.to_string() }))?;
     let solved = lm::minimize(x0, &problem.bounds, opts, |x| {
         evaluate(&mut simulator, &with_free(x), &problem.targets)

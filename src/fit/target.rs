@@ -4,8 +4,11 @@
 
 use crate::sim::SystemInfo;
 
-/// A number one simulation run reports, which a target fixes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// A number one simulation run reports, which a target fixes (and `hybc sobol --output`
+/// reads). Spelled one way everywhere: `NAME` (an output or a state at the final time), `EVENT#K`
+/// (the K-th firing), `EVENT#last` (the last firing), `NAME@TIME` (an output or a state at a given
+/// time, from the run's samples at `SimOptions::at`).
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Observable {
     /// An output at the final time (index into `SystemInfo::output_names`).
     Output(usize),
@@ -15,17 +18,71 @@ pub enum Observable {
     /// an event id, because events of different modes may share a name and the user counts
     /// firings of the name.
     EventTime { name_event: usize, occurrence: usize },
+    /// The time of the last firing of any event named as `name_event` is.
+    LastFiring { name_event: usize },
+    /// An output (`output: true`) or a state at time `time`.
+    At { output: bool, index: usize, time: f64 },
 }
 
 impl Observable {
-    /// Parses `NAME` (an output or a state; prefix `output:` or `state:` when a name is both) or
-    /// `EVENT#K` against the names in `info`, as a target's left side (`hybc sobol --output`).
+    /// Parses `NAME` (an output or a state; prefix `output:` or `state:` when a name is both),
+    /// `EVENT#K`, `EVENT#last` or `NAME@TIME` against the names in `info`.
     pub fn parse(name: &str, info: &SystemInfo) -> Result<Observable, TargetError> {
-        let name = name.trim();
-        match name.split_once('#') {
-            Some((event, k)) => event_time(event.trim(), k.trim(), name, info),
-            None => named_value(name, info),
+        parse_observable(name.trim(), name, info)
+    }
+
+    /// The time at which the run must sample it, for `NAME@TIME`.
+    pub fn sample_time(&self) -> Option<f64> {
+        match *self {
+            Observable::At { time, .. } => Some(time),
+            _ => None,
         }
+    }
+
+    /// The name as the user writes it (`energy`, `touchdown#2`, `touchdown#last`, `y@1.5`).
+    pub fn label(&self, info: &SystemInfo) -> String {
+        match *self {
+            Observable::Output(i) => info.output_names[i].clone(),
+            Observable::State(i) => info.state_names[i].clone(),
+            Observable::EventTime { name_event, occurrence } => {
+                format!("{}#{occurrence}", info.events[name_event].name)
+            }
+            Observable::LastFiring { name_event } => format!("{}#last", info.events[name_event].name),
+            Observable::At { output, index, time } => {
+                let names = if output { &info.output_names } else { &info.state_names };
+                format!("{}@{time}", names[index])
+            }
+        }
+    }
+}
+
+/// The sample times a set of observables needs, ascending and without repeats (for
+/// `SimOptions::at`).
+pub fn sample_times<'o>(observables: impl IntoIterator<Item = &'o Observable>) -> Vec<f64> {
+    let mut times: Vec<f64> = observables.into_iter().filter_map(Observable::sample_time).collect();
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    times
+}
+
+/// [`Observable::parse`] of `name`, with `text` (the whole flag value) in the messages.
+fn parse_observable(name: &str, text: &str, info: &SystemInfo) -> Result<Observable, TargetError> {
+    if let Some((value, time)) = name.split_once('@') {
+        let time = crate::number::parse_number(time.trim())
+            .map_err(|_| TargetError::BadTime { text: text.to_string() })?;
+        return match named_value(value.trim(), info)? {
+            Observable::Output(index) => Ok(Observable::At { output: true, index, time }),
+            Observable::State(index) => Ok(Observable::At { output: false, index, time }),
+            _ => unreachable!("named_value gives an output or a state"),
+        };
+    }
+    match name.split_once('#') {
+        Some((event, k)) if k.trim() == "last" => match event_time(event.trim(), "1", text, info)? {
+            Observable::EventTime { name_event, .. } => Ok(Observable::LastFiring { name_event }),
+            _ => unreachable!("event_time gives an event time"),
+        },
+        Some((event, k)) => event_time(event.trim(), k.trim(), text, info),
+        None => named_value(name, info),
     }
 }
 
@@ -41,7 +98,10 @@ pub struct Target {
 /// A `--target` text that does not name a target of the model.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum TargetError {
-    #[error("expected NAME=VALUE, NAME=VALUE@WEIGHT or EVENT#K=TIME, found `{text}`")]
+    #[error(
+        "expected NAME=VALUE, NAME@TIME=VALUE, EVENT#K=TIME or EVENT#last=TIME, each with an optional \
+         @WEIGHT after the value, found `{text}`"
+    )]
     Malformed { text: String },
     #[error("`{text}` is not a finite number")]
     NotANumber { text: String },
@@ -51,9 +111,11 @@ pub enum TargetError {
     #[error("weight `{text}` must be a positive finite number")]
     BadWeight { text: String },
     #[error(
-        "in `{text}`: the firing number K of EVENT#K must be a whole number from 1 (1 is the first firing)"
+        "in `{text}`: the firing number K of EVENT#K must be a whole number from 1 (1 is the first firing), or `last`"
     )]
     BadOccurrence { text: String },
+    #[error("in `{text}`: the time of NAME@TIME must be a finite number")]
+    BadTime { text: String },
     #[error("model has no event `{name}`{hint}; its events are {known}")]
     UnknownEvent { name: String, hint: String, known: String },
     #[error("model has no output or state `{name}`{hint}; its outputs are {outputs}, its states {states}")]
@@ -86,22 +148,13 @@ impl Target {
                 .filter(|w| *w > 0.0)
                 .ok_or_else(|| TargetError::BadWeight { text: w.to_string() })?,
         };
-        let observable = match name.split_once('#') {
-            Some((event, k)) => event_time(event.trim(), k.trim(), text, info)?,
-            None => named_value(name, info)?,
-        };
+        let observable = parse_observable(name, text, info)?;
         Ok(Target { observable, value, weight })
     }
 
-    /// The target's name as the user writes it (`energy`, `touchdown#2`).
+    /// The target's name as the user writes it (`energy`, `touchdown#2`, `y@1.5`).
     pub fn label(&self, info: &SystemInfo) -> String {
-        match self.observable {
-            Observable::Output(i) => info.output_names[i].clone(),
-            Observable::State(i) => info.state_names[i].clone(),
-            Observable::EventTime { name_event, occurrence } => {
-                format!("{}#{occurrence}", info.events[name_event].name)
-            }
-        }
+        self.observable.label(info)
     }
 }
 

@@ -18,12 +18,12 @@ use super::jump::{dot_nonzero, CrossingContext, Jump, JumpOutcome};
 use super::options::SimOptions;
 use super::recorder::{Point, PointKind, Recorder};
 use super::result::{
-    EndCusp, EventRecord, FinalState, SimError, SimResult, SimStats, SimWarning, StopReason,
+    EndCusp, EventRecord, FinalState, Sample, SimError, SimResult, SimStats, SimWarning, StopReason,
 };
 use super::rk::Rk;
 use super::stepper::{Interpolant, Stepper};
 use super::system::{Direction, GuardShape, HybridSystem, SystemInfo};
-use super::zeno;
+use super::{samples, zeno};
 
 const EPS: f64 = f64::EPSILON;
 /// Largest ratio of the first step after an event to Hairer's initial estimate at the
@@ -139,6 +139,8 @@ fn rhs_for<'a, S: HybridSystem + ?Sized>(
 /// One run in progress. Made by `Simulator::integrator`; [`Self::step`] advances it,
 /// [`Self::finish`] turns it into the run's result.
 pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = Rk> {
+    /// The values at `SimOptions::at` taken so far (the next one due is `samples.len()`).
+    samples: Vec<Sample>,
     sys: &'a S,
     info: &'a SystemInfo,
     p: &'a [f64],
@@ -262,6 +264,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             reset_onto_guard: Vec::new(),
             onto_guard_dte: Vec::new(),
             before_end: None,
+            samples: Vec::with_capacity(opts.at.len()),
         };
         if it.z[..n].iter().any(|v| !v.is_finite()) {
             it.done = Some(it.fault_nonfinite());
@@ -658,7 +661,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             }
             Selection::Nothing => {
                 if sample_due {
-                    self.record_samples(t1);
+                    self.record_samples(t1, false);
                 }
                 let singular_at_start = self.stepper.masked() && self.start_derivative_not_finite();
                 self.stepper.accept(self.z);
@@ -674,7 +677,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             }
             Selection::NotFinite { pos, t } => {
                 if sample_due || self.sample_due(t) {
-                    self.record_samples(t);
+                    self.record_samples(t, true);
                 }
                 self.stepper.interpolant().eval(t, self.z);
                 self.t = t;
@@ -684,7 +687,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             }
             Selection::Fire(t_fire) => {
                 if sample_due || self.sample_due(t_fire) {
-                    self.record_samples(t_fire);
+                    self.record_samples(t_fire, true);
                 }
                 let singular_at_start = self.stepper.masked() && self.start_derivative_not_finite();
                 self.stepper.interpolant().eval(t_fire, self.z);
@@ -750,6 +753,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             self.before.0.extend_from_slice(&self.z[..n]);
         }
         self.record(PointKind::AfterEvents);
+        self.record_at_current_point();
         for (void, s) in self.void.iter_mut().zip(&self.z[self.n..]) {
             *void |= s.is_nan();
         }
@@ -1005,6 +1009,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 grazing: out.grazing,
                 denominator: out.denominator,
                 margin: out.margin,
+                resolution: out.resolution,
             });
             self.stats.events += 1;
             self.fired.push((ev, crossing.sigma, out.denominator));
@@ -1153,11 +1158,18 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
 
     /// Whether the recorder wants a sample from the dense output of the step ending at `t_seg_end`.
     fn sample_due(&self, t_seg_end: f64) -> bool {
-        self.recorder.next_sample().is_some_and(|ts| ts <= t_seg_end)
+        self.recorder.next_sample().is_some_and(|ts| ts <= t_seg_end) || self.at_due(t_seg_end, false)
     }
 
-    /// Samples in `(t0, t_seg_end]` from the dense output of the current step.
-    fn record_samples(&mut self, t_seg_end: f64) {
+    /// Whether the next time of `SimOptions::at` is at most `t` (before `t` when `strict`).
+    fn at_due(&self, t: f64, strict: bool) -> bool {
+        self.opts.at.get(self.samples.len()).is_some_and(|&ts| ts < t || (!strict && ts == t))
+    }
+
+    /// The recorder's samples up to `t_seg_end`, and those of `SimOptions::at` up to it (before
+    /// it when `before_instant`: a sample at an event instant is taken after the events), from
+    /// the dense output of the step just attempted.
+    fn record_samples(&mut self, t_seg_end: f64, before_instant: bool) {
         let n = self.n;
         while let Some(ts) = self.recorder.next_sample().filter(|&ts| ts <= t_seg_end) {
             let (outputs, z) = &mut *self.record_buf;
@@ -1167,6 +1179,52 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 Point { kind: PointKind::Sample, t: ts, mode: self.mode, x: &z[..n], s: &z[n..], outputs };
             self.recorder.record(&point);
         }
+        while self.at_due(t_seg_end, before_instant) {
+            let ts = self.opts.at[self.samples.len()];
+            let z = &mut self.record_buf.1;
+            self.stepper.interpolant().eval(ts, z);
+            let z = std::mem::take(&mut self.record_buf.1);
+            self.push_sample(ts, &z);
+            self.record_buf.1 = z;
+        }
+    }
+
+    /// The samples of `SimOptions::at` due at the current point (after an instant's events, or
+    /// where the run stops).
+    fn record_at_current_point(&mut self) {
+        while self.at_due(self.t, false) {
+            let ts = self.opts.at[self.samples.len()];
+            let z = std::mem::take(self.z);
+            self.push_sample(ts, &z);
+            *self.z = z;
+        }
+    }
+
+    /// Appends the sample at `ts` of the state and sensitivities `z`, with the outputs and their
+    /// derivatives `y_x S + y_p` at that fixed time.
+    fn push_sample(&mut self, ts: f64, z: &[f64]) {
+        let (n, m, k) = (self.n, self.m, self.info.n_outputs());
+        let (x, s) = z.split_at(n);
+        let mut outputs = vec![0.0; k];
+        self.sys.outputs(ts, x, self.p, &mut outputs);
+        let doutputs = if m > 0 {
+            let (yx, yp, yt) = &mut *self.output_jac;
+            self.sys.output_jac(ts, x, self.p, yx, yp, yt);
+            Some(output_sens((n, m, k), &*self.output_jac, s, None))
+        } else {
+            None
+        };
+        self.samples.push(Sample {
+            time: ts,
+            reached: true,
+            mode: self.mode,
+            state: x.to_vec(),
+            dstate: (m > 0).then(|| s.to_vec()),
+            outputs,
+            doutputs,
+            after_events: false,
+            near_event: None,
+        });
     }
 
     /// Samples due at the current point itself (the start of the run).
@@ -1205,7 +1263,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// The run's result, ended by `stopped_by`: events, the final state with its sensitivities
     /// and the outputs' (chained through the output Jacobians), warnings, statistics. The
     /// trajectory is the recorder's to give.
-    pub fn finish(self, stopped_by: StopReason) -> SimResult {
+    pub fn finish(mut self, stopped_by: StopReason) -> SimResult {
+        self.record_at_current_point();
+        let mut samples = std::mem::take(&mut self.samples);
+        samples::complete(&mut samples, &self.opts.at, &self.events, (self.n, self.m, self.info.n_outputs()));
         let (n, m, k) = (self.n, self.m, self.info.n_outputs());
         let t = self.t;
         let x = &self.z[..n];
@@ -1259,6 +1320,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             stats,
             trajectory: None,
             end_cusp,
+            samples,
         }
     }
 }

@@ -95,6 +95,9 @@ pub(crate) struct JumpOutcome {
     pub grazing: bool,
     /// For a near-grazing crossing: how far the guard's extremum is from zero.
     pub margin: Option<f64>,
+    /// How well the crossing time is known: the guard's accuracy at the tolerances over its
+    /// crossing speed (0 where the event takes another's instant, or the speed is zero).
+    pub resolution: f64,
 }
 
 impl Jump {
@@ -146,7 +149,7 @@ impl Jump {
                 // gradient is the instant's.
                 let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
                 let denominator = dot(&self.gx, &self.f_minus) + gt;
-                JumpOutcome { denominator, conditioning: 0.0, grazing: false, margin: None }
+                JumpOutcome { denominator, conditioning: 0.0, grazing: false, margin: None, resolution: 0.0 }
             }
             None => self.event_time_gradient(sys, ev, t, x, s, p, context),
         };
@@ -258,6 +261,7 @@ impl Jump {
                 f64::NAN
             };
         }
-        JumpOutcome { denominator: d, conditioning, grazing, margin }
+        let resolution = if d != 0.0 && (accuracy / d).is_finite() { (accuracy / d).abs() } else { 0.0 };
+        JumpOutcome { denominator: d, conditioning, grazing, margin, resolution }
     }
 }

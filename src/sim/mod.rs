@@ -21,6 +21,7 @@ mod result;
 mod rk;
 mod roots;
 mod run;
+mod samples;
 mod stepper;
 mod sums;
 pub mod system;

@@ -66,6 +66,10 @@ pub struct SimOptions {
     /// Optional cap on the step size (infinite by default).
     pub h_max: f64,
     pub trajectory: TrajectoryRequest,
+    /// Times at which every state and output is sampled with its derivatives, from the dense
+    /// output (`SimResult::samples`): ascending, within `[t_start, t_end]`. They do not cut the
+    /// steps. A sample at an event instant is taken after the instant's events.
+    pub at: Vec<f64>,
 }
 
 /// The run defaults, the one set the CLI and the library share: a model's `simulate` line
@@ -84,6 +88,7 @@ impl Default for SimOptions {
             sens_error_control: true,
             h_max: f64::INFINITY,
             trajectory: TrajectoryRequest::None,
+            at: Vec::new(),
         }
     }
 }

@@ -20,6 +20,11 @@ pub enum SimError {
     ParamLength { expected: usize, got: usize },
     #[error("option `{name}` has invalid value {value}")]
     InvalidOption { name: &'static str, value: f64 },
+    #[error(
+        "sample time {t} is not in order within the run: sample times are ascending, from t_start = {t_start} \
+         to t_end = {t_end} (the one before is {previous})"
+    )]
+    SampleTime { t: f64, t_start: f64, t_end: f64, previous: f64 },
     #[error("model shape is inconsistent: {what} index {index} out of range (count {count})")]
     BadIndex { what: &'static str, index: usize, count: usize },
     // The runtime faults: one wording, `fault_text`, with names (`describe`) or indices (here).
@@ -246,6 +251,10 @@ pub struct EventRecord {
     pub denominator: f64,
     /// For a near-grazing crossing: the distance of the guard's extremum from zero.
     pub margin: Option<f64>,
+    /// How well the time is known: the guard's accuracy at the tolerances over the crossing
+    /// speed (0 for an event that takes another's instant, in a cascade or a group).
+    #[serde(skip)]
+    pub resolution: f64,
 }
 
 /// The state where the run stopped.
@@ -406,6 +415,34 @@ pub struct SimResult {
     /// that moves them later takes them out of the run. `final` is the side with them; this is
     /// the other side, the final values and derivatives had they not fired.
     pub end_cusp: Option<EndCusp>,
+    /// The values at `SimOptions::at`, one per time asked for, in order.
+    pub samples: Vec<Sample>,
+}
+
+/// The states and outputs at one time of `SimOptions::at`, from the dense output of the step
+/// that holds it, with their derivatives at that fixed time (column per parameter, as
+/// `FinalState`): the interpolated sensitivities, which are the derivative of the interpolated
+/// states.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Sample {
+    pub time: f64,
+    /// False when the run stopped before this time (an event `stop`, Zeno, a fault): then the
+    /// values are NaN and the derivatives `None`.
+    pub reached: bool,
+    pub mode: usize,
+    pub state: Vec<f64>,
+    /// `dx/dp` (n * m), NaN where a derivative does not exist; `None` without parameters.
+    pub dstate: Option<Vec<f64>>,
+    pub outputs: Vec<f64>,
+    /// `y_x dx/dp + y_p` (k * m).
+    pub doutputs: Option<Vec<f64>>,
+    /// The sample is at an event instant: the values are those after the instant's events.
+    pub after_events: bool,
+    /// An event (its index in `SimResult::events`) within the time resolution of which the sample
+    /// lies (`|t - t_e|` at most the guard's accuracy over its crossing speed): a parameter
+    /// change moves the event across the sample, so the derivatives there hold on one side only
+    /// (a cusp). The nearest such event.
+    pub near_event: Option<usize>,
 }
 
 /// The final values of a run without the events it fired at `t_end` (see `SimResult::end_cusp`).

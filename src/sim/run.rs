@@ -196,6 +196,19 @@ fn validate(info: &SystemInfo, opts: &SimOptions) -> Result<(), SimError> {
             return Err(SimError::TooManySamples { dt, t_start, t_end, rows, cap });
         }
     }
+    if opts.at.len() as f64 > MAX_SAMPLED_ROWS {
+        return Err(SimError::InvalidOption {
+            name: "number of sample times (at most 1e6)",
+            value: opts.at.len() as f64,
+        });
+    }
+    let mut previous = opts.t_start;
+    for &t in &opts.at {
+        if !(t >= previous && t <= opts.t_end) {
+            return Err(SimError::SampleTime { t, t_start: opts.t_start, t_end: opts.t_end, previous });
+        }
+        previous = t;
+    }
     Ok(())
 }
 

@@ -30,50 +30,48 @@ use crate::sweep::SweepError;
 /// standard error): the normal 95% interval, SALib's `conf` at its default `conf_level`.
 pub const Z_95: f64 = 1.959963984540054;
 
-/// A number one run reports, whose indices are asked for.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Quantity {
-    /// A final output or state, or the time of the K-th firing of an event (`touchdown#2`).
-    Observable(Observable),
-    /// The time of the last firing of an event (`touchdown#last`).
-    LastFiring { name_event: usize },
-}
-
 /// One `--output` of an analysis: what it reads and its label as the user wrote it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Output {
     pub label: String,
-    pub quantity: Quantity,
+    pub quantity: Observable,
 }
 
 impl Output {
-    /// Parses `NAME` (an output or a state), `EVENT#K` (K from 1) or `EVENT#last`.
+    /// Parses `NAME` (an output or a state), `EVENT#K` (K from 1), `EVENT#last` or `NAME@TIME`
+    /// (`Observable::parse`).
     pub fn parse(text: &str, info: &SystemInfo) -> Result<Output, TargetError> {
         let text = text.trim();
-        let quantity = match text.split_once('#') {
-            Some((event, "last")) => match Observable::parse(&format!("{event}#1"), info)? {
-                Observable::EventTime { name_event, .. } => Quantity::LastFiring { name_event },
-                _ => unreachable!("EVENT#1 parses as an event time"),
-            },
-            _ => Quantity::Observable(Observable::parse(text, info)?),
-        };
-        Ok(Output { label: text.to_string(), quantity })
+        Ok(Output { label: text.to_string(), quantity: Observable::parse(text, info)? })
     }
 
     /// Its value in a run that ended as asked, NaN where it does not exist (the event fired fewer
-    /// times) or is not finite.
+    /// times, the run stopped before the time) or is not finite. `NAME@TIME` reads the run's
+    /// samples: the run's options must sample it (`sample_times`).
     pub fn value(&self, info: &SystemInfo, r: &SimResult) -> f64 {
         let fired = |name_event: usize| {
             let name = &info.events[name_event].name;
             r.events.iter().filter(move |e| e.name == *name)
         };
         let v = match self.quantity {
-            Quantity::Observable(Observable::Output(i)) => r.final_state.outputs[i],
-            Quantity::Observable(Observable::State(i)) => r.final_state.state[i],
-            Quantity::Observable(Observable::EventTime { name_event, occurrence }) => {
+            Observable::Output(i) => r.final_state.outputs[i],
+            Observable::State(i) => r.final_state.state[i],
+            Observable::EventTime { name_event, occurrence } => {
                 fired(name_event).nth(occurrence - 1).map_or(f64::NAN, |e| e.time)
             }
-            Quantity::LastFiring { name_event } => fired(name_event).next_back().map_or(f64::NAN, |e| e.time),
+            Observable::LastFiring { name_event } => {
+                fired(name_event).next_back().map_or(f64::NAN, |e| e.time)
+            }
+            Observable::At { output, index, time } => match r.samples.iter().find(|s| s.time == time) {
+                Some(s) if s.reached => {
+                    if output {
+                        s.outputs[index]
+                    } else {
+                        s.state[index]
+                    }
+                }
+                _ => f64::NAN,
+            },
         };
         if v.is_finite() {
             v
@@ -81,6 +79,11 @@ impl Output {
             f64::NAN
         }
     }
+}
+
+/// The options of an analysis's runs: `opts` sampling every `NAME@TIME` of `outputs`.
+fn sampling(opts: &SimOptions, outputs: &[Output]) -> SimOptions {
+    SimOptions { at: crate::fit::sample_times(outputs.iter().map(|o| &o.quantity)), ..opts.clone() }
 }
 
 /// What to do with rows that have no value for an output: the run ended early (Zeno, stuck,
@@ -195,6 +198,8 @@ pub fn evaluate_rows<S: HybridSystem + ?Sized>(
         "rows {range:?} of a design of {:?} rows",
         design.rows()
     );
+    // Every `NAME@TIME` output is read off the run's samples.
+    let opts = &sampling(opts, outputs);
     let k = outputs.len();
     let rows = range.len();
     let block = design.block();

@@ -475,3 +475,59 @@ fn a_name_that_is_both_an_output_and_a_state_takes_a_prefix() {
         assert_relative_eq!(fixture.param(&r, "a"), a, max_relative = 1e-9);
     }
 }
+
+// ---- values at times (`NAME@TIME`) and the last firing (`EVENT#last`) ----
+
+#[test]
+fn values_at_times_are_targets_that_recover_a_rate_and_a_start_from_noiseless_samples() {
+    // x = x0 exp(-k t) at three times: k = 1.3, x0 = 2.5 from k = 1, x0 = 2.
+    let src =
+        "model decay\nparam k = 1 in [0.1, 10]\nparam x0 = 2 in [0.1, 10]\nstate x = x0\nder(x) = -k * x\n";
+    let fixture = compile_with_free(src, &["k", "x0"]);
+    let targets: Vec<String> =
+        [0.5f64, 1.0, 1.5].iter().map(|t| format!("x@{t}={:e}", 2.5 * (-1.3 * t).exp())).collect();
+    let refs: Vec<&str> = targets.iter().map(String::as_str).collect();
+    let r = fit(&fixture.problem(&[], &refs, 2.0), &FitOptions::default()).expect("fit starts");
+    assert!(r.is_converged(), "{:?}", r.stop);
+    assert_relative_eq!(fixture.param(&r, "k"), 1.3, max_relative = 1e-8);
+    assert_relative_eq!(fixture.param(&r, "x0"), 2.5, max_relative = 1e-8);
+    assert_eq!(
+        Target::parse("x@0.5=1", fixture.compiled.info()).unwrap().label(fixture.compiled.info()),
+        "x@0.5"
+    );
+}
+
+#[test]
+fn the_last_firing_is_a_target_and_a_time_after_a_stop_is_refused() {
+    // The ball to T = 2.5 with e free from 0.8: its last touchdown placed where e = 0.82 puts it
+    // (the 4th for both, so the target is on the start's smooth piece).
+    let k = bounces(1.0, 0.82);
+    assert_eq!(k, bounces(1.0, 0.8));
+    let fixture = Fixture::ball(&["e"]);
+    let last = ball_form(1.0, 0.82).touchdown(k as i32);
+    let target = format!("touchdown#last={last:e}");
+    let r = fit(&fixture.problem(&[], &[target.as_str()], T), &FitOptions::default()).expect("fit starts");
+    assert!(r.is_converged(), "{:?}", r.stop);
+    assert_relative_eq!(fixture.param(&r, "e"), 0.82, max_relative = 1e-8);
+    // A value at a time after a `stop`: no value, so the fit cannot start.
+    let src = "model s\nparam h0 = 10 in [1, 20]\nstate y = h0\nstate v = 0\nder(y) = v\nder(v) = -9.81\n\
+               event done when t >= 0.5 {\n    stop\n}\n";
+    let fixture = compile_with_free(src, &["h0"]);
+    let err = fit(&fixture.problem(&[], &["y@0.75=1"], 1.0), &FitOptions::default()).unwrap_err();
+    assert!(err.to_string().contains("the run stopped before its time"), "{err}");
+}
+
+#[test]
+fn the_one_spelling_is_refused_clearly_where_it_names_nothing() {
+    let fixture = Fixture::ball(&["e"]);
+    let info = fixture.compiled.info();
+    for (text, needle) in [
+        ("y@abc=1", "the time of NAME@TIME must be a finite number"),
+        ("touchdown@1=1", "no output or state `touchdown`"),
+        ("touchdown#first=1", "or `last`"),
+        ("nothing#last=1", "no event `nothing`"),
+    ] {
+        let e = Target::parse(text, info).unwrap_err().to_string();
+        assert!(e.contains(needle), "{text}: {e}");
+    }
+}

@@ -29,6 +29,7 @@ mod jit_models;
 mod limits;
 mod plot;
 mod run_gradients;
+mod samples;
 mod sim_ball;
 mod sim_events;
 mod sobol;

@@ -432,3 +432,45 @@ fn normal_and_log_uniform_priors_reach_the_design_rows() {
     assert!(l_mean.abs() < 0.01, "{l_mean}");
     approx::assert_relative_eq!(l_var, 4f64.ln().powi(2) / 12.0, max_relative = 0.01);
 }
+
+#[test]
+fn a_value_at_a_time_is_an_output_with_the_analytic_indices() {
+    // x(0.5) = 0.5 a + b for der(x) = a + 2 b: with a, b uniform on [0, 1] the variances are
+    // 0.25 / 12 and 1 / 12, so S1 = ST = (0.2, 0.8). The final value x(1) = a + 2 b is the same
+    // split (1/12 against 4/12): both read off one run per row.
+    let dir = std::env::temp_dir().join(format!("hybc-sobol-at-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("lin.hyb");
+    std::fs::write(&path, "model lin\nparam a = 0.5\nparam b = 0.5\nstate x = 0\nder(x) = a + 2 * b\n")
+        .unwrap();
+    let out = sobol_cli(&[
+        path.to_str().unwrap(),
+        "--vary",
+        "a=0:1",
+        "--vary",
+        "b=0:1",
+        "--t-end",
+        "1",
+        "--output",
+        "x@0.5,x",
+        "-n",
+        "4096",
+        "--seed",
+        "3",
+        "--format",
+        "json",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["outputs"][0]["name"], "x@0.5");
+    for output in json["outputs"].as_array().unwrap() {
+        for (key, conf) in [("S1", "S1_conf"), ("ST", "ST_conf")] {
+            for (k, want) in [0.2, 0.8].into_iter().enumerate() {
+                let got = output[key][k].as_f64().unwrap();
+                let interval = output[conf][k].as_f64().unwrap();
+                assert!((got - want).abs() <= 1.5 * interval + 1e-12, "{key}[{k}] = {got} +/- {interval}");
+            }
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
