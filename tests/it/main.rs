@@ -31,6 +31,7 @@ mod run_gradients;
 mod sim_ball;
 mod sim_events;
 mod sobol;
+mod stiff;
 mod stress_events;
 mod stress_frontend;
 mod sweep;
