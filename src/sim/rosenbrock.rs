@@ -340,12 +340,14 @@ impl Stepper for Rosenbrock {
 
 /// The dense output of one Rosenbrock step (an [`Interpolant`]): with `theta = (t - t0) / h`,
 /// `z(theta) = (1 - theta) z0 + theta (z1 + (1 - theta) Q(theta))`,
-/// `Q = q_0 + theta (q_1 + theta q_2)`, `q_r = sum_j H_rj k_j` (`row_tableau`).
+/// `Q = q_0 + theta (q_1 + theta q_2)`, `q_r = sum_j H_rj k_j` (`row_tableau`), evaluated as
+/// `z0 + theta ((z1 - z0) + (1 - theta) Q)`: a component that does not move stays exactly
+/// where it is (a counter read at an event time), as with the explicit pairs' form.
 pub struct RowDense {
     t0: f64,
     h: f64,
     n_q: usize,
-    /// Component-major: `[z0, z1, q_0 .. q_{n_q - 1}]` per component, stride `2 + MAX_DENSE`.
+    /// Component-major: `[z0, z1 - z0, q_0 .. q_{n_q - 1}]` per component, stride `2 + MAX_DENSE`.
     coef: Vec<f64>,
 }
 
@@ -364,7 +366,7 @@ impl RowDense {
         self.n_q = tab.dense.len();
         for (i, c) in self.coef.chunks_exact_mut(STRIDE).enumerate() {
             c[0] = z0[i];
-            c[1] = z1[i];
+            c[1] = z1[i] - z0[i];
             for (r, row) in tab.dense.iter().enumerate() {
                 c[2 + r] = row.iter().enumerate().map(|(j, w)| w * k[j * nz + i]).sum();
             }
@@ -401,7 +403,7 @@ impl Interpolant for RowDense {
         let th = self.theta(t);
         for (o, c) in out.iter_mut().zip(self.coef.chunks_exact(STRIDE)) {
             let (q, _) = self.q(c, th);
-            *o = (1.0 - th) * c[0] + th * (c[1] + (1.0 - th) * q);
+            *o = c[0] + th * (c[1] + (1.0 - th) * q);
         }
     }
     fn eval_deriv(&self, t: f64, out: &mut [f64]) {
@@ -412,7 +414,7 @@ impl Interpolant for RowDense {
         let th = self.theta(t);
         for (o, c) in out.iter_mut().zip(self.coef.chunks_exact(STRIDE)) {
             let (q, dq) = self.q(c, th);
-            *o = (c[1] - c[0] + (1.0 - 2.0 * th) * q + th * (1.0 - th) * dq) / self.h;
+            *o = (c[1] + (1.0 - 2.0 * th) * q + th * (1.0 - th) * dq) / self.h;
         }
     }
 }
