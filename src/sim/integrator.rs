@@ -441,11 +441,19 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let spacing = t1.abs().next_up() - t1.abs();
         let near =
             g.is_finite() && landing.sigma * g >= 0.0 && g.abs() <= SWITCH_NEAR * spacing * speed.abs();
-        if !near {
+        // With a breakpoint (a time event) before the predicted crossing, the next step lands on
+        // it and crosses the switch there, with the event, in time order.
+        let t_cross = t1 + g.abs() / speed.abs() + spacing;
+        if !near || self.breakpoints.next_after(t1) <= t_cross {
             return false;
         }
         let ev = self.info.modes[self.mode].events[landing.pos];
-        let crossing = Crossing { t: t1, sigma: landing.sigma, touch: false, t_pre: t1, on_guard: false };
+        // Not crossed yet (the guard is a few spacings short of zero): like a touch, it fires
+        // without its guard on the crossed side, which `fire_group` would otherwise take for a
+        // state moved back by an earlier reset and skip. Skipped, the switch was left to the next
+        // step, whose error estimate straddles the jump of the flow: with sensitivities at zero
+        // (scaled by atol) it shrank to an underflow (the soft ball's first contact, issue #25).
+        let crossing = Crossing { t: t1, sigma: landing.sigma, touch: true, t_pre: t1, on_guard: false };
         self.det.group.clear();
         self.det.group.push((ev, crossing));
         true

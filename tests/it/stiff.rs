@@ -258,3 +258,103 @@ fn stiff_jumps_dense_output_matches_the_closed_form_between_jumps() {
         assert!(checked > 1500, "{method:?}: {checked} samples checked");
     }
 }
+
+/// A ball on a penalty spring-damper instead of a reset: contact stiffness `wc` per unit mass
+/// (`max(0, -y)`), damping ratio `zeta` while in contact (`if y < 0`, a flow switch, located and
+/// crossed with its saltation like an event), no reset; at rest on the spring (`y = -g / wc`)
+/// well before `T = 10`.
+const SOFT_BALL: &str = "model soft_ball
+param g = 9.81
+param wc = 1e6
+param zeta = 0.3
+param h0 = 1
+state y = h0
+state v = 0
+der(y) = v
+der(v) = -g + wc * max(0, -y) - (if y < 0 then 2 * zeta * sqrt(wc) * v else 0)
+";
+
+/// The soft ball at `wc = 1e6` with gradients with respect to the damping and the drop height:
+/// an explicit pair stops at a million steps (issue #25); Rodas5P completes in a few thousand,
+/// (987 attempts measured, 1200 asserted), its final state at rest on the spring, and its
+/// gradients pass `hybc::gradcheck` at rtol
+/// 1e-8 (the checker's default tolerance there, 1e-3, with its own rules for noise).
+#[test]
+fn the_soft_ball_at_a_stiffness_of_1e6_completes_with_rodas5p_and_its_gradients_check() {
+    let model = Model::parse(SOFT_BALL).expect("parses");
+    let compiled = model.compile(&["zeta", "h0"]).expect("compiles");
+    let opts =
+        SimOptions { t_end: 10.0, rtol: 1e-8, atol: 1e-10, method: Method::Rodas5p, ..SimOptions::default() };
+    let run = compiled.simulate(&compiled.params(), &opts).expect("runs");
+    assert!(run.is_complete(), "{:?}", run.stopped_by());
+    let stats = &run.result().stats;
+    eprintln!(
+        "soft ball rodas5p: {} steps, {} rejected, {} rhs calls",
+        stats.steps, stats.rejected, stats.rhs_calls
+    );
+    assert!(stats.steps + stats.rejected <= 1200, "{} steps, {} rejected", stats.steps, stats.rejected);
+    // At rest on the spring: y = -g / wc.
+    let y = run.state("y").unwrap();
+    assert!((y + 9.81e-6).abs() <= 1e-9, "y = {y}");
+    let p = compiled.params().values().to_vec();
+    let check = hybc::gradcheck::check(
+        compiled.native(),
+        &p,
+        &opts,
+        run.result(),
+        &hybc::gradcheck::CheckOptions::for_rtol(opts.rtol),
+    )
+    .expect("checks");
+    assert!(check.passed(), "{check:#?}");
+}
+
+/// Robertson's kinetics (`k1 = 0.04`, `k2 = 3e7`, `k3 = 1e4`) to `t = 1e5`, with an event when
+/// `y1` falls below 0.5 that doubles the rate `k1` (a state): Rodas5P takes a few hundred (496
+/// attempts measured, 600 asserted)
+/// steps where the explicit pairs take hundreds of thousands (issue #25), and the gradients
+/// with respect to all three rates pass `hybc::gradcheck` at rtol 1e-8.
+#[test]
+fn robertsons_kinetics_to_1e5_with_an_event_complete_in_few_rodas5p_steps_and_check() {
+    let text = "model robertson
+param k1 = 0.04
+param k2 = 3e7
+param k3 = 1e4
+state y1 = 1
+state y2 = 0
+state y3 = 0
+state k = k1
+der(y1) = -k * y1 + k3 * y2 * y3
+der(y2) = k * y1 - k3 * y2 * y3 - k2 * y2 * y2
+der(y3) = k2 * y2 * y2
+der(k) = 0
+event faster when y1 <= 0.5 {
+    k := 2 * k
+}
+";
+    let model = Model::parse(text).expect("parses");
+    let compiled = model.compile(&["k1", "k2", "k3"]).expect("compiles");
+    let opts =
+        SimOptions { t_end: 1e5, rtol: 1e-8, atol: 1e-14, method: Method::Rodas5p, ..SimOptions::default() };
+    let run = compiled.simulate(&compiled.params(), &opts).expect("runs");
+    assert!(run.is_complete(), "{:?}", run.stopped_by());
+    assert_eq!(run.events().len(), 1);
+    let stats = &run.result().stats;
+    eprintln!(
+        "robertson rodas5p: {} steps, {} rejected, {} rhs calls",
+        stats.steps, stats.rejected, stats.rhs_calls
+    );
+    assert!(stats.steps + stats.rejected <= 600, "{} steps, {} rejected", stats.steps, stats.rejected);
+    // Mass is conserved (the flow's three rates sum to zero).
+    let total: f64 = ["y1", "y2", "y3"].iter().map(|s| run.state(s).unwrap()).sum();
+    assert!((total - 1.0).abs() <= 1e-9, "mass {total}");
+    let p = compiled.params().values().to_vec();
+    let check = hybc::gradcheck::check(
+        compiled.native(),
+        &p,
+        &opts,
+        run.result(),
+        &hybc::gradcheck::CheckOptions::for_rtol(opts.rtol),
+    )
+    .expect("checks");
+    assert!(check.passed(), "{check:#?}");
+}
