@@ -61,8 +61,8 @@ pub(crate) fn plan_stiff(funcs: &mut ModelFunctions, info: &SystemInfo) -> Resul
             .map(|row| row.iter().map(|&(c, e)| (c, d.diff(store, e, Var::Time))).collect())
             .collect();
         for j in 0..m {
-            for i in 0..n {
-                let products = fxt_rows[i]
+            for (i, row) in fxt_rows.iter().enumerate() {
+                let products = row
                     .iter()
                     .filter(|&&(_, e)| !store.is_zero(e))
                     .map(|&(c, e)| Ok((e, index_u32(&jac.name, j * n + c)?)))
@@ -79,8 +79,8 @@ pub(crate) fn plan_stiff(funcs: &mut ModelFunctions, info: &SystemInfo) -> Resul
             .map(|row| row.iter().map(|&(c, e)| (c, directional(store, &mut d, e, n))).collect())
             .collect();
         for j in 0..m {
-            for i in 0..n {
-                let products = fxv_rows[i]
+            for (i, row) in fxv_rows.iter().enumerate() {
+                let products = row
                     .iter()
                     .filter(|&&(_, e)| !store.is_zero(e))
                     .map(|&(c, e)| Ok((e, index_u32(&dir.name, j * n + c)?)))

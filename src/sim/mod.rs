@@ -2,7 +2,8 @@
 //! [`HybridSystem`] trait, never on Cranelift.
 //!
 //! Code map: `options` (what to ask); `stepper` (the seam any method implements), `tableau`,
-//! `sums`, `rk` and `dense` (the explicit Runge-Kutta pairs and their interpolants);
+//! `sums`, `rk` and `dense` (the explicit Runge-Kutta pairs and their interpolants); `row_tableau`
+//! and `rosenbrock` (the Rosenbrock methods for stiff flows, with their interpolant);
 //! `integrator` (the state of a run and its `step`), `breakpoints` (times landed on exactly),
 //! `events` (detection), `roots` (root finding), `jump` (event-time gradients and saltation),
 //! `zeno` (accumulating events), `recorder` (trajectories through an observer); `run` (a run

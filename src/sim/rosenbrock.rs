@@ -80,7 +80,7 @@ impl Rosenbrock {
         atol: f64,
     ) -> Rosenbrock {
         let n = n_states;
-        let m = if n == 0 { 0 } else { (nz - n) / n };
+        let m = (nz - n).checked_div(n).unwrap_or(0);
         Rosenbrock {
             tab,
             nz,

@@ -27,6 +27,10 @@
 //! convergence orders on a linear and a nonlinear non-autonomous problem) and below (row
 //! consistency).
 
+// The coefficients are kept exactly as published (trailing zeros and all), so that they can be
+// compared with the sources digit by digit.
+#![allow(clippy::excessive_precision)]
+
 /// A Rosenbrock method in the transformed form above.
 #[derive(Debug)]
 pub struct RowTableau {
