@@ -358,3 +358,40 @@ event faster when y1 <= 0.5 {
     .expect("checks");
     assert!(check.passed(), "{check:#?}");
 }
+
+/// Every shipped model, every parameter differentiated, with each Rosenbrock method at the
+/// model's own tolerances: the run completes as the explicit default's does and its derivatives
+/// pass `hybc::gradcheck` (the checker's default tolerance for the model's rtol).
+#[test]
+fn every_shipped_model_checks_its_gradients_with_the_rosenbrock_methods() {
+    let mut failed = Vec::new();
+    for shipped in shipped_models() {
+        let model = Model::parse(&shipped.source).expect("parses");
+        let compiled = model.compile_all().expect("compiles");
+        let p = compiled.params().values().to_vec();
+        let explicit = compiled.simulate(&compiled.params(), &model.sim_options()).expect("runs");
+        for method in [Method::Rodas5p, Method::Rodas4] {
+            let opts = SimOptions { method, ..model.sim_options() };
+            let run = compiled.simulate(&compiled.params(), &opts).expect("runs");
+            let tag = format!("{} {method:?}", shipped.name);
+            if run.stopped_by() != explicit.stopped_by() || run.events().len() != explicit.events().len() {
+                failed.push(format!("{tag}: {:?} after {} events", run.stopped_by(), run.events().len()));
+                continue;
+            }
+            let check = hybc::gradcheck::check(
+                compiled.native(),
+                &p,
+                &opts,
+                run.result(),
+                &hybc::gradcheck::CheckOptions::for_rtol(opts.rtol),
+            )
+            .expect("checks");
+            if !check.passed() {
+                let worst: Vec<String> =
+                    check.failures().map(|c| format!("{} {:e}", c.name, c.worst_discrepancy())).collect();
+                failed.push(format!("{tag}: {worst:?}, events consistent {}", check.events.is_consistent()));
+            }
+        }
+    }
+    assert!(failed.is_empty(), "{failed:#?}");
+}
