@@ -29,6 +29,9 @@ pub const MAX_SOBOL_VALUES: usize = 100_000_000;
 /// Bootstrap resamples of a Sobol' analysis (`--bootstrap`): each recomputes every index over
 /// all base points.
 pub const MAX_BOOTSTRAP: usize = 100_000;
+/// Attempted steps of one run (`--max-steps`, Python `max_steps=`): steps cost time, not memory
+/// (unless a trajectory keeps every one), and a billion small steps take minutes.
+pub const MAX_STEPS: usize = 1_000_000_000;
 /// Trials of a fit (`--max-iter`): every trial is kept for the report.
 pub const MAX_FIT_ITER: usize = 1_000_000;
 

@@ -101,7 +101,8 @@ class Model:
         ``grad``: parameters to differentiate with respect to (the gradient column order).
         ``trajectory``: None, ``"steps"`` (every accepted step and both sides of every event) or a
         sampling interval ``dt``. ``options``: ``t_end``, ``rtol``, ``atol``, ``max_events``,
-        ``max_steps``, ``method`` (``"auto"``, ``"dopri5"``, ``"dop853"``), ``graze_tol``,
+        ``max_steps``, ``method`` (``"auto"``, ``"dopri5"``, ``"dop853"``, or the Rosenbrock
+        methods for stiff models ``"rodas5p"``, ``"rodas4"``), ``graze_tol``,
         ``sens_error_control``, ``h_max``; unset ones come from the model's ``simulate`` line, then
         the defaults of ``hybc run``. The GIL is released while the model compiles and runs.
         """

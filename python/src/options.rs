@@ -41,9 +41,11 @@ impl SimKeywords {
             None | Some("auto") => Method::Auto,
             Some("dopri5") => Method::Dopri5,
             Some("dop853") => Method::Dop853,
+            Some("rodas5p") => Method::Rodas5p,
+            Some("rodas4") => Method::Rodas4,
             Some(other) => {
                 return Err(PyValueError::new_err(format!(
-                    "method: expected \"auto\", \"dopri5\" or \"dop853\", found {other:?}"
+                    "method: expected \"auto\", \"dopri5\", \"dop853\", \"rodas5p\" or \"rodas4\", found {other:?}"
                 )))
             }
         };
@@ -64,7 +66,13 @@ impl SimKeywords {
                 hybc::limits::MAX_EVENTS,
             )
             .map_err(|e| PyValueError::new_err(e.to_string()))?,
-            max_steps: self.max_steps.unwrap_or(base.max_steps),
+            max_steps: hybc::limits::count(
+                "max_steps",
+                self.max_steps.unwrap_or(base.max_steps),
+                1,
+                hybc::limits::MAX_STEPS,
+            )
+            .map_err(|e| PyValueError::new_err(e.to_string()))?,
             graze_tol: positive("graze_tol", self.graze_tol.unwrap_or(base.graze_tol))?,
             sens_error_control: self.sens_error_control.unwrap_or(base.sens_error_control),
             h_max,

@@ -22,6 +22,10 @@ enum MethodArg {
     Auto,
     Dopri5,
     Dop853,
+    /// Rosenbrock Rodas5P (stiff flows; compiles the flow's Jacobians on first use).
+    Rodas5p,
+    /// Rosenbrock Rodas4 (stiff flows).
+    Rodas4,
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -48,6 +52,9 @@ pub(crate) struct SimFlags {
     /// Stop (as Zeno behaviour) after this many events.
     #[arg(long, default_value_t = 10_000)]
     max_events: usize,
+    /// Stop with a fault after this many attempted steps (accepted and rejected).
+    #[arg(long, default_value_t = SimOptions::default().max_steps)]
+    max_steps: usize,
     /// A crossing is grazing (no time gradient) when |g''| delta / d^2 reaches this, with d the
     /// crossing speed, g'' the guard's curvature and delta its accuracy at the tolerances; near-grazing
     /// (gradient kept, with a warning) when it reaches its square.
@@ -203,7 +210,11 @@ pub(crate) fn sim_options(model: &Model, args: &SimFlags) -> Result<SimOptions, 
             MethodArg::Auto => Method::Auto,
             MethodArg::Dopri5 => Method::Dopri5,
             MethodArg::Dop853 => Method::Dop853,
+            MethodArg::Rodas5p => Method::Rodas5p,
+            MethodArg::Rodas4 => Method::Rodas4,
         },
+        max_steps: crate::limits::count("--max-steps", args.max_steps, 1, crate::limits::MAX_STEPS)
+            .map_err(|e| e.to_string())?,
         // 0 would still fire the first event (the cap is checked after each instant), so it is
         // refused rather than reported as 1.
         max_events: crate::limits::count("--max-events", args.max_events, 1, MAX_EVENTS)

@@ -2,7 +2,7 @@
 //! checks every slice length before entering native code, and implements `sim::HybridSystem`.
 //! Knows nothing of how kernels are generated beyond the plans' declared lengths.
 
-use std::sync::Mutex;
+use std::sync::{Mutex, OnceLock};
 
 use cranelift_codegen::settings::{self, Configurable};
 use cranelift_frontend::FunctionBuilderContext;
@@ -12,6 +12,7 @@ use cranelift_module::{default_libcall_names, FuncId, Module};
 use super::lower::{declare_callees, define_driver, define_kernel};
 use super::plan::{plan_model, KernelPlan, Lens, ModelKernels, N_OUTS};
 use super::runtime::Callee;
+use super::stiff::plan_stiff;
 use super::{
     CodegenError, CompileOptions, OptLevel, RegAlloc, AUTO_REGALLOC_LIMIT, AUTO_REGALLOC_NODE_LIMIT,
 };
@@ -79,6 +80,19 @@ pub struct CompiledModel {
     kernels: ModelKernels<Kernel>,
     n_kernels: usize,
     module: Mutex<Option<JITModule>>,
+    /// The model's functions, kept to compile the stiff kernels on demand (their second
+    /// derivatives cost compile time that explicit runs never repay); dropped once they are built.
+    source: Mutex<Option<ModelFunctions>>,
+    opts: CompileOptions,
+    /// The stiff kernels once built (or why they could not be); their module is freed in `Drop`.
+    stiff: OnceLock<Result<StiffKernels, String>>,
+    stiff_module: Mutex<Option<JITModule>>,
+}
+
+/// The kernels a Rosenbrock stepper needs, per mode (see `codegen::stiff`).
+struct StiffKernels {
+    jac: Vec<Kernel>,
+    dir: Vec<Kernel>,
 }
 
 impl std::fmt::Debug for CompiledModel {
@@ -114,6 +128,10 @@ impl CompiledModel {
                 n_kernels: parts.iter().map(|(_, p)| if p.len() > 1 { p.len() + 1 } else { 1 }).sum(),
                 kernels,
                 module: Mutex::new(Some(module)),
+                source: Mutex::new(Some(funcs.clone())),
+                opts: *opts,
+                stiff: OnceLock::new(),
+                stiff_module: Mutex::new(None),
             }),
             Err(e) => {
                 // SAFETY: no pointer into the module's memory was handed out: `build_kernels`
@@ -124,10 +142,72 @@ impl CompiledModel {
         }
     }
 
-    /// Number of native functions generated.
+    /// Number of native functions generated (the stiff kernels, built on demand, not counted).
     pub fn n_kernels(&self) -> usize {
         self.n_kernels
     }
+
+    /// The stiff kernels, compiled on first use: every mode's flow Jacobian with the
+    /// sensitivities' time derivative, and the directional derivative of the sensitivity
+    /// right-hand side (`codegen::stiff`). An error says why they could not be built.
+    fn stiff_kernels(&self) -> Result<&StiffKernels, &str> {
+        self.stiff
+            .get_or_init(|| self.build_stiff().map_err(|e| e.to_string()))
+            .as_ref()
+            .map_err(String::as_str)
+    }
+
+    fn build_stiff(&self) -> Result<StiffKernels, CodegenError> {
+        let mut source = lock(&self.source);
+        let mut funcs =
+            source.take().ok_or(CodegenError::Internal { reason: "model functions already consumed" })?;
+        let plan = plan_stiff(&mut funcs, &self.info)?;
+        let cut = |ks: &[KernelPlan]| -> Vec<(String, Vec<KernelPlan>)> {
+            ks.iter().map(|k| (k.name.clone(), k.parts(self.opts.max_part_size))).collect()
+        };
+        let (jac, dir) = (cut(&plan.jac), cut(&plan.dir));
+        let all_parts = || jac.iter().chain(&dir).flat_map(|(_, p)| p);
+        let largest = all_parts().map(KernelPlan::size).max().unwrap_or(0);
+        let most_nodes =
+            all_parts().map(|k| super::lower::needed_nodes(&funcs.store, k.roots()).len()).max().unwrap_or(0);
+        let mut module = new_module(&self.opts, largest, most_nodes)?;
+        let built = (|| {
+            let callees = declare_callees(&mut module)?;
+            let mut ctx = module.make_context();
+            let mut fn_ctx = FunctionBuilderContext::new();
+            let mut define = |list: &[(String, Vec<KernelPlan>)]| {
+                list.iter()
+                    .map(|entry| define_entry(&mut module, &mut ctx, &mut fn_ctx, &callees, &funcs, entry))
+                    .collect::<Result<Vec<_>, CodegenError>>()
+            };
+            let (jac_ids, dir_ids) = (define(&jac)?, define(&dir)?);
+            module.finalize_definitions().map_err(|source| CodegenError::Module {
+                kernel: "finalize stiff".into(),
+                source: Box::new(source),
+            })?;
+            let fetch =
+                |ids: &[(FuncId, Lens, [bool; N_OUTS])]| ids.iter().map(|e| finalized(&module, e)).collect();
+            Ok(StiffKernels { jac: fetch(&jac_ids), dir: fetch(&dir_ids) })
+        })();
+        match built {
+            Ok(kernels) => {
+                *lock(&self.stiff_module) = Some(module);
+                Ok(kernels)
+            }
+            Err(e) => {
+                // SAFETY: no pointer into the module's memory was handed out: the kernels are
+                // dropped with the error.
+                unsafe { module.free_memory() };
+                Err(e)
+            }
+        }
+    }
+}
+
+/// Locks a mutex that only this module's code locks, none of it while panicking: a poisoned
+/// lock still guards consistent data.
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
 impl Drop for CompiledModel {
@@ -141,6 +221,14 @@ impl Drop for CompiledModel {
         if let Some(module) = slot.take() {
             // SAFETY: `&mut self` proves no kernel is running, and the pointers in
             // `self.kernels` are never used after this: they are private and die with `self`.
+            unsafe { module.free_memory() };
+        }
+        let stiff = match self.stiff_module.get_mut() {
+            Ok(slot) => slot,
+            Err(poisoned) => poisoned.into_inner(),
+        };
+        if let Some(module) = stiff.take() {
+            // SAFETY: as above, for the stiff kernels in `self.stiff`.
             unsafe { module.free_memory() };
         }
     }
@@ -203,28 +291,41 @@ fn build_kernels(
     let callees = declare_callees(module)?;
     let mut ctx = module.make_context();
     let mut fn_ctx = FunctionBuilderContext::new();
-    let ids = parts.try_map(|(name, kernel_parts)| {
-        let first = kernel_parts.first().ok_or(CodegenError::Internal { reason: "kernel without parts" })?;
-        let ids = kernel_parts
-            .iter()
-            .map(|part| define_kernel(module, &mut ctx, &mut fn_ctx, &callees, &funcs.store, part))
-            .collect::<Result<Vec<FuncId>, CodegenError>>()?;
-        let entry = match ids.as_slice() {
-            [single] => *single,
-            _ => define_driver(module, &mut ctx, &mut fn_ctx, name, &ids)?,
-        };
-        Ok::<_, CodegenError>((entry, first.lens, first.prefill))
-    })?;
+    let ids = parts.try_map(|entry| define_entry(module, &mut ctx, &mut fn_ctx, &callees, funcs, entry))?;
     module
         .finalize_definitions()
         .map_err(|source| CodegenError::Module { kernel: "finalize".into(), source: Box::new(source) })?;
-    ids.try_map(|&(id, lens, prefill)| {
-        let code = module.get_finalized_function(id);
-        // SAFETY: `code` is the finalized entry of a function defined with `kernel_signature`,
-        // which is exactly `KernelFn` under the host's default (C) calling convention.
-        let f = unsafe { std::mem::transmute::<*const u8, KernelFn>(code) };
-        Ok(Kernel { f, lens, prefill })
-    })
+    ids.try_map(|entry| Ok(finalized(module, entry)))
+}
+
+/// Defines one planned kernel: its single part, or its parts and a driver that calls them.
+fn define_entry(
+    module: &mut JITModule,
+    ctx: &mut cranelift_codegen::Context,
+    fn_ctx: &mut FunctionBuilderContext,
+    callees: &std::collections::HashMap<Callee, FuncId>,
+    funcs: &ModelFunctions,
+    (name, kernel_parts): &(String, Vec<KernelPlan>),
+) -> Result<(FuncId, Lens, [bool; N_OUTS]), CodegenError> {
+    let first = kernel_parts.first().ok_or(CodegenError::Internal { reason: "kernel without parts" })?;
+    let ids = kernel_parts
+        .iter()
+        .map(|part| define_kernel(module, ctx, fn_ctx, callees, &funcs.store, part))
+        .collect::<Result<Vec<FuncId>, CodegenError>>()?;
+    let entry = match ids.as_slice() {
+        [single] => *single,
+        _ => define_driver(module, ctx, fn_ctx, name, &ids)?,
+    };
+    Ok((entry, first.lens, first.prefill))
+}
+
+/// The callable kernel of a defined entry, after `finalize_definitions`.
+fn finalized(module: &JITModule, &(id, lens, prefill): &(FuncId, Lens, [bool; N_OUTS])) -> Kernel {
+    let code = module.get_finalized_function(id);
+    // SAFETY: `code` is the finalized entry of a function defined with `kernel_signature`,
+    // which is exactly `KernelFn` under the host's default (C) calling convention.
+    let f = unsafe { std::mem::transmute::<*const u8, KernelFn>(code) };
+    Kernel { f, lens, prefill }
 }
 
 /// Fills every output with NaN when a mode or event index is out of range: the trait has no
@@ -276,6 +377,38 @@ impl HybridSystem for CompiledModel {
                 k.call(t, x, s, p, [dx, ds, &mut []]);
             }
             None => poison([dx, ds, &mut []]),
+        }
+    }
+
+    fn prepare_jacobians(&self) -> Result<(), String> {
+        self.stiff_kernels().map(|_| ()).map_err(str::to_owned)
+    }
+
+    fn flow_jac(
+        &self,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        s: &[f64],
+        p: &[f64],
+        fx: &mut [f64],
+        ft: &mut [f64],
+        st: &mut [f64],
+    ) {
+        match self.stiff_kernels().ok().and_then(|k| k.jac.get(mode)) {
+            Some(k) => {
+                k.call(t, x, s, p, [fx, ft, st]);
+            }
+            None => poison([fx, ft, st]),
+        }
+    }
+
+    fn sens_dir(&self, mode: usize, t: f64, xv: &[f64], s: &[f64], p: &[f64], dir: &mut [f64]) {
+        match self.stiff_kernels().ok().and_then(|k| k.dir.get(mode)) {
+            Some(k) => {
+                k.call(t, xv, s, p, [dir, &mut [], &mut []]);
+            }
+            None => poison([dir, &mut [], &mut []]),
         }
     }
 

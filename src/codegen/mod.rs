@@ -3,6 +3,7 @@
 //! consumes `expr::ModelFunctions` and implements `sim::HybridSystem`.
 //!
 //! Code map: `plan` decides what each kernel computes and checks every index (no Cranelift);
+//! `stiff` plans the Rosenbrock kernels (Jacobians, second derivatives), compiled on demand;
 //! `lower` turns a plan into IR, one `translate_*` method per node kind; `runtime` holds the host
 //! wrappers for transcendental functions; `compiled` owns the JIT module and calls the kernels.
 
@@ -11,6 +12,7 @@ mod compiled;
 mod lower;
 mod plan;
 mod runtime;
+mod stiff;
 
 pub use compiled::CompiledModel;
 

@@ -68,11 +68,11 @@ pub(crate) struct KernelPlan {
 }
 
 impl KernelPlan {
-    fn new(name: String, lens: Lens) -> Self {
+    pub(crate) fn new(name: String, lens: Lens) -> Self {
         KernelPlan { name, lens, prefill: [false; N_OUTS], writes: Vec::new(), ret: None }
     }
 
-    fn write(&mut self, out: usize, index: usize, term: Term) -> Result<(), CodegenError> {
+    pub(crate) fn write(&mut self, out: usize, index: usize, term: Term) -> Result<(), CodegenError> {
         let index = u32::try_from(index)
             .map_err(|_| CodegenError::TooLarge { what: self.name.clone(), len: index })?;
         self.writes.push(Write { out, index, term });
@@ -116,7 +116,7 @@ impl KernelPlan {
     /// structural zeros instead of being zero-filled by the caller: a handful of constant stores
     /// in the kernel cost less than a `memset` call per output per call (the guard and reset
     /// Jacobians, called at every step and event).
-    fn write_small_zeros(&mut self) {
+    pub(crate) fn write_small_zeros(&mut self) {
         for out in 0..N_OUTS {
             let len = self.lens.out[out];
             if !self.prefill[out] || len > MAX_ZERO_WRITES {
@@ -449,12 +449,12 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
     Ok(plan)
 }
 
-fn index_u32(what: &str, index: usize) -> Result<u32, CodegenError> {
+pub(crate) fn index_u32(what: &str, index: usize) -> Result<u32, CodegenError> {
     u32::try_from(index).map_err(|_| CodegenError::TooLarge { what: what.to_owned(), len: index })
 }
 
 /// The entries of a checked sparse matrix grouped by row: `(column, expression)` ascending.
-fn rows(mat: &SparseMat, n_rows: usize) -> Vec<Vec<(usize, ExprId)>> {
+pub(crate) fn rows(mat: &SparseMat, n_rows: usize) -> Vec<Vec<(usize, ExprId)>> {
     let mut rows = vec![Vec::new(); n_rows];
     for &(r, c, e) in &mat.entries {
         rows[r as usize].push((c as usize, e));

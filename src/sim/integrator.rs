@@ -21,7 +21,7 @@ use super::result::{
     EndCusp, EventRecord, FinalState, Sample, SimError, SimResult, SimStats, SimWarning, StopReason,
 };
 use super::rk::Rk;
-use super::stepper::{Interpolant, Stepper};
+use super::stepper::{Interpolant, Rhs, Stepper};
 use super::system::{Direction, GuardShape, HybridSystem, SystemInfo};
 use super::{samples, zeno};
 
@@ -122,17 +122,35 @@ fn existing(d: &[f64]) -> Option<Vec<f64>> {
     (d.is_empty() || d.iter().any(|v| !v.is_nan())).then(|| d.to_vec())
 }
 
-/// The flow of `mode` with its sensitivities as one right-hand side over `z = [x, S]`.
-fn rhs_for<'a, S: HybridSystem + ?Sized>(
+/// The flow of `mode` with its sensitivities as one right-hand side over `z = [x, S]`, with the
+/// model's Jacobians for an implicit stepper.
+struct ModeRhs<'a, S: HybridSystem + ?Sized> {
     sys: &'a S,
     p: &'a [f64],
     n: usize,
     mode: usize,
-) -> impl FnMut(f64, &[f64], &mut [f64]) + 'a {
-    move |t, z, dz| {
-        let (x, s) = z.split_at(n);
-        let (dx, ds) = dz.split_at_mut(n);
-        sys.flow_sens(mode, t, x, s, p, dx, ds);
+}
+
+fn rhs_for<'a, S: HybridSystem + ?Sized>(sys: &'a S, p: &'a [f64], n: usize, mode: usize) -> ModeRhs<'a, S> {
+    ModeRhs { sys, p, n, mode }
+}
+
+impl<S: HybridSystem + ?Sized> Rhs for ModeRhs<'_, S> {
+    #[inline(always)]
+    fn eval(&mut self, t: f64, z: &[f64], dz: &mut [f64]) {
+        let (x, s) = z.split_at(self.n);
+        let (dx, ds) = dz.split_at_mut(self.n);
+        self.sys.flow_sens(self.mode, t, x, s, self.p, dx, ds);
+    }
+
+    fn jacobian(&mut self, t: f64, z: &[f64], fx: &mut [f64], ft: &mut [f64]) {
+        let (x, s) = z.split_at(self.n);
+        let (ftx, fts) = ft.split_at_mut(self.n);
+        self.sys.flow_jac(self.mode, t, x, s, self.p, fx, ftx, fts);
+    }
+
+    fn sens_coupling(&mut self, t: f64, xv: &[f64], z: &[f64], out: &mut [f64]) {
+        self.sys.sens_dir(self.mode, t, xv, &z[self.n..], self.p, out);
     }
 }
 
@@ -436,12 +454,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// crossed one, found as for an accepted step (the attempt's interpolant is only as good as
     /// the attempt, but good enough to aim the retry at the switch), then as
     /// `retry_before_switch`.
-    fn retry_after_rejected_switch<F: FnMut(f64, &[f64], &mut [f64])>(
-        &mut self,
-        t0: f64,
-        t1: f64,
-        rhs: &mut F,
-    ) -> bool {
+    fn retry_after_rejected_switch<F: Rhs>(&mut self, t0: f64, t1: f64, rhs: &mut F) -> bool {
         let evs = &self.info.modes[self.mode].events;
         if !evs.iter().any(|&ev| self.info.events[ev].implicit) {
             return false;
@@ -471,11 +484,19 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let spacing = t1.abs().next_up() - t1.abs();
         let near =
             g.is_finite() && landing.sigma * g >= 0.0 && g.abs() <= SWITCH_NEAR * spacing * speed.abs();
-        if !near {
+        // With a breakpoint (a time event) before the predicted crossing, the next step lands on
+        // it and crosses the switch there, with the event, in time order.
+        let t_cross = t1 + g.abs() / speed.abs() + spacing;
+        if !near || self.breakpoints.next_after(t1) <= t_cross {
             return false;
         }
         let ev = self.info.modes[self.mode].events[landing.pos];
-        let crossing = Crossing { t: t1, sigma: landing.sigma, touch: false, t_pre: t1, on_guard: false };
+        // Not crossed yet (the guard is a few spacings short of zero): like a touch, it fires
+        // without its guard on the crossed side, which `fire_group` would otherwise take for a
+        // state moved back by an earlier reset and skip. Skipped, the switch was left to the next
+        // step, whose error estimate straddles the jump of the flow: with sensitivities at zero
+        // (scaled by atol) it shrank to an underflow (the soft ball's first contact, issue #25).
+        let crossing = Crossing { t: t1, sigma: landing.sigma, touch: true, t_pre: t1, on_guard: false };
         self.det.group.clear();
         self.det.group.push((ev, crossing));
         true

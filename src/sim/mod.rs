@@ -2,7 +2,8 @@
 //! [`HybridSystem`] trait, never on Cranelift.
 //!
 //! Code map: `options` (what to ask); `stepper` (the seam any method implements), `tableau`,
-//! `sums`, `rk` and `dense` (the explicit Runge-Kutta pairs and their interpolants);
+//! `sums`, `rk` and `dense` (the explicit Runge-Kutta pairs and their interpolants); `row_tableau`
+//! and `rosenbrock` (the Rosenbrock methods for stiff flows, with their interpolant);
 //! `integrator` (the state of a run and its `step`), `breakpoints` (times landed on exactly),
 //! `events` (detection), `poly` (a guard along a dense output), `roots` (root finding), `jump`
 //! (event-time gradients and saltation), `zeno` (accumulating events), `recorder` (trajectories
@@ -20,6 +21,8 @@ mod recorder;
 mod result;
 mod rk;
 mod roots;
+mod rosenbrock;
+mod row_tableau;
 mod run;
 mod samples;
 mod stepper;
@@ -34,6 +37,7 @@ pub use options::*;
 pub use recorder::{NoRecorder, Point, PointKind, Recorder, RowSchedule, TrajectoryRecorder};
 pub use result::*;
 pub use rk::Rk;
-pub use run::{run, Simulator, SystemRef, MAX_SAMPLED_ROWS, MIN_RTOL};
+pub use rosenbrock::{Rosenbrock, RowDense};
+pub use run::{run, Driver, Simulator, SystemRef, MAX_SAMPLED_ROWS, MIN_RTOL};
 pub use stepper::{Interpolant, Rhs, Stepper};
 pub use system::*;

@@ -3,7 +3,8 @@
 
 use serde::Serialize;
 
-/// Which Runge-Kutta pair integrates the flow.
+/// Which method integrates the flow: an explicit Runge-Kutta pair, or a Rosenbrock method for
+/// stiff flows.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Method {
@@ -14,6 +15,12 @@ pub enum Method {
     Dopri5,
     /// Hairer's DOP853, 8th order with 5th/3rd-order error estimators and 7th-order dense output.
     Dop853,
+    /// Steinebach's Rodas5P: Rosenbrock, 5th order with a 4th-order embedded estimate and
+    /// 4th-order dense output, stiffly accurate and L-stable; for stiff flows.
+    Rodas5p,
+    /// Hairer and Wanner's Rodas4: Rosenbrock, 4th order (3rd-order estimate and dense output),
+    /// stiffly accurate and L-stable.
+    Rodas4,
 }
 
 impl Method {
@@ -24,6 +31,11 @@ impl Method {
             Method::Auto => Method::Dopri5,
             other => other,
         }
+    }
+
+    /// Whether the method is a Rosenbrock method (needs the flow's Jacobian).
+    pub fn is_rosenbrock(self) -> bool {
+        matches!(self, Method::Rodas5p | Method::Rodas4)
     }
 }
 
@@ -51,7 +63,8 @@ pub struct SimOptions {
     pub method: Method,
     /// Largest number of events: the run stops with `StopReason::MaxEvents` when it is reached.
     pub max_events: usize,
-    /// Largest number of attempted steps (accepted + rejected) before the run stops with a fault.
+    /// Largest number of attempted steps (accepted + rejected) before the run stops with a fault
+    /// (at most `limits::MAX_STEPS` from the command line and Python).
     pub max_steps: usize,
     /// A crossing is grazing (no time gradient) when its conditioning
     /// `kappa = |g''| delta / d^2` is at least `graze_tol`, and near-grazing (gradient kept, with a

@@ -40,6 +40,8 @@ pub enum SimError {
         "rtol {rtol:e} cannot be met: below {floor:e} the error estimates are round-off in double precision"
     )]
     ToleranceTooSmall { rtol: f64, floor: f64 },
+    #[error("the method {method} needs the flow's Jacobian, which this model could not provide: {reason}")]
+    NoJacobians { method: &'static str, reason: String },
     #[error(
         "a trajectory sampled every {dt:e} from t = {t_start} to {t_end} has {rows:.0} rows, more than the \
          {cap:.0} a run keeps in memory (sample more coarsely)"

@@ -8,8 +8,11 @@ use super::integrator::{Integrator, StepOutcome, Workspace};
 use super::jump::Jump;
 use super::options::{Method, SimOptions, TrajectoryRequest};
 use super::recorder::{Recorder, TrajectoryRecorder};
-use super::result::{SimError, SimResult};
+use super::result::{SimError, SimResult, StopReason};
 use super::rk::Rk;
+use super::rosenbrock::Rosenbrock;
+use super::row_tableau::{RODAS4, RODAS5P};
+use super::stepper::Stepper;
 use super::system::{HybridSystem, SystemInfo};
 use super::tableau::{DOP853, DOPRI5};
 
@@ -38,7 +41,80 @@ pub fn run<S: HybridSystem + ?Sized>(sys: &S, p: &[f64], opts: &SimOptions) -> R
 pub struct Simulator<H: SystemRef> {
     sys: H,
     opts: SimOptions,
-    work: Workspace,
+    work: Work,
+}
+
+/// The scratch of a run with the stepper the options chose. The stepper is a type parameter of
+/// the integrator, chosen once per run here, so the explicit methods' step loop is the same
+/// machine code as before there was a choice (no dispatch per call).
+enum Work {
+    Explicit(Workspace<Rk>),
+    Rosenbrock(Workspace<Rosenbrock>),
+}
+
+/// One run in progress with the stepper the options chose (see [`Simulator::integrator`]).
+pub enum Driver<'a, S: HybridSystem + ?Sized, R: Recorder> {
+    Explicit(Integrator<'a, S, R, Rk>),
+    Rosenbrock(Integrator<'a, S, R, Rosenbrock>),
+}
+
+impl<S: HybridSystem + ?Sized, R: Recorder> Driver<'_, S, R> {
+    /// [`Integrator::step`].
+    pub fn step(&mut self) -> StepOutcome {
+        match self {
+            Driver::Explicit(it) => it.step(),
+            Driver::Rosenbrock(it) => it.step(),
+        }
+    }
+
+    /// [`Integrator::finish`].
+    pub fn finish(self, stopped_by: StopReason) -> SimResult {
+        match self {
+            Driver::Explicit(it) => it.finish(stopped_by),
+            Driver::Rosenbrock(it) => it.finish(stopped_by),
+        }
+    }
+}
+
+/// The scratch of a run, for any stepper.
+struct ShapedWork<'a, St> {
+    stepper: St,
+    info: &'a SystemInfo,
+    n: usize,
+    m: usize,
+    k: usize,
+    nz: usize,
+}
+
+impl<St: Stepper> ShapedWork<'_, St> {
+    fn build(self) -> Workspace<St> {
+        let ShapedWork { stepper, info, n, m, k, nz } = self;
+        Workspace {
+            stepper,
+            det: Detector::new(info, n, m),
+            jump: Jump::new(n, m),
+            breakpoints: Breakpoints::default(),
+            z: vec![0.0; nz],
+            fired: Vec::new(),
+            output_jac: (vec![0.0; k * n], vec![0.0; k * m], vec![0.0; k]),
+            x_sides: (vec![0.0; n], vec![0.0; n]),
+            record_buf: (vec![0.0; k], vec![0.0; nz]),
+            before: (vec![0.0; n], Vec::new()),
+            instant_dte: vec![0.0; m],
+            void: vec![false; n * m],
+        }
+    }
+}
+
+/// A run from start to end on any stepper.
+fn run_to_end<S: HybridSystem + ?Sized, R: Recorder, St: Stepper>(
+    mut it: Integrator<'_, S, R, St>,
+) -> SimResult {
+    loop {
+        if let StepOutcome::Done(stop) = it.step() {
+            return it.finish(stop);
+        }
+    }
 }
 
 /// What a [`Simulator`] holds its model by: a reference, an `Arc`, a `Box`, anything that
@@ -73,22 +149,24 @@ impl<H: SystemRef> Simulator<H> {
         validate(info, opts)?;
         let (n, m) = (info.n_states(), info.n_grad());
         let nz = n * (1 + m);
-        let tab = if opts.method.resolve(opts.rtol) == Method::Dop853 { &DOP853 } else { &DOPRI5 };
+        let method = opts.method.resolve(opts.rtol);
         let n_err = if opts.sens_error_control { nz } else { n };
         let k = info.n_outputs();
-        let work = Workspace {
-            stepper: Rk::new(tab, nz, n, n_err, opts.rtol, opts.atol),
-            det: Detector::new(info, n, m),
-            jump: Jump::new(n, m),
-            breakpoints: Breakpoints::default(),
-            z: vec![0.0; nz],
-            fired: Vec::new(),
-            output_jac: (vec![0.0; k * n], vec![0.0; k * m], vec![0.0; k]),
-            x_sides: (vec![0.0; n], vec![0.0; n]),
-            record_buf: (vec![0.0; k], vec![0.0; nz]),
-            before: (vec![0.0; n], Vec::new()),
-            instant_dte: vec![0.0; m],
-            void: vec![false; n * m],
+        let work = match method {
+            Method::Rodas5p | Method::Rodas4 => {
+                let tab = if method == Method::Rodas5p { &RODAS5P } else { &RODAS4 };
+                let method = tab.name;
+                sys.system()
+                    .prepare_jacobians()
+                    .map_err(|reason| SimError::NoJacobians { method, reason })?;
+                let stepper = Rosenbrock::new(tab, nz, n, n_err, opts.rtol, opts.atol);
+                Work::Rosenbrock(ShapedWork { stepper, info, n, m, k, nz }.build())
+            }
+            Method::Auto | Method::Dopri5 | Method::Dop853 => {
+                let tab = if method == Method::Dop853 { &DOP853 } else { &DOPRI5 };
+                let stepper = Rk::new(tab, nz, n, n_err, opts.rtol, opts.atol);
+                Work::Explicit(ShapedWork { stepper, info, n, m, k, nz }.build())
+            }
         };
         Ok(Simulator { sys, opts: opts.clone(), work })
     }
@@ -103,12 +181,12 @@ impl<H: SystemRef> Simulator<H> {
 
     /// [`Self::run`] with another recorder (the result's `trajectory` is then `None`).
     pub fn run_with<R: Recorder>(&mut self, p: &[f64], recorder: &mut R) -> Result<SimResult, SimError> {
-        let mut it = self.integrator(p, recorder)?;
-        loop {
-            if let StepOutcome::Done(stop) = it.step() {
-                return Ok(it.finish(stop));
-            }
-        }
+        let sys = self.sys.system();
+        check_params(sys.info(), p)?;
+        Ok(match &mut self.work {
+            Work::Explicit(w) => run_to_end(Integrator::new(sys, p, &self.opts, w, recorder)),
+            Work::Rosenbrock(w) => run_to_end(Integrator::new(sys, p, &self.opts, w, recorder)),
+        })
     }
 
     /// A run at `p` to drive step by step: [`Integrator::step`] until it says `Done`, then
@@ -117,10 +195,13 @@ impl<H: SystemRef> Simulator<H> {
         &'s mut self,
         p: &'s [f64],
         recorder: &'s mut R,
-    ) -> Result<Integrator<'s, H::System, R>, SimError> {
+    ) -> Result<Driver<'s, H::System, R>, SimError> {
         let sys = self.sys.system();
         check_params(sys.info(), p)?;
-        Ok(Integrator::new(sys, p, &self.opts, &mut self.work, recorder))
+        Ok(match &mut self.work {
+            Work::Explicit(w) => Driver::Explicit(Integrator::new(sys, p, &self.opts, w, recorder)),
+            Work::Rosenbrock(w) => Driver::Rosenbrock(Integrator::new(sys, p, &self.opts, w, recorder)),
+        })
     }
 
     pub fn options(&self) -> &SimOptions {

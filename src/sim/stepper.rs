@@ -12,13 +12,74 @@
 use super::poly::{chebyshev_node, Poly, CAP};
 
 /// The right-hand side `dz = F(t, z)` a stepper integrates: the current mode's flow with its
-/// sensitivity equations. Any `FnMut(f64, &[f64], &mut [f64])` is one.
+/// sensitivity equations, `z = [x, S]` with `n` states. Any `FnMut(f64, &[f64], &mut [f64])` is
+/// one.
 ///
-/// An implicit method will also need the Jacobian of the flow; it will arrive here as a provided
-/// method, so explicit methods stay unchanged.
+/// An implicit (Rosenbrock) method also needs the Jacobian of `F`, which is block lower
+/// triangular, `[[f_x, 0], [B, I (x) f_x]]` with `B v = d/dx (f_x s_j + f_p_j) v` per
+/// sensitivity column: [`Self::jacobian`] gives `f_x` and `F_t`, [`Self::sens_coupling`] the
+/// product `B v`. Explicit methods never call them. The integrator's right-hand side takes them
+/// from the model (`HybridSystem::flow_jac`, `sens_dir`: symbolic derivatives for a compiled
+/// model); the provided defaults take central differences of [`Self::eval`], for closures in
+/// tests.
 pub trait Rhs {
     fn eval(&mut self, t: f64, z: &[f64], dz: &mut [f64]);
+
+    /// The state block's Jacobian `fx = f_x` (n * n, row-major; `n` from its length) and the
+    /// time derivative `ft = F_t` of the whole right-hand side (`z.len()`), at `(t, z)`.
+    fn jacobian(&mut self, t: f64, z: &[f64], fx: &mut [f64], ft: &mut [f64]) {
+        let nz = z.len();
+        let n = (fx.len() as f64).sqrt().round() as usize;
+        let (mut zp, mut zm) = (z.to_vec(), z.to_vec());
+        let (mut fp, mut fm) = (vec![0.0; nz], vec![0.0; nz]);
+        for c in 0..n {
+            let h = FD_STEP * z[c].abs().max(1.0);
+            zp[c] = z[c] + h;
+            zm[c] = z[c] - h;
+            self.eval(t, &zp, &mut fp);
+            self.eval(t, &zm, &mut fm);
+            for i in 0..n {
+                fx[i * n + c] = (fp[i] - fm[i]) / (zp[c] - zm[c]);
+            }
+            zp[c] = z[c];
+            zm[c] = z[c];
+        }
+        let h = FD_STEP * t.abs().max(1.0);
+        self.eval(t + h, z, &mut fp);
+        self.eval(t - h, z, &mut fm);
+        for (out, (a, b)) in ft.iter_mut().zip(fp.iter().zip(&fm)) {
+            *out = (a - b) / ((t + h) - (t - h));
+        }
+    }
+
+    /// `out = B v` (n * m) at `(t, z)`, with `xv = [x, v]` (2n, `x` the state part of `z`): the
+    /// derivative of the sensitivity right-hand side along the state direction `v`.
+    fn sens_coupling(&mut self, t: f64, xv: &[f64], z: &[f64], out: &mut [f64]) {
+        let n = xv.len() / 2;
+        let nz = z.len();
+        let v = &xv[n..];
+        let vmax = v.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        if vmax == 0.0 {
+            out.fill(0.0);
+            return;
+        }
+        let h = FD_STEP * z[..n].iter().fold(1.0f64, |a, b| a.max(b.abs())) / vmax;
+        let (mut zp, mut zm) = (z.to_vec(), z.to_vec());
+        for i in 0..n {
+            zp[i] = z[i] + h * v[i];
+            zm[i] = z[i] - h * v[i];
+        }
+        let (mut fp, mut fm) = (vec![0.0; nz], vec![0.0; nz]);
+        self.eval(t, &zp, &mut fp);
+        self.eval(t, &zm, &mut fm);
+        for (o, (a, b)) in out.iter_mut().zip(fp[n..].iter().zip(&fm[n..])) {
+            *o = (a - b) / (2.0 * h);
+        }
+    }
 }
+
+/// Relative step of the default central differences: the cube root of the machine epsilon.
+const FD_STEP: f64 = 6.0554544523933395e-6;
 
 impl<F: FnMut(f64, &[f64], &mut [f64])> Rhs for F {
     #[inline(always)]

@@ -13,6 +13,10 @@
 
 use std::sync::Arc;
 
+/// Relative step of the default central differences (`HybridSystem::flow_jac`): the cube root
+/// of the machine epsilon balances truncation (h^2) against round-off (eps / h).
+const FD_STEP: f64 = 6.0554544523933395e-6;
+
 /// Crossing direction of a guard `g`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -115,6 +119,84 @@ pub trait HybridSystem: Sync {
     // The argument list mirrors the native kernel's ABI; a struct would only add a copy.
     #[allow(clippy::too_many_arguments)]
     fn flow_sens(&self, mode: usize, t: f64, x: &[f64], s: &[f64], p: &[f64], dx: &mut [f64], ds: &mut [f64]);
+    /// Makes [`Self::flow_jac`] and [`Self::sens_dir`] ready (a compiled model compiles their
+    /// kernels here, once); called before a run with an implicit method. An error says why
+    /// they cannot be had. The default (the central differences below) needs nothing.
+    fn prepare_jacobians(&self) -> Result<(), String> {
+        Ok(())
+    }
+    /// The flow's Jacobian `fx = f_x` (n * n, row-major) and `ft = f_t` (n) at `(t, x)`, and the
+    /// time derivative of the sensitivity right-hand side, `st = f_xt s + f_pt` (n * m), at
+    /// `(t, x, s)`: what a Rosenbrock stepper needs of the flow with its sensitivities.
+    ///
+    /// A compiled model evaluates symbolic derivatives. The default takes central differences
+    /// of [`Self::flow_sens`] (steps `cbrt(eps) max(|u|, 1)`, about 1e-10 relative error): it is
+    /// for hand-written systems in tests, never the path of a compiled model.
+    #[allow(clippy::too_many_arguments)]
+    fn flow_jac(
+        &self,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        s: &[f64],
+        p: &[f64],
+        fx: &mut [f64],
+        ft: &mut [f64],
+        st: &mut [f64],
+    ) {
+        let n = x.len();
+        let (mut xp, mut xm) = (x.to_vec(), x.to_vec());
+        let (mut fp, mut fm) = (vec![0.0; n], vec![0.0; n]);
+        let (mut sp, mut sm) = (vec![0.0; s.len()], vec![0.0; s.len()]);
+        for c in 0..n {
+            let h = FD_STEP * x[c].abs().max(1.0);
+            xp[c] = x[c] + h;
+            xm[c] = x[c] - h;
+            self.flow(mode, t, &xp, p, &mut fp);
+            self.flow(mode, t, &xm, p, &mut fm);
+            for i in 0..n {
+                fx[i * n + c] = (fp[i] - fm[i]) / (xp[c] - xm[c]);
+            }
+            xp[c] = x[c];
+            xm[c] = x[c];
+        }
+        let h = FD_STEP * t.abs().max(1.0);
+        let (tp, tm) = (t + h, t - h);
+        self.flow_sens(mode, tp, x, s, p, &mut fp, &mut sp);
+        self.flow_sens(mode, tm, x, s, p, &mut fm, &mut sm);
+        for (out, (a, b)) in ft.iter_mut().zip(fp.iter().zip(&fm)) {
+            *out = (a - b) / (tp - tm);
+        }
+        for (out, (a, b)) in st.iter_mut().zip(sp.iter().zip(&sm)) {
+            *out = (a - b) / (tp - tm);
+        }
+    }
+    /// The derivative of the sensitivity right-hand side along a direction `v` of the state,
+    /// `dir = (d/dx (f_x s_j + f_p_j)) v = f_xx[s_j, v] + f_xp_j v` (n * m, column per parameter),
+    /// at `(t, x, s)`, with `xv = [x, v]` (2n): the coupling block of the Jacobian of the flow
+    /// with its sensitivities. The default takes a central difference of [`Self::flow_sens`]
+    /// along `v` (for hand-written systems in tests, as [`Self::flow_jac`]).
+    #[allow(clippy::too_many_arguments)]
+    fn sens_dir(&self, mode: usize, t: f64, xv: &[f64], s: &[f64], p: &[f64], dir: &mut [f64]) {
+        let n = xv.len() / 2;
+        let (x, v) = xv.split_at(n);
+        let vmax = v.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        if vmax == 0.0 {
+            dir.fill(0.0);
+            return;
+        }
+        let xmax = x.iter().fold(1.0f64, |a, b| a.max(b.abs()));
+        let h = FD_STEP * xmax / vmax;
+        let xp: Vec<f64> = x.iter().zip(v).map(|(x, v)| x + h * v).collect();
+        let xm: Vec<f64> = x.iter().zip(v).map(|(x, v)| x - h * v).collect();
+        let mut f = vec![0.0; n];
+        let (mut sp, mut sm) = (vec![0.0; s.len()], vec![0.0; s.len()]);
+        self.flow_sens(mode, t, &xp, s, p, &mut f, &mut sp);
+        self.flow_sens(mode, t, &xm, s, p, &mut f, &mut sm);
+        for (out, (a, b)) in dir.iter_mut().zip(sp.iter().zip(&sm)) {
+            *out = (a - b) / (2.0 * h);
+        }
+    }
     /// Guards of every event active in `mode`, in the order of `ModeInfo::events`.
     fn guards(&self, mode: usize, t: f64, x: &[f64], p: &[f64], g: &mut [f64]);
     /// Speeds `g_x f + g_t` of every guard active in `mode` (order of `ModeInfo::events`) along a

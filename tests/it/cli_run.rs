@@ -134,3 +134,20 @@ fn trajectory_csv_has_a_header_and_uniform_samples() {
         assert_relative_eq!(*t, 0.5 * k as f64, epsilon = 1e-12);
     }
 }
+
+#[test]
+fn ball_with_each_rosenbrock_method_reproduces_the_closed_form_and_checks_its_gradients() {
+    // The same closed form through `--method rodas5p|rodas4`, to the same 1e-9, with
+    // `--check-grad` (exit 0 only when every derivative passes).
+    for method in ["rodas5p", "rodas4"] {
+        let (json, out) =
+            run_json(&["models/ball.hyb", "--grad", "e,h0", "--method", method, "--check-grad"]);
+        assert!(out.status.success(), "{method}: {}", String::from_utf8_lossy(&out.stderr));
+        let ball = BallForm::DEFAULT;
+        let events = json["events"].as_array().expect("events");
+        assert_eq!(events.len(), 4, "{method}: four bounces before 2.5 s");
+        for (ev, k) in events.iter().zip(1..) {
+            assert_relative_eq!(f(&ev["time"]), ball.touchdown(k), max_relative = 1e-9);
+        }
+    }
+}

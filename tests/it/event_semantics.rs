@@ -128,7 +128,7 @@ fn a_reset_that_moves_the_state_across_another_guard_fires_it_at_the_same_instan
     for a in [1.0, 0.8] {
         let model = Model::parse(text).expect("parses");
         let compiled = model.compile(&["a"]).expect("compiles");
-        let mut opts = model.sim_options();
+        let mut opts = crate::support::runs::options(&model);
         opts.t_end = 2.0;
         opts.rtol = 1e-10;
         opts.atol = 1e-12;
@@ -240,7 +240,84 @@ fn events_that_keep_cascading_at_one_instant_stop_the_run_as_stuck() {
 fn a_relative_tolerance_below_double_precision_is_refused_as_unattainable() {
     let model = Model::parse(BALL).expect("parses");
     let compiled = model.compile::<&str>(&[]).expect("compiles");
-    let opts = SimOptions { rtol: 1e-16, atol: 1e-300, ..model.sim_options() };
+    let opts = SimOptions { rtol: 1e-16, atol: 1e-300, ..crate::support::runs::options(&model) };
     let err = compiled.simulate(&model.params(), &opts).expect_err("refused");
     assert!(err.to_string().contains("rtol 1e-16 cannot be met"), "{err}");
+}
+
+/// Every test above, to run with each Rosenbrock method (`support::runs::with_method`): the
+/// tests that choose their method themselves keep it.
+const ALL: &[(&str, fn())] = &[
+    (
+        "a_guard_crossing_zero_many_times_in_one_step_is_seen_every_time",
+        a_guard_crossing_zero_many_times_in_one_step_is_seen_every_time,
+    ),
+    ("a_time_guard_on_an_exact_flow_fires_every_period", a_time_guard_on_an_exact_flow_fires_every_period),
+    (
+        "a_flow_switch_pulsing_within_steps_integrates_every_pulse",
+        a_flow_switch_pulsing_within_steps_integrates_every_pulse,
+    ),
+    (
+        "a_guard_that_becomes_nan_fires_before_and_is_reported_after",
+        a_guard_that_becomes_nan_fires_before_and_is_reported_after,
+    ),
+    (
+        "a_ball_dropped_from_the_floor_is_stuck_not_falling_through",
+        a_ball_dropped_from_the_floor_is_stuck_not_falling_through,
+    ),
+    ("a_perfectly_inelastic_ball_stays_at_the_floor", a_perfectly_inelastic_ball_stays_at_the_floor),
+    ("a_dose_at_the_start_is_given_at_the_start", a_dose_at_the_start_is_given_at_the_start),
+    (
+        "a_reset_that_moves_the_state_across_another_guard_fires_it_at_the_same_instant",
+        a_reset_that_moves_the_state_across_another_guard_fires_it_at_the_same_instant,
+    ),
+    (
+        "a_large_state_the_guard_does_not_read_invents_no_event",
+        a_large_state_the_guard_does_not_read_invents_no_event,
+    ),
+    (
+        "events_microseconds_apart_late_in_time_fire_in_time_order_at_their_times",
+        events_microseconds_apart_late_in_time_fire_in_time_order_at_their_times,
+    ),
+    ("ten_events_at_one_instant_are_a_group_not_zeno", ten_events_at_one_instant_are_a_group_not_zeno),
+    (
+        "many_events_over_a_long_horizon_end_at_max_events_not_zeno",
+        many_events_over_a_long_horizon_end_at_max_events_not_zeno,
+    ),
+    (
+        "the_ball_run_without_end_stops_as_zeno_at_its_accumulation_point",
+        the_ball_run_without_end_stops_as_zeno_at_its_accumulation_point,
+    ),
+    (
+        "a_reset_onto_another_guard_fires_it_when_the_flow_moves_it_across",
+        a_reset_onto_another_guard_fires_it_when_the_flow_moves_it_across,
+    ),
+    (
+        "events_that_keep_cascading_at_one_instant_stop_the_run_as_stuck",
+        events_that_keep_cascading_at_one_instant_stop_the_run_as_stuck,
+    ),
+    (
+        "a_relative_tolerance_below_double_precision_is_refused_as_unattainable",
+        a_relative_tolerance_below_double_precision_is_refused_as_unattainable,
+    ),
+];
+
+/// The tests that fail with a Rosenbrock method, and why: `a_reset_onto_another_guard...`
+/// asserts an event time of exactly 1.0 (1e-15 relative) on a linear clock, which Rodas5P
+/// reaches at 0.9999999999999857 (its coefficients satisfy the order conditions to about 6e-15,
+/// see `event_edges::KNOWN`); `a_dose_at_the_start...` asserts `x = e^-1` to 1e-9 at the
+/// model's rtol 1e-10, which Rodas4 (4th order) misses by 1.02e-9 relative (global error ten
+/// local tolerances, as its order allows).
+const KNOWN: &[&str] = &[
+    "a_reset_onto_another_guard_fires_it_when_the_flow_moves_it_across (Rodas5p)",
+    "a_dose_at_the_start_is_given_at_the_start (Rodas4)",
+];
+
+#[test]
+fn every_event_semantics_test_holds_with_the_rosenbrock_methods_but_the_known_ones() {
+    let mut failed = Vec::new();
+    for method in [hybc::sim::Method::Rodas5p, hybc::sim::Method::Rodas4] {
+        failed.extend(crate::support::runs::every_test_with(method, ALL));
+    }
+    assert_eq!(failed, KNOWN, "the failures with a Rosenbrock method changed");
 }

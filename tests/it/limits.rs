@@ -38,6 +38,8 @@ fn every_count_a_flag_accepts_is_capped_with_the_flag_named() {
         "--max-iter: at most",
     );
     usage_error(&["sweep", ball, "--vary", "e=0.5", "--events", "1001"], "--events: at most 1000");
+    usage_error(&["run", ball, "--max-steps", "1000000001"], "--max-steps: at most 1000000000");
+    usage_error(&["sweep", ball, "--vary", "e=0.5", "--max-steps", "0"], "--max-steps: at least 1");
     usage_error(&["sweep", ball, "--vary", "e=0.5", "--threads", "1025"], "--threads: at most 1024");
     usage_error(&["sweep", ball, "--samples", "1000000001"], "--samples: expected 1 to 1000000000");
     usage_error(&["sweep", ball, "--vary", "e=0:1:1000000001"], "at most 1000000000 points");
@@ -445,4 +447,16 @@ fn zero_width_and_combining_characters_are_escaped_in_diagnostics() {
         assert!(err.contains(&format!("unexpected invisible character {tag}")), "{tag}: {err}");
         assert!(err.contains(&format!("der(x) = 1 +{tag} 2")), "{tag}: {err}");
     }
+}
+
+#[test]
+fn max_steps_replaces_the_fixed_step_cap() {
+    // The ball to 2.5 takes 9 steps at its tolerances: a cap of 5 stops it with a fault (exit 3)
+    // naming the cap, and the default lets it finish.
+    let out = hybc(&["run", "models/ball.hyb", "--max-steps", "5"]);
+    assert_eq!(out.status.code(), Some(3), "{}", stderr(&out));
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), stderr(&out));
+    assert!(text.contains("more than 5 steps"), "{text}");
+    let out = hybc(&["run", "models/ball.hyb", "--max-steps", "1000"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
 }

@@ -33,6 +33,7 @@ mod samples;
 mod sim_ball;
 mod sim_events;
 mod sobol;
+mod stiff;
 mod stress_events;
 mod stress_frontend;
 mod sweep;

@@ -253,3 +253,85 @@ fn bounces_too_small_to_resolve_stop_as_zeno_instead_of_falling_through() {
     }
     assert!(zeno > 0, "no run reached its accumulation point before t = 2.5");
 }
+
+#[test]
+fn ball_bounces_match_closed_form_rosenbrock_on_central_difference_jacobians() {
+    // The hand-written ball has no Jacobian kernels: the Rosenbrock methods take the documented
+    // central-difference defaults of `HybridSystem::flow_jac` and `sens_dir` (exact here, the
+    // flow being linear), and meet the same closed forms to the same 1e-9.
+    check_first_point(Method::Rodas5p, true);
+    check_first_point(Method::Rodas4, true);
+}
+
+/// The ball, with Jacobians that cannot be had.
+struct NoJacobians(Ball);
+
+impl hybc::sim::HybridSystem for NoJacobians {
+    fn info(&self) -> &hybc::sim::SystemInfo {
+        self.0.info()
+    }
+    fn initial_state(&self, p: &[f64], x0: &mut [f64]) {
+        self.0.initial_state(p, x0)
+    }
+    fn initial_sens(&self, p: &[f64], s0: &mut [f64]) {
+        self.0.initial_sens(p, s0)
+    }
+    fn flow(&self, mode: usize, t: f64, x: &[f64], p: &[f64], dx: &mut [f64]) {
+        self.0.flow(mode, t, x, p, dx)
+    }
+    fn flow_sens(
+        &self,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        s: &[f64],
+        p: &[f64],
+        dx: &mut [f64],
+        ds: &mut [f64],
+    ) {
+        self.0.flow_sens(mode, t, x, s, p, dx, ds)
+    }
+    fn prepare_jacobians(&self) -> Result<(), String> {
+        Err("no second derivatives here".into())
+    }
+    fn guards(&self, mode: usize, t: f64, x: &[f64], p: &[f64], g: &mut [f64]) {
+        self.0.guards(mode, t, x, p, g)
+    }
+    fn guard_grad(&self, event: usize, t: f64, x: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) -> f64 {
+        self.0.guard_grad(event, t, x, p, gx, gp)
+    }
+    fn condition(&self, event: usize, t: f64, x: &[f64], p: &[f64]) -> bool {
+        self.0.condition(event, t, x, p)
+    }
+    fn reset(&self, event: usize, t: f64, x: &[f64], p: &[f64], r: &mut [f64]) {
+        self.0.reset(event, t, x, p, r)
+    }
+    fn reset_jac(
+        &self,
+        event: usize,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+        rx: &mut [f64],
+        rp: &mut [f64],
+        rt: &mut [f64],
+    ) {
+        self.0.reset_jac(event, t, x, p, rx, rp, rt)
+    }
+    fn outputs(&self, t: f64, x: &[f64], p: &[f64], y: &mut [f64]) {
+        self.0.outputs(t, x, p, y)
+    }
+    fn output_jac(&self, t: f64, x: &[f64], p: &[f64], yx: &mut [f64], yp: &mut [f64], yt: &mut [f64]) {
+        self.0.output_jac(t, x, p, yx, yp, yt)
+    }
+}
+
+#[test]
+fn a_rosenbrock_method_without_jacobians_is_an_error_naming_the_method_and_why() {
+    let sys = NoJacobians(Ball::new());
+    let err = run(&sys, &[G, E, 1.0], &opts(2.5, Method::Rodas5p, true)).expect_err("refused");
+    let text = err.to_string();
+    assert!(text.contains("rodas5p") && text.contains("no second derivatives here"), "{text}");
+    // The explicit methods need nothing of the kind.
+    assert!(run(&sys, &[G, E, 1.0], &opts(2.5, Method::Dopri5, true)).is_ok());
+}

@@ -1,0 +1,632 @@
+//! Stage 5 (sim): the Rosenbrock (ROW) methods Rodas5P and Rodas4 as a [`Stepper`], for stiff
+//! flows. Linearly implicit: one LU factorisation of `W = I / (h gamma) - f_x` per attempted
+//! step (dense, nalgebra), no Newton iteration; the stages and coefficients are in
+//! `row_tableau.rs`.
+//!
+//! Sensitivities. The integrated vector is `z = [x, S]`, and the method is applied to the whole
+//! system `z' = F(t, z) = [f, f_x S + f_p]`, whose Jacobian is block lower triangular:
+//! `[[f_x, 0], [B, I (x) f_x]]` with `B v = d/dx (f_x s_j + f_p_j) v` per column `j`. So every
+//! stage solves the state block with the LU of `W`, then every sensitivity column with the same
+//! LU, its right-hand side increased by `B k_x` (`Rhs::sens_coupling`, the compiled
+//! `f_xx[s_j, k_x] + f_xp_j k_x`). Evaluated, like `f_x` and `F_t`, at the step's start
+//! `(t0, x0, S0)`, this is exactly what differentiating the state's own stage equations with
+//! respect to the parameters gives (`W k_i = f(u_i) + ...` differentiated: `dW/dp k_i` is
+//! `-B k_i`, `d(f_t)/dp` is `f_xt s + f_pt`): the sensitivities are the derivatives of the
+//! computed discrete solution for the step sizes taken, to round-off, whatever the tolerance.
+//! Their error with respect to the true sensitivities is the method's error on the augmented
+//! system, controlled like the states' when `sens_error_control` is on.
+//!
+//! Error control: the embedded solution's difference is the last stage `k_s`;
+//! `err = sqrt(mean_i (k_s,i / sc_i)^2)` with `sc_i = atol + rtol max(|z0_i|, |z1_i|)` over the
+//! controlled components, accepted when `<= 1`. Step sizes: `h 0.9 err^(-1/q)` with `q` the
+//! embedded order plus one, bounded to `[0.2 h, 6 h]` as in Hairer's RODAS, no growth after a
+//! rejection. The Jacobian is evaluated once per start point and kept across rejected attempts.
+//!
+//! Dense output: the method's own interpolation (order 4 for Rodas5P, 3 for Rodas4) for every
+//! component, sensitivities included, built with the step (it costs a few vector sums).
+
+use nalgebra::{DMatrix, DMatrixViewMut};
+
+use super::row_tableau::RowTableau;
+use super::stepper::{Interpolant, Rhs, Stepper};
+
+const SAFETY: f64 = 0.9;
+const FAC_MIN: f64 = 0.2;
+const FAC_MAX: f64 = 6.0;
+/// Most dense-output rows of any method (Rodas5P's three).
+const MAX_DENSE: usize = 3;
+/// Where the derivative is sampled inside a step for the event detector's sign checks.
+const INTERIOR: [f64; 3] = [0.25, 0.5, 0.75];
+
+/// A Rosenbrock method with its controller and dense output (a [`Stepper`]).
+pub struct Rosenbrock {
+    tab: &'static RowTableau,
+    nz: usize,
+    n: usize,
+    n_err: usize,
+    rtol: f64,
+    atol: f64,
+    masked: bool,
+    /// Stages, `stages` blocks of `nz`.
+    k: Vec<f64>,
+    /// `F` at the start point and at the end of the last attempt.
+    f0: Vec<f64>,
+    f1: Vec<f64>,
+    /// `f_x` (n x n) and `F_t` (nz) at the start point; `jac_fresh` while they belong to it.
+    fx: Vec<f64>,
+    ft: Vec<f64>,
+    jac_fresh: bool,
+    /// Scratch: a stage input, a stage right-hand side, `[x0, v]`, and `B v`.
+    u: Vec<f64>,
+    r: Vec<f64>,
+    xv: Vec<f64>,
+    dir: Vec<f64>,
+    h: f64,
+    y_new: Vec<f64>,
+    dense: RowDense,
+    /// Derivatives of the dense output at [`INTERIOR`], `nz` each.
+    interior: Vec<f64>,
+    rhs_calls: usize,
+    jac_calls: usize,
+}
+
+impl Rosenbrock {
+    pub(crate) fn new(
+        tab: &'static RowTableau,
+        nz: usize,
+        n_states: usize,
+        n_err: usize,
+        rtol: f64,
+        atol: f64,
+    ) -> Rosenbrock {
+        let n = n_states;
+        let m = (nz - n).checked_div(n).unwrap_or(0);
+        Rosenbrock {
+            tab,
+            nz,
+            n,
+            n_err,
+            rtol,
+            atol,
+            masked: false,
+            k: vec![0.0; tab.stages * nz],
+            f0: vec![0.0; nz],
+            f1: vec![0.0; nz],
+            fx: vec![0.0; n * n],
+            ft: vec![0.0; nz],
+            jac_fresh: false,
+            u: vec![0.0; nz],
+            r: vec![0.0; nz],
+            xv: vec![0.0; 2 * n],
+            dir: vec![0.0; n * m],
+            h: 0.0,
+            y_new: vec![0.0; nz],
+            dense: RowDense::new(nz),
+            interior: vec![0.0; INTERIOR.len() * nz],
+            rhs_calls: 0,
+            jac_calls: 0,
+        }
+    }
+
+    /// Jacobian evaluations (one per start point that an attempt was made from).
+    pub fn jac_calls(&self) -> usize {
+        self.jac_calls
+    }
+
+    /// The exponent of the controller: the error estimate is `O(h^q)`.
+    fn q(&self) -> f64 {
+        (self.tab.embedded + 1) as f64
+    }
+
+    /// All stages of a step of size `h` from `(t, y)`; `false` when `W` is singular.
+    fn stages<R: Rhs>(&mut self, t: f64, y: &[f64], h: f64, rhs: &mut R) -> bool {
+        let (n, nz, tab) = (self.n, self.nz, self.tab);
+        let inv_hg = 1.0 / (h * tab.gamma);
+        let fx = &self.fx;
+        let w = DMatrix::from_fn(n, n, |i, j| if i == j { inv_hg } else { 0.0 } - fx[i * n + j]);
+        let lu = w.lu();
+        if n > 0 && !lu.is_invertible() {
+            return false;
+        }
+        self.xv[..n].copy_from_slice(&y[..n]);
+        for i in 0..tab.stages {
+            if i == 0 {
+                self.r.copy_from_slice(&self.f0);
+            } else {
+                self.u.copy_from_slice(y);
+                for (j, &a) in tab.a[i].iter().enumerate() {
+                    if a != 0.0 {
+                        axpy(a, &self.k[j * nz..(j + 1) * nz], &mut self.u);
+                    }
+                }
+                rhs.eval(t + tab.c[i] * h, &self.u, &mut self.r);
+                self.rhs_calls += 1;
+            }
+            for (j, &c) in tab.cm[i].iter().enumerate() {
+                if c != 0.0 {
+                    axpy(c / h, &self.k[j * nz..(j + 1) * nz], &mut self.r);
+                }
+            }
+            if tab.d[i] != 0.0 {
+                axpy(h * tab.d[i], &self.ft, &mut self.r);
+            }
+            // The state block, then every sensitivity column with the coupling `B k_x` added.
+            let (rx, rs) = self.r.split_at_mut(n);
+            if !lu.solve_mut(&mut DMatrixViewMut::from_slice(rx, n, 1)) {
+                return false;
+            }
+            if !rs.is_empty() {
+                self.xv[n..].copy_from_slice(rx);
+                rhs.sens_coupling(t, &self.xv, y, &mut self.dir);
+                for (r, d) in rs.iter_mut().zip(&self.dir) {
+                    *r += d;
+                }
+                let cols = rs.len() / n;
+                if !lu.solve_mut(&mut DMatrixViewMut::from_slice(rs, n, cols)) {
+                    return false;
+                }
+            }
+            self.k[i * nz..(i + 1) * nz].copy_from_slice(&self.r);
+        }
+        // Stiffly accurate: the solution is the last stage's input plus the last stage.
+        let last = tab.stages - 1;
+        self.y_new.copy_from_slice(&self.u);
+        axpy(1.0, &self.k[last * nz..], &mut self.y_new);
+        true
+    }
+
+    /// The scaled norm of the last stage (the error estimate) over the controlled components;
+    /// `MASKED` leaves out sensitivities that are not finite (as `Rk::error`).
+    fn error<const MASKED: bool>(&self, y: &[f64]) -> f64 {
+        let e = &self.k[(self.tab.stages - 1) * self.nz..];
+        let mut sum = 0.0;
+        let mut used = 0usize;
+        for i in 0..self.n_err {
+            let (y0, y1, ei) = (y[i], self.y_new[i], e[i]);
+            if MASKED && i >= self.n && !(y0.is_finite() && y1.is_finite() && ei.is_finite()) {
+                continue;
+            }
+            used += 1;
+            let r = ei / (self.atol + self.rtol * y0.abs().max(y1.abs()));
+            sum += r * r;
+        }
+        let count = if MASKED { used.max(1) } else { self.n_err.max(1) };
+        (sum / count as f64).sqrt()
+    }
+}
+
+/// `y += a x`.
+fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
+    for (y, x) in y.iter_mut().zip(x) {
+        *y += a * x;
+    }
+}
+
+fn all_finite(v: &[f64]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+impl Stepper for Rosenbrock {
+    type Interpolant = RowDense;
+
+    fn reset(&mut self) {
+        self.h = 0.0;
+        self.rhs_calls = 0;
+        self.jac_calls = 0;
+        self.jac_fresh = false;
+    }
+
+    fn restart<R: Rhs>(&mut self, t: f64, z: &[f64], rhs: &mut R) {
+        rhs.eval(t, z, &mut self.f0);
+        self.rhs_calls += 1;
+        self.jac_fresh = false;
+    }
+
+    fn start_derivative(&self) -> &[f64] {
+        &self.f0
+    }
+
+    /// Hairer's estimate (as `Rk::initial_step`): `h0 = 0.01 |z0| / |f0|` in the scaled norm,
+    /// one explicit Euler step for the second derivative, `h1 = (0.01 / max(d1, d2))^(1/q)`.
+    fn initial_step<R: Rhs>(&mut self, t: f64, z: &[f64], h_max: f64, rhs: &mut R) -> f64 {
+        let ne = self.n_err;
+        let inv = |y: f64| 1.0 / (self.atol + self.rtol * y.abs());
+        let rms = |v: &dyn Fn(usize) -> f64| {
+            ((0..ne).map(|i| (v(i) * inv(z[i])).powi(2)).sum::<f64>() / ne.max(1) as f64).sqrt()
+        };
+        let d0 = rms(&|i| z[i]);
+        let d1 = rms(&|i| self.f0[i]);
+        let mut h0 =
+            if !(d0.is_finite() && d1.is_finite()) || d0 < 1.0 || d1 < 1e-5 { 1e-6 } else { 0.01 * d0 / d1 };
+        h0 = h0.min(h_max);
+        for ((u, &y), &f) in self.u.iter_mut().zip(z).zip(&self.f0) {
+            *u = y + h0 * f;
+        }
+        rhs.eval(t + h0, &self.u, &mut self.r);
+        self.rhs_calls += 1;
+        let d2 = rms(&|i| self.r[i] - self.f0[i]) / h0;
+        let dmax = d1.max(d2);
+        let h1 = if dmax <= 1e-15 || !dmax.is_finite() {
+            (h0 * 1e-3).max(1e-6)
+        } else {
+            (0.01 / dmax).powf(1.0 / self.q())
+        };
+        (100.0 * h0).min(h1).min(h_max)
+    }
+
+    fn attempt<R: Rhs>(&mut self, t: f64, z: &[f64], h: f64, rhs: &mut R) -> f64 {
+        self.h = h;
+        if !self.jac_fresh {
+            let n = self.n;
+            rhs.jacobian(t, z, &mut self.fx, &mut self.ft);
+            self.jac_calls += 1;
+            self.jac_fresh = true;
+            // The state block's Jacobian must be finite for `W`'s LU; a sensitivity part of
+            // `F_t` that is not finite only spoils the sensitivities (masked below).
+            if !all_finite(&self.fx) || !all_finite(&self.ft[..n]) {
+                self.masked = false;
+                return f64::INFINITY;
+            }
+        }
+        self.masked = false;
+        if !self.stages(t, z, h, rhs) || !all_finite(&self.y_new[..self.n]) {
+            return f64::INFINITY;
+        }
+        rhs.eval(t + h, &self.y_new, &mut self.f1);
+        self.rhs_calls += 1;
+        let mut err = self.error::<false>(z);
+        if !(err.is_finite() && all_finite(&self.y_new)) {
+            // A sensitivity that is not finite at a finite state is a derivative that does not
+            // exist (NaN from here on, see `sim::jump`): the step is judged without it.
+            self.masked = true;
+            err = self.error::<true>(z);
+            if !err.is_finite() {
+                return f64::INFINITY;
+            }
+        }
+        self.dense.build(self.tab, t, h, z, &self.y_new, &self.k);
+        for (slot, &theta) in INTERIOR.iter().enumerate() {
+            let nz = self.nz;
+            self.dense.eval_deriv(t + theta * h, &mut self.interior[slot * nz..(slot + 1) * nz]);
+        }
+        err
+    }
+
+    fn end_state(&self) -> &[f64] {
+        &self.y_new
+    }
+
+    fn end_derivative(&self) -> &[f64] {
+        &self.f1
+    }
+
+    fn grow(&mut self, err: f64) -> f64 {
+        let fac = SAFETY * err.max(1e-10).powf(-1.0 / self.q());
+        self.h * fac.clamp(FAC_MIN, FAC_MAX)
+    }
+
+    fn shrink(&self, err: f64) -> f64 {
+        let fac = if err.is_finite() { SAFETY * err.powf(-1.0 / self.q()) } else { FAC_MIN };
+        self.h * fac.clamp(FAC_MIN, 1.0)
+    }
+
+    /// The dense output was built with the attempt.
+    fn build_interpolant<R: Rhs>(&mut self, _t0: f64, _z: &[f64], _rhs: &mut R) {}
+
+    fn interpolant(&self) -> &RowDense {
+        &self.dense
+    }
+
+    fn accept(&mut self, z: &mut [f64]) {
+        z.copy_from_slice(&self.y_new);
+        self.f0.copy_from_slice(&self.f1);
+        self.jac_fresh = false;
+    }
+
+    fn rhs_calls(&self) -> usize {
+        self.rhs_calls
+    }
+
+    fn masked(&self) -> bool {
+        self.masked
+    }
+
+    fn visit_interior<V: FnMut(f64, &[f64])>(&self, mut visit: V) {
+        for (slot, &theta) in INTERIOR.iter().enumerate() {
+            visit(theta, &self.interior[slot * self.nz..(slot + 1) * self.nz]);
+        }
+    }
+}
+
+/// The dense output of one Rosenbrock step (an [`Interpolant`]): with `theta = (t - t0) / h`,
+/// `z(theta) = (1 - theta) z0 + theta (z1 + (1 - theta) Q(theta))`,
+/// `Q = q_0 + theta (q_1 + theta q_2)`, `q_r = sum_j H_rj k_j` (`row_tableau`), evaluated as
+/// `z0 + theta ((z1 - z0) + (1 - theta) Q)`: a component that does not move stays exactly
+/// where it is (a counter read at an event time), as with the explicit pairs' form.
+pub struct RowDense {
+    t0: f64,
+    h: f64,
+    n_q: usize,
+    /// Component-major: `[z0, z1 - z0, q_0 .. q_{n_q - 1}]` per component, stride `2 + MAX_DENSE`.
+    coef: Vec<f64>,
+}
+
+const STRIDE: usize = 2 + MAX_DENSE;
+
+impl RowDense {
+    fn new(nz: usize) -> RowDense {
+        // Until the first build the interpolant is the zero constant.
+        RowDense { t0: 0.0, h: 0.0, n_q: 0, coef: vec![0.0; STRIDE * nz] }
+    }
+
+    fn build(&mut self, tab: &RowTableau, t0: f64, h: f64, z0: &[f64], z1: &[f64], k: &[f64]) {
+        let nz = z0.len();
+        self.t0 = t0;
+        self.h = h;
+        self.n_q = tab.dense.len();
+        for (i, c) in self.coef.chunks_exact_mut(STRIDE).enumerate() {
+            c[0] = z0[i];
+            c[1] = z1[i] - z0[i];
+            for (r, row) in tab.dense.iter().enumerate() {
+                c[2 + r] = row.iter().enumerate().map(|(j, w)| w * k[j * nz + i]).sum();
+            }
+        }
+    }
+
+    fn theta(&self, t: f64) -> f64 {
+        if self.h != 0.0 {
+            (t - self.t0) / self.h
+        } else {
+            0.0
+        }
+    }
+
+    /// `Q(theta)` and `Q'(theta)` of one component's coefficients.
+    fn q(&self, c: &[f64], th: f64) -> (f64, f64) {
+        let (mut q, mut dq) = (0.0, 0.0);
+        for r in (0..self.n_q).rev() {
+            dq = q + th * dq;
+            q = c[2 + r] + th * q;
+        }
+        (q, dq)
+    }
+}
+
+impl Interpolant for RowDense {
+    fn t0(&self) -> f64 {
+        self.t0
+    }
+    fn h(&self) -> f64 {
+        self.h
+    }
+    fn eval(&self, t: f64, out: &mut [f64]) {
+        let th = self.theta(t);
+        for (o, c) in out.iter_mut().zip(self.coef.chunks_exact(STRIDE)) {
+            let (q, _) = self.q(c, th);
+            *o = c[0] + th * (c[1] + (1.0 - th) * q);
+        }
+    }
+    fn eval_deriv(&self, t: f64, out: &mut [f64]) {
+        if self.h == 0.0 {
+            out.fill(0.0);
+            return;
+        }
+        let th = self.theta(t);
+        for (o, c) in out.iter_mut().zip(self.coef.chunks_exact(STRIDE)) {
+            let (q, dq) = self.q(c, th);
+            *o = (c[1] + (1.0 - 2.0 * th) * q + th * (1.0 - th) * dq) / self.h;
+        }
+    }
+    /// `theta (1 - theta) Q(theta)` with `Q` of degree `n_q - 1`: `n_q + 1` (the guard polynomial
+    /// of `Interpolant::linear_form` is then sampled at that many points plus one).
+    fn degree(&self) -> usize {
+        self.n_q + 1
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::row_tableau::{RODAS4, RODAS5P};
+    use super::*;
+
+    /// `y' = lambda y + cos t` with `y(0) = 1`, `lambda = -2`, in closed form; the exact Jacobian
+    /// and time derivative (no sensitivities).
+    struct Linear;
+    const LAMBDA: f64 = -2.0;
+    fn linear_exact(t: f64) -> f64 {
+        // y = C e^(lambda t) + (-lambda cos t + sin t) / (1 + lambda^2)
+        let p = |t: f64| (-LAMBDA * t.cos() + t.sin()) / (1.0 + LAMBDA * LAMBDA);
+        (1.0 - p(0.0)) * (LAMBDA * t).exp() + p(t)
+    }
+    impl Rhs for Linear {
+        fn eval(&mut self, t: f64, z: &[f64], dz: &mut [f64]) {
+            dz[0] = LAMBDA * z[0] + t.cos();
+        }
+        fn jacobian(&mut self, t: f64, _z: &[f64], fx: &mut [f64], ft: &mut [f64]) {
+            fx[0] = LAMBDA;
+            ft[0] = -t.sin();
+        }
+    }
+
+    /// `y' = -y^2 + t` (nonlinear, non-autonomous), reference by many small steps of Rodas5P.
+    struct Nonlinear;
+    impl Rhs for Nonlinear {
+        fn eval(&mut self, t: f64, z: &[f64], dz: &mut [f64]) {
+            dz[0] = -z[0] * z[0] + t;
+        }
+        fn jacobian(&mut self, _t: f64, z: &[f64], fx: &mut [f64], ft: &mut [f64]) {
+            fx[0] = -2.0 * z[0];
+            ft[0] = 1.0;
+        }
+    }
+
+    /// Integrates from 0 to 1 with `steps` fixed steps; the end value.
+    fn fixed_steps<R: Rhs>(tab: &'static RowTableau, rhs: &mut R, y0: f64, steps: usize) -> f64 {
+        let mut ros = Rosenbrock::new(tab, 1, 1, 1, 1e-6, 1e-6);
+        let h = 1.0 / steps as f64;
+        let mut z = [y0];
+        ros.reset();
+        ros.restart(0.0, &z, rhs);
+        for i in 0..steps {
+            let err = ros.attempt(i as f64 * h, &z, h, rhs);
+            assert!(err.is_finite());
+            ros.accept(&mut z);
+        }
+        z[0]
+    }
+
+    /// The observed order `log2(e(h) / e(h/2))` at two step sizes.
+    fn observed_order(
+        _tab: &'static RowTableau,
+        exact: f64,
+        run: impl Fn(usize) -> f64,
+        steps: usize,
+    ) -> f64 {
+        let e1 = (run(steps) - exact).abs();
+        let e2 = (run(2 * steps) - exact).abs();
+        (e1 / e2).log2()
+    }
+
+    #[test]
+    fn linear_problem_converges_at_the_methods_order() {
+        for (tab, steps) in [(&RODAS5P, 8), (&RODAS4, 8)] {
+            let exact = linear_exact(1.0);
+            let q = observed_order(tab, exact, |s| fixed_steps(tab, &mut Linear, 1.0, s), steps);
+            // Global order p: halving h divides the error by 2^p (within 0.3 at these sizes).
+            assert!((q - tab.order as f64).abs() < 0.3, "{}: observed order {q}", tab.name);
+        }
+    }
+
+    #[test]
+    fn nonlinear_problem_converges_at_the_methods_order() {
+        let exact = fixed_steps(&RODAS5P, &mut Nonlinear, 0.5, 4096);
+        for (tab, steps) in [(&RODAS5P, 8), (&RODAS4, 8)] {
+            let q = observed_order(tab, exact, |s| fixed_steps(tab, &mut Nonlinear, 0.5, s), steps);
+            assert!((q - tab.order as f64).abs() < 0.3, "{}: observed order {q}", tab.name);
+        }
+    }
+
+    /// The embedded solution (the last stage's input) has its own order: the error estimate
+    /// `|k_s|` of one step shrinks as `h^(embedded + 1)`.
+    #[test]
+    fn error_estimate_has_the_embedded_order() {
+        for tab in [&RODAS5P, &RODAS4] {
+            let est = |h: f64| {
+                let mut ros = Rosenbrock::new(tab, 1, 1, 1, 0.0, 1.0);
+                let z = [0.5];
+                ros.restart(0.0, &z, &mut Nonlinear);
+                ros.attempt(0.0, &z, h, &mut Nonlinear)
+            };
+            let q = (est(0.1) / est(0.05)).log2();
+            assert!((q - (tab.embedded + 1) as f64).abs() < 0.35, "{}: {q}", tab.name);
+        }
+    }
+
+    /// The dense output inside one step: error `O(h^(d + 1))` for dense order `d` (4 for
+    /// Rodas5P, 3 for Rodas4), so halving the step divides it by about `2^(d + 1)`.
+    #[test]
+    fn dense_output_has_its_order() {
+        for (tab, d) in [(&RODAS5P, 4), (&RODAS4, 3)] {
+            let worst = |h: f64| {
+                let mut ros = Rosenbrock::new(tab, 1, 1, 1, 1e-6, 1e-6);
+                let z = [1.0];
+                ros.restart(0.0, &z, &mut Linear);
+                ros.attempt(0.0, &z, h, &mut Linear);
+                let mut e = 0.0f64;
+                for i in 1..10 {
+                    let t = h * i as f64 / 10.0;
+                    let mut v = [0.0];
+                    ros.interpolant().eval(t, &mut v);
+                    e = e.max((v[0] - linear_exact(t)).abs());
+                }
+                e
+            };
+            let q = (worst(0.2) / worst(0.1)).log2();
+            assert!(q > d as f64 + 0.6, "{}: interpolation error ratio 2^{q}", tab.name);
+        }
+    }
+
+    /// L-stability in practice: a very stiff linear decay `y' = -1e8 (y - cos t)` with a step of
+    /// 0.1 follows the slow manifold `y ~ cos t` instead of blowing up.
+    #[test]
+    fn stiff_decay_follows_the_slow_manifold() {
+        struct Stiff;
+        impl Rhs for Stiff {
+            fn eval(&mut self, t: f64, z: &[f64], dz: &mut [f64]) {
+                dz[0] = -1e8 * (z[0] - t.cos());
+            }
+            fn jacobian(&mut self, t: f64, _z: &[f64], fx: &mut [f64], ft: &mut [f64]) {
+                fx[0] = -1e8;
+                ft[0] = -1e8 * t.sin();
+            }
+        }
+        for tab in [&RODAS5P, &RODAS4] {
+            let y = fixed_steps(tab, &mut Stiff, 0.0, 10);
+            assert!((y - 1f64.cos()).abs() < 1e-7, "{}: {y}", tab.name);
+        }
+    }
+
+    /// `y' = -p y^2 + sin t` with its sensitivity `s = dy/dp`, `s' = -2 p y s - y^2`, as the
+    /// integrator builds it (`z = [y, s]`), with the exact Jacobian, time derivative and coupling
+    /// `B v = (-2 p s - 2 y) v`.
+    struct WithSens {
+        p: f64,
+    }
+    impl Rhs for WithSens {
+        fn eval(&mut self, t: f64, z: &[f64], dz: &mut [f64]) {
+            dz[0] = -self.p * z[0] * z[0] + t.sin();
+            if z.len() > 1 {
+                dz[1] = -2.0 * self.p * z[0] * z[1] - z[0] * z[0];
+            }
+        }
+        fn jacobian(&mut self, t: f64, z: &[f64], fx: &mut [f64], ft: &mut [f64]) {
+            fx[0] = -2.0 * self.p * z[0];
+            ft[0] = t.cos();
+            if ft.len() > 1 {
+                ft[1] = 0.0;
+            }
+        }
+        fn sens_coupling(&mut self, _t: f64, xv: &[f64], z: &[f64], out: &mut [f64]) {
+            out[0] = (-2.0 * self.p * z[1] - 2.0 * z[0]) * xv[1];
+        }
+    }
+
+    /// `steps` fixed steps of `h` from `z0`; the end state.
+    fn fixed<const N: usize>(
+        tab: &'static RowTableau,
+        p: f64,
+        z0: [f64; N],
+        h: f64,
+        steps: usize,
+    ) -> [f64; N] {
+        let mut ros = Rosenbrock::new(tab, N, 1, N, 1e-6, 1e-6);
+        let mut rhs = WithSens { p };
+        let mut z = z0;
+        ros.restart(0.0, &z, &mut rhs);
+        for i in 0..steps {
+            assert!(ros.attempt(i as f64 * h, &z, h, &mut rhs).is_finite());
+            ros.accept(&mut z);
+        }
+        z
+    }
+
+    /// The sensitivity the stepper integrates is the derivative of the discrete solution itself:
+    /// with 8 fixed steps of 0.25 it matches central differences of the computed state (same
+    /// steps) to 1e-9, while it differs from the true derivative (the same sensitivity with
+    /// 4096 steps) by the method's error, over 100 times more.
+    #[test]
+    fn sensitivities_are_the_derivative_of_the_discrete_solution() {
+        for tab in [&RODAS5P, &RODAS4] {
+            let p = 1.3;
+            let [_, s] = fixed(tab, p, [1.0, 0.0], 0.25, 8);
+            let d = 1e-5;
+            let [yp] = fixed(tab, p + d, [1.0], 0.25, 8);
+            let [ym] = fixed(tab, p - d, [1.0], 0.25, 8);
+            let discrete = (yp - ym) / (2.0 * d);
+            let [_, exact] = fixed(tab, p, [1.0, 0.0], 2.0 / 4096.0, 4096);
+            let (to_discrete, to_exact) = ((s - discrete).abs(), (s - exact).abs());
+            assert!(to_discrete <= 1e-9 * s.abs(), "{}: {s} vs discrete {discrete}", tab.name);
+            assert!(to_exact > 100.0 * to_discrete, "{}: {to_exact:e} vs {to_discrete:e}", tab.name);
+        }
+    }
+}
