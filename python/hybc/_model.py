@@ -92,6 +92,7 @@ class Model:
         *,
         grad: Sequence[str] = (),
         trajectory: None | str | float = None,
+        at: Sequence[float] | np.ndarray | None = None,
         **options: Any,
     ) -> "_hybc.Run":
         """One run at ``params`` (the others at their defaults). A vector parameter (``param
@@ -100,7 +101,10 @@ class Model:
 
         ``grad``: parameters to differentiate with respect to (the gradient column order).
         ``trajectory``: None, ``"steps"`` (every accepted step and both sides of every event) or a
-        sampling interval ``dt``. ``options``: ``t_end``, ``rtol``, ``atol``, ``max_events``,
+        sampling interval ``dt``. ``at``: ascending times within the run at which every output
+        and state is reported with its derivatives, from the dense output (``run.samples``:
+        ``values[time, name]``, ``dvalues[time, name, param]``; a time at an event instant gets
+        the values after its events). ``options``: ``t_end``, ``rtol``, ``atol``, ``max_events``,
         ``max_steps``, ``method`` (``"auto"``, ``"dopri5"``, ``"dop853"``, or the Rosenbrock
         methods for stiff models ``"rodas5p"``, ``"rodas4"``), ``graze_tol``,
         ``sens_error_control``, ``h_max``; unset ones come from the model's ``simulate`` line, then
@@ -112,6 +116,7 @@ class Model:
             _param_dict(_expand_vectors(params, vectors)),
             grad=_expand_names(_names(grad, "grad"), vectors),
             trajectory=trajectory,
+            at=None if at is None else np.asarray(at, dtype=np.float64).ravel().tolist(),
             **options,
         )
 

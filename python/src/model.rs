@@ -142,8 +142,8 @@ impl Model {
     }
 
     /// One run; see `hybc.Model.simulate`.
-    #[pyo3(signature = (params = None, *, grad = None, trajectory = None, t_end = None, rtol = None,
-        atol = None, max_events = None, max_steps = None, method = None, graze_tol = None,
+    #[pyo3(signature = (params = None, *, grad = None, trajectory = None, at = None, t_end = None,
+        rtol = None, atol = None, max_events = None, max_steps = None, method = None, graze_tol = None,
         sens_error_control = None, h_max = None))]
     #[allow(clippy::too_many_arguments)]
     fn simulate(
@@ -152,6 +152,7 @@ impl Model {
         params: Option<HashMap<String, f64>>,
         grad: Option<Vec<String>>,
         trajectory: Option<&Bound<'_, PyAny>>,
+        at: Option<Vec<f64>>,
         t_end: Option<f64>,
         rtol: Option<f64>,
         atol: Option<f64>,
@@ -175,6 +176,15 @@ impl Model {
         };
         let mut opts = keywords.options(&self.model)?;
         opts.trajectory = trajectory_request(trajectory)?;
+        let at = at.unwrap_or_default();
+        if at.len() as f64 > hybc::sim::MAX_SAMPLED_ROWS {
+            return Err(PyValueError::new_err(format!(
+                "at: {} times, at most {:.0}",
+                at.len(),
+                hybc::sim::MAX_SAMPLED_ROWS
+            )));
+        }
+        opts.at = at;
         let values = self.param_values(params)?;
         let compiled = self.compiled(py, &grad.unwrap_or_default())?;
         let t_end = opts.t_end;

@@ -243,6 +243,42 @@ impl Run {
         Ok(Some(dict))
     }
 
+    /// The values at the times asked for with `at=` (`hybc run --at`), as arrays: "t" (T,),
+    /// "names" (the outputs, then the states), "values" (T, K) and "dvalues" (T, K, n_grad), NaN
+    /// where a value or derivative does not exist or the run stopped before the time; "reached",
+    /// "after_events" (bool, (T,)) and "near_event" (the index of an event within whose time
+    /// resolution the sample lies, -1 for none). None when no times were asked for.
+    #[getter]
+    fn samples<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let samples = self.run.samples();
+        if samples.is_empty() {
+            return Ok(None);
+        }
+        let info = self.info();
+        let (k, n, m) = (info.n_outputs(), info.n_states(), self.n_grad());
+        let width = k + n;
+        let mut values: Vec<f64> = Vec::with_capacity(samples.len() * width);
+        let mut dvalues: Vec<f64> = Vec::with_capacity(samples.len() * width * m);
+        for s in samples {
+            values.extend(s.outputs.iter().chain(&s.state));
+            for i in 0..width {
+                let (d, rows, row) = if i < k { (&s.doutputs, k, i) } else { (&s.dstate, n, i - k) };
+                dvalues.extend((0..m).map(|j| d.as_ref().map_or(f64::NAN, |d| d[j * rows + row])));
+            }
+        }
+        let dict = PyDict::new(py);
+        dict.set_item("t", PyArray1::from_iter(py, samples.iter().map(|s| s.time)))?;
+        let names: Vec<&String> = info.output_names.iter().chain(&info.state_names).collect();
+        dict.set_item("names", names)?;
+        dict.set_item("values", PyArray1::from_vec(py, values).reshape([samples.len(), width])?)?;
+        dict.set_item("dvalues", PyArray1::from_vec(py, dvalues).reshape([samples.len(), width, m])?)?;
+        dict.set_item("reached", samples.iter().map(|s| s.reached).collect::<Vec<bool>>())?;
+        dict.set_item("after_events", samples.iter().map(|s| s.after_events).collect::<Vec<bool>>())?;
+        let near: Vec<i64> = samples.iter().map(|s| s.near_event.map_or(-1, |e| e as i64)).collect();
+        dict.set_item("near_event", PyArray1::from_vec(py, near))?;
+        Ok(Some(dict))
+    }
+
     /// The run as `hybc run --format json` prints it.
     fn to_json(&self) -> String {
         self.run.report().to_json().to_string()

@@ -306,3 +306,31 @@ def test_a_vector_parameter_refuses_a_wrong_shape_or_range():
         model.simulate({"u": ["a"] * 5})
     with pytest.raises(hybc.ParameterError, match=r"u\[2\] = 9 is outside its range"):
         model.simulate({"u": [0, 0, 9, 0, 0]})
+
+
+def test_values_at_times_match_the_ball_between_bounces(ball):
+    # The first flight: y = h0 - g t^2 / 2, dy/dh0 = 1, dy/de = 0; the second: after t1 the ball
+    # leaves at e g t1, y = e g t1 tau - g tau^2 / 2 with tau = t - t1, dy/de = g t1 tau.
+    t1 = math.sqrt(2.0 / G)
+    at = np.linspace(0.0, 1.15, 24)
+    run = ball.simulate(grad=["e", "h0"], at=at, t_end=1.15)
+    s = run.samples
+    assert s["names"] == ["energy", "y", "v"]
+    assert s["values"].shape == (24, 3) and s["dvalues"].shape == (24, 3, 2)
+    np.testing.assert_array_equal(s["t"], at)
+    for k, t in enumerate(at):
+        if t <= t1:
+            y, dy_de, dy_dh0 = 1.0 - 0.5 * G * t * t, 0.0, 1.0
+        else:
+            tau = t - t1
+            y, dy_de = 0.8 * G * t1 * tau - 0.5 * G * tau * tau, G * t1 * tau
+            dt1 = 1.0 / (G * t1)
+            dy_dh0 = 0.8 * G * dt1 * tau - 0.8 * G * t1 * dt1 + G * tau * dt1
+        assert s["values"][k, 1] == pytest.approx(y, abs=1e-9)
+        assert s["dvalues"][k, 1, 0] == pytest.approx(dy_de, abs=1e-8)
+        assert s["dvalues"][k, 1, 1] == pytest.approx(dy_dh0, abs=1e-8)
+    assert s["reached"].all() if isinstance(s["reached"], np.ndarray) else all(s["reached"])
+    assert (s["near_event"] == -1).all()
+    assert ball.simulate().samples is None
+    with pytest.raises(Exception, match="sample time"):
+        ball.simulate(at=[0.5, 0.2])
