@@ -29,10 +29,17 @@ pub struct FitArgs {
     /// The parameters to fit: `P1,P2,...` (bounded by their declared ranges).
     #[arg(long, value_name = "P1,P2")]
     free: String,
-    /// A target (repeatable): `OUTPUT=VALUE`, `STATE=VALUE` (at the final time), or
-    /// `EVENT#K=TIME` (the K-th firing, 1-based); append `@WEIGHT` to weight its residual.
-    #[arg(long = "target", value_name = "NAME=VALUE[@W]", required = true)]
+    /// A target (repeatable): `OUTPUT=VALUE`, `STATE=VALUE` (at the final time), `NAME@TIME=VALUE`
+    /// (at a time), `EVENT#K=TIME` (the K-th firing, 1-based) or `EVENT#last=TIME`; append
+    /// `@WEIGHT` to weight its residual.
+    #[arg(long = "target", value_name = "NAME=VALUE[@W]", required_unless_present = "data")]
     targets: Vec<String>,
+    /// Measurements to fit (least squares): a CSV with a `time` column, a column per observed
+    /// output or state, optional `sigma_NAME` columns (standard deviations, weights 1/sigma);
+    /// an empty cell is a missing value. The report adds the residuals per name and the
+    /// parameters' standard errors.
+    #[arg(long, value_name = "FILE.csv")]
+    data: Option<std::path::PathBuf>,
     /// Start value of a parameter, or a fixed value of a parameter not fitted (repeatable).
     #[arg(long = "set", value_name = "P=VALUE")]
     set: Vec<String>,
@@ -93,11 +100,25 @@ fn fit_model(model: &Model, args: &FitArgs) -> Result<ExitCode, String> {
         Err(code) => return Ok(code),
     };
     let info = compiled.info().clone();
-    let targets = args
+    let mut targets = args
         .targets
         .iter()
         .map(|t| Target::parse(t, &info).map_err(|e| format!("--target: {e}")))
         .collect::<Result<Vec<_>, _>>()?;
+    let mut sigma_known = false;
+    if let Some(path) = &args.data {
+        let shown = path.display().to_string();
+        let text = read_data(path).map_err(|e| format!("--data: cannot read `{shown}`: {e}"))?;
+        let measured = fit::data::parse_data(&text, &shown, &info).map_err(|e| format!("--data: {e}"))?;
+        // Standard deviations are known when every value's weight came from a sigma column.
+        sigma_known = text.lines().next().is_some_and(|header| {
+            let cols: Vec<&str> = header.split(',').map(str::trim).collect();
+            cols.iter()
+                .filter(|c| **c != "time" && !c.starts_with("sigma_"))
+                .all(|c| cols.contains(&format!("sigma_{c}").as_str()))
+        });
+        targets.extend(measured);
+    }
     if targets.len() < free.len() {
         eprintln!(
             "warning: {} free parameters but {} target(s): the fit is underdetermined; the damped steps \
@@ -132,6 +153,7 @@ fn fit_model(model: &Model, args: &FitArgs) -> Result<ExitCode, String> {
         result,
         compile_seconds: compiled.compile_seconds(),
         fit_seconds: started.elapsed().as_secs_f64(),
+        sigma_known,
     };
     match args.format {
         Format::Table => super::print_out(&report.to_table()),
@@ -143,4 +165,17 @@ fn fit_model(model: &Model, args: &FitArgs) -> Result<ExitCode, String> {
         eprintln!("error: {}", report.reason());
         ExitCode::from(EXIT_GOAL_NOT_MET)
     })
+}
+
+/// A data file's text, refused beyond `MAX_DATA_BYTES` before it is read whole.
+fn read_data(path: &std::path::Path) -> std::io::Result<String> {
+    /// 10^6 measurements of a few columns are some 50 MB.
+    const MAX_DATA_BYTES: u64 = 256 << 20;
+    let len = std::fs::metadata(path)?.len();
+    if len > MAX_DATA_BYTES {
+        return Err(std::io::Error::other(format!(
+            "{len} bytes, more than the {MAX_DATA_BYTES} a data file may have"
+        )));
+    }
+    std::fs::read_to_string(path)
 }

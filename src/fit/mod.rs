@@ -13,6 +13,7 @@
 //! Code map: `target` (what to match, parsed from `NAME=VALUE@WEIGHT`), `evaluate` (one run ->
 //! residuals and Jacobian), `lm` (the solver), `report` (names, table, JSON).
 
+pub mod data;
 mod evaluate;
 mod lm;
 mod report;
@@ -269,7 +270,7 @@ pub fn fit<S: HybridSystem>(problem: &FitProblem<'_, S>, opts: &FitOptions) -> R
         .iter()
         .zip(&solved.evaluation.values)
         .zip(&tolerances)
-        .map(|((t, &v), &tol)| (v - t.value).abs() <= tol)
+        .map(|((t, &v), &tol)| t.observed || (v - t.value).abs() <= tol)
         .collect();
     Ok(FitResult {
         params: with_free(&solved.x),

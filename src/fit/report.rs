@@ -20,6 +20,17 @@ pub struct FitReport {
     pub result: FitResult,
     pub compile_seconds: f64,
     pub fit_seconds: f64,
+    /// Whether every measurement (`--data`) came with its standard deviation: the parameters'
+    /// standard errors are then not rescaled by the residual variance.
+    pub sigma_known: bool,
+}
+
+/// What a fit to measurements adds to the report: per observed name, how many values and the
+/// root mean square of `model - measured`; the free parameters' standard errors.
+struct DataSummary {
+    observations: usize,
+    by_name: Vec<(String, usize, f64)>,
+    standard_errors: Option<Vec<f64>>,
 }
 
 impl FitReport {
@@ -117,6 +128,34 @@ impl FitReport {
         }
     }
 
+    /// The statistics of the measurements among the targets, if any.
+    fn data_summary(&self) -> Option<DataSummary> {
+        let r = &self.result;
+        let observed: Vec<usize> = (0..self.targets.len()).filter(|&i| self.targets[i].observed).collect();
+        if observed.is_empty() {
+            return None;
+        }
+        let mut by_name: Vec<(String, usize, f64)> = Vec::new();
+        for &i in &observed {
+            let label = self.targets[i].label(&self.info);
+            let name = label.split_once('@').map_or(label.as_str(), |(n, _)| n).to_string();
+            let miss = r.evaluation.values[i] - self.targets[i].value;
+            match by_name.iter_mut().find(|(n, _, _)| *n == name) {
+                Some(entry) => {
+                    entry.1 += 1;
+                    entry.2 += miss * miss;
+                }
+                None => by_name.push((name, 1, miss * miss)),
+            }
+        }
+        for entry in &mut by_name {
+            entry.2 = (entry.2 / entry.1 as f64).sqrt();
+        }
+        let standard_errors =
+            super::data::standard_errors(&r.evaluation.jacobian, &r.evaluation.residuals, self.sigma_known);
+        Some(DataSummary { observations: observed.len(), by_name, standard_errors })
+    }
+
     /// The JSON object documented in the README.
     pub fn to_json(&self) -> Value {
         let r = &self.result;
@@ -177,9 +216,20 @@ impl FitReport {
             FitStop::MaxIterations => "max_iterations",
             FitStop::Stalled(_) => "stalled",
         };
+        let data = self.data_summary().map(|d| {
+            let by_name: Vec<Value> =
+                d.by_name.iter().map(|(n, c, rms)| json!({"name": n, "count": c, "rms": rms})).collect();
+            json!({
+                "observations": d.observations,
+                "by_name": by_name,
+                "sigma_known": self.sigma_known,
+                "standard_errors": d.standard_errors.map(|se| self.free_object(&se)),
+            })
+        });
         json!({
             "model": self.model,
             "free": self.free_names(),
+            "data": data,
             "params": params,
             "residuals": residuals,
             "objective": r.evaluation.objective(),
@@ -204,8 +254,12 @@ impl FitReport {
         let mut out = String::new();
         let free = self.free_names();
         let labels: Vec<String> = self.targets.iter().map(|t| t.label(&self.info)).collect();
-        let _ =
-            writeln!(out, "model {}   free {}   targets {}", self.model, free.join(", "), labels.join(", "));
+        let shown = if labels.len() > 8 {
+            format!("{}, ... ({} in all)", labels[..8].join(", "), labels.len())
+        } else {
+            labels.join(", ")
+        };
+        let _ = writeln!(out, "model {}   free {}   targets {shown}", self.model, free.join(", "));
         let pcols: String = free.iter().map(|n| format!("  {n:>16}")).collect();
         let _ = writeln!(
             out,
@@ -255,6 +309,27 @@ impl FitReport {
                 r.tolerances[i],
                 if r.met[i] { "" } else { "  not met" }
             );
+        }
+        if let Some(d) = self.data_summary() {
+            let _ = writeln!(out, "\ndata: {} measurements", d.observations);
+            for (name, count, rms) in &d.by_name {
+                let _ = writeln!(out, "  {name:<16}  {count:>8} values  residual rms {}", sci(*rms));
+            }
+            match &d.standard_errors {
+                Some(se) => {
+                    let scale = if self.sigma_known { "the given sigmas" } else { "the residual variance" };
+                    let _ = writeln!(out, "standard errors (from the Jacobian, scaled by {scale}):");
+                    for ((name, &j), se) in free.iter().zip(&self.info.grad_params).zip(se) {
+                        let _ = writeln!(out, "  {name} = {} +/- {}", num(r.params[j]), short(*se));
+                    }
+                }
+                None => {
+                    let _ = writeln!(
+                        out,
+                        "standard errors: none (J^T J is singular, or no more measurements than parameters)"
+                    );
+                }
+            }
         }
         let condition = if r.condition.is_finite() { num(r.condition) } else { "infinite".to_string() };
         let _ = writeln!(

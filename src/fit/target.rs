@@ -93,6 +93,9 @@ pub struct Target {
     pub value: f64,
     /// Multiplies the residual (the inverse of a standard deviation, in a weighted fit).
     pub weight: f64,
+    /// A measurement (`--data`), not an equation: its residual is the measurement's error, so
+    /// the fit converges at the least-squares minimum without meeting it.
+    pub observed: bool,
 }
 
 /// A `--target` text that does not name a target of the model.
@@ -149,7 +152,7 @@ impl Target {
                 .ok_or_else(|| TargetError::BadWeight { text: w.to_string() })?,
         };
         let observable = parse_observable(name, text, info)?;
-        Ok(Target { observable, value, weight })
+        Ok(Target { observable, value, weight, observed: false })
     }
 
     /// The target's name as the user writes it (`energy`, `touchdown#2`, `y@1.5`).

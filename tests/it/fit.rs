@@ -531,3 +531,105 @@ fn the_one_spelling_is_refused_clearly_where_it_names_nothing() {
         assert!(e.contains(needle), "{text}: {e}");
     }
 }
+
+// ---- fits to time series (`--data`) ----
+
+/// The dosing model's concentration in closed form (two doses, first-order absorption).
+fn dosing_conc(t: f64, ka: f64, ke: f64) -> f64 {
+    [2.0, 8.0]
+        .iter()
+        .map(|t_d| t - t_d)
+        .filter(|s| *s > 0.0)
+        .map(|s| 100.0 * ka / (ka - ke) * ((-ke * s).exp() - (-ka * s).exp()))
+        .sum::<f64>()
+        / 40.0
+}
+
+fn data_file(name: &str, text: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("hybc-data-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn noiseless_measurements_give_back_the_rates_to_1e_8() {
+    // Concentrations and gut amounts (a state) every hour, with a missing cell: the fit from the
+    // model's defaults (ka 1, ke 0.2) recovers ka = 1.3, ke = 0.25.
+    let mut text = String::from("time,conc,gut\n");
+    for k in 1..=12 {
+        let t = k as f64;
+        let gut: f64 = [2.0, 8.0]
+            .iter()
+            .map(|t_d| t - t_d)
+            .filter(|s| *s >= 0.0)
+            .map(|s| 100.0 * (-1.3 * s).exp())
+            .sum();
+        let gut = if k == 5 { String::new() } else { format!("{gut:e}") };
+        text += &format!("{t},{:e},{gut}\n", dosing_conc(t, 1.3, 0.25));
+    }
+    let path = data_file("noiseless.csv", &text);
+    let out = hybc(&[
+        "fit",
+        "models/dosing.hyb",
+        "--free",
+        "ka,ke",
+        "--data",
+        path.to_str().unwrap(),
+        "--format",
+        "json",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let json: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_relative_eq!(f(&json["params"]["ka"]), 1.3, max_relative = 1e-8);
+    assert_relative_eq!(f(&json["params"]["ke"]), 0.25, max_relative = 1e-8);
+    assert_eq!(json["data"]["observations"], 23);
+    assert_eq!(json["data"]["by_name"][0]["name"], "conc");
+    assert_eq!(json["data"]["by_name"][1]["count"], 11);
+    assert!(f(&json["data"]["by_name"][0]["rms"]) < 1e-8);
+}
+
+#[test]
+fn the_shipped_noisy_measurements_give_the_true_rates_within_three_standard_errors() {
+    // examples/data/dosing_conc.csv: ka = 1.3, ke = 0.25 with noise of sd 0.02 (its script).
+    let out = hybc(&[
+        "fit",
+        "models/dosing.hyb",
+        "--free",
+        "ka,ke",
+        "--data",
+        "examples/data/dosing_conc.csv",
+        "--format",
+        "json",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let json: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["data"]["sigma_known"], true);
+    for (name, truth) in [("ka", 1.3), ("ke", 0.25)] {
+        let (value, se) = (f(&json["params"][name]), f(&json["data"]["standard_errors"][name]));
+        assert!(se > 0.0 && (value - truth).abs() <= 3.0 * se, "{name} = {value} +/- {se}");
+    }
+    // The residuals are of the size of the noise.
+    let rms = f(&json["data"]["by_name"][0]["rms"]);
+    assert!(rms > 0.01 && rms < 0.03, "{rms}");
+}
+
+#[test]
+fn a_data_file_that_names_nothing_or_holds_no_number_is_refused_with_its_line() {
+    for (text, needle) in [
+        ("time,cons\n1,2\n", "column `cons` is not an output or a state of the model (did you mean `conc`?)"),
+        ("t,conc\n1,2\n", ":1: no `time` column"),
+        ("time,conc\n1,2\n2,x\n", ":3: column `conc`: `x` is not a finite number"),
+        ("time,conc,sigma_gut\n1,2,3\n", "`sigma_gut` has no column `gut`"),
+        ("time,conc,sigma_conc\n1,2,0\n", ":2: column `sigma_conc`: a standard deviation must be positive"),
+        ("time,conc\n1,2,3\n", ":2: expected 2 cells"),
+        ("time,conc\n1,\n", "no measurements"),
+    ] {
+        let path = data_file("bad.csv", text);
+        let out = hybc(&["fit", "models/dosing.hyb", "--free", "ka", "--data", path.to_str().unwrap()]);
+        assert_eq!(out.status.code(), Some(2), "{text}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(needle), "{text}: {err}");
+    }
+}

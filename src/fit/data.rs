@@ -1,0 +1,199 @@
+//! Fits to time series (`hybc fit --data obs.csv`): a CSV of measurements becomes one target per
+//! value (`NAME@TIME`, weighted by `1 / sigma`), and a finished fit gets the statistics of a
+//! least-squares estimate: the residuals per observed name and the parameters' standard errors
+//! from the Jacobian (the inverse Fisher information). No IO: the caller reads the file.
+
+use nalgebra::DMatrix;
+
+use super::target::{Observable, Target};
+use crate::sim::SystemInfo;
+
+/// The most measurements a data file may hold (one target, one residual and one Jacobian row
+/// each: 10^6 measurements of 10 free parameters are 80 MB of Jacobian).
+pub const MAX_OBSERVATIONS: usize = 1_000_000;
+
+/// A data file that cannot be read as measurements of the model.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum DataError {
+    #[error("{file}: the file is empty; expected a header line with a `time` column")]
+    Empty { file: String },
+    #[error("{file}:1: no `time` column in the header (columns: {columns})")]
+    NoTime { file: String, columns: String },
+    #[error("{file}:1: column `{name}` is not an output or a state of the model{hint} (outputs: {outputs}; states: {states})")]
+    UnknownColumn { file: String, name: String, hint: String, outputs: String, states: String },
+    #[error("{file}:1: column `{name}` appears twice")]
+    Repeated { file: String, name: String },
+    #[error("{file}:1: `sigma_{name}` has no column `{name}` to weigh")]
+    LoneSigma { file: String, name: String },
+    #[error("{file}:{line}: expected {expected} cells as in the header, found {found}")]
+    Cells { file: String, line: usize, expected: usize, found: usize },
+    #[error("{file}:{line}: column `{column}`: `{text}` is not a finite number")]
+    NotANumber { file: String, line: usize, column: String, text: String },
+    #[error("{file}:{line}: column `{column}`: a standard deviation must be positive, found {text}")]
+    BadSigma { file: String, line: usize, column: String, text: String },
+    #[error("{file}:{line}: a row needs its time")]
+    NoTimeValue { file: String, line: usize },
+    #[error("{file}: more than {cap} measurements")]
+    TooMany { file: String, cap: usize },
+    #[error("{file}: no measurements (every value cell is empty)")]
+    Nothing { file: String },
+}
+
+/// The measurements of `text` (a CSV file's contents, named `file` in messages) as targets: a
+/// `time` column, one column per observed output or state, optional `sigma_NAME` columns (the
+/// measurement's standard deviation: the weight is `1 / sigma`; 1 without). An empty cell is a
+/// missing value. Cells are separated by commas; surrounding spaces are ignored.
+pub fn parse_data(text: &str, file: &str, info: &SystemInfo) -> Result<Vec<Target>, DataError> {
+    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
+    let Some((_, header)) = lines.next() else {
+        return Err(DataError::Empty { file: file.to_string() });
+    };
+    let columns: Vec<&str> = header.split(',').map(str::trim).collect();
+    let time = columns
+        .iter()
+        .position(|c| *c == "time")
+        .ok_or_else(|| DataError::NoTime { file: file.to_string(), columns: columns.join(", ") })?;
+    // Per column: what it holds.
+    enum Column {
+        Time,
+        Value { output: bool, index: usize, sigma: Option<usize> },
+        Sigma,
+    }
+    let mut kinds: Vec<Column> = Vec::with_capacity(columns.len());
+    for (c, name) in columns.iter().enumerate() {
+        if columns[..c].contains(name) {
+            return Err(DataError::Repeated { file: file.to_string(), name: name.to_string() });
+        }
+        if c == time {
+            kinds.push(Column::Time);
+        } else if let Some(of) = name.strip_prefix("sigma_") {
+            if !columns.contains(&of) {
+                return Err(DataError::LoneSigma { file: file.to_string(), name: of.to_string() });
+            }
+            kinds.push(Column::Sigma);
+        } else {
+            let (output, index) = match Observable::parse(name, info) {
+                Ok(Observable::Output(i)) => (true, i),
+                Ok(Observable::State(i)) => (false, i),
+                _ => return Err(unknown(file, name, info)),
+            };
+            let sigma = columns.iter().position(|c| c.strip_prefix("sigma_") == Some(name));
+            kinds.push(Column::Value { output, index, sigma });
+        }
+    }
+    let number = |line: usize, column: &str, cell: &str| -> Result<f64, DataError> {
+        crate::number::parse_number(cell).map_err(|_| DataError::NotANumber {
+            file: file.to_string(),
+            line,
+            column: column.to_string(),
+            text: cell.to_string(),
+        })
+    };
+    let mut targets = Vec::new();
+    for (index, row) in lines {
+        let line = index + 1;
+        let cells: Vec<&str> = row.split(',').map(str::trim).collect();
+        if cells.len() != columns.len() {
+            return Err(DataError::Cells {
+                file: file.to_string(),
+                line,
+                expected: columns.len(),
+                found: cells.len(),
+            });
+        }
+        if cells[time].is_empty() {
+            return Err(DataError::NoTimeValue { file: file.to_string(), line });
+        }
+        let t = number(line, "time", cells[time])?;
+        for (c, kind) in kinds.iter().enumerate() {
+            let Column::Value { output, index, sigma } = *kind else { continue };
+            if cells[c].is_empty() {
+                continue;
+            }
+            let value = number(line, columns[c], cells[c])?;
+            let weight = match sigma.map(|s| (s, cells[s])) {
+                None | Some((_, "")) => 1.0,
+                Some((s, text)) => {
+                    let sd = number(line, columns[s], text)?;
+                    if sd <= 0.0 {
+                        let (file, column, text) =
+                            (file.to_string(), columns[s].to_string(), text.to_string());
+                        return Err(DataError::BadSigma { file, line, column, text });
+                    }
+                    1.0 / sd
+                }
+            };
+            if targets.len() == MAX_OBSERVATIONS {
+                return Err(DataError::TooMany { file: file.to_string(), cap: MAX_OBSERVATIONS });
+            }
+            let observable = Observable::At { output, index, time: t };
+            targets.push(Target { observable, value, weight, observed: true });
+        }
+    }
+    if targets.is_empty() {
+        return Err(DataError::Nothing { file: file.to_string() });
+    }
+    Ok(targets)
+}
+
+fn unknown(file: &str, name: &str, info: &SystemInfo) -> DataError {
+    let outputs: Vec<&str> = info.output_names.iter().map(String::as_str).collect();
+    let states: Vec<&str> = info.state_names.iter().map(String::as_str).collect();
+    let hint = crate::sema::closest_name(name, outputs.iter().chain(&states).copied())
+        .map(|s| format!(" (did you mean `{s}`?)"))
+        .unwrap_or_default();
+    let list = |v: &[&str]| if v.is_empty() { "none".to_string() } else { v.join(", ") };
+    DataError::UnknownColumn {
+        file: file.to_string(),
+        name: name.to_string(),
+        hint,
+        outputs: list(&outputs),
+        states: list(&states),
+    }
+}
+
+/// The standard error of each free parameter at a least-squares estimate with the weighted
+/// Jacobian `jacobian` (observations x free) and residuals `residuals`: the square roots of the
+/// diagonal of `s^2 (J^T J)^-1`. With measured standard deviations (`sigma_known`) the weighted
+/// residuals are in units of them and `s^2 = 1`; without, `s^2` is the residual variance
+/// `sum r^2 / (N - P)`. `None` where `J^T J` is singular or there are no more observations than
+/// parameters.
+pub fn standard_errors(jacobian: &DMatrix<f64>, residuals: &[f64], sigma_known: bool) -> Option<Vec<f64>> {
+    let (n, p) = jacobian.shape();
+    if n <= p {
+        return None;
+    }
+    let fisher = jacobian.transpose() * jacobian;
+    let covariance = fisher.try_inverse()?;
+    let s2 = if sigma_known { 1.0 } else { residuals.iter().map(|r| r * r).sum::<f64>() / (n - p) as f64 };
+    let se: Vec<f64> = (0..p).map(|j| (s2 * covariance[(j, j)]).sqrt()).collect();
+    se.iter().all(|v| v.is_finite()).then_some(se)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_straight_line_has_the_textbook_standard_errors() {
+        // y = a + b x at x = 0, 1, 2, 3 with residuals r: the slope's variance is s^2 / Sxx with
+        // Sxx = 5 and s^2 = sum r^2 / 2; the intercept's s^2 (1/4 + 2.25 / 5).
+        let j = DMatrix::from_row_slice(4, 2, &[1.0, 0.0, 1.0, 1.0, 1.0, 2.0, 1.0, 3.0]);
+        let r = [0.1, -0.2, 0.15, -0.05];
+        let s2 = r.iter().map(|v| v * v).sum::<f64>() / 2.0;
+        let se = standard_errors(&j, &r, false).unwrap();
+        assert!((se[1] - (s2 / 5.0).sqrt()).abs() < 1e-15);
+        assert!((se[0] - (s2 * (0.25 + 2.25 / 5.0)).sqrt()).abs() < 1e-15);
+        // Known sigmas: s^2 = 1. Too few observations, or a singular J^T J: none.
+        assert!((standard_errors(&j, &r, true).unwrap()[1] - (1.0f64 / 5.0).sqrt()).abs() < 1e-15);
+        assert!(
+            standard_errors(&DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, 1.0]), &r[..2], false).is_none()
+        );
+        assert!(standard_errors(
+            &DMatrix::from_row_slice(3, 2, &[1.0, 2.0, 1.0, 2.0, 1.0, 2.0]),
+            &r[..3],
+            false
+        )
+        .is_none());
+    }
+}
