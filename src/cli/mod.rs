@@ -4,6 +4,7 @@
 mod check;
 mod derive;
 mod fit;
+mod periodic;
 mod run;
 mod samples;
 mod sobol;
@@ -40,6 +41,9 @@ enum Command {
     /// Sobol' indices (first order, total, optionally second order) of outputs over parameter
     /// priors, from a Saltelli design; bootstrap intervals.
     Sobol(sobol::SobolArgs),
+    /// A periodic orbit through events: the initial values a run returns to right after a section
+    /// event, and the orbit's Floquet multipliers (stability).
+    Periodic(periodic::PeriodicArgs),
 }
 
 /// Exit codes, as documented in the README.
@@ -67,6 +71,7 @@ pub fn main() -> ExitCode {
         Command::Fit(args) => fit::run(&args),
         Command::Sweep(args) => sweep::run(&args),
         Command::Sobol(args) => sobol::run(&args),
+        Command::Periodic(args) => periodic::run(&args),
     }
 }
 

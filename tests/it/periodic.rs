@@ -1,0 +1,171 @@
+//! `hybc periodic`: the simplest walker's gait (Garcia, Chatterjee, Ruina and Coleman 1998) as a
+//! fixed point of the heel-strike return map, and its Floquet multipliers against an independent
+//! computation: central differences of the return map, run by run.
+
+use hybc::periodic::{find, PeriodicProblem};
+
+use crate::event_edges::WALKER;
+use crate::support::cli::hybc;
+use crate::support::runs::run;
+
+/// The published fixed point at gamma = 0.009 (theta0, dtheta0, dphi0; phi0 = 2 theta0).
+const PUBLISHED: [f64; 3] = [0.200310900544287, -0.199832473004977, -0.015822999948318];
+
+fn problem_from(model: &hybc::sema::Model, start: [f64; 3]) -> PeriodicProblem<'_> {
+    let free: Vec<_> = ["theta0", "dtheta0", "dphi0"].iter().map(|n| model.param_index(n).unwrap()).collect();
+    let mut params: Vec<f64> = model.params.iter().map(|p| p.default).collect();
+    for (p, v) in free.iter().zip(start) {
+        params[p.0 as usize] = v;
+    }
+    let sim = hybc::sim::SimOptions { t_end: 10.0, rtol: 1e-12, atol: 1e-14, ..Default::default() };
+    PeriodicProblem { model, section: "heelstrike".into(), free, params, sim, max_iter: 30, tol: 1e-11 }
+}
+
+/// The walker's state right after the heel strike from the full initial state `x0` (its swing
+/// angle free, unlike the model's `phi = 2 theta0`), by an ordinary run.
+fn strike(x0: [f64; 4]) -> Vec<f64> {
+    let text = WALKER
+        .replace("state phi = 2 * theta0", &format!("state phi = {:e}", x0[2]))
+        .replace("param theta0 = 0.200310900544287", &format!("param theta0 = {:e}", x0[0]))
+        .replace("param dtheta0 = -0.199832473004977", &format!("param dtheta0 = {:e}", x0[1]))
+        .replace("param dphi0 = -0.015822999948318", &format!("param dphi0 = {:e}", x0[3]));
+    let r = run(&text, &[], |o| {
+        o.t_end = 10.0;
+        o.rtol = 1e-12;
+        o.atol = 1e-14;
+    });
+    r.result().final_state.state.clone()
+}
+
+#[test]
+fn the_walker_returns_to_its_published_gait_and_its_multipliers_match_differences() {
+    let model = hybc::check_source(WALKER).unwrap();
+    // From a start 1% off the published gait.
+    let start = PUBLISHED.map(|v| v * 1.01);
+    let r = find(&problem_from(&model, start)).expect("a fixed point");
+    for (got, want) in
+        r.fixed_point.iter().zip([PUBLISHED[0], PUBLISHED[1], 2.0 * PUBLISHED[0], PUBLISHED[2]])
+    {
+        assert!((got - want).abs() < 1e-9, "{:?}", r.fixed_point);
+    }
+    assert!(r.residuals.len() <= 8, "{:?}", r.residuals);
+    // The period: one step of the published gait (3.8 s at gamma = 0.009).
+    assert!(r.period > 3.0 && r.period < 4.5, "{}", r.period);
+    // The monodromy matrix against central differences of the return map (h = 1e-6): each
+    // entry to 1e-6, which the differences resolve at rtol 1e-12.
+    let x = [r.fixed_point[0], r.fixed_point[1], r.fixed_point[2], r.fixed_point[3]];
+    let h = 1e-6;
+    for j in 0..4 {
+        let (mut up, mut down) = (x, x);
+        up[j] += h;
+        down[j] -= h;
+        let (a, b) = (strike(up), strike(down));
+        for i in 0..4 {
+            let fd = (a[i] - b[i]) / (2.0 * h);
+            assert!((r.monodromy[(i, j)] - fd).abs() < 1e-6, "M[{i}][{j}] = {} vs {fd}", r.monodromy[(i, j)]);
+        }
+    }
+    // Two multipliers are trivial (the section's), and the gait is stable: the others inside
+    // the unit circle.
+    let sizes: Vec<f64> = r.multipliers.iter().map(|(re, im)| re.hypot(*im)).collect();
+    assert_eq!(
+        sizes.iter().filter(|s| **s <= hybc::periodic::TRIVIAL_MULTIPLIER).count(),
+        2,
+        "{:?}",
+        r.multipliers
+    );
+    assert!(r.stable, "{:?}", r.multipliers);
+}
+
+#[test]
+fn a_section_that_is_not_a_stop_event_or_names_nothing_is_refused() {
+    let model = hybc::check_source(&WALKER.replace("    stop\n", "")).unwrap();
+    let e = find(&problem_from(&model, PUBLISHED)).unwrap_err();
+    assert!(e.to_string().contains("is not a `stop` event"), "{e}");
+    let model = hybc::check_source(WALKER).unwrap();
+    let mut p = problem_from(&model, PUBLISHED);
+    p.section = "toe".into();
+    assert!(find(&p).unwrap_err().to_string().contains("no event `toe`"));
+}
+
+#[test]
+fn the_short_period_gait_is_found_from_its_own_start_and_is_unstable() {
+    // Garcia et al.'s second gait at gamma = 0.009: shorter steps, one multiplier near 4.
+    let model = hybc::check_source(WALKER).unwrap();
+    let r = find(&problem_from(&model, [0.194, -0.204, -0.06])).expect("a fixed point");
+    assert!((r.fixed_point[0] - 0.19393736).abs() < 1e-7, "{:?}", r.fixed_point);
+    assert!(r.period < 3.2, "{}", r.period);
+    assert!(!r.stable);
+    // Its largest multiplier against the eigenvalues of the return map's central differences.
+    let x = [r.fixed_point[0], r.fixed_point[1], r.fixed_point[2], r.fixed_point[3]];
+    let h = 1e-6;
+    let mut fd = nalgebra::DMatrix::zeros(4, 4);
+    for j in 0..4 {
+        let (mut up, mut down) = (x, x);
+        up[j] += h;
+        down[j] -= h;
+        let (a, b) = (strike(up), strike(down));
+        for i in 0..4 {
+            fd[(i, j)] = (a[i] - b[i]) / (2.0 * h);
+        }
+    }
+    let fd_top = hybc::periodic::multipliers(&fd)[0];
+    assert!(
+        (r.multipliers[0].0 - fd_top.0).abs() < 1e-5 && r.multipliers[0].1 == 0.0,
+        "{:?} vs {fd_top:?}",
+        r.multipliers
+    );
+    assert!(r.multipliers[0].0 > 3.9 && r.multipliers[0].0 < 4.1, "{:?}", r.multipliers);
+}
+
+#[test]
+fn the_cli_finds_the_gait_on_a_second_slope_and_prints_the_json_contract() {
+    let out = hybc(&[
+        "periodic",
+        "models/walker.hyb",
+        "--section",
+        "heelstrike",
+        "--free",
+        "theta0,dtheta0,dphi0",
+        "--set",
+        "gamma=0.004",
+        "--format",
+        "json",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let theta = json["fixed_point"]["theta"].as_f64().unwrap();
+    let phi = json["fixed_point"]["phi"].as_f64().unwrap();
+    assert!((phi - 2.0 * theta).abs() < 1e-12 && theta > 0.1 && theta < 0.2, "{json}");
+    assert_eq!(json["multipliers"].as_array().unwrap().len(), 4);
+    assert_eq!(json["trivial"], 2);
+    assert_eq!(json["stable"], true);
+    assert!(json["period"].as_f64().unwrap() > 3.0);
+    // The shipped model's own defaults are the fixed point already: no iteration.
+    let out = hybc(&[
+        "periodic",
+        "models/walker.hyb",
+        "--section",
+        "heelstrike",
+        "--free",
+        "theta0,dtheta0,dphi0",
+        "--format",
+        "json",
+    ]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["iterations"], 0, "{json}");
+    // No fixed point from a start that falls over (the stance leg never reaches heel strike):
+    // exit 3, the run does not reach the section.
+    let out = hybc(&[
+        "periodic",
+        "models/walker.hyb",
+        "--section",
+        "heelstrike",
+        "--free",
+        "theta0",
+        "--set",
+        "dtheta0=0.5",
+    ]);
+    assert_eq!(out.status.code(), Some(3), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("does not reach the section"));
+}
