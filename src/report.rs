@@ -109,26 +109,8 @@ impl RunReport {
             out.write_all(b":")?;
             match field {
                 JsonField::Value(v) => serde_json::to_writer(&mut *out, &v)?,
-                JsonField::Events => {
-                    out.write_all(b"[")?;
-                    for (k, e) in self.result.events.iter().enumerate() {
-                        if k > 0 {
-                            out.write_all(b",")?;
-                        }
-                        serde_json::to_writer(&mut *out, &self.event_json(e))?;
-                    }
-                    out.write_all(b"]")?;
-                }
-                JsonField::Samples => {
-                    out.write_all(b"[")?;
-                    for (k, sample) in self.result.samples.iter().enumerate() {
-                        if k > 0 {
-                            out.write_all(b",")?;
-                        }
-                        serde_json::to_writer(&mut *out, &self.sample_json(sample))?;
-                    }
-                    out.write_all(b"]")?;
-                }
+                JsonField::Events => write_array(out, &self.result.events, |e| self.event_json(e))?,
+                JsonField::Samples => write_array(out, &self.result.samples, |s| self.sample_json(s))?,
             }
         }
         out.write_all(b"}")
@@ -358,6 +340,22 @@ impl RunReport {
         }
         Ok(())
     }
+}
+
+/// Writes `items` as a JSON array, one value at a time (never the whole tree in memory).
+fn write_array<T>(
+    out: &mut impl std::io::Write,
+    items: &[T],
+    value: impl Fn(&T) -> Value,
+) -> std::io::Result<()> {
+    out.write_all(b"[")?;
+    for (k, item) in items.iter().enumerate() {
+        if k > 0 {
+            out.write_all(b",")?;
+        }
+        serde_json::to_writer(&mut *out, &value(item))?;
+    }
+    out.write_all(b"]")
 }
 
 /// A top-level field of the JSON contract: a value, or the events or samples (written one at a

@@ -37,6 +37,24 @@ fn strike(x0: [f64; 4]) -> Vec<f64> {
     r.result().final_state.state.clone()
 }
 
+/// The return map's Jacobian at `x` by central differences (h = 1e-6), run by run: at rtol
+/// 1e-12 the differences resolve each entry to about 1e-7.
+fn differenced_monodromy(x: &[f64]) -> nalgebra::DMatrix<f64> {
+    let x = [x[0], x[1], x[2], x[3]];
+    let h = 1e-6;
+    let mut fd = nalgebra::DMatrix::zeros(4, 4);
+    for j in 0..4 {
+        let (mut up, mut down) = (x, x);
+        up[j] += h;
+        down[j] -= h;
+        let (a, b) = (strike(up), strike(down));
+        for i in 0..4 {
+            fd[(i, j)] = (a[i] - b[i]) / (2.0 * h);
+        }
+    }
+    fd
+}
+
 #[test]
 fn the_walker_returns_to_its_published_gait_and_its_multipliers_match_differences() {
     let model = hybc::check_source(WALKER).unwrap();
@@ -53,17 +71,10 @@ fn the_walker_returns_to_its_published_gait_and_its_multipliers_match_difference
     assert!(r.period > 3.0 && r.period < 4.5, "{}", r.period);
     // The monodromy matrix against central differences of the return map (h = 1e-6): each
     // entry to 1e-6, which the differences resolve at rtol 1e-12.
-    let x = [r.fixed_point[0], r.fixed_point[1], r.fixed_point[2], r.fixed_point[3]];
-    let h = 1e-6;
-    for j in 0..4 {
-        let (mut up, mut down) = (x, x);
-        up[j] += h;
-        down[j] -= h;
-        let (a, b) = (strike(up), strike(down));
-        for i in 0..4 {
-            let fd = (a[i] - b[i]) / (2.0 * h);
-            assert!((r.monodromy[(i, j)] - fd).abs() < 1e-6, "M[{i}][{j}] = {} vs {fd}", r.monodromy[(i, j)]);
-        }
+    let fd = differenced_monodromy(&r.fixed_point);
+    for (i, j) in (0..4).flat_map(|i| (0..4).map(move |j| (i, j))) {
+        let (exact, fd) = (r.monodromy[(i, j)], fd[(i, j)]);
+        assert!((exact - fd).abs() < 1e-6, "M[{i}][{j}] = {exact} vs {fd}");
     }
     // Two multipliers are trivial (the section's), and the gait is stable: the others inside
     // the unit circle.
@@ -97,19 +108,7 @@ fn the_short_period_gait_is_found_from_its_own_start_and_is_unstable() {
     assert!(r.period < 3.2, "{}", r.period);
     assert!(!r.stable);
     // Its largest multiplier against the eigenvalues of the return map's central differences.
-    let x = [r.fixed_point[0], r.fixed_point[1], r.fixed_point[2], r.fixed_point[3]];
-    let h = 1e-6;
-    let mut fd = nalgebra::DMatrix::zeros(4, 4);
-    for j in 0..4 {
-        let (mut up, mut down) = (x, x);
-        up[j] += h;
-        down[j] -= h;
-        let (a, b) = (strike(up), strike(down));
-        for i in 0..4 {
-            fd[(i, j)] = (a[i] - b[i]) / (2.0 * h);
-        }
-    }
-    let fd_top = hybc::periodic::multipliers(&fd)[0];
+    let fd_top = hybc::periodic::multipliers(&differenced_monodromy(&r.fixed_point))[0];
     assert!(
         (r.multipliers[0].0 - fd_top.0).abs() < 1e-5 && r.multipliers[0].1 == 0.0,
         "{:?} vs {fd_top:?}",
