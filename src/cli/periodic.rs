@@ -25,7 +25,8 @@ enum Format {
 pub struct PeriodicArgs {
     #[command(flatten)]
     model: ModelArg,
-    /// The section: a `stop` event; the orbit returns to its initial state right after it.
+    /// The section: an event; the orbit returns to its initial state right after its first
+    /// firing (a run of the return map stops there).
     #[arg(long, value_name = "EVENT")]
     section: String,
     /// The parameters that set the initial state, solved for: `P1,P2,...`.
@@ -79,9 +80,9 @@ fn solve(model: &Model, args: &PeriodicArgs) -> Result<ExitCode, String> {
             super::print_out(&text);
             Ok(ExitCode::SUCCESS)
         }
-        Err(
-            e @ (PeriodicError::NoSection { .. } | PeriodicError::NotStop { .. } | PeriodicError::NoFree),
-        ) => Err(format!("--section/--free: {e}")),
+        Err(e @ (PeriodicError::NoSection { .. } | PeriodicError::NoFree)) => {
+            Err(format!("--section/--free: {e}"))
+        }
         Err(e @ PeriodicError::NotConverged { .. }) => {
             eprintln!("error: {e}");
             Ok(ExitCode::from(EXIT_GOAL_NOT_MET))

@@ -3,9 +3,10 @@
 //! Jacobian, and the orbit's Floquet multipliers (the eigenvalues of the monodromy matrix, the
 //! return map's Jacobian, saltation matrices included).
 //!
-//! The return map is a run from the initial state to the section event, which must be a `stop`
-//! event: the final state then is the state right after it, and the run's total derivatives
-//! (`dstate_total`, with the motion of the stopping time) are the return map's Jacobian. The
+//! The return map is a run from the initial state to the first firing of the section event,
+//! made a `stop` event for the analysis (in a copy of the checked model): the final state then is
+//! the state right after it, and the run's total derivatives (`dstate_total`, with the motion of
+//! the stopping time) are the return map's Jacobian. The
 //! monodromy matrix needs the derivative with respect to every initial state, also those that no
 //! free parameter moves alone (the walker's swing angle starts at twice its stance angle): the
 //! model is compiled a second time with one extra parameter per state as that state's initial
@@ -29,7 +30,8 @@ pub const TRIVIAL_MULTIPLIER: f64 = 1e-8;
 #[derive(Clone, Debug)]
 pub struct PeriodicProblem<'m> {
     pub model: &'m sema::Model,
-    /// The section: a `stop` event.
+    /// The section: an event; the orbit returns to its initial state right after its first
+    /// firing (the event is made a `stop` event for the analysis).
     pub section: String,
     /// The parameters to solve for (they set the initial state).
     pub free: Vec<ParamIdx>,
@@ -66,8 +68,6 @@ pub struct PeriodicResult {
 pub enum PeriodicError {
     #[error("model has no event `{name}`; its events are {known}")]
     NoSection { name: String, known: String },
-    #[error("the section `{name}` is not a `stop` event: add `stop` to its reset block, so that a run ends right after it")]
-    NotStop { name: String },
     #[error("no free parameters: name the parameters that set the initial state")]
     NoFree,
     #[error("cannot compile the model: {0}")]
@@ -151,9 +151,10 @@ pub fn find(problem: &PeriodicProblem<'_>) -> Result<PeriodicResult, PeriodicErr
         let known: Vec<&str> = model.events.iter().filter(|e| !e.implicit).map(|e| e.name.as_str()).collect();
         PeriodicError::NoSection { name: problem.section.clone(), known: known.join(", ") }
     })?;
-    if !model.events[section].is_stop {
-        return Err(PeriodicError::NotStop { name: problem.section.clone() });
-    }
+    // A run of the return map ends right after the section's first firing.
+    let mut stopping = model.clone();
+    stopping.events[section].is_stop = true;
+    let model = &stopping;
     if problem.free.is_empty() {
         return Err(PeriodicError::NoFree);
     }
