@@ -109,15 +109,9 @@ fn fit_model(model: &Model, args: &FitArgs) -> Result<ExitCode, String> {
     if let Some(path) = &args.data {
         let shown = path.display().to_string();
         let text = read_data(path).map_err(|e| format!("--data: cannot read `{shown}`: {e}"))?;
-        let measured = fit::data::parse_data(&text, &shown, &info).map_err(|e| format!("--data: {e}"))?;
-        // Standard deviations are known when every value's weight came from a sigma column.
-        sigma_known = text.lines().next().is_some_and(|header| {
-            let cols: Vec<&str> = header.split(',').map(str::trim).collect();
-            cols.iter()
-                .filter(|c| **c != "time" && !c.starts_with("sigma_"))
-                .all(|c| cols.contains(&format!("sigma_{c}").as_str()))
-        });
-        targets.extend(measured);
+        let data = fit::data::parse_data(&text, &shown, &info).map_err(|e| format!("--data: {e}"))?;
+        sigma_known = data.sigma_known;
+        targets.extend(data.targets);
     }
     if targets.len() < free.len() {
         eprintln!(

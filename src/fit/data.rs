@@ -43,7 +43,16 @@ pub enum DataError {
 /// `time` column, one column per observed output or state, optional `sigma_NAME` columns (the
 /// measurement's standard deviation: the weight is `1 / sigma`; 1 without). An empty cell is a
 /// missing value. Cells are separated by commas; surrounding spaces are ignored.
-pub fn parse_data(text: &str, file: &str, info: &SystemInfo) -> Result<Vec<Target>, DataError> {
+/// Measurements read from a data file: one observed target per value cell.
+#[derive(Clone, Debug)]
+pub struct Data {
+    pub targets: Vec<Target>,
+    /// Whether every value column has its `sigma_` column: the weighted residuals are then in
+    /// units of the measurements' standard deviations (see [`standard_errors`]).
+    pub sigma_known: bool,
+}
+
+pub fn parse_data(text: &str, file: &str, info: &SystemInfo) -> Result<Data, DataError> {
     let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
     let Some((_, header)) = lines.next() else {
         return Err(DataError::Empty { file: file.to_string() });
@@ -133,7 +142,8 @@ pub fn parse_data(text: &str, file: &str, info: &SystemInfo) -> Result<Vec<Targe
     if targets.is_empty() {
         return Err(DataError::Nothing { file: file.to_string() });
     }
-    Ok(targets)
+    let sigma_known = kinds.iter().all(|k| !matches!(k, Column::Value { sigma: None, .. }));
+    Ok(Data { targets, sigma_known })
 }
 
 fn unknown(file: &str, name: &str, info: &SystemInfo) -> DataError {

@@ -1137,8 +1137,10 @@ impl Detector {
         p: &[f64],
     ) {
         let (t0, h) = (dense.t0(), dense.h());
-        dense.eval(t0, &mut self.x[..n]);
-        let gt = sys.guard_grad(ev, t0, &self.x, p, &mut self.gx, &mut self.gp);
+        // The start of the step on the interpolant, once: the gradient's argument (constant for
+        // an affine guard) and the base of every extremum's value below.
+        dense.eval(t0, &mut self.dx[..n]);
+        let gt = sys.guard_grad(ev, t0, &self.dx, p, &mut self.gx, &mut self.gp);
         let mut coef = [0.0; poly::CAP];
         let len = dense.linear_form(&self.gx, &mut coef);
         let mut guard = Poly::from_coefficients(&coef, len);
@@ -1151,7 +1153,6 @@ impl Detector {
                 // The value from the dense output itself, not from the power basis: that sums
                 // terms of the guard's size over the whole step, and a bounce a billionth of a
                 // long step wide has its apex far below their round-off.
-                dense.eval(t0, &mut self.dx[..n]);
                 dense.eval(te, &mut self.x[..n]);
                 let moved: f64 =
                     self.gx.iter().zip(self.x.iter().zip(&self.dx)).map(|(g, (x, b))| g * (x - b)).sum();

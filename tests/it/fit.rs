@@ -585,6 +585,8 @@ fn noiseless_measurements_give_back_the_rates_to_1e_8() {
     assert_relative_eq!(f(&json["params"]["ka"]), 1.3, max_relative = 1e-8);
     assert_relative_eq!(f(&json["params"]["ke"]), 0.25, max_relative = 1e-8);
     assert_eq!(json["data"]["observations"], 23);
+    // No sigma columns: the standard errors are scaled by the residual variance.
+    assert_eq!(json["data"]["sigma_known"], false);
     assert_eq!(json["data"]["by_name"][0]["name"], "conc");
     assert_eq!(json["data"]["by_name"][1]["count"], 11);
     assert!(f(&json["data"]["by_name"][0]["rms"]) < 1e-8);
