@@ -3,7 +3,9 @@
 //! timed twice: through `sim::run` (a fresh `Simulator` per run: options checked and scratch
 //! buffers allocated every time) and through one `Simulator` reused for every run, which is what
 //! sweeps, fits and gradient checks do. Last, the reused run with gradients and 100 `--at` samples
-//! from the dense output, against the same run without (`_at100`).
+//! from the dense output, against the same run without (`_at100`); and the same pair on the dosing
+//! model (two doses, gradients with respect to ka and ke, 53 steps to t = 12), the shape of a fit
+//! to a time series.
 //! Run: `cargo bench --bench ball_run`.
 
 use std::hint::black_box;
@@ -40,6 +42,22 @@ fn ball_run(c: &mut Criterion) {
     }
 }
 
+fn dosing_samples(c: &mut Criterion) {
+    let model = hybc::check_source(include_str!("../models/dosing.hyb")).expect("dosing checks");
+    let funcs = lower(&model);
+    let grad = vec![model.param_index("ka").expect("ka"), model.param_index("ke").expect("ke")];
+    let compiled = compile(&funcs, system_info(&model, &grad), &CompileOptions::default()).expect("compiles");
+    let p: Vec<f64> = model.params.iter().map(|p| p.default).collect();
+    let opts = SimOptions { t_end: 12.0, rtol: 1e-10, atol: 1e-12, ..SimOptions::default() };
+    let at: Vec<f64> = (0..100).map(|k| 12.0 * k as f64 / 99.0).collect();
+    for (label, opts) in [("", opts.clone()), ("_at100", SimOptions { at, ..opts })] {
+        let mut sim = Simulator::new(&compiled, &opts).expect("valid options");
+        c.bench_function(&format!("dosing_run_T12_grad_ka_ke_reused_simulator{label}"), |b| {
+            b.iter(|| sim.run(black_box(&p)).expect("runs"))
+        });
+    }
+}
+
 fn ball_compile(c: &mut Criterion) {
     let source = include_str!("../models/ball.hyb");
     c.bench_function("ball_compile_parse_to_kernels_grad_all", |b| {
@@ -52,5 +70,5 @@ fn ball_compile(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, ball_run, ball_compile);
+criterion_group!(benches, ball_run, dosing_samples, ball_compile);
 criterion_main!(benches);

@@ -44,7 +44,7 @@ impl RunReport {
         Value::Object(m)
     }
 
-    fn named_rows(&self, names: &[String], a: &Option<Vec<f64>>) -> Value {
+    fn named_rows(&self, names: &[String], a: Option<&[f64]>) -> Value {
         match a {
             None => Value::Null,
             Some(a) => Value::Object(
@@ -85,7 +85,7 @@ impl RunReport {
                         Value::Array(self.result.events.iter().map(|e| self.event_json(e)).collect())
                     }
                     JsonField::Samples => {
-                        Value::Array(self.result.samples.iter().map(|s| self.sample_json(s)).collect())
+                        Value::Array(self.result.samples.iter().map(|s| self.sample_json(&s)).collect())
                     }
                 };
                 (key.to_string(), value)
@@ -110,7 +110,7 @@ impl RunReport {
             match field {
                 JsonField::Value(v) => serde_json::to_writer(&mut *out, &v)?,
                 JsonField::Events => write_array(out, &self.result.events, |e| self.event_json(e))?,
-                JsonField::Samples => write_array(out, &self.result.samples, |s| self.sample_json(s))?,
+                JsonField::Samples => write_array(out, self.result.samples.iter(), |s| self.sample_json(&s))?,
             }
         }
         out.write_all(b"}")
@@ -127,10 +127,10 @@ impl RunReport {
             "mode": if s.reached { json!(self.mode_name(s.mode)) } else { Value::Null },
             "after_events": s.after_events,
             "near_event": s.near_event,
-            "state": named(&self.info.state_names, &s.state),
-            "dstate": self.named_rows(&self.info.state_names, &s.dstate),
-            "outputs": named(&self.info.output_names, &s.outputs),
-            "doutputs": self.named_rows(&self.info.output_names, &s.doutputs),
+            "state": named(&self.info.state_names, s.state),
+            "dstate": self.named_rows(&self.info.state_names, s.dstate),
+            "outputs": named(&self.info.output_names, s.outputs),
+            "doutputs": self.named_rows(&self.info.output_names, s.doutputs),
         })
     }
 
@@ -164,13 +164,13 @@ impl RunReport {
             "time": f.time,
             "mode": self.mode_name(f.mode),
             "state": named(&self.info.state_names, &f.state),
-            "dstate": self.named_rows(&self.info.state_names, &f.dstate),
+            "dstate": self.named_rows(&self.info.state_names, f.dstate.as_deref()),
             "outputs": named(&self.info.output_names, &f.outputs),
-            "doutputs": self.named_rows(&self.info.output_names, &f.doutputs),
+            "doutputs": self.named_rows(&self.info.output_names, f.doutputs.as_deref()),
         });
         if let StopReason::Event { .. } = r.stopped_by {
-            fin["dstate_total"] = self.named_rows(&self.info.state_names, &f.dstate_total);
-            fin["doutputs_total"] = self.named_rows(&self.info.output_names, &f.doutputs_total);
+            fin["dstate_total"] = self.named_rows(&self.info.state_names, f.dstate_total.as_deref());
+            fin["doutputs_total"] = self.named_rows(&self.info.output_names, f.doutputs_total.as_deref());
         }
         if let Some(c) = &r.end_cusp {
             // The other side of a cusp at t_end: the final values had the events there not fired.
@@ -178,9 +178,9 @@ impl RunReport {
             fin["without_end_events"] = json!({
                 "events": events,
                 "state": named(&self.info.state_names, &c.state),
-                "dstate": self.named_rows(&self.info.state_names, &c.dstate),
+                "dstate": self.named_rows(&self.info.state_names, c.dstate.as_deref()),
                 "outputs": named(&self.info.output_names, &c.outputs),
-                "doutputs": self.named_rows(&self.info.output_names, &c.doutputs),
+                "doutputs": self.named_rows(&self.info.output_names, c.doutputs.as_deref()),
             });
         }
         let stopped_by = json!(r.stopped_by.name());
@@ -324,7 +324,7 @@ impl RunReport {
         )?;
         let head: String = names.iter().map(|n| format!("  {n:>18}")).collect();
         writeln!(out, "  {:>18}  {:<2}{head}", "time", "")?;
-        for s in &r.samples {
+        for s in r.samples.iter() {
             let flag = match (s.after_events, s.near_event) {
                 (true, _) => "+",
                 (false, Some(_)) => "~",
@@ -333,7 +333,7 @@ impl RunReport {
             let values: String = s
                 .outputs
                 .iter()
-                .chain(&s.state)
+                .chain(s.state)
                 .map(|v| format!("  {:>18}", if s.reached { num(*v) } else { "-".to_string() }))
                 .collect();
             writeln!(out, "  {:>18}  {flag:<2}{values}", num(s.time))?;
@@ -345,11 +345,11 @@ impl RunReport {
 /// Writes `items` as a JSON array, one value at a time (never the whole tree in memory).
 fn write_array<T>(
     out: &mut impl std::io::Write,
-    items: &[T],
-    value: impl Fn(&T) -> Value,
+    items: impl IntoIterator<Item = T>,
+    value: impl Fn(T) -> Value,
 ) -> std::io::Result<()> {
     out.write_all(b"[")?;
-    for (k, item) in items.iter().enumerate() {
+    for (k, item) in items.into_iter().enumerate() {
         if k > 0 {
             out.write_all(b",")?;
         }

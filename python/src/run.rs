@@ -259,11 +259,11 @@ impl Run {
         let width = k + n;
         let mut values: Vec<f64> = Vec::with_capacity(samples.len() * width);
         let mut dvalues: Vec<f64> = Vec::with_capacity(samples.len() * width * m);
-        for s in samples {
-            values.extend(s.outputs.iter().chain(&s.state));
+        for s in samples.iter() {
+            values.extend(s.outputs.iter().chain(s.state));
             for i in 0..width {
-                let (d, rows, row) = if i < k { (&s.doutputs, k, i) } else { (&s.dstate, n, i - k) };
-                dvalues.extend((0..m).map(|j| d.as_ref().map_or(f64::NAN, |d| d[j * rows + row])));
+                let (d, rows, row) = if i < k { (s.doutputs, k, i) } else { (s.dstate, n, i - k) };
+                dvalues.extend((0..m).map(|j| d.map_or(f64::NAN, |d| d[j * rows + row])));
             }
         }
         let dict = PyDict::new(py);

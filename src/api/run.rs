@@ -3,7 +3,7 @@
 
 use super::Compiled;
 use crate::report::RunReport;
-use crate::sim::{EventRecord, Sample, SimResult, SimWarning, StopReason};
+use crate::sim::{EventRecord, Samples, SimResult, SimWarning, StopReason};
 
 /// The result of one simulation, read by name.
 ///
@@ -35,7 +35,7 @@ impl Run {
     }
 
     /// The values at `SimOptions::at`, one per time asked for, in order.
-    pub fn samples(&self) -> &[Sample] {
+    pub fn samples(&self) -> &Samples {
         &self.result.samples
     }
 

@@ -67,19 +67,18 @@ fn write_rows(out: &mut impl Write, report: &RunReport) -> io::Result<()> {
     }
     writeln!(out, "{}", head.join(","))?;
     let (k, n) = (info.n_outputs(), info.n_states());
-    for s in &report.result.samples {
+    for s in report.result.samples.iter() {
         let mut row = vec![
             format!("{:e}", s.time),
             s.reached.to_string(),
             s.after_events.to_string(),
             s.near_event.map(|e| e.to_string()).unwrap_or_default(),
         ];
-        row.extend(s.outputs.iter().chain(&s.state).map(|v| value(*v)));
+        row.extend(s.outputs.iter().chain(s.state).map(|v| value(*v)));
         for j in 0..grad.len() {
-            let d =
-                |a: &Option<Vec<f64>>, len: usize, i: usize| a.as_ref().map_or(f64::NAN, |a| a[j * len + i]);
-            row.extend((0..k).map(|i| value(d(&s.doutputs, k, i))));
-            row.extend((0..n).map(|i| value(d(&s.dstate, n, i))));
+            let d = |a: Option<&[f64]>, len: usize, i: usize| a.map_or(f64::NAN, |a| a[j * len + i]);
+            row.extend((0..k).map(|i| value(d(s.doutputs, k, i))));
+            row.extend((0..n).map(|i| value(d(s.dstate, n, i))));
         }
         writeln!(out, "{}", row.join(","))?;
     }

@@ -191,7 +191,7 @@ fn read(
         }
         Observable::At { output, index, time } => {
             // `fit` samples every target's time; one the run did not reach has no value.
-            let sample = result.samples.iter().find(|s| s.time == time).filter(|s| s.reached);
+            let sample = result.samples.at_time(time).filter(|s| s.reached);
             let sample = sample.ok_or(Missing::Time)?;
             let (values, d, rows) = if output {
                 (&sample.outputs, &sample.doutputs, info.n_outputs())

@@ -18,7 +18,7 @@ use super::jump::{dot_nonzero, CrossingContext, Jump, JumpOutcome};
 use super::options::SimOptions;
 use super::recorder::{Point, PointKind, Recorder};
 use super::result::{
-    EndCusp, EventRecord, FinalState, Sample, SimError, SimResult, SimStats, SimWarning, StopReason,
+    EndCusp, EventRecord, FinalState, Samples, SimError, SimResult, SimStats, SimWarning, StopReason,
 };
 use super::rk::Rk;
 use super::stepper::{Interpolant, Rhs, Stepper};
@@ -158,7 +158,7 @@ impl<S: HybridSystem + ?Sized> Rhs for ModeRhs<'_, S> {
 /// [`Self::finish`] turns it into the run's result.
 pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = Rk> {
     /// The values at `SimOptions::at` taken so far (the next one due is `samples.len()`).
-    samples: Vec<Sample>,
+    samples: Samples,
     sys: &'a S,
     info: &'a SystemInfo,
     p: &'a [f64],
@@ -282,7 +282,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             reset_onto_guard: Vec::new(),
             onto_guard_dte: Vec::new(),
             before_end: None,
-            samples: Vec::with_capacity(opts.at.len()),
+            samples: Samples::with_capacity((n, m, info.n_outputs()), opts.at.len()),
         };
         if it.z[..n].iter().any(|v| !v.is_finite()) {
             it.done = Some(it.fault_nonfinite());
@@ -1202,11 +1202,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         }
         while self.at_due(t_seg_end, before_instant) {
             let ts = self.opts.at[self.samples.len()];
-            let z = &mut self.record_buf.1;
+            let (z, _, _) = self.samples.push(ts, self.mode);
             self.stepper.interpolant().eval(ts, z);
-            let z = std::mem::take(&mut self.record_buf.1);
-            self.push_sample(ts, &z);
-            self.record_buf.1 = z;
+            self.fill_sample_outputs();
         }
     }
 
@@ -1215,37 +1213,26 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     fn record_at_current_point(&mut self) {
         while self.at_due(self.t, false) {
             let ts = self.opts.at[self.samples.len()];
-            let z = std::mem::take(self.z);
-            self.push_sample(ts, &z);
-            *self.z = z;
+            let (z, _, _) = self.samples.push(ts, self.mode);
+            z.copy_from_slice(&self.z[..]);
+            self.fill_sample_outputs();
         }
     }
 
-    /// Appends the sample at `ts` of the state and sensitivities `z`, with the outputs and their
-    /// derivatives `y_x S + y_p` at that fixed time.
-    fn push_sample(&mut self, ts: f64, z: &[f64]) {
+    /// Fills the outputs of the sample just pushed, and their derivatives `y_x S + y_p` at that
+    /// fixed time, from its state and sensitivities.
+    fn fill_sample_outputs(&mut self) {
         let (n, m, k) = (self.n, self.m, self.info.n_outputs());
+        let row = self.samples.len() - 1;
+        let (z, outputs, doutputs) = self.samples.row_mut(row);
         let (x, s) = z.split_at(n);
-        let mut outputs = vec![0.0; k];
-        self.sys.outputs(ts, x, self.p, &mut outputs);
-        let doutputs = if m > 0 {
+        let ts = self.opts.at[row];
+        self.sys.outputs(ts, x, self.p, outputs);
+        if m > 0 {
             let (yx, yp, yt) = &mut *self.output_jac;
             self.sys.output_jac(ts, x, self.p, yx, yp, yt);
-            Some(output_sens((n, m, k), &*self.output_jac, s, None))
-        } else {
-            None
-        };
-        self.samples.push(Sample {
-            time: ts,
-            reached: true,
-            mode: self.mode,
-            state: x.to_vec(),
-            dstate: (m > 0).then(|| s.to_vec()),
-            outputs,
-            doutputs,
-            after_events: false,
-            near_event: None,
-        });
+            output_sens_into((n, m, k), &*self.output_jac, s, None, doutputs);
+        }
     }
 
     /// Samples due at the current point itself (the start of the run).
@@ -1287,7 +1274,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     pub fn finish(mut self, stopped_by: StopReason) -> SimResult {
         self.record_at_current_point();
         let mut samples = std::mem::take(&mut self.samples);
-        samples::complete(&mut samples, &self.opts.at, &self.events, (self.n, self.m, self.info.n_outputs()));
+        samples::complete(&mut samples, &self.opts.at, &self.events);
         let (n, m, k) = (self.n, self.m, self.info.n_outputs());
         let t = self.t;
         let x = &self.z[..n];
@@ -1356,12 +1343,24 @@ fn on_breakpoint(t: f64, at: f64) -> bool {
 /// `y_x S_j + y_p_j` (`+ y_t dt_j` for totals), column per parameter, for `k` outputs of `n`
 /// states and `m` parameters, from the output Jacobians `(y_x, y_p, y_t)`.
 fn output_sens(
+    shape: (usize, usize, usize),
+    jac: &(Vec<f64>, Vec<f64>, Vec<f64>),
+    sens: &[f64],
+    dte: Option<&[f64]>,
+) -> Vec<f64> {
+    let mut out = vec![0.0; shape.2 * shape.1];
+    output_sens_into(shape, jac, sens, dte, &mut out);
+    out
+}
+
+/// [`output_sens`] into `out` (k * m).
+fn output_sens_into(
     (n, m, k): (usize, usize, usize),
     (yx, yp, yt): &(Vec<f64>, Vec<f64>, Vec<f64>),
     sens: &[f64],
     dte: Option<&[f64]>,
-) -> Vec<f64> {
-    let mut out = vec![0.0; k * m];
+    out: &mut [f64],
+) {
     for j in 0..m {
         for i in 0..k {
             let row = &yx[i * n..(i + 1) * n];
@@ -1375,7 +1374,6 @@ fn output_sens(
             out[j * k + i] = v;
         }
     }
-    out
 }
 
 /// Events within the resolution at which instants are told apart (`1e-9 max(|t|, 1)`, as for

@@ -418,26 +418,45 @@ pub struct SimResult {
     /// the other side, the final values and derivatives had they not fired.
     pub end_cusp: Option<EndCusp>,
     /// The values at `SimOptions::at`, one per time asked for, in order.
-    pub samples: Vec<Sample>,
+    pub samples: Samples,
+}
+
+/// The values at `SimOptions::at`, one row per time asked for, in order, kept in flat arrays
+/// (one allocation per array and run, not per sample: a fit to a time series samples every run).
+/// Read a row with [`Samples::get`] or [`Samples::iter`], which give [`Sample`] views.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Samples {
+    /// (states, differentiated parameters, outputs).
+    shape: (usize, usize, usize),
+    time: Vec<f64>,
+    reached: Vec<bool>,
+    mode: Vec<usize>,
+    /// Per row the states (n) then their derivatives (n * m): the layout the dense output fills.
+    z: Vec<f64>,
+    outputs: Vec<f64>,
+    /// Per row k * m.
+    doutputs: Vec<f64>,
+    after_events: Vec<bool>,
+    near_event: Vec<Option<usize>>,
 }
 
 /// The states and outputs at one time of `SimOptions::at`, from the dense output of the step
 /// that holds it, with their derivatives at that fixed time (column per parameter, as
 /// `FinalState`): the interpolated sensitivities, which are the derivative of the interpolated
-/// states.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Sample {
+/// states. A view into [`Samples`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Sample<'a> {
     pub time: f64,
     /// False when the run stopped before this time (an event `stop`, Zeno, a fault): then the
     /// values are NaN and the derivatives `None`.
     pub reached: bool,
     pub mode: usize,
-    pub state: Vec<f64>,
+    pub state: &'a [f64],
     /// `dx/dp` (n * m), NaN where a derivative does not exist; `None` without parameters.
-    pub dstate: Option<Vec<f64>>,
-    pub outputs: Vec<f64>,
+    pub dstate: Option<&'a [f64]>,
+    pub outputs: &'a [f64],
     /// `y_x dx/dp + y_p` (k * m).
-    pub doutputs: Option<Vec<f64>>,
+    pub doutputs: Option<&'a [f64]>,
     /// The sample is at an event instant: the values are those after the instant's events.
     pub after_events: bool,
     /// An event (its index in `SimResult::events`) within the time resolution of which the sample
@@ -445,6 +464,119 @@ pub struct Sample {
     /// change moves the event across the sample, so the derivatives there hold on one side only
     /// (a cusp). The nearest such event.
     pub near_event: Option<usize>,
+}
+
+impl Samples {
+    /// No rows yet, room for `rows` of `shape` (states, differentiated parameters, outputs).
+    pub(crate) fn with_capacity(shape: (usize, usize, usize), rows: usize) -> Samples {
+        let (n, m, k) = shape;
+        Samples {
+            shape,
+            time: Vec::with_capacity(rows),
+            reached: Vec::with_capacity(rows),
+            mode: Vec::with_capacity(rows),
+            z: Vec::with_capacity(rows * (n + n * m)),
+            outputs: Vec::with_capacity(rows * k),
+            doutputs: Vec::with_capacity(rows * k * m),
+            after_events: Vec::with_capacity(rows),
+            near_event: Vec::with_capacity(rows),
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.time.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.time.is_empty()
+    }
+
+    /// Row `i`.
+    pub fn get(&self, i: usize) -> Option<Sample<'_>> {
+        if i >= self.len() {
+            return None;
+        }
+        let (n, m, k) = self.shape;
+        let (zw, dyw) = (n + n * m, k * m);
+        let z = &self.z[i * zw..(i + 1) * zw];
+        let reached = self.reached[i];
+        let with_derivatives = reached && m > 0;
+        Some(Sample {
+            time: self.time[i],
+            reached,
+            mode: self.mode[i],
+            state: &z[..n],
+            dstate: with_derivatives.then(|| &z[n..]),
+            outputs: &self.outputs[i * k..(i + 1) * k],
+            doutputs: with_derivatives.then(|| &self.doutputs[i * dyw..(i + 1) * dyw]),
+            after_events: self.after_events[i],
+            near_event: self.near_event[i],
+        })
+    }
+
+    /// The rows in time order.
+    pub fn iter(&self) -> impl DoubleEndedIterator<Item = Sample<'_>> + ExactSizeIterator + '_ {
+        (0..self.len()).map(|i| self.get(i).expect("in range"))
+    }
+
+    /// The first row at time `t` (the times are ascending), if one was asked for.
+    pub fn at_time(&self, t: f64) -> Option<Sample<'_>> {
+        let i = self.time.partition_point(|&s| s < t);
+        self.time.get(i).filter(|&&s| s == t).and_then(|_| self.get(i))
+    }
+
+    /// Appends a row at `time` in `mode` and gives its state-and-sensitivities, outputs and
+    /// output-derivative slots (zeroed) to fill.
+    pub(crate) fn push(&mut self, time: f64, mode: usize) -> (&mut [f64], &mut [f64], &mut [f64]) {
+        let (n, m, k) = self.shape;
+        self.time.push(time);
+        self.reached.push(true);
+        self.mode.push(mode);
+        self.after_events.push(false);
+        self.near_event.push(None);
+        let (z0, y0, dy0) = (self.z.len(), self.outputs.len(), self.doutputs.len());
+        self.z.resize(z0 + n + n * m, 0.0);
+        self.outputs.resize(y0 + k, 0.0);
+        self.doutputs.resize(dy0 + k * m, 0.0);
+        (&mut self.z[z0..], &mut self.outputs[y0..], &mut self.doutputs[dy0..])
+    }
+
+    /// The state-and-sensitivities, outputs and output-derivative slots of row `i`.
+    pub(crate) fn row_mut(&mut self, i: usize) -> (&mut [f64], &mut [f64], &mut [f64]) {
+        let (n, m, k) = self.shape;
+        let (zw, dyw) = (n + n * m, k * m);
+        (
+            &mut self.z[i * zw..(i + 1) * zw],
+            &mut self.outputs[i * k..(i + 1) * k],
+            &mut self.doutputs[i * dyw..(i + 1) * dyw],
+        )
+    }
+
+    /// Appends a row for a time the run did not reach: NaN values, no derivatives.
+    pub(crate) fn push_unreached(&mut self, time: f64) {
+        let (z, y, dy) = self.push(time, 0);
+        z.fill(f64::NAN);
+        y.fill(f64::NAN);
+        dy.fill(f64::NAN);
+        *self.reached.last_mut().expect("just pushed") = false;
+    }
+
+    /// The times of the rows.
+    pub fn times(&self) -> &[f64] {
+        &self.time
+    }
+
+    /// Marks row `i` as taken after the events of its instant, and the event it is near.
+    pub(crate) fn mark(&mut self, i: usize, after_events: bool, near_event: Option<usize>) {
+        self.after_events[i] = after_events;
+        self.near_event[i] = near_event;
+    }
+}
+
+impl Serialize for Samples {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_seq(self.iter())
+    }
 }
 
 /// The final values of a run without the events it fired at `t_end` (see `SimResult::end_cusp`).

@@ -62,7 +62,7 @@ impl Output {
             Observable::LastFiring { name_event } => {
                 fired(name_event).next_back().map_or(f64::NAN, |e| e.time)
             }
-            Observable::At { output, index, time } => match r.samples.iter().find(|s| s.time == time) {
+            Observable::At { output, index, time } => match r.samples.at_time(time) {
                 Some(s) if s.reached => {
                     if output {
                         s.outputs[index]

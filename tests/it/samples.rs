@@ -33,7 +33,7 @@ fn state(s: &Sample, i: usize) -> f64 {
 
 /// `dstate[j * n + i]`.
 fn dstate(s: &Sample, i: usize, j: usize, n: usize) -> f64 {
-    s.dstate.as_ref().expect("derivatives")[j * n + i]
+    s.dstate.expect("derivatives")[j * n + i]
 }
 
 #[test]
@@ -46,7 +46,8 @@ fn the_ball_between_bounces_matches_its_closed_form_with_derivatives() {
         o.at = at.clone();
     });
     assert_eq!(r.samples().len(), at.len());
-    for s in r.samples() {
+    for s in r.samples().iter() {
+        let s = &s;
         let (y, dy_de, dy_dh0) = ball_closed_form(s.time, 9.81, 0.8, 1.0);
         assert!(s.reached);
         assert_relative_eq!(state(s, 0), y, epsilon = 1e-9);
@@ -55,7 +56,7 @@ fn the_ball_between_bounces_matches_its_closed_form_with_derivatives() {
         // The output and its derivative: energy = v^2 / 2 + g y, d energy = v dv + g dy.
         let (v, dv_de) = (state(s, 1), dstate(s, 1, 0, 2));
         assert_relative_eq!(s.outputs[0], 0.5 * v * v + 9.81 * y, epsilon = 1e-8);
-        let de = s.doutputs.as_ref().unwrap()[0];
+        let de = s.doutputs.unwrap()[0];
         assert_relative_eq!(de, v * dv_de + 9.81 * dy_de, epsilon = 1e-7);
     }
 }
@@ -86,7 +87,7 @@ fn a_sample_at_an_event_instant_is_taken_after_its_events() {
         o.t_end = 2.0;
         o.at = vec![0.999, 1.0, 1.5];
     });
-    let s = r.samples();
+    let s: Vec<Sample> = r.samples().iter().collect();
     assert!(!s[0].after_events && s[0].near_event.is_none());
     assert_relative_eq!(s[0].state[0], 0.999, epsilon = 1e-12);
     assert!(s[1].after_events);
@@ -122,7 +123,7 @@ fn times_after_a_stop_are_reported_as_not_reached() {
         o.t_end = 1.0;
         o.at = vec![0.25, 0.5, 0.75];
     });
-    let s = r.samples();
+    let s: Vec<Sample> = r.samples().iter().collect();
     assert!(s[0].reached && s[1].reached && !s[2].reached);
     assert!(s[1].after_events);
     assert_eq!(s[1].state[0], 7.0);
