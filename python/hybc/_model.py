@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import warnings
 from collections.abc import Mapping, Sequence
@@ -133,7 +134,9 @@ class Model:
         """Runs many points in parallel (GIL released); returns the columns of ``hybc sweep``.
 
         ``points``: a dict ``name -> 1-D array`` (all of one length; point ``i`` takes element
-        ``i`` of each, as ``zip``) where a scalar value fixes that parameter for every point; or a
+        ``i`` of each, as ``zip``) where a scalar value fixes that parameter for every point (a
+        vector parameter ``u[N]`` takes an array of shape (N,), fixed for every point, or
+        (n_points, N), row ``i`` for point ``i``; in ``grad`` its name means every element); or a
         2-D array of shape (n_points, len(names)) with ``names``. Any memory order or dtype that
         converts to float64 is accepted (it is normalised to C-ordered float64 first). For a full
         grid see :func:`hybc.grid`. ``events``: event slots per row (``event<k>``, ``t<k>``,
@@ -144,6 +147,7 @@ class Model:
         ``status``/``event<k>``/``error`` str ("" where empty).
         """
         names, matrix, fixed = normalise_points(self, points, names)
+        grad = _expand_names(_names(grad, "grad"), dict(self._native.vectors))
         return sweep_matrix(self, names, matrix, fixed, dict(grad=grad, events=events, threads=threads, **options))
 
     def sobol(
@@ -187,6 +191,64 @@ class Model:
             *spec.design_args(), spec.outputs, 0, spec.rows, threads=threads, **options
         )
         return sobol_result(spec, values, [(early, first)])
+
+    def fit(
+        self,
+        free: Sequence[str],
+        targets: Sequence[str] | Mapping[str, float] = (),
+        *,
+        data: Mapping[str, Any] | None = None,
+        params: Mapping[str, Any] | None = None,
+        max_iter: int = 100,
+        xtol: float = 1e-10,
+        gtol: float = 1e-10,
+        ftol: float = 1e-14,
+        **options: Any,
+    ) -> dict[str, Any]:
+        """Fits the parameters ``free`` (bounded by their declared ranges; a vector parameter's
+        name means every element) by least squares, as ``hybc fit`` does, and returns its report
+        (the dict of ``hybc fit --format json``: ``params``, ``converged``, ``reason``,
+        ``residuals``, ``condition``, ``cusps``, ``data`` with the residuals per name and the
+        standard errors, ``stats``).
+
+        - ``targets``: ``"NAME=VALUE[@W]"`` strings (``NAME`` an output or state at the end,
+          ``NAME@TIME``, ``EVENT#K``, ``EVENT#last``), or a dict ``NAME -> VALUE``.
+        - ``data``: measurements, a DataFrame-like mapping of columns: ``"time"``, one column per
+          observed output or state, optional ``"sigma_NAME"`` columns (standard deviations);
+          NaN is a missing value. The rules and messages are ``hybc fit --data``'s (rows are
+          numbered as lines of that CSV: the header is line 1).
+        - ``params``: start values of the free parameters and values of the others.
+        - ``options``: the keywords of :meth:`simulate` (``t_end``, ``rtol``, ...).
+
+        A fit that does not converge returns its report with ``converged`` False and the
+        ``reason``; a target or data the model refuses raises ``ValueError``; a run that fails at
+        the start raises ``RuntimeError``. Warnings (fewer targets than free parameters) go
+        through :mod:`warnings`.
+        """
+        vectors = dict(self._native.vectors)
+        free = _expand_names(_names(free, "free"), vectors)
+        if isinstance(targets, Mapping):
+            targets = [f"{name}={_number(value, f'targets: `{name}`')!r}" for name, value in targets.items()]
+        elif isinstance(targets, str):
+            targets = [targets]
+        else:
+            targets = [str(t) for t in targets]
+        _check_counts({"max_iter": max_iter, **options})
+        report, notes = _hybc.fit_report(
+            self._native,
+            free,
+            targets,
+            None if data is None else _data_csv(data),
+            _param_dict(_expand_vectors(params, vectors)),
+            int(max_iter),
+            float(xtol),
+            float(gtol),
+            float(ftol),
+            **options,
+        )
+        for note in notes:
+            warnings.warn(note, stacklevel=2)
+        return json.loads(report)
 
     def sobol_design(
         self,
@@ -431,12 +493,25 @@ def normalise_points(
             raise TypeError("names= is for a 2-D array of points; a dict names its columns")
         fixed: dict[str, float] = {}
         columns: dict[str, np.ndarray] = {}
+        vectors = dict(model.vectors)
         for name, value in points.items():
             array = np.asarray(value)
             # float() and NumPy would turn "0.9" into 0.9: text is not a parameter value.
             if array.dtype.kind not in "iuf":
                 raise TypeError(f"points: `{name}`: expected numbers, found {value!r}")
-            if array.ndim == 0:
+            if name in vectors:
+                # A vector parameter: (N,) fixes it for every point, (n_points, N) varies it.
+                size = vectors[name]
+                if array.shape == (size,):
+                    fixed.update({f"{name}[{k}]": float(v) for k, v in enumerate(array.tolist())})
+                elif array.ndim == 2 and array.shape[1] == size:
+                    columns.update({f"{name}[{k}]": array[:, k] for k in range(size)})
+                else:
+                    raise ValueError(
+                        f"points[{name!r}]: `{name}` is a vector of {size} parameters: expected shape "
+                        f"({size},) for every point or (n_points, {size}), found {array.shape}"
+                    )
+            elif array.ndim == 0:
                 fixed[str(name)] = float(array)
             elif array.ndim == 1:
                 columns[str(name)] = array
@@ -465,7 +540,7 @@ def normalise_points(
     return [str(n) for n in names], matrix, {}
 
 
-_COUNTS = ("events", "threads", "max_events", "max_steps")
+_COUNTS = ("events", "threads", "max_events", "max_steps", "max_iter")
 
 
 def _check_counts(kw: Mapping[str, Any]) -> None:
@@ -513,6 +588,33 @@ def _number(value: Any, what: str) -> float:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise TypeError(f"{what}: expected a number, found {type(value).__name__} {value!r}")
     return float(value)
+
+
+def _data_csv(data: Mapping[str, Any]) -> str:
+    """``Model.fit``'s ``data`` (a mapping of equally long columns, e.g. a pandas DataFrame) as
+    the CSV text ``hybc fit --data`` reads: NaN becomes an empty cell (a missing value), numbers
+    their shortest round-trip form."""
+    if not isinstance(data, Mapping) and not hasattr(data, "keys"):
+        raise TypeError(f"data: expected a mapping of columns (a dict or a DataFrame), found {type(data).__name__}")
+    names = [str(k) for k in data.keys()]
+    for name in names:
+        if any(c in name for c in ",\n\r"):
+            raise ValueError(f"data: column name {name!r} contains a comma or a line break")
+    columns = []
+    for key, name in zip(data.keys(), names):
+        array = np.asarray(data[key])
+        if array.dtype.kind not in "iuf":
+            raise TypeError(f"data: column `{name}`: expected numbers, found dtype {array.dtype}")
+        if array.ndim != 1:
+            raise ValueError(f"data: column `{name}`: expected a 1-D column, found shape {array.shape}")
+        columns.append(array.astype(np.float64))
+    lengths = {name: len(c) for name, c in zip(names, columns)}
+    if len(set(lengths.values())) > 1:
+        raise ValueError(f"data: the columns differ in length: {lengths}")
+    cell = lambda v: "" if np.isnan(v) else repr(float(v))  # noqa: E731
+    lines = [",".join(names)]
+    lines.extend(",".join(cell(v) for v in row) for row in zip(*columns))
+    return "\n".join(lines) + "\n"
 
 
 def _expand_vectors(params: Any, vectors: dict[str, int]) -> Any:

@@ -17,6 +17,15 @@ work (JAX transposes the linear JVP for reverse mode); a ``jax.vmap`` batch is o
 in parallel. Derivatives are first order: a derivative of the Jacobian (``jax.hessian``) raises
 JAX's "The FFI call to `hybc_run` cannot be differentiated".
 
+Values along the trajectory: ``at=times`` reads the same outputs at each of the T times too,
+from the dense output (``Model.simulate(at=)``'s samples); ``f(p)["samples"][name]`` has shape
+(T,) and its JVP is the interpolated sensitivity at that fixed time, so ``jax.grad`` of a loss
+over a whole time series works. A time the run did not reach (it stopped before) reads NaN.
+
+A vector parameter (``param u[N]``) named in ``params`` is N inputs, ``u[0]`` .. ``u[N-1]``, in
+order; ``f`` takes either the flat vector of every input or a dict of arrays, one per name in
+``params`` (``{"u": u, "T": 2.0}``), and ``jax.grad`` then returns a dict of the same shape.
+
 Rules:
 
 - Shapes are static: ``events=K`` slots hold the first K event times, NaN where fewer fired;
@@ -45,7 +54,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _hybc
-from ._model import _check_counts, _param_dict
+from ._model import _check_counts, _expand_names, _expand_vectors, _param_dict
 
 __all__ = ["function", "Function", "STATUS", "status_name"]
 
@@ -68,7 +77,7 @@ OK, GRAZING, NOT_DIFFERENTIABLE, ZENO, STUCK, MAX_EVENTS, FAULT, BAD_PARAM, NON_
 _TARGET = "hybc_run"
 _registered = False
 # Keys of the result dict that are not model outputs.
-_RESERVED = ("event_times", "n_events", "status")
+_RESERVED = ("event_times", "n_events", "status", "samples")
 
 
 def status_name(code: Any) -> str:
@@ -105,13 +114,20 @@ class Function:
         outputs: list[str],
         events: int,
         handle: int,
+        at: np.ndarray | None = None,
+        groups: list[tuple[str, int | None]] | None = None,
     ):
         self.model = model
         self.params = params
         self.outputs = outputs
         self.events = events
         self.handle = handle
-        m, n, k = len(params), len(outputs), events
+        #: The sample times (``at=``), shape (T,).
+        self.at = np.zeros(0) if at is None else at
+        # The names given in ``params`` and their sizes (None for a scalar), for dict inputs.
+        self.groups = groups if groups is not None else [(p, None) for p in params]
+        m, k = len(params), events
+        n = len(outputs) * (1 + len(self.at))
         f64, i32 = jnp.float64, jnp.int32
         values = jax.ShapeDtypeStruct((n,), f64)
         times = jax.ShapeDtypeStruct((k,), f64)
@@ -152,14 +168,33 @@ class Function:
             f"{self.events} event slots>"
         )
 
-    def __call__(self, p: Any) -> dict[str, jax.Array]:
-        """Runs at the input vector ``p`` (shape ``(len(params),)``, float64).
+    def _flatten(self, p: Mapping[str, Any]) -> jax.Array:
+        """The input vector from a dict of one array per name in ``params``."""
+        names = [name for name, _ in self.groups]
+        if set(p) != set(names):
+            raise ValueError(f"hybc.jax: expected the inputs {names}, got {sorted(p)}")
+        parts = []
+        for name, size in self.groups:
+            value = jnp.asarray(p[name])
+            want = () if size is None else (size,)
+            if value.shape != want:
+                what = "a scalar" if size is None else f"a vector of {size}"
+                raise ValueError(f"hybc.jax: input `{name}` is {what}, got shape {value.shape}")
+            parts.append(jnp.ravel(value))
+        return jnp.concatenate(parts) if parts else jnp.zeros(0)
+
+    def __call__(self, p: Any) -> dict[str, Any]:
+        """Runs at the input vector ``p`` (shape ``(len(params),)``, float64), or at a dict of
+        arrays, one per name given in ``params`` (a vector parameter's array of N values).
 
         Returns a dict: each output (a scalar), ``"event_times"`` (K,), ``"n_events"`` and
-        ``"status"`` (int32 scalars).
+        ``"status"`` (int32 scalars), and with ``at=`` ``"samples"``, a dict of each output at
+        the sample times (T,).
         """
         if not _x64():
             raise TypeError(_X64_MESSAGE)
+        if isinstance(p, Mapping):
+            p = self._flatten(p)
         p = jnp.asarray(p)
         if jnp.issubdtype(p.dtype, jnp.floating) and p.dtype != jnp.float64:
             raise TypeError(f"hybc.jax: the parameters are {p.dtype}; {_X64_MESSAGE}")
@@ -172,7 +207,11 @@ class Function:
                 f"got shape {p.shape} (map over more points with jax.vmap)"
             )
         values, times, n_events, status = self._call(p)
-        out = {name: values[i] for i, name in enumerate(self.outputs)}
+        c = len(self.outputs)
+        out: dict[str, Any] = {name: values[i] for i, name in enumerate(self.outputs)}
+        if len(self.at):
+            rows = values[c:].reshape(len(self.at), c)
+            out["samples"] = {name: rows[:, i] for i, name in enumerate(self.outputs)}
         out["event_times"] = times
         out["n_events"] = n_events
         out["status"] = status
@@ -186,14 +225,19 @@ def function(
     events: int = 0,
     *,
     values: Mapping[str, float] | None = None,
+    at: Any = None,
     **sim_kw: Any,
 ) -> Function:
     """A JAX function ``f(p) -> dict`` running ``model`` with the parameters ``params`` as inputs.
 
-    - ``params``: names of the input parameters, the order of ``p``'s entries (and of gradients).
+    - ``params``: names of the input parameters, the order of ``p``'s entries (and of gradients);
+      a vector parameter's name stands for its N elements.
     - ``outputs``: names of outputs (or states) read at the end of the run.
     - ``events``: number K of event slots (``"event_times"`` has shape (K,)).
-    - ``values``: values of the other parameters (their defaults otherwise).
+    - ``values``: values of the other parameters (their defaults otherwise; a vector parameter
+      takes an array).
+    - ``at``: ascending times within the run at which the outputs are read too
+      (``"samples"``); at most 10^7 numbers (values and Jacobian entries) per point.
     - ``sim_kw``: the keywords of ``Model.simulate``: ``t_end``, ``rtol``, ``atol``,
       ``max_events``, ``max_steps``, ``method``, ``graze_tol``, ``sens_error_control``, ``h_max``
       (the model's ``simulate`` line and the run defaults otherwise).
@@ -204,6 +248,10 @@ def function(
     if not _x64():
         raise TypeError(_X64_MESSAGE)
     params = [params] if isinstance(params, str) else list(params)
+    vectors = dict(getattr(model, "_native", model).vectors)
+    groups = [(name, vectors.get(name)) for name in params]
+    params = _expand_names(params, vectors)
+    times = None if at is None else np.asarray(at, dtype=np.float64).ravel()
     outputs = [outputs] if isinstance(outputs, str) else list(outputs)
     _check_counts({"events": events, **sim_kw})
     events = int(events)
@@ -213,7 +261,9 @@ def function(
     if len(set(outputs)) != len(outputs):
         raise ValueError(f"outputs: a name is given twice in {outputs}")
     native = getattr(model, "_native", model)
-    fixed = _param_dict(values, "values")
-    handle = _hybc.jax_register(native, params, outputs, events, fixed, **sim_kw)
+    fixed = _param_dict(_expand_vectors(values, vectors), "values")
+    handle = _hybc.jax_register(
+        native, params, outputs, events, fixed, at=None if times is None else times.tolist(), **sim_kw
+    )
     _register_target()
-    return Function(model, params, outputs, events, handle)
+    return Function(model, params, outputs, events, handle, times, groups)

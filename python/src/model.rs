@@ -176,15 +176,7 @@ impl Model {
         };
         let mut opts = keywords.options(&self.model)?;
         opts.trajectory = trajectory_request(trajectory)?;
-        let at = at.unwrap_or_default();
-        if at.len() as f64 > hybc::sim::MAX_SAMPLED_ROWS {
-            return Err(PyValueError::new_err(format!(
-                "at: {} times, at most {:.0}",
-                at.len(),
-                hybc::sim::MAX_SAMPLED_ROWS
-            )));
-        }
-        opts.at = at;
+        opts.at = crate::options::sample_times(at)?;
         let values = self.param_values(params)?;
         let compiled = self.compiled(py, &grad.unwrap_or_default())?;
         let t_end = opts.t_end;

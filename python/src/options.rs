@@ -103,3 +103,17 @@ pub fn trajectory_request(value: Option<&Bound<'_, PyAny>>) -> PyResult<Trajecto
         ))),
     }
 }
+
+/// The sample times of `at=` (`hybc run --at`), at most `hybc::sim::MAX_SAMPLED_ROWS` of them;
+/// the run checks their order and range.
+pub fn sample_times(at: Option<Vec<f64>>) -> PyResult<Vec<f64>> {
+    let at = at.unwrap_or_default();
+    if at.len() as f64 > hybc::sim::MAX_SAMPLED_ROWS {
+        return Err(PyValueError::new_err(format!(
+            "at: {} times, at most {:.0}",
+            at.len(),
+            hybc::sim::MAX_SAMPLED_ROWS
+        )));
+    }
+    Ok(at)
+}

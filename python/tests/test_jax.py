@@ -414,3 +414,77 @@ def test_one_status_vocabulary_with_model_simulate():
     assert set(hj.STATUS.values()) - {"bad_param"} == {
         "ok", "grazing", "not_differentiable", "non_finite", "zeno", "stuck", "max_events", "fault"
     }
+
+
+def ball_between_bounces(t: float, e: float = E, h0: float = H0):
+    """y(t) and (dy/de, dy/dh0) over the first two flights (before the second bounce)."""
+    t1 = math.sqrt(2 * h0 / G)
+    if t <= t1:
+        return h0 - 0.5 * G * t * t, (0.0, 1.0)
+    tau = t - t1
+    dt1 = 1.0 / (G * t1)
+    y = e * G * t1 * tau - 0.5 * G * tau * tau
+    return y, (G * t1 * tau, e * G * dt1 * tau - e * G * t1 * dt1 + G * tau * dt1)
+
+
+def test_values_at_times_and_their_jvps_match_the_ball_between_bounces(ball_model):
+    # 12 times over the first two flights (the second bounce is at 1.174): values and the
+    # Jacobian of every sample against the closed form, and jax.grad of a trajectory loss.
+    at = np.linspace(0.0, 1.15, 12)
+    f = hj.function(ball_model, params=["e", "h0"], outputs=["y", "energy"], at=at, t_end=1.15)
+    out = f(jnp.array(P0))
+    assert out["samples"]["y"].shape == (12,)
+    want = [ball_between_bounces(t) for t in at]
+    np.testing.assert_allclose(out["samples"]["y"], [y for y, _ in want], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(out["samples"]["energy"], G * H0 * np.where(at < 0.4516, 1.0, E**2), rtol=1e-8)
+    jac = jax.jacfwd(lambda p: f(p)["samples"]["y"])(jnp.array(P0))
+    np.testing.assert_allclose(jac, [d for _, d in want], rtol=0, atol=1e-8)
+    # A least-squares loss over the trajectory: its gradient is 2 sum (y - d) dy/dp.
+    data = np.array([y for y, _ in want]) + 0.01
+    loss = lambda p: jnp.sum((f(p)["samples"]["y"] - data) ** 2)  # noqa: E731
+    g = jax.grad(loss)(jnp.array(P0))
+    np.testing.assert_allclose(g, 2 * (-0.01) * np.sum([d for _, d in want], axis=0), rtol=1e-6)
+    # The final value is still there, equal to the last sample's (both at t = 1.15).
+    assert float(out["y"]) == pytest.approx(float(out["samples"]["y"][-1]), abs=1e-9)
+
+
+def test_a_time_after_a_stop_reads_nan_and_too_many_samples_are_refused(ball_model):
+    text = "model halt\nparam a = 1\nstate x = 0\nder(x) = a\nevent halt when t >= 0.5 {\n    stop\n}\n"
+    f = hj.function(hybc.Model(text), params=["a"], outputs=["x"], at=[0.25, 0.75], t_end=1.0)
+    s = f(jnp.array([2.0]))["samples"]["x"]
+    assert float(s[0]) == pytest.approx(0.5, abs=1e-12) and math.isnan(float(s[1]))
+    with pytest.raises(ValueError, match="numbers per point"):
+        # 3 columns at 900,001 instants with 3 inputs: 1.08e7 numbers (80 MB) per point.
+        hj.function(ball_model, params=["e", "h0", "g"], outputs=["y", "v", "energy"], at=np.linspace(0, 1, 900_000))
+
+
+PWL_MODEL = """model ramp
+param u[5] = 0 in [-10, 10]
+param c = 1
+state x = 0
+der(x) = c * pwl(t, 0, 1, u)
+"""
+
+
+def test_a_vector_parameter_is_one_array_input():
+    # x(1) = c * trapezoid(u) on 5 knots (spacing 1/4): weights (1, 2, 2, 2, 1) / 8.
+    model = hybc.Model(PWL_MODEL)
+    f = hj.function(model, params=["u", "c"], outputs=["x"], t_end=1.0)
+    assert f.params == ["u[0]", "u[1]", "u[2]", "u[3]", "u[4]", "c"]
+    u = jnp.array([0.5, -1.0, 2.0, 3.0, -0.25])
+    weights = np.array([1, 2, 2, 2, 1]) / 8
+    x = float(f({"u": u, "c": 2.0})["x"])
+    assert x == pytest.approx(2.0 * float(weights @ u), rel=1e-12)
+    g = jax.grad(lambda p: f(p)["x"])({"u": u, "c": 2.0})
+    np.testing.assert_allclose(g["u"], 2.0 * weights, rtol=1e-10)
+    assert float(g["c"]) == pytest.approx(float(weights @ u), rel=1e-10)
+    # The flat vector is the same input.
+    flat = jax.grad(lambda p: f(p)["x"])(jnp.concatenate([u, jnp.array([2.0])]))
+    np.testing.assert_allclose(flat[:5], g["u"], rtol=0, atol=0)
+    with pytest.raises(ValueError, match=r"input `u` is a vector of 5, got shape \(3,\)"):
+        f({"u": jnp.zeros(3), "c": 1.0})
+    with pytest.raises(ValueError, match="expected the inputs"):
+        f({"u": u})
+    # A vector parameter that is not an input takes an array in values=.
+    h = hj.function(model, params=["c"], outputs=["x"], values={"u": np.ones(5)}, t_end=1.0)
+    assert float(h(jnp.array([3.0]))["x"]) == pytest.approx(3.0, rel=1e-12)

@@ -256,3 +256,16 @@ def test_the_gil_is_released_while_a_sweep_runs(ball):
     assert len(result["table"]["e"]) == 20000
     assert elapsed > 0.05, "the sweep was too short to tell"
     assert ticks >= 10, (ticks, elapsed)
+
+
+def test_a_vector_parameter_is_varied_by_rows_or_fixed_by_one_array():
+    # der(x) = dot(u, w) to T = 2: x = 2 u.w, dx/du_k = 2 w_k.
+    text = "model dot\nparam u[3] = 0 in [-5, 5]\nparam w[3] = 1\nstate x = 0\nder(x) = dot(u, w)\n"
+    model = hybc.Model(text)
+    rows = np.array([[1.0, 2.0, 3.0], [0.5, -1.0, 0.0]])
+    w = np.array([1.0, 10.0, 100.0])
+    out = model.sweep({"u": rows, "w": w}, grad=["u"], t_end=2.0)
+    np.testing.assert_allclose(out["x"], 2 * rows @ w, rtol=1e-12)
+    np.testing.assert_allclose(out["dx/du[1]"], [20.0, 20.0], rtol=1e-12)
+    with pytest.raises(ValueError, match=r"`u` is a vector of 3 parameters"):
+        model.sweep({"u": np.zeros((2, 4))})

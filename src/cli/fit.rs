@@ -1,16 +1,15 @@
 //! `hybc fit FILE`: compile a model once with the free parameters as gradient parameters, then fit
 //! them to targets on final outputs, final states and event times (`crate::fit`).
 
-use std::process::ExitCode;
-use std::time::Instant;
-
 use clap::ValueEnum;
+use std::process::ExitCode;
 
 use super::run::{parameter_values, positive, sim_options, SimFlags};
 use super::{
     compile_model, load_model, parse_param_list, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED,
 };
-use crate::fit::{self, Bounds, FitError, FitOptions, FitProblem, FitReport, Rejection, Target};
+use crate::fit::request::{self, Failure, Request};
+use crate::fit::FitOptions;
 use crate::Model;
 
 /// The most trials `--max-iter` allows.
@@ -99,55 +98,35 @@ fn fit_model(model: &Model, args: &FitArgs) -> Result<ExitCode, String> {
         Ok(c) => c,
         Err(code) => return Ok(code),
     };
-    let info = compiled.info().clone();
-    let mut targets = args
-        .targets
-        .iter()
-        .map(|t| Target::parse(t, &info).map_err(|e| format!("--target: {e}")))
-        .collect::<Result<Vec<_>, _>>()?;
-    let mut sigma_known = false;
-    if let Some(path) = &args.data {
-        let shown = path.display().to_string();
-        let text = read_data(path).map_err(|e| format!("--data: cannot read `{shown}`: {e}"))?;
-        let data = fit::data::parse_data(&text, &shown, &info).map_err(|e| format!("--data: {e}"))?;
-        sigma_known = data.sigma_known;
-        targets.extend(data.targets);
-    }
-    if targets.len() < free.len() {
-        eprintln!(
-            "warning: {} free parameters but {} target(s): the fit is underdetermined; the damped steps \
-             stay near the start and the condition number is infinite",
-            free.len(),
-            targets.len()
-        );
-    }
-    let bounds =
-        free.iter().map(|p| Bounds::from_range(model.checked().params[p.0 as usize].range)).collect();
-
-    let problem = FitProblem { system: compiled.native(), start, bounds, targets, sim };
-    let started = Instant::now();
-    let result = match fit::fit(&problem, &options) {
-        Ok(result) => result,
+    let data = match &args.data {
+        Some(path) => {
+            let shown = path.display().to_string();
+            let text = read_data(path).map_err(|e| format!("--data: cannot read `{shown}`: {e}"))?;
+            Some((text, shown))
+        }
+        None => None,
+    };
+    let request = Request {
+        targets: &args.targets,
+        data: data.as_ref().map(|(text, file)| (text.as_str(), file.as_str())),
+        start,
+        sim,
+        options,
+    };
+    let report = match request::run(model, &compiled, request, &mut |w| eprintln!("warning: {w}")) {
+        Ok(report) => report,
+        Err(Failure::Target(e)) => return Err(format!("--target: {e}")),
+        Err(Failure::Data(e)) => return Err(format!("--data: {e}")),
+        Err(Failure::Usage(message)) => return Err(message),
         // The run works, but the fit's goal cannot be stated in doubles: the goal is not met.
-        Err(e @ FitError::Start(Rejection::ObjectiveOverflow { .. } | Rejection::NonFinite { .. })) => {
+        Err(Failure::StartObjective(e)) => {
             eprintln!("error: {e}");
             return Ok(ExitCode::from(EXIT_GOAL_NOT_MET));
         }
-        Err(e @ FitError::Start(_)) => {
+        Err(Failure::StartRun(e)) => {
             eprintln!("error: {e}");
             return Ok(ExitCode::from(EXIT_SIM_STOPPED));
         }
-        Err(e) => return Err(e.to_string()),
-    };
-    let report = FitReport {
-        model: model.name().to_string(),
-        info,
-        targets: problem.targets,
-        options,
-        result,
-        compile_seconds: compiled.compile_seconds(),
-        fit_seconds: started.elapsed().as_secs_f64(),
-        sigma_known,
     };
     match args.format {
         Format::Table => super::print_out(&report.to_table()),

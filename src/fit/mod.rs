@@ -11,12 +11,15 @@
 //! whose gradient does not exist (grazing) is rejected the same way.
 //!
 //! Code map: `target` (what to match, parsed from `NAME=VALUE@WEIGHT`), `evaluate` (one run ->
-//! residuals and Jacobian), `lm` (the solver), `report` (names, table, JSON).
+//! residuals and Jacobian), `lm` (the solver), `report` (names, table, JSON), `data` (a CSV of
+//! measurements as targets, standard errors), `request` (a whole fit from text, for the CLI and
+//! Python).
 
 pub mod data;
 mod evaluate;
 mod lm;
 mod report;
+pub mod request;
 mod target;
 
 pub use evaluate::{evaluate, Evaluation, Rejection};

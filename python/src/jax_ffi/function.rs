@@ -4,7 +4,9 @@
 //!
 //! Per point (every buffer row-major, leading batch dimensions flattened into `b`):
 //! `p[b, j]` in; `values[b, i]`, `times[b, k]`, `n_events[b]`, `status[b]` out, and with
-//! Jacobians `dvalues[b, i, j]`, `dtimes[b, k, j]`. Unfired event slots hold NaN times and zero
+//! Jacobians `dvalues[b, i, j]`, `dtimes[b, k, j]`. With sample times (`at=`), the values are the
+//! C columns at the end, then the same C columns at each of the T sample times (`1 + T` blocks of
+//! C: `i = (1 + s) C + c` for sample `s`), so the handler and its buffers do not change. Unfired event slots hold NaN times and zero
 //! time derivatives (a pad is a constant, so a masked loss gets no NaN through them); a derivative
 //! that does not exist (grazing) is NaN, and so is every final value of a run that did not reach
 //! `t_end` (see `status.rs`).
@@ -112,6 +114,8 @@ pub struct Function {
     /// Every parameter's value where it is not an input (defaults with the caller's overrides).
     base: Vec<f64>,
     columns: Vec<Selector>,
+    /// The number of sample times (`SimOptions::at`, the same in both engines).
+    samples: usize,
     events: usize,
     plain: Engine,
     with_jacobians: Engine,
@@ -135,15 +139,17 @@ impl Function {
     ) -> Function {
         assert_eq!(with_jacobians.n_grad(), inputs.len(), "Jacobian engine compiled for the inputs");
         let input_names = inputs.iter().map(|i| i.name.clone()).collect();
-        Function { model_name, inputs, input_names, base, columns, events, plain, with_jacobians }
+        let samples = plain.opts.at.len();
+        Function { model_name, inputs, input_names, base, columns, samples, events, plain, with_jacobians }
     }
 
     pub fn n_inputs(&self) -> usize {
         self.inputs.len()
     }
 
+    /// The value columns at the end and at each sample time.
     pub fn n_values(&self) -> usize {
-        self.columns.len()
+        self.columns.len() * (1 + self.samples)
     }
 
     pub fn n_event_slots(&self) -> usize {
@@ -236,28 +242,38 @@ impl Function {
         }
         let complete = result.stopped_by.is_complete();
         let fin = &result.final_state;
-        let n_states = fin.state.len();
-        let n_outputs = fin.outputs.len();
-        for (v, col) in slot.values.iter_mut().zip(&self.columns) {
-            *v = match (complete, col) {
-                (false, _) => f64::NAN,
-                (true, Selector::Output(i)) => fin.outputs[*i],
-                (true, Selector::State(i)) => fin.state[*i],
-            };
+        let c = self.columns.len();
+        let (end_values, sample_values) = slot.values.split_at_mut(c);
+        for (v, col) in end_values.iter_mut().zip(&self.columns) {
+            *v = if complete { col.read(&fin.outputs, &fin.state) } else { f64::NAN };
+        }
+        for (row, sample) in sample_values.chunks_mut(c.max(1)).zip(result.samples.iter()) {
+            for (v, col) in row.iter_mut().zip(&self.columns) {
+                // A time after the run's stop reads NaN (the sample says it was not reached).
+                *v = col.read(sample.outputs, sample.state);
+            }
         }
         let Some((dvalues, dtimes)) = slot.jacobians else { return };
         // At a `stop` event the final values are taken at a time that moves with the parameters:
         // their derivative is the total one.
         let dstate = fin.dstate_total.as_deref().or(fin.dstate.as_deref());
         let doutputs = fin.doutputs_total.as_deref().or(fin.doutputs.as_deref());
+        let (end_rows, sample_rows) = dvalues.split_at_mut(c * m);
+        let (n_states, n_outputs) = (fin.state.len(), fin.outputs.len());
         for (i, col) in self.columns.iter().enumerate() {
             for j in 0..m {
-                let d = match (complete, col) {
-                    (false, _) => None,
-                    (true, Selector::Output(o)) => doutputs.map(|d| d[j * n_outputs + o]),
-                    (true, Selector::State(s)) => dstate.map(|d| d[j * n_states + s]),
-                };
-                dvalues[i * m + j] = d.unwrap_or(f64::NAN);
+                let d =
+                    if complete { col.derivative(doutputs, dstate, (n_outputs, n_states), j) } else { None };
+                end_rows[i * m + j] = d.unwrap_or(f64::NAN);
+            }
+        }
+        // A sample's derivative is at its fixed time (the interpolated sensitivity).
+        for (rows, sample) in sample_rows.chunks_mut((c * m).max(1)).zip(result.samples.iter()) {
+            for (i, col) in self.columns.iter().enumerate() {
+                for j in 0..m {
+                    let d = col.derivative(sample.doutputs, sample.dstate, (n_outputs, n_states), j);
+                    rows[i * m + j] = d.unwrap_or(f64::NAN);
+                }
             }
         }
         for slot_k in 0..k {
@@ -269,6 +285,31 @@ impl Function {
                     None => row.fill(f64::NAN),
                 },
             }
+        }
+    }
+}
+
+impl Selector {
+    /// The column's value among `outputs` and `states`.
+    fn read(self, outputs: &[f64], states: &[f64]) -> f64 {
+        match self {
+            Selector::Output(i) => outputs[i],
+            Selector::State(i) => states[i],
+        }
+    }
+
+    /// Its derivative with respect to input `j`, from column-per-parameter blocks of the outputs'
+    /// (`k` rows) or states' (`n` rows) derivatives; `None` where they do not exist.
+    fn derivative(
+        self,
+        doutputs: Option<&[f64]>,
+        dstates: Option<&[f64]>,
+        (k, n): (usize, usize),
+        j: usize,
+    ) -> Option<f64> {
+        match self {
+            Selector::Output(i) => doutputs.map(|d| d[j * k + i]),
+            Selector::State(i) => dstates.map(|d| d[j * n + i]),
         }
     }
 }

@@ -13,6 +13,10 @@ use crate::errors;
 use crate::model::Model;
 use crate::options::SimKeywords;
 
+/// The most numbers (values and their Jacobian entries) one point of a function returns: 10^7,
+/// 80 MB per point, which XLA allocates per call.
+const MAX_VALUES_PER_POINT: f64 = 1e7;
+
 /// The address of the FFI handler, for `jax.ffi.pycapsule`.
 #[pyfunction]
 pub fn jax_handler_address() -> usize {
@@ -22,10 +26,11 @@ pub fn jax_handler_address() -> usize {
 /// Registers a function and returns its handle (an existing one for an identical configuration).
 ///
 /// `params`: the input parameters, in input order; `columns`: outputs or states read at the end;
-/// `events`: event slots; `values`: values of other parameters (defaults otherwise).
+/// `events`: event slots; `values`: values of other parameters (defaults otherwise); `at`: sample
+/// times at which the columns are read too.
 #[pyfunction]
 #[pyo3(signature = (
-    model, params, columns, events, values,
+    model, params, columns, events, values, at = None,
     t_end = None, rtol = None, atol = None, max_events = None, max_steps = None, method = None,
     graze_tol = None, sens_error_control = None, h_max = None,
 ))]
@@ -37,6 +42,7 @@ pub fn jax_register(
     columns: Vec<String>,
     events: usize,
     values: HashMap<String, f64>,
+    at: Option<Vec<f64>>,
     t_end: Option<f64>,
     rtol: Option<f64>,
     atol: Option<f64>,
@@ -62,7 +68,20 @@ pub fn jax_register(
     hybc::limits::count("events", events, 0, hybc::limits::MAX_EVENT_COLUMNS)
         .map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))?;
     let inner = model.inner();
-    let opts = keywords.options(inner)?;
+    let mut opts = keywords.options(inner)?;
+    opts.at = crate::options::sample_times(at)?;
+    // Every point's buffers hold each column at the end and at each time, with a Jacobian row
+    // per column and time: bounded like `hybc sweep`'s event columns times the sampled rows.
+    let per_point = (columns.len() * (1 + opts.at.len())) as f64 * (1 + params.len()) as f64;
+    if per_point > MAX_VALUES_PER_POINT {
+        return Err(PyValueError::new_err(format!(
+            "at: {} times of {} columns with {} inputs make {per_point:.0} numbers per point, at most \
+             {MAX_VALUES_PER_POINT:.0}",
+            opts.at.len(),
+            columns.len(),
+            params.len()
+        )));
+    }
     let checked = inner.checked();
 
     let mut inputs = Vec::with_capacity(params.len());

@@ -1,0 +1,104 @@
+//! `Model.fit`: the library's whole fit (`hybc::fit::request`, what `hybc fit` runs) from Python's
+//! arguments. The Python layer turns a DataFrame-like mapping into the CSV text `hybc fit --data`
+//! reads, so one parser gives both front ends the same rules and messages; the report comes back
+//! as the JSON `hybc fit --format json` prints.
+
+use std::collections::HashMap;
+
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+
+use hybc::fit::request::{self, Failure, Request};
+use hybc::fit::FitOptions;
+
+use crate::errors::ParameterError;
+use crate::model::Model;
+use crate::options::SimKeywords;
+
+/// Fits `free` to `targets` (`NAME=VALUE[@W]`) and the measurements of `data` (CSV text) from
+/// `params` (start values and fixed values); returns the report's JSON and the warnings.
+#[pyfunction]
+#[pyo3(signature = (
+    model, free, targets, data, params,
+    max_iter, xtol, gtol, ftol,
+    t_end = None, rtol = None, atol = None, max_events = None, max_steps = None, method = None,
+    graze_tol = None, sens_error_control = None, h_max = None,
+))]
+#[allow(clippy::too_many_arguments)]
+pub fn fit_report(
+    py: Python<'_>,
+    model: PyRef<'_, Model>,
+    free: Vec<String>,
+    targets: Vec<String>,
+    data: Option<String>,
+    params: Option<HashMap<String, f64>>,
+    max_iter: usize,
+    xtol: f64,
+    gtol: f64,
+    ftol: f64,
+    t_end: Option<f64>,
+    rtol: Option<f64>,
+    atol: Option<f64>,
+    max_events: Option<usize>,
+    max_steps: Option<usize>,
+    method: Option<String>,
+    graze_tol: Option<f64>,
+    sens_error_control: Option<bool>,
+    h_max: Option<f64>,
+) -> PyResult<(String, Vec<String>)> {
+    let keywords = SimKeywords {
+        t_end,
+        rtol,
+        atol,
+        max_events,
+        max_steps,
+        method,
+        graze_tol,
+        sens_error_control,
+        h_max,
+    };
+    let inner = model.inner();
+    let sim = keywords.options(inner)?;
+    if free.is_empty() {
+        return Err(ParameterError::new_err("free: name at least one parameter to fit"));
+    }
+    if targets.is_empty() && data.is_none() {
+        return Err(PyValueError::new_err("fit: give targets= or data= (or both)"));
+    }
+    if max_iter == 0 || max_iter > hybc::limits::MAX_FIT_ITER {
+        return Err(PyValueError::new_err(format!(
+            "max_iter: expected 1 to {}, found {max_iter}",
+            hybc::limits::MAX_FIT_ITER
+        )));
+    }
+    for (name, v) in [("xtol", xtol), ("gtol", gtol), ("ftol", ftol)] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(PyValueError::new_err(format!(
+                "{name}: expected a positive finite number, found {v}"
+            )));
+        }
+    }
+    let start = model.param_values(params)?.values().to_vec();
+    let compiled = model.compiled(py, &free)?;
+    let options = FitOptions { max_iter, xtol, gtol, ftol };
+    let inner = inner.clone();
+    let (report, warnings) = py.detach(move || {
+        let request = Request {
+            targets: &targets,
+            data: data.as_deref().map(|text| (text, "data")),
+            start,
+            sim,
+            options,
+        };
+        let mut warnings = Vec::new();
+        let report = request::run(&inner, &compiled, request, &mut |w| warnings.push(w.to_string()));
+        (report, warnings)
+    });
+    match report {
+        Ok(report) => Ok((report.to_json().to_string(), warnings)),
+        Err(Failure::Target(e)) => Err(PyValueError::new_err(format!("targets: {e}"))),
+        Err(Failure::Data(e)) => Err(PyValueError::new_err(format!("data: {e}"))),
+        Err(Failure::Usage(message)) => Err(PyValueError::new_err(message)),
+        Err(Failure::StartRun(e) | Failure::StartObjective(e)) => Err(PyRuntimeError::new_err(e.to_string())),
+    }
+}
