@@ -26,8 +26,8 @@ pub struct PeriodicArgs {
     #[command(flatten)]
     model: ModelArg,
     /// The section: an event; the orbit returns to its initial state right after its first
-    /// firing (a run of the return map stops there).
-    #[arg(long, value_name = "EVENT")]
+    /// firing (a run of the return map stops there), or its K-th with `EVENT#K`.
+    #[arg(long, value_name = "EVENT[#K]")]
     section: String,
     /// The parameters that set the initial state, solved for: `P1,P2,...`.
     #[arg(long, value_name = "P1,P2")]
@@ -48,6 +48,29 @@ pub struct PeriodicArgs {
     format: Format,
 }
 
+/// The section as the user wrote it: `EVENT`, or `EVENT#K` for a later firing.
+fn section_label(problem: &PeriodicProblem<'_>) -> String {
+    match problem.firing {
+        1 => problem.section.clone(),
+        k => format!("{}#{k}", problem.section),
+    }
+}
+
+/// `EVENT` (its first firing) or `EVENT#K` (its K-th), the spelling of `hybc fit --target`.
+fn section_firing(text: &str) -> Result<(String, usize), String> {
+    match text.split_once('#') {
+        None => Ok((text.trim().to_string(), 1)),
+        Some((event, k)) => {
+            let max = periodic::MAX_FIRING;
+            let firing =
+                k.trim().parse::<usize>().ok().filter(|k| (1..=max).contains(k)).ok_or_else(|| {
+                    format!("--section: `{text}`: expected EVENT or EVENT#K with K from 1 to {max}")
+                })?;
+            Ok((event.trim().to_string(), firing))
+        }
+    }
+}
+
 pub fn run(args: &PeriodicArgs) -> ExitCode {
     let model = match load_model(&args.model.file) {
         Ok(model) => model,
@@ -62,9 +85,11 @@ pub fn run(args: &PeriodicArgs) -> ExitCode {
 fn solve(model: &Model, args: &PeriodicArgs) -> Result<ExitCode, String> {
     let free = parse_param_list(model, &args.free, "--free")?;
     super::run::at_most("--max-iter", args.max_iter, crate::limits::MAX_FIT_ITER)?;
+    let (section, firing) = section_firing(&args.section)?;
     let problem = PeriodicProblem {
         model: model.checked(),
-        section: args.section.clone(),
+        section,
+        firing,
         free,
         params: parameter_values(model, &args.set)?.values().to_vec(),
         sim: sim_options(model, &args.sim)?,
@@ -80,9 +105,9 @@ fn solve(model: &Model, args: &PeriodicArgs) -> Result<ExitCode, String> {
             super::print_out(&text);
             Ok(ExitCode::SUCCESS)
         }
-        Err(e @ (PeriodicError::NoSection { .. } | PeriodicError::NoFree)) => {
-            Err(format!("--section/--free: {e}"))
-        }
+        Err(
+            e @ (PeriodicError::NoSection { .. } | PeriodicError::NoFree | PeriodicError::BadFiring { .. }),
+        ) => Err(format!("--section/--free: {e}")),
         Err(e @ PeriodicError::NotConverged { .. }) => {
             eprintln!("error: {e}");
             Ok(ExitCode::from(EXIT_GOAL_NOT_MET))
@@ -112,6 +137,7 @@ fn json(model: &Model, problem: &PeriodicProblem<'_>, r: &PeriodicResult) -> ser
     json!({
         "model": m.name,
         "section": problem.section,
+        "firing": problem.firing,
         "fixed_point": states,
         "params": free,
         "period": r.period,
@@ -132,7 +158,7 @@ fn table(model: &Model, problem: &PeriodicProblem<'_>, r: &PeriodicResult) -> St
         out,
         "model {}   section {}   fixed point after {} Newton iterations (residual {:.1e})",
         m.name,
-        problem.section,
+        section_label(problem),
         r.residuals.len() - 1,
         r.residuals.last().copied().unwrap_or(f64::NAN)
     );
@@ -140,7 +166,7 @@ fn table(model: &Model, problem: &PeriodicProblem<'_>, r: &PeriodicResult) -> St
     for p in &problem.free {
         let _ = writeln!(out, "  {:<14}  {:>20}", m.params[p.0 as usize].name, num(r.params[p.0 as usize]));
     }
-    let _ = writeln!(out, "\ninitial state (= the state right after {}):", problem.section);
+    let _ = writeln!(out, "\ninitial state (= the state right after {}):", section_label(problem));
     for (s, v) in m.states.iter().zip(&r.fixed_point) {
         let _ = writeln!(out, "  {:<14}  {:>20}", s.name, num(*v));
     }

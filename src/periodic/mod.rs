@@ -30,9 +30,12 @@ pub const TRIVIAL_MULTIPLIER: f64 = 1e-8;
 #[derive(Clone, Debug)]
 pub struct PeriodicProblem<'m> {
     pub model: &'m sema::Model,
-    /// The section: an event; the orbit returns to its initial state right after its first
-    /// firing (the event is made a `stop` event for the analysis).
+    /// The section: an event; the orbit returns to its initial state right after its
+    /// `firing`-th firing (the event is made a `stop` event there for the analysis).
     pub section: String,
+    /// Which firing of the section closes the orbit (1-based): 2 for a gait whose period holds
+    /// two impacts.
+    pub firing: usize,
     /// The parameters to solve for (they set the initial state).
     pub free: Vec<ParamIdx>,
     /// All parameter values; the free ones are the starting guess.
@@ -70,6 +73,8 @@ pub enum PeriodicError {
     NoSection { name: String, known: String },
     #[error("no free parameters: name the parameters that set the initial state")]
     NoFree,
+    #[error("the section's firing must be 1 to {max}, found {firing}")]
+    BadFiring { firing: usize, max: usize },
     #[error("cannot compile the model: {0}")]
     Compile(String),
     #[error("the run from the initial state does not reach the section `{section}`: {how}")]
@@ -81,6 +86,60 @@ pub enum PeriodicError {
     NotConverged { iterations: usize, residual: f64, tol: f64 },
     #[error("the return map's Jacobian with respect to the free parameters is not finite")]
     Singular,
+}
+
+/// The most firings of the section an orbit may hold (`--section EVENT#K`).
+pub const MAX_FIRING: usize = 1000;
+
+/// `model` with the section's `firing`-th firing a `stop` event, and that event's index. For the
+/// first, the section itself stops. For a later one, a counter state (`der = 0`, starting at 0)
+/// counts the firings: the section fires as declared (and adds 1) while fewer than `firing - 1`
+/// have fired, and a copy of it that stops fires instead at the `firing`-th crossing (an
+/// enabling condition on the counter, evaluated just before the event, picks one of the two).
+/// The counter is the last state; the analysis leaves it out of the orbit. A section declared
+/// `stop` no longer stops before its `firing`-th firing.
+fn stop_at_firing(model: &sema::Model, section: usize, firing: usize) -> (sema::Model, usize) {
+    let mut m = model.clone();
+    if firing == 1 {
+        m.events[section].is_stop = true;
+        return (m, section);
+    }
+    let count = sema::StateIdx(m.states.len() as u32);
+    m.states.push(sema::State {
+        name: format!("{}#count", m.events[section].name),
+        init: Expr::Num(0.0),
+        span: m.events[section].span,
+    });
+    for mode in &mut m.modes {
+        mode.flows.push(Expr::Num(0.0));
+    }
+    // The counter is an integer: compare it half-way between two counts.
+    let threshold = Expr::Num(firing as f64 - 1.5);
+    let enabled = |op, own: &Option<sema::Cond>| {
+        let on_count = sema::Cond::Cmp(op, Expr::State(count), threshold.clone());
+        Some(match own {
+            Some(c) => sema::Cond::And(Box::new(c.clone()), Box::new(on_count)),
+            None => on_count,
+        })
+    };
+    let mut last = m.events[section].clone();
+    last.condition = enabled(sema::CmpOp::Gt, &last.condition);
+    last.is_stop = true;
+    let counted = &mut m.events[section];
+    // A section declared `stop` walks on until its `firing`-th firing, which the copy stops.
+    counted.is_stop = false;
+    counted.condition = enabled(sema::CmpOp::Lt, &counted.condition);
+    let plus_one = Expr::Binary(sema::BinOp::Add, Box::new(Expr::State(count)), Box::new(Expr::Num(1.0)));
+    counted.resets.push((count, plus_one));
+    let stop = m.events.len();
+    m.events.push(last);
+    let stop_idx = sema::EventIdx(stop as u32);
+    for mode in &mut m.modes {
+        if mode.events.contains(&sema::EventIdx(section as u32)) {
+            mode.events.push(stop_idx);
+        }
+    }
+    (m, stop)
 }
 
 /// The model with one parameter per state as its initial value (named `NAME(0)`): its
@@ -151,26 +210,32 @@ pub fn find(problem: &PeriodicProblem<'_>) -> Result<PeriodicResult, PeriodicErr
         let known: Vec<&str> = model.events.iter().filter(|e| !e.implicit).map(|e| e.name.as_str()).collect();
         PeriodicError::NoSection { name: problem.section.clone(), known: known.join(", ") }
     })?;
-    // A run of the return map ends right after the section's first firing.
-    let mut stopping = model.clone();
-    stopping.events[section].is_stop = true;
+    if problem.firing == 0 || problem.firing > MAX_FIRING {
+        return Err(PeriodicError::BadFiring { firing: problem.firing, max: MAX_FIRING });
+    }
+    // A run of the return map ends right after the section's `firing`-th firing.
+    let (stopping, section) = stop_at_firing(model, section, problem.firing);
     let model = &stopping;
     if problem.free.is_empty() {
         return Err(PeriodicError::NoFree);
     }
-    let n = model.states.len();
+    // The model's own states; a counter of the section's firings may follow them.
+    let n = problem.model.states.len();
     let initial = compiled(model, &problem.free)?;
     let (augmented, seeds) = seeded(model);
     let map = compiled(&augmented, &seeds)?;
     let mut sim = Simulator::new(&map, &problem.sim)
         .map_err(|e| PeriodicError::Missed { section: problem.section.clone(), how: e.to_string() })?;
     let mut params = problem.params.clone();
-    let (mut x0, mut x0p) = (vec![0.0; n], vec![0.0; n * problem.free.len()]);
+    let n_all = model.states.len();
+    let (mut x0, mut x0p) = (vec![0.0; n_all], vec![0.0; n_all * problem.free.len()]);
     let mut residuals = Vec::new();
     for iteration in 0..=problem.max_iter {
         initial.initial_state(&params, &mut x0);
         let (x1, m, period, events) = return_map(&mut sim, &params, &x0, section, &problem.section)?;
-        let r: Vec<f64> = x1.iter().zip(&x0).map(|(a, b)| a - b).collect();
+        // The counter (if any) is no part of the orbit: it starts at 0 and ends at `firing`.
+        let m = m.view((0, 0), (n, n)).into_owned();
+        let r: Vec<f64> = x1[..n].iter().zip(&x0[..n]).map(|(a, b)| a - b).collect();
         let worst = r.iter().map(|v| v.abs()).fold(0.0, f64::max);
         residuals.push(worst);
         if r.iter().zip(&x0).all(|(ri, xi)| ri.abs() <= problem.tol * (1.0 + xi.abs())) {
@@ -179,6 +244,7 @@ pub fn find(problem: &PeriodicProblem<'_>) -> Result<PeriodicResult, PeriodicErr
                 let size = re.hypot(im);
                 size <= TRIVIAL_MULTIPLIER || size < 1.0
             });
+            x0.truncate(n);
             return Ok(PeriodicResult {
                 params,
                 fixed_point: x0,
@@ -197,7 +263,7 @@ pub fn find(problem: &PeriodicProblem<'_>) -> Result<PeriodicResult, PeriodicErr
         // may be fewer than the states), by the SVD.
         initial.initial_sens(&params, &mut x0p);
         let k = problem.free.len();
-        let x0p = DMatrix::from_fn(n, k, |i, j| x0p[j * n + i]);
+        let x0p = DMatrix::from_fn(n, k, |i, j| x0p[j * n_all + i]);
         let jac = (&m - DMatrix::identity(n, n)) * &x0p;
         let step =
             jac.svd(true, true).solve(&nalgebra::DVector::from_vec(r.iter().map(|v| -v).collect()), 1e-14);

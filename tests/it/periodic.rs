@@ -18,7 +18,16 @@ fn problem_from(model: &hybc::sema::Model, start: [f64; 3]) -> PeriodicProblem<'
         params[p.0 as usize] = v;
     }
     let sim = hybc::sim::SimOptions { t_end: 10.0, rtol: 1e-12, atol: 1e-14, ..Default::default() };
-    PeriodicProblem { model, section: "heelstrike".into(), free, params, sim, max_iter: 30, tol: 1e-11 }
+    PeriodicProblem {
+        model,
+        section: "heelstrike".into(),
+        firing: 1,
+        free,
+        params,
+        sim,
+        max_iter: 30,
+        tol: 1e-11,
+    }
 }
 
 /// The walker's state right after the heel strike from the full initial state `x0` (its swing
@@ -100,6 +109,48 @@ fn a_section_without_stop_is_its_first_firing_and_an_unknown_one_is_refused() {
     let mut p = problem_from(&stopping, PUBLISHED);
     p.section = "toe".into();
     assert!(find(&p).unwrap_err().to_string().contains("no event `toe`"));
+}
+
+#[test]
+fn the_second_heel_strike_closes_the_same_gait_with_twice_the_period_and_squared_multipliers() {
+    // A one-step gait is a fixed point of the two-step map too: the same state, twice the
+    // period, and the two-step monodromy is M^2, so its multipliers are the squares. With the
+    // section declared `stop` (moved to the second firing) and without (the walker walks on).
+    let stopping = hybc::check_source(WALKER).unwrap();
+    let one = find(&problem_from(&stopping, PUBLISHED)).expect("one step");
+    for text in [WALKER.to_string(), WALKER.replace("    stop\n", "")] {
+        let model = hybc::check_source(&text).unwrap();
+        let mut p = problem_from(&model, PUBLISHED.map(|v| v * 1.01));
+        p.firing = 2;
+        let two = find(&p).expect("two steps");
+        assert_eq!(two.fixed_point.len(), 4, "the counter is not part of the orbit");
+        for (a, b) in two.fixed_point.iter().zip(&one.fixed_point) {
+            assert!((a - b).abs() < 1e-9, "{:?} vs {:?}", two.fixed_point, one.fixed_point);
+        }
+        assert!(
+            (two.period - 2.0 * one.period).abs() < 1e-9 * one.period,
+            "{} vs {}",
+            two.period,
+            one.period
+        );
+        assert_eq!(two.events, 2 * one.events);
+        let squared = &one.monodromy * &one.monodromy;
+        for (i, j) in (0..4).flat_map(|i| (0..4).map(move |j| (i, j))) {
+            assert!((two.monodromy[(i, j)] - squared[(i, j)]).abs() < 1e-8, "M2[{i}][{j}]");
+        }
+        let square = |(re, im): (f64, f64)| (re * re - im * im, 2.0 * re * im);
+        for (&got, &single) in two.multipliers.iter().zip(&one.multipliers).take(2) {
+            let want = square(single);
+            assert!(
+                (got.0 - want.0).abs() < 1e-8 && (got.1.abs() - want.1.abs()).abs() < 1e-8,
+                "{got:?} vs {want:?}"
+            );
+        }
+        assert!(two.stable);
+    }
+    let mut p = problem_from(&stopping, PUBLISHED);
+    p.firing = 0;
+    assert!(find(&p).unwrap_err().to_string().contains("firing must be 1 to"));
 }
 
 #[test]
