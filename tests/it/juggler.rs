@@ -10,7 +10,7 @@
 //!
 //! `effort` is the integral of the paddle's squared velocity: `c^2 t_end` for a constant `c`.
 
-use hybc::{Model, SimOptions};
+use hybc::Model;
 
 const JUGGLER: &str = include_str!("../../models/juggler.hyb");
 const G: f64 = 9.81;
