@@ -23,12 +23,16 @@ Workloads (the issue's numbering):
 from __future__ import annotations
 
 import argparse
-import math
+import json
+import pathlib
 import time
 
 import numpy as np
 
 import hybc
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+SOFT_BALL_PATH = ROOT / "models/soft_ball.hyb"
 
 ROBERTSON = """model robertson
 param k1 = 0.04
@@ -67,10 +71,21 @@ def rel_err(got, want) -> float:
     return float(np.max(np.abs(got - want) / scale))
 
 
+def tol_err(got, want, rtol: float, atol: float) -> float:
+    """The largest error in units of the tolerances, |got - want| / (atol + rtol |want|): for a
+    state that comes to rest (the soft ball's v) a relative error means nothing."""
+    got, want = np.asarray(got, dtype=float), np.asarray(want, dtype=float)
+    return float(np.max(np.abs(got - want) / (atol + rtol * np.abs(want))))
+
+
 def row(name: str, seconds: float, steps, err_values: float, err_grad, note: str = "") -> None:
     grad = "-" if err_grad is None else f"{err_grad:.1e}"
     steps = "-" if steps is None else str(steps)
     print(f"  {name:<34} {seconds * 1e3:10.2f} ms {steps:>9}  values {err_values:.1e}  grads {grad:>8}  {note}")
+
+
+# Errors printed: relative (Robertson: every value is well away from 0) or in units of the
+# tolerances (soft ball); the heading of each workload says which.
 
 
 # ---------------------------------------------------------------------------------------------
@@ -195,38 +210,42 @@ def robertson_amici(workdir: str = "/tmp/hybc_amici_robertson"):
     path = f"{workdir}.xml"
     libsbml.writeSBMLToFile(doc, path)
     start = time.perf_counter()
-    importer = amici.SbmlImporter(path)
-    importer.sbml2amici("robertson", workdir, verbose=False)
-    module = amici.import_model_module("robertson", workdir)
+    model = amici.SbmlImporter(path).sbml2amici("robertson", workdir, compute_conservation_laws=False)
     compile_s = time.perf_counter() - start
-    model = module.getModel()
-    model.setTimepoints([ROBERTSON_T])
-    solver = model.getSolver()
-    solver.setRelativeTolerance(RTOL)
-    solver.setAbsoluteTolerance(ATOL)
-    solver.setMaxSteps(10_000_000)
-    solver.setSensitivityOrder(amici.SensitivityOrder.first)
-    solver.setSensitivityMethod(amici.SensitivityMethod.forward)
-    names = list(model.getParameterIds())
-    plist = [names.index(p) for p in ("k1", "k2", "k3")]
-    model.setParameterList(plist)
-    states = list(model.getStateIds())
-
-    def go():
-        rdata = amici.runAmiciSimulation(model, solver)
-        if rdata.status != 0:
-            raise RuntimeError(f"AMICI status {rdata.status}")
-        x = np.asarray(rdata.x)[-1]
-        sx = np.asarray(rdata.sx)[-1]  # (parameters, states)
-        idx = [states.index(s) for s in ("y1", "y2", "y3")]
-        steps = int(np.sum(rdata.numsteps))
-        return x[idx], sx[:, idx].T, steps
-
+    go = amici_runner(model, ROBERTSON_T, RTOL, ATOL, ("k1", "k2", "k3"), ("y1", "y2", "y3"))
     return go, compile_s
 
 
+def amici_runner(model, t_end: float, rtol: float, atol: float, params, states):
+    """A run of an AMICI 1.0 model to `t_end` with forward sensitivities with respect to
+    `params`: the final `states`, their derivatives (states x params) and the step count."""
+    from amici.sim.sundials import SensitivityMethod, SensitivityOrder, run_simulation
+
+    model.set_timepoints([t_end])
+    solver = model.create_solver()
+    solver.set_relative_tolerance(rtol)
+    solver.set_absolute_tolerance(atol)
+    solver.set_max_steps(10_000_000)
+    solver.set_sensitivity_order(SensitivityOrder.first)
+    solver.set_sensitivity_method(SensitivityMethod.forward)
+    names = list(model.get_free_parameter_ids())
+    model.set_parameter_list([names.index(p) for p in params])
+    ids = list(model.get_state_ids())
+    idx = [ids.index(s) for s in states]
+
+    def go():
+        rdata = run_simulation(model, solver)
+        if rdata.status != 0:
+            raise RuntimeError(f"AMICI status {rdata.status}")
+        x = np.asarray(rdata.x)[-1]
+        sx = np.asarray(rdata.sx)[-1]  # (params, states)
+        return x[idx], sx[:, idx].T, int(np.sum(rdata.numsteps))
+
+    return go
+
+
 def robertson(repeat: int) -> None:
-    print(f"W4b Robertson to t = {ROBERTSON_T:g} with one event, rtol {RTOL:g}, atol {ATOL:g}")
+    print(f"W4b Robertson to t = {ROBERTSON_T:g} with one event, rtol {RTOL:g}, atol {ATOL:g} (relative errors)")
     ref_y, ref_d = robertson_values(robertson_hybc("rodas5p", 1e-12, 1e-20)())
     for method in ("rodas5p", "rodas4", "auto"):
         try:
@@ -235,8 +254,7 @@ def robertson(repeat: int) -> None:
             print(f"  hybc {method:<29} failed: {e}")
             continue
         y, d = robertson_values(run)
-        stats = run.to_json()
-        steps = __import__("json").loads(stats)["stats"]["steps"]
+        steps = json.loads(run.to_json())["stats"]["steps"]
         row(f"hybc {method} (+ d/dk)", t, steps, rel_err(y, ref_y), rel_err(d, ref_d))
     for method in ("Radau", "BDF"):
         try:
@@ -260,13 +278,128 @@ def robertson(repeat: int) -> None:
         print(f"  AMICI: missing ({e})")
 
 
+# ---------------------------------------------------------------------------------------------
+# W4a: the soft ball (models/soft_ball.hyb: spring wc^2 max(0, -y), damper 2 zeta wc v in contact)
+
+SOFT_T, SOFT_RTOL, SOFT_ATOL = 10.0, 1e-8, 1e-10
+SOFT_P = {"g": 9.81, "zeta": 0.3, "h0": 1.0}
+
+
+def soft_hybc(wc: float, method: str, rtol: float = SOFT_RTOL, atol: float = SOFT_ATOL):
+    model = hybc.Model.from_file(SOFT_BALL_PATH)
+
+    def go():
+        return model.simulate({"wc": wc}, grad=["zeta", "h0"], t_end=SOFT_T, rtol=rtol, atol=atol, method=method,
+                              max_steps=2_000_000)
+
+    return go
+
+
+def soft_values(run) -> tuple[np.ndarray, np.ndarray]:
+    y = np.array([run.state[s] for s in ("y", "v")])
+    d = np.array([run.dstate[s] for s in ("y", "v")])  # (2, 2): d (y, v) / d (zeta, h0)
+    return y, d
+
+
+def soft_rhs(y, v, wc, zeta, g, where, maximum):
+    return -g + wc**2 * maximum(0.0, -y) - where(y < 0, 2 * zeta * wc * v, 0.0)
+
+
+def soft_scipy(wc: float, method: str):
+    from scipy.integrate import solve_ivp
+
+    g, zeta, h0 = SOFT_P["g"], SOFT_P["zeta"], SOFT_P["h0"]
+
+    def f(t, x):
+        return [x[1], soft_rhs(x[0], x[1], wc, zeta, g, lambda c, a, b: a if c else b, max)]
+
+    def jac(t, x):
+        inside = x[0] < 0
+        return [[0.0, 1.0], [-(wc**2) if inside else 0.0, -2 * zeta * wc if inside else 0.0]]
+
+    def go():
+        r = solve_ivp(f, (0, SOFT_T), [h0, 0.0], method=method, jac=jac, rtol=SOFT_RTOL, atol=SOFT_ATOL)
+        return r.y[:, -1], r.nfev, len(r.t) - 1
+
+    return go
+
+
+def soft_diffrax(wc: float):
+    import diffrax
+    import jax
+    import jax.numpy as jnp
+
+    jax.config.update("jax_enable_x64", True)
+    g = SOFT_P["g"]
+
+    def f(t, x, args):
+        zeta = args
+        return jnp.stack([x[1], soft_rhs(x[0], x[1], wc, zeta, g, jnp.where, jnp.maximum)])
+
+    term, solver = diffrax.ODETerm(f), diffrax.Kvaerno5()
+    controller = diffrax.PIDController(rtol=SOFT_RTOL, atol=SOFT_ATOL)
+
+    def final(p):
+        zeta, h0 = p
+        sol = diffrax.diffeqsolve(term, solver, 0.0, SOFT_T, 1e-4, jnp.stack([h0, 0.0]), args=zeta,
+                                  stepsize_controller=controller, adjoint=diffrax.ForwardMode(),
+                                  max_steps=2_000_000)
+        return sol.ys[-1], sol.stats["num_accepted_steps"]
+
+    values = jax.jit(final)
+    jacobian = jax.jit(jax.jacfwd(lambda p: final(p)[0]))
+    p = jnp.array([SOFT_P["zeta"], SOFT_P["h0"]])
+
+    def go():
+        (x, steps), d = values(p), jacobian(p)
+        return np.asarray(x), np.asarray(d), int(steps)
+
+    start = time.perf_counter()
+    go()
+    return go, time.perf_counter() - start
+
+
+def softball(repeat: int) -> None:
+    for wc in (1e2, 1e3, 1e4, 1e5, 1e6):
+        print(f"W4a soft ball, wc = {wc:g}, T = {SOFT_T:g}, rtol {SOFT_RTOL:g}, atol {SOFT_ATOL:g} "
+              "(errors in units of atol + rtol |x|)")
+        ref_x, ref_d = soft_values(soft_hybc(wc, "rodas5p", 1e-11, 1e-14)())
+        # Errors in units of the run's tolerances (the ball is at rest: relative errors of v and
+        # of the derivatives, all near 0, mean nothing).
+        err = lambda got, want: tol_err(got, want, SOFT_RTOL, SOFT_ATOL)  # noqa: E731
+        for method in ("rodas5p", "auto", "dopri5"):
+            if method == "dopri5" and wc > 1e4:
+                print("  hybc dopri5: skipped above wc = 1e4 (hundreds of thousands of steps)")
+                continue
+            try:
+                t, run = best_of(soft_hybc(wc, method), repeat)
+            except Exception as e:  # noqa: BLE001
+                print(f"  hybc {method:<29} failed: {e}")
+                continue
+            x, d = soft_values(run)
+            steps = json.loads(run.to_json())["stats"]["steps"]
+            row(f"hybc {method} (+ d/d(zeta, h0))", t, steps, err(x, ref_x), err(d, ref_d), run.status)
+        try:
+            t, (x, nfev, steps) = best_of(soft_scipy(wc, "Radau"), max(1, repeat // 2))
+            row("scipy Radau (values only)", t, steps, err(x, ref_x), None, f"{nfev} f evals")
+        except ImportError as e:
+            print(f"  scipy: missing ({e})")
+        try:
+            go, first = soft_diffrax(wc)
+            t, (x, d, steps) = best_of(go, repeat)
+            row("diffrax Kvaerno5 (+ jacfwd)", t, steps, err(x, ref_x), err(d, ref_d),
+                f"first call {first:.1f} s")
+        except ImportError as e:
+            print(f"  diffrax: missing ({e})")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("workloads", nargs="*", default=["robertson"])
     parser.add_argument("--repeat", type=int, default=5)
     args = parser.parse_args()
     for name in args.workloads:
-        {"robertson": robertson}[name](args.repeat)
+        {"robertson": robertson, "softball": softball}[name](args.repeat)
 
 
 if __name__ == "__main__":
