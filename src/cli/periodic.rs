@@ -132,8 +132,9 @@ fn json(model: &Model, problem: &PeriodicProblem<'_>, r: &PeriodicResult) -> ser
         .iter()
         .map(|p| (m.params[p.0 as usize].name.clone(), json!(r.params[p.0 as usize])))
         .collect();
-    let n = r.fixed_point.len();
+    let n = r.orbit.len();
     let rows: Vec<Vec<f64>> = (0..n).map(|i| (0..n).map(|j| r.monodromy[(i, j)]).collect()).collect();
+    let orbit: Vec<&str> = r.orbit.iter().map(|&i| m.states[i].name.as_str()).collect();
     json!({
         "model": m.name,
         "section": problem.section,
@@ -144,6 +145,7 @@ fn json(model: &Model, problem: &PeriodicProblem<'_>, r: &PeriodicResult) -> ser
         "multipliers": r.multipliers.iter().map(|&(re, im)| [re, im]).collect::<Vec<_>>(),
         "trivial": r.multipliers.iter().filter(|&&z| trivial(z)).count(),
         "stable": r.stable,
+        "orbit": orbit,
         "monodromy": rows,
         "iterations": r.residuals.len() - 1,
         "residuals": r.residuals,
@@ -167,8 +169,9 @@ fn table(model: &Model, problem: &PeriodicProblem<'_>, r: &PeriodicResult) -> St
         let _ = writeln!(out, "  {:<14}  {:>20}", m.params[p.0 as usize].name, num(r.params[p.0 as usize]));
     }
     let _ = writeln!(out, "\ninitial state (= the state right after {}):", section_label(problem));
-    for (s, v) in m.states.iter().zip(&r.fixed_point) {
-        let _ = writeln!(out, "  {:<14}  {:>20}", s.name, num(*v));
+    for (i, (s, v)) in m.states.iter().zip(&r.fixed_point).enumerate() {
+        let note = if r.orbit.contains(&i) { "" } else { "  (a running cost: not part of the orbit)" };
+        let _ = writeln!(out, "  {:<14}  {:>20}{note}", s.name, num(*v));
     }
     let _ = writeln!(out, "\nperiod: {}   events per period: {}", num(r.period), r.events);
     let _ = writeln!(out, "\nFloquet multipliers (eigenvalues of the monodromy matrix, saltation included):");

@@ -55,8 +55,12 @@ pub struct PeriodicResult {
     pub fixed_point: Vec<f64>,
     /// The time from the start to the section.
     pub period: f64,
-    /// `d x(section+) / d x0`, row-major n x n.
+    /// `d x(section+) / d x0` over the orbit's states (`orbit`).
     pub monodromy: DMatrix<f64>,
+    /// The states of the orbit, the rows and columns of `monodromy`: every state but the
+    /// quadrature ones (`sema::quadrature_states`: a running cost that no flow, guard or other
+    /// state reads grows from period to period and is no part of the orbit).
+    pub orbit: Vec<usize>,
     /// Eigenvalues of the monodromy matrix as `(re, im)`, by decreasing magnitude.
     pub multipliers: Vec<(f64, f64)>,
     /// Whether every multiplier above [`TRIVIAL_MULTIPLIER`] lies strictly inside the unit circle.
@@ -219,8 +223,12 @@ pub fn find(problem: &PeriodicProblem<'_>) -> Result<PeriodicResult, PeriodicErr
     if problem.free.is_empty() {
         return Err(PeriodicError::NoFree);
     }
-    // The model's own states; a counter of the section's firings may follow them.
+    // The model's own states; a counter of the section's firings may follow them. The orbit is
+    // every one of them but the quadrature states.
     let n = problem.model.states.len();
+    let quadrature = sema::quadrature_states(problem.model);
+    let orbit: Vec<usize> = (0..n).filter(|&i| !quadrature[i]).collect();
+    let k_orbit = orbit.len();
     let initial = compiled(model, &problem.free)?;
     let (augmented, seeds) = seeded(model);
     let map = compiled(&augmented, &seeds)?;
@@ -233,12 +241,12 @@ pub fn find(problem: &PeriodicProblem<'_>) -> Result<PeriodicResult, PeriodicErr
     for iteration in 0..=problem.max_iter {
         initial.initial_state(&params, &mut x0);
         let (x1, m, period, events) = return_map(&mut sim, &params, &x0, section, &problem.section)?;
-        // The counter (if any) is no part of the orbit: it starts at 0 and ends at `firing`.
-        let m = m.view((0, 0), (n, n)).into_owned();
-        let r: Vec<f64> = x1[..n].iter().zip(&x0[..n]).map(|(a, b)| a - b).collect();
+        // The counter (if any) and the quadrature states are no part of the orbit.
+        let m = DMatrix::from_fn(k_orbit, k_orbit, |i, j| m[(orbit[i], orbit[j])]);
+        let r: Vec<f64> = orbit.iter().map(|&i| x1[i] - x0[i]).collect();
         let worst = r.iter().map(|v| v.abs()).fold(0.0, f64::max);
         residuals.push(worst);
-        if r.iter().zip(&x0).all(|(ri, xi)| ri.abs() <= problem.tol * (1.0 + xi.abs())) {
+        if r.iter().zip(&orbit).all(|(ri, &i)| ri.abs() <= problem.tol * (1.0 + x0[i].abs())) {
             let multipliers = multipliers(&m);
             let stable = multipliers.iter().all(|&(re, im)| {
                 let size = re.hypot(im);
@@ -250,6 +258,7 @@ pub fn find(problem: &PeriodicProblem<'_>) -> Result<PeriodicResult, PeriodicErr
                 fixed_point: x0,
                 period,
                 monodromy: m,
+                orbit,
                 multipliers,
                 stable,
                 residuals,
@@ -263,8 +272,8 @@ pub fn find(problem: &PeriodicProblem<'_>) -> Result<PeriodicResult, PeriodicErr
         // may be fewer than the states), by the SVD.
         initial.initial_sens(&params, &mut x0p);
         let k = problem.free.len();
-        let x0p = DMatrix::from_fn(n, k, |i, j| x0p[j * n_all + i]);
-        let jac = (&m - DMatrix::identity(n, n)) * &x0p;
+        let x0p = DMatrix::from_fn(k_orbit, k, |i, j| x0p[j * n_all + orbit[i]]);
+        let jac = (&m - DMatrix::identity(k_orbit, k_orbit)) * &x0p;
         let step =
             jac.svd(true, true).solve(&nalgebra::DVector::from_vec(r.iter().map(|v| -v).collect()), 1e-14);
         let step = step.map_err(|_| PeriodicError::Singular)?;

@@ -5,9 +5,11 @@ mod error;
 pub mod lint;
 pub mod model;
 mod names;
+mod quadrature;
 mod switches;
 
 pub use check::check;
 pub use error::CheckError;
 pub use model::*;
 pub use names::closest as closest_name;
+pub use quadrature::quadrature_states;

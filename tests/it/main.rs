@@ -8,6 +8,7 @@ mod check_grad;
 mod cli_cases;
 mod cli_run;
 mod closed_forms;
+mod compass_gait;
 mod convergence;
 mod derive_snapshots;
 mod event_edges;
