@@ -24,7 +24,7 @@ use nalgebra::{DMatrix, DMatrixViewMut};
 #[serde(rename_all = "lowercase")]
 pub enum LinearSolver {
     /// Banded from [`SPARSE_MIN_STATES`] states on when the model gives its Jacobian's pattern
-    /// and the band pays; dense otherwise.
+    /// and the band costs fewer operations than the dense LU; dense otherwise.
     #[default]
     Auto,
     /// Always the dense LU.
@@ -33,11 +33,14 @@ pub enum LinearSolver {
     Banded,
 }
 
-/// From this many states the banded factorisation is used (when the model gives its pattern and
-/// the band is narrow enough). Measured on the diffusion chain of workload W5 (Rodas5P, 10
-/// gradients, README Performance): the banded solve is faster already at 10 states, and nothing
-/// is lost below, but the dense path is the one every small model has been tested with.
-pub const SPARSE_MIN_STATES: usize = 16;
+/// From this many states the banded factorisation is used (when the model gives its Jacobian's
+/// pattern and the band costs fewer operations than the dense LU). Measured on the diffusion
+/// chain of workload W5 (Rodas5P, 10 gradients, `examples/w5_chain.rs`, README Performance):
+/// a run with the band takes the time of the dense one at 2 states (0.188 ms both), 0.93 of it at
+/// 3, 0.54 at 10, 0.39 at 30 and 0.007 at 1000; the switch is where the band becomes narrower
+/// than the matrix, not a size. The dense LU stays for one and two states, where there is no
+/// band to find.
+pub const SPARSE_MIN_STATES: usize = 3;
 
 /// The symbolic analysis of one pattern: the ordering and the band.
 #[derive(Clone, Debug)]
@@ -132,7 +135,7 @@ struct Band {
     ld: usize,
     ab: Vec<f64>,
     piv: Vec<usize>,
-    /// A right-hand side in the banded order.
+    /// The right-hand sides in the banded order, row-major.
     work: Vec<f64>,
 }
 
@@ -145,7 +148,6 @@ impl Band {
         self.ab.clear();
         self.ab.resize(n * self.ld, 0.0);
         self.piv.resize(n, 0);
-        self.work.resize(n, 0.0);
     }
 
     #[inline(always)]
@@ -196,27 +198,47 @@ impl Band {
         true
     }
 
-    /// Solves in place for `b` in the banded order.
-    fn solve(&self, b: &mut [f64]) {
+    /// Solves in place for `cols` right-hand sides in the banded order, stored row-major
+    /// (`b[i * cols + c]`): every row operation acts on all the columns at once, so the
+    /// substitutions' dependency chains run side by side instead of one column after another.
+    fn solve(&self, b: &mut [f64], cols: usize) {
         let (n, kl, ku2) = (self.n, self.kl, self.ku2);
+        let row = |i: usize| i * cols..(i + 1) * cols;
         for j in 0..n {
-            b.swap(j, self.piv[j]);
-            let (bj, last) = (b[j], (j + kl).min(n - 1));
-            if bj != 0.0 && last > j {
+            let p = self.piv[j];
+            if p != j {
+                let (head, tail) = b.split_at_mut(p * cols);
+                head[row(j)].swap_with_slice(&mut tail[..cols]);
+            }
+            let last = (j + kl).min(n - 1);
+            if last > j {
+                let (head, tail) = b.split_at_mut((j + 1) * cols);
+                let bj = &head[row(j)];
                 // Column j's multipliers are contiguous in `ab`.
                 let l = &self.ab[self.idx(j + 1, j)..=self.idx(last, j)];
-                for (bi, l) in b[j + 1..=last].iter_mut().zip(l) {
-                    *bi -= l * bj;
+                for (bi, &l) in tail.chunks_exact_mut(cols).zip(l) {
+                    if l != 0.0 {
+                        for (x, y) in bi.iter_mut().zip(bj) {
+                            *x -= l * y;
+                        }
+                    }
                 }
             }
         }
         for j in (0..n).rev() {
-            b[j] /= self.ab[self.idx(j, j)];
-            let (bj, first) = (b[j], j.saturating_sub(ku2));
-            if bj != 0.0 && first < j {
-                let u = &self.ab[self.idx(first, j)..self.idx(j, j)];
-                for (bi, u) in b[first..j].iter_mut().zip(u) {
-                    *bi -= u * bj;
+            let inv = 1.0 / self.ab[self.idx(j, j)];
+            let first = j.saturating_sub(ku2);
+            let (head, tail) = b.split_at_mut(j * cols);
+            let bj = &mut tail[..cols];
+            for x in bj.iter_mut() {
+                *x *= inv;
+            }
+            let u = &self.ab[self.idx(first, j)..self.idx(j, j)];
+            for (bi, &u) in head[first * cols..].chunks_exact_mut(cols).zip(u) {
+                if u != 0.0 {
+                    for (x, y) in bi.iter_mut().zip(&*bj) {
+                        *x -= u * y;
+                    }
                 }
             }
         }
@@ -314,14 +336,18 @@ impl LinSolve {
         match self.current {
             Some(key) => {
                 let Some(Some(Some(s))) = self.structures.get(key) else { return false };
+                // Into the banded order, row-major over the columns, and back.
                 let mut work = std::mem::take(&mut self.band.work);
-                for col in b.chunks_exact_mut(n).take(cols) {
-                    for (i, &v) in col.iter().enumerate() {
-                        work[s.perm[i]] = v;
+                work.resize(n * cols, 0.0);
+                for (c, col) in b.chunks_exact(n).take(cols).enumerate() {
+                    for (&v, &at) in col.iter().zip(&s.perm) {
+                        work[at * cols + c] = v;
                     }
-                    self.band.solve(&mut work);
-                    for (i, v) in col.iter_mut().enumerate() {
-                        *v = work[s.perm[i]];
+                }
+                self.band.solve(&mut work, cols);
+                for (c, col) in b.chunks_exact_mut(n).take(cols).enumerate() {
+                    for (v, &at) in col.iter_mut().zip(&s.perm) {
+                        *v = work[at * cols + c];
                     }
                 }
                 self.band.work = work;

@@ -1,13 +1,13 @@
 //! Workload W5 of issue #25 and the banded factorisation (`sim::linsolve`): the diffusion chain
 //! (`support::chain::diffusion_source`) with Rodas5P, the banded LU against the dense LU and
 //! both against the closed form of the linear chain, a matrix exponential; the chain with its
-//! refill event through `hybc::gradcheck`; the Jacobian kernel writes only the pattern.
+//! top-up event through `hybc::gradcheck`; the Jacobian kernel writes only the pattern.
 
 use hybc::sim::{HybridSystem, LinearSolver, Method, SimOptions};
 use hybc::Model;
 use nalgebra::{DMatrix, DVector};
 
-use crate::support::chain::diffusion_source;
+use crate::support::chain::{diffusion_source, diffusion_start};
 
 const N: usize = 40;
 
@@ -39,12 +39,14 @@ fn chain_matrix(n: usize, d: &[f64], c: f64, wrt: Option<usize>) -> DMatrix<f64>
     a
 }
 
-/// `x(T)` and `dx(T)/dd_j` of the linear chain from `x(0) = e_0`: the exponential of the
-/// system with one sensitivity, `[[A, 0], [A_j, A]]`, applied to `[e_0, 0]`.
+/// `x(T)` and `dx(T)/dd_j` of the linear chain from its ramp `x(0)`: the exponential of the
+/// system with one sensitivity, `[[A, 0], [A_j, A]]`, applied to `[x(0), 0]`.
 fn closed_form(n: usize, d: &[f64], c: f64, t: f64) -> (Vec<f64>, Vec<Vec<f64>>) {
     let a = chain_matrix(n, d, c, None);
     let mut x0 = DVector::zeros(2 * n);
-    x0[0] = 1.0;
+    for i in 0..n {
+        x0[i] = diffusion_start(i, n);
+    }
     let mut x = Vec::new();
     let mut sens = Vec::new();
     for j in 0..d.len() {
@@ -74,7 +76,7 @@ fn run(model: &Model, solver: LinearSolver, rtol: f64, t_end: f64) -> hybc::Run 
 
 /// The linear chain (no event) of 40 cells to T = 2 at rtol 1e-10: the banded and the dense LU
 /// both agree with the matrix exponential, values to 1e-9 and the ten gradients to 1e-8
-/// (relative to the largest of each), and with each other to 1e-11.
+/// (relative to the largest of each), and with each other to 1e-11 (the same steps).
 #[test]
 fn the_linear_chain_matches_its_matrix_exponential_banded_and_dense() {
     let model = Model::parse(&diffusion_source(N, false)).expect("parses");
@@ -100,21 +102,22 @@ fn the_linear_chain_matches_its_matrix_exponential_banded_and_dense() {
     for (x, y) in a.state.iter().zip(&b.state) {
         assert!((x - y).abs() <= 1e-11 * x_scale, "{x} vs {y}");
     }
+    // Every column, the leak `c`'s too (not in the closed form: relative to itself).
     for (x, y) in a.dstate.as_ref().unwrap().iter().zip(b.dstate.as_ref().unwrap()) {
-        assert!((x - y).abs() <= 1e-11 * s_scale, "{x} vs {y}");
+        assert!((x - y).abs() <= 1e-11 * s_scale.max(y.abs()), "{x} vs {y}");
     }
 }
 
-/// The chain with its refill event (N = 40, T = 10, 19 refills): the banded LU fires the same
+/// The chain with its top-up event (N = 40, T = 10): the banded LU fires the same
 /// events as the dense one at the same times (1e-9), and its gradients with respect to all ten
 /// conductances pass `hybc::gradcheck` at rtol 1e-8.
 #[test]
-fn the_chain_with_refills_is_the_same_banded_and_its_gradients_check() {
+fn the_chain_with_its_event_is_the_same_banded_and_its_gradients_check() {
     let model = Model::parse(&diffusion_source(N, true)).expect("parses");
     let banded = run(&model, LinearSolver::Banded, 1e-8, 10.0);
     let dense = run(&model, LinearSolver::Dense, 1e-8, 10.0);
     assert!(banded.is_complete());
-    assert!(banded.events().len() >= 10, "{} events", banded.events().len());
+    assert_eq!(banded.events().len(), 1);
     assert_eq!(banded.events().len(), dense.events().len());
     for (a, b) in banded.events().iter().zip(dense.events()) {
         assert!((a.time - b.time).abs() <= 1e-9, "{} vs {}", a.time, b.time);
