@@ -37,7 +37,7 @@ pub enum LinearSolver {
 /// pattern and the band costs fewer operations than the dense LU). Measured on the diffusion
 /// chain of workload W5 (Rodas5P, 10 gradients, `examples/w5_chain.rs`, README Performance):
 /// a run with the band takes the time of the dense one at 2 states (0.188 ms both), 0.93 of it at
-/// 3, 0.54 at 10, 0.39 at 30 and 0.007 at 1000; the switch is where the band becomes narrower
+/// 3, 0.54 at 10, 0.40 at 30 and 0.008 at 1000; the switch is where the band becomes narrower
 /// than the matrix, not a size. The dense LU stays for one and two states, where there is no
 /// band to find.
 pub const SPARSE_MIN_STATES: usize = 3;
