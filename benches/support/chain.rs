@@ -1,4 +1,7 @@
-//! The generated chain model shared by `benches/jit.rs` and `examples/jit_options.rs`.
+//! The generated chain models shared by the benches, the examples and the tests
+//! (`tests/it/support`): `chain_source` (`benches/jit.rs`), `diffusion_source` (workload W5).
+// Each includer (benches, examples, tests) uses only some of the generators.
+#![allow(dead_code)]
 
 /// A chain of `n` states: `x0` decays, each later state relaxes towards its predecessor with a
 /// quadratic loss; one event resets the last state.
@@ -16,4 +19,43 @@ pub fn chain_source(n: usize) -> String {
     s.push_str(&format!("event full when x{last} >= 0.5 {{\n    x{last} := 0\n}}\n"));
     s.push_str(&format!("output y = x{last}\n"));
     s
+}
+
+/// Workload W5 of issue #25: a diffusion chain of `n` states, mildly stiff, with 10 parameters
+/// and a guard on one state. Cell `i` exchanges with cell `i + 1` through the conductance
+/// `d[j]` of its segment (`j = 10 i / n`, ten segments of equal length) and every cell leaks at
+/// rate `c`: the eigenvalues lie in `[-(4 max d + c), -c]` (down to -200 at the defaults, so an
+/// explicit method is held to steps of about 0.016 at any `n`). The cells start on a ramp,
+/// `x_i(0) = 1 - i / (2 n)`; when cell 0 has leaked down to 0.6 (near t = 5) it is topped up by
+/// 0.3 once (`top_up`, a falling guard on `x0`, then mode `rest`). Without the event
+/// (`with_event = false`) the chain is linear, `x' = A(d) x`: its solution and derivatives are
+/// a matrix exponential (the tests' closed form).
+pub fn diffusion_source(n: usize, with_event: bool) -> String {
+    assert!(n >= 2, "a chain has at least two cells");
+    let seg = |i: usize| 10 * i / n;
+    let mut s = String::from("model diffusion_chain\nparam d[10] = 50 in [0.1, 1000]\nparam c = 0.1\n");
+    for i in 0..n {
+        s.push_str(&format!("state x{i} = {}\n", diffusion_start(i, n)));
+    }
+    for i in 0..n {
+        let mut rhs = format!("-c * x{i}");
+        if i > 0 {
+            rhs.push_str(&format!(" + d[{}] * (x{} - x{i})", seg(i - 1), i - 1));
+        }
+        if i + 1 < n {
+            rhs.push_str(&format!(" - d[{}] * (x{i} - x{})", seg(i), i + 1));
+        }
+        s.push_str(&format!("der(x{i}) = {rhs}\n"));
+    }
+    if with_event {
+        s.push_str("initial mode fill {\n    event top_up when x0 <= 0.6 -> rest {\n        x0 := x0 + 0.3\n    }\n}\nmode rest {\n}\n");
+    }
+    s.push_str(&format!("output y = x{}\n", n - 1));
+    s
+}
+
+/// Cell `i`'s initial value in [`diffusion_source`] (as written in the model: `{}` of an `f64`
+/// reads back exactly).
+pub fn diffusion_start(i: usize, n: usize) -> f64 {
+    1.0 - 0.5 * i as f64 / n as f64
 }

@@ -93,6 +93,8 @@ pub struct CompiledModel {
 struct StiffKernels {
     jac: Vec<Kernel>,
     dir: Vec<Kernel>,
+    /// Each mode's `f_x` entries, in the order `jac` writes their values.
+    patterns: Vec<Vec<(u32, u32)>>,
 }
 
 impl std::fmt::Debug for CompiledModel {
@@ -187,7 +189,7 @@ impl CompiledModel {
             })?;
             let fetch =
                 |ids: &[(FuncId, Lens, [bool; N_OUTS])]| ids.iter().map(|e| finalized(&module, e)).collect();
-            Ok(StiffKernels { jac: fetch(&jac_ids), dir: fetch(&dir_ids) })
+            Ok(StiffKernels { jac: fetch(&jac_ids), dir: fetch(&dir_ids), patterns: plan.patterns.clone() })
         })();
         match built {
             Ok(kernels) => {
@@ -395,11 +397,42 @@ impl HybridSystem for CompiledModel {
         ft: &mut [f64],
         st: &mut [f64],
     ) {
+        let kernels = self.stiff_kernels().ok();
+        match kernels.and_then(|k| Some((k.jac.get(mode)?, k.patterns.get(mode)?))) {
+            Some((k, pattern)) if fx.len() == x.len() * x.len() => {
+                // The kernel writes the pattern's values; small models take them as a matrix.
+                let mut vals = vec![0.0; pattern.len()];
+                k.call(t, x, s, p, [&mut vals, ft, st]);
+                fx.fill(0.0);
+                let n = x.len();
+                for (&(r, c), v) in pattern.iter().zip(vals) {
+                    fx[r as usize * n + c as usize] = v;
+                }
+            }
+            _ => poison([fx, ft, st]),
+        }
+    }
+
+    fn jac_pattern(&self, mode: usize) -> Option<&[(u32, u32)]> {
+        self.stiff_kernels().ok()?.patterns.get(mode).map(Vec::as_slice)
+    }
+
+    fn flow_jac_values(
+        &self,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        s: &[f64],
+        p: &[f64],
+        vals: &mut [f64],
+        ft: &mut [f64],
+        st: &mut [f64],
+    ) {
         match self.stiff_kernels().ok().and_then(|k| k.jac.get(mode)) {
             Some(k) => {
-                k.call(t, x, s, p, [fx, ft, st]);
+                k.call(t, x, s, p, [vals, ft, st]);
             }
-            None => poison([fx, ft, st]),
+            None => poison([vals, ft, st]),
         }
     }
 

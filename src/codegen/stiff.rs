@@ -2,8 +2,12 @@
 //! mode. They take second derivatives, which an explicit run never needs, so they are planned
 //! and compiled on demand (`CompiledModel::prepare_jacobians`), not with the model.
 //!
-//! - `mode{k}_flow_jac` (inputs `x` (n), `s = S` (n m)): `f_x` (n x n, row-major), `f_t` (n),
-//!   and the sensitivities' time derivative `f_xt s_j + f_pt_j` (n m, column per parameter).
+//! - `mode{k}_flow_jac` (inputs `x` (n), `s = S` (n m)): `f_x` as the values of its structurally
+//!   nonzero entries only, in the order of the mode's pattern (`StiffPlan::patterns`: the
+//!   entries of the symbolic `f_x`, known here at compile time), `f_t` (n), and the
+//!   sensitivities' time derivative `f_xt s_j + f_pt_j` (n m, column per parameter). A chain of
+//!   1000 states writes about 3000 numbers, not a million; the dense `n x n` matrix, for small
+//!   models, is scattered from them by the caller (`CompiledModel::flow_jac`).
 //! - `mode{k}_sens_dir` (inputs `x = [x, v]` (2n), `s = S` (n m)): for the direction `v`, the
 //!   derivative of the sensitivity right-hand side along `v`,
 //!   `(d/dx (f_x s_j + f_p_j)) v = f_xx[s_j, v] + f_xp_j v` (n m). The direction enters as the
@@ -16,10 +20,12 @@ use super::CodegenError;
 use crate::expr::{Differentiator, ExprId, ExprStore, ModelFunctions, Node, Var};
 use crate::sim::SystemInfo;
 
-/// The stiff kernels of every mode, indexed by mode.
+/// The stiff kernels of every mode, indexed by mode, with the pattern of each mode's `f_x`.
 pub(crate) struct StiffPlan {
     pub jac: Vec<KernelPlan>,
     pub dir: Vec<KernelPlan>,
+    /// `(row, column)` of each value `flow_jac` writes to its first output, in that order.
+    pub patterns: Vec<Vec<(u32, u32)>>,
 }
 
 /// Plans the stiff kernels of `funcs` (already checked against `info` by `plan_model`); the new
@@ -35,7 +41,7 @@ pub(crate) fn plan_stiff(funcs: &mut ModelFunctions, info: &SystemInfo) -> Resul
         }
     }
     let mut d = Differentiator::new();
-    let mut plan = StiffPlan { jac: Vec::new(), dir: Vec::new() };
+    let mut plan = StiffPlan { jac: Vec::new(), dir: Vec::new(), patterns: Vec::new() };
     let modes = funcs.modes.clone();
     let store = &mut funcs.store;
     for (k, mode) in modes.iter().enumerate() {
@@ -46,12 +52,16 @@ pub(crate) fn plan_stiff(funcs: &mut ModelFunctions, info: &SystemInfo) -> Resul
             fp_rows[i].iter().find(|&&(param, _)| grad_col[param] == Some(j)).map(|&(_, e)| e)
         };
 
-        let lens = Lens { x: n, s: n * m, p: n_params, out: [n * n, n, n * m] };
+        // Every entry of the pattern is written (the sparse matrix holds no zeros), so the
+        // values need no zero fill.
+        let pattern: Vec<(u32, u32)> = mode.flow_x.entries.iter().map(|&(i, c, _)| (i, c)).collect();
+        let lens = Lens { x: n, s: n * m, p: n_params, out: [pattern.len(), n, n * m] };
         let mut jac = KernelPlan::new(format!("mode{k}_flow_jac"), lens);
-        jac.prefill = [true, true, false];
-        for &(i, c, e) in &mode.flow_x.entries {
-            jac.write(0, i as usize * n + c as usize, Term::Expr(e))?;
+        jac.prefill = [false, true, false];
+        for (slot, &(_, _, e)) in mode.flow_x.entries.iter().enumerate() {
+            jac.write(0, slot, Term::Expr(e))?;
         }
+        plan.patterns.push(pattern);
         for &(i, e) in &mode.flow_t.entries {
             jac.write(1, i as usize, Term::Expr(e))?;
         }

@@ -149,6 +149,16 @@ impl<S: HybridSystem + ?Sized> Rhs for ModeRhs<'_, S> {
         self.sys.flow_jac(self.mode, t, x, s, self.p, fx, ftx, fts);
     }
 
+    fn jac_pattern(&self) -> Option<(usize, &[(u32, u32)])> {
+        self.sys.jac_pattern(self.mode).map(|p| (self.mode, p))
+    }
+
+    fn jacobian_values(&mut self, t: f64, z: &[f64], vals: &mut [f64], ft: &mut [f64]) {
+        let (x, s) = z.split_at(self.n);
+        let (ftx, fts) = ft.split_at_mut(self.n);
+        self.sys.flow_jac_values(self.mode, t, x, s, self.p, vals, ftx, fts);
+    }
+
     fn sens_coupling(&mut self, t: f64, xv: &[f64], z: &[f64], out: &mut [f64]) {
         self.sys.sens_dir(self.mode, t, xv, &z[self.n..], self.p, out);
     }

@@ -12,9 +12,11 @@
 
 mod breakpoints;
 mod dense;
+mod errnorm;
 mod events;
 mod integrator;
 mod jump;
+mod linsolve;
 mod options;
 mod poly;
 mod recorder;
@@ -33,6 +35,7 @@ mod zeno;
 
 pub use dense::Dense;
 pub use integrator::{Integrator, StepOutcome};
+pub use linsolve::{LinearSolver, SPARSE_MIN_STATES};
 pub use options::*;
 pub use recorder::{NoRecorder, Point, PointKind, Recorder, RowSchedule, TrajectoryRecorder};
 pub use result::*;

@@ -78,6 +78,10 @@ pub struct SimOptions {
     pub sens_error_control: bool,
     /// Optional cap on the step size (infinite by default).
     pub h_max: f64,
+    /// The factorisation of a Rosenbrock method's `W` (`sim::linsolve`): banded for models of
+    /// [`SPARSE_MIN_STATES`](super::SPARSE_MIN_STATES) states or more whose Jacobian's pattern
+    /// gives a narrow band, dense otherwise. Explicit methods ignore it.
+    pub linear_solver: super::LinearSolver,
     pub trajectory: TrajectoryRequest,
     /// Times at which every state and output is sampled with its derivatives, from the dense
     /// output (`SimResult::samples`): ascending, within `[t_start, t_end]`. They do not cut the
@@ -100,6 +104,7 @@ impl Default for SimOptions {
             graze_tol: 1e-2,
             sens_error_control: true,
             h_max: f64::INFINITY,
+            linear_solver: super::LinearSolver::Auto,
             trajectory: TrajectoryRequest::None,
             at: Vec::new(),
         }

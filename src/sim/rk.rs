@@ -19,6 +19,7 @@
 //! and `h1 = (0.01 / max(d1, d2))^(1/q)`; the estimate is `min(100 h0, h1)`.
 
 use super::dense::Dense;
+use super::errnorm::BlockNorm;
 use super::stepper::{Rhs, Stepper};
 use super::sums::{centred_sum, stage_sum};
 #[cfg(doc)]
@@ -141,9 +142,8 @@ impl Rk {
         let ne = self.n_err;
         let n_states = self.n_states;
         centred_sum(&self.k, self.nz, &self.tab.e, &mut self.err5[..ne]);
-        let mut sum5 = 0.0;
-        let mut sum3 = 0.0;
-        let mut used = 0usize;
+        let with3 = self.tab.e3.is_some();
+        let mut norm = BlockNorm::new(n_states);
         let scales = y[..ne].iter().zip(&self.y_new[..ne]);
         let skip =
             |i: usize, values: [f64; 4]| MASKED && i >= n_states && values.iter().any(|v| !v.is_finite());
@@ -151,40 +151,20 @@ impl Rk {
             Some(e3) => {
                 centred_sum(&self.k, self.nz, e3, &mut self.err3[..ne]);
                 for (i, ((y0, y1), (e5, e3))) in scales.zip(self.err5.iter().zip(&self.err3)).enumerate() {
-                    if skip(i, [*y0, *y1, *e5, *e3]) {
-                        continue;
-                    }
-                    used += 1;
                     let h_sc = h / (self.atol + self.rtol * y0.abs().max(y1.abs()));
-                    let (r5, r3) = (e5 * h_sc, e3 * h_sc);
-                    sum5 += r5 * r5;
-                    sum3 += r3 * r3;
+                    let r = (!skip(i, [*y0, *y1, *e5, *e3])).then(|| (e5 * h_sc, e3 * h_sc));
+                    norm.add(i, r, true);
                 }
             }
             None => {
                 for (i, ((y0, y1), e5)) in scales.zip(&self.err5).enumerate() {
-                    if skip(i, [*y0, *y1, *e5, 0.0]) {
-                        continue;
-                    }
-                    used += 1;
                     let sc = self.atol + self.rtol * y0.abs().max(y1.abs());
-                    let r5 = h * e5 / sc;
-                    sum5 += r5 * r5;
+                    let r = (!skip(i, [*y0, *y1, *e5, 0.0])).then(|| (h * e5 / sc, 0.0));
+                    norm.add(i, r, false);
                 }
             }
         }
-        let n = if MASKED { used.max(1) } else { ne.max(1) } as f64;
-        if self.tab.e3.is_some() {
-            let den = sum5 + 0.01 * sum3;
-            // A NaN estimate stays NaN (the step is rejected); only a zero one is zero.
-            if den == 0.0 {
-                0.0
-            } else {
-                sum5 / (n * den).sqrt()
-            }
-        } else {
-            (sum5 / n).sqrt()
-        }
+        norm.finish(with3)
     }
 }
 

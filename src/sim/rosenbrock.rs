@@ -1,7 +1,7 @@
 //! Stage 5 (sim): the Rosenbrock (ROW) methods Rodas5P and Rodas4 as a [`Stepper`], for stiff
 //! flows. Linearly implicit: one LU factorisation of `W = I / (h gamma) - f_x` per attempted
-//! step (dense, nalgebra), no Newton iteration; the stages and coefficients are in
-//! `row_tableau.rs`.
+//! step (dense, or banded for large models with a known Jacobian pattern: `linsolve.rs`), no
+//! Newton iteration; the stages and coefficients are in `row_tableau.rs`.
 //!
 //! Sensitivities. The integrated vector is `z = [x, S]`, and the method is applied to the whole
 //! system `z' = F(t, z) = [f, f_x S + f_p]`, whose Jacobian is block lower triangular:
@@ -25,8 +25,8 @@
 //! Dense output: the method's own interpolation (order 4 for Rodas5P, 3 for Rodas4) for every
 //! component, sensitivities included, built with the step (it costs a few vector sums).
 
-use nalgebra::{DMatrix, DMatrixViewMut};
-
+use super::errnorm::BlockNorm;
+use super::linsolve::{LinSolve, LinearSolver};
 use super::row_tableau::RowTableau;
 use super::stepper::{Interpolant, Rhs, Stepper};
 
@@ -52,8 +52,10 @@ pub struct Rosenbrock {
     /// `F` at the start point and at the end of the last attempt.
     f0: Vec<f64>,
     f1: Vec<f64>,
-    /// `f_x` (n x n) and `F_t` (nz) at the start point; `jac_fresh` while they belong to it.
-    fx: Vec<f64>,
+    /// `f_x` (in `lin`: dense or the pattern's values) and `F_t` (nz) at the start point;
+    /// `jac_fresh` while they belong to it.
+    lin: Box<LinSolve>,
+    solver: LinearSolver,
     ft: Vec<f64>,
     jac_fresh: bool,
     /// Scratch: a stage input, a stage right-hand side, `[x0, v]`, and `B v`.
@@ -92,7 +94,8 @@ impl Rosenbrock {
             k: vec![0.0; tab.stages * nz],
             f0: vec![0.0; nz],
             f1: vec![0.0; nz],
-            fx: vec![0.0; n * n],
+            lin: Box::new(LinSolve::new(n)),
+            solver: LinearSolver::Auto,
             ft: vec![0.0; nz],
             jac_fresh: false,
             u: vec![0.0; nz],
@@ -108,6 +111,12 @@ impl Rosenbrock {
         }
     }
 
+    /// The factorisation to use (`SimOptions::linear_solver`).
+    pub(crate) fn with_linear_solver(mut self, solver: LinearSolver) -> Rosenbrock {
+        self.solver = solver;
+        self
+    }
+
     /// Jacobian evaluations (one per start point that an attempt was made from).
     pub fn jac_calls(&self) -> usize {
         self.jac_calls
@@ -121,11 +130,7 @@ impl Rosenbrock {
     /// All stages of a step of size `h` from `(t, y)`; `false` when `W` is singular.
     fn stages<R: Rhs>(&mut self, t: f64, y: &[f64], h: f64, rhs: &mut R) -> bool {
         let (n, nz, tab) = (self.n, self.nz, self.tab);
-        let inv_hg = 1.0 / (h * tab.gamma);
-        let fx = &self.fx;
-        let w = DMatrix::from_fn(n, n, |i, j| if i == j { inv_hg } else { 0.0 } - fx[i * n + j]);
-        let lu = w.lu();
-        if n > 0 && !lu.is_invertible() {
+        if !self.lin.factor(1.0 / (h * tab.gamma)) {
             return false;
         }
         self.xv[..n].copy_from_slice(&y[..n]);
@@ -152,7 +157,7 @@ impl Rosenbrock {
             }
             // The state block, then every sensitivity column with the coupling `B k_x` added.
             let (rx, rs) = self.r.split_at_mut(n);
-            if !lu.solve_mut(&mut DMatrixViewMut::from_slice(rx, n, 1)) {
+            if !self.lin.solve(rx, 1) {
                 return false;
             }
             if !rs.is_empty() {
@@ -162,7 +167,7 @@ impl Rosenbrock {
                     *r += d;
                 }
                 let cols = rs.len() / n;
-                if !lu.solve_mut(&mut DMatrixViewMut::from_slice(rs, n, cols)) {
+                if !self.lin.solve(rs, cols) {
                     return false;
                 }
             }
@@ -179,19 +184,14 @@ impl Rosenbrock {
     /// `MASKED` leaves out sensitivities that are not finite (as `Rk::error`).
     fn error<const MASKED: bool>(&self, y: &[f64]) -> f64 {
         let e = &self.k[(self.tab.stages - 1) * self.nz..];
-        let mut sum = 0.0;
-        let mut used = 0usize;
+        let mut norm = BlockNorm::new(self.n);
         for i in 0..self.n_err {
             let (y0, y1, ei) = (y[i], self.y_new[i], e[i]);
-            if MASKED && i >= self.n && !(y0.is_finite() && y1.is_finite() && ei.is_finite()) {
-                continue;
-            }
-            used += 1;
+            let skip = MASKED && i >= self.n && !(y0.is_finite() && y1.is_finite() && ei.is_finite());
             let r = ei / (self.atol + self.rtol * y0.abs().max(y1.abs()));
-            sum += r * r;
+            norm.add(i, (!skip).then_some((r, 0.0)), false);
         }
-        let count = if MASKED { used.max(1) } else { self.n_err.max(1) };
-        (sum / count as f64).sqrt()
+        norm.finish(false)
     }
 }
 
@@ -258,12 +258,16 @@ impl Stepper for Rosenbrock {
         self.h = h;
         if !self.jac_fresh {
             let n = self.n;
-            rhs.jacobian(t, z, &mut self.fx, &mut self.ft);
+            if self.lin.select(self.solver, rhs.jac_pattern()) {
+                rhs.jacobian_values(t, z, &mut self.lin.fx, &mut self.ft);
+            } else {
+                rhs.jacobian(t, z, &mut self.lin.fx, &mut self.ft);
+            }
             self.jac_calls += 1;
             self.jac_fresh = true;
             // The state block's Jacobian must be finite for `W`'s LU; a sensitivity part of
             // `F_t` that is not finite only spoils the sensitivities (masked below).
-            if !all_finite(&self.fx) || !all_finite(&self.ft[..n]) {
+            if !all_finite(&self.lin.fx) || !all_finite(&self.ft[..n]) {
                 self.masked = false;
                 return f64::INFINITY;
             }

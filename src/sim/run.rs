@@ -159,7 +159,8 @@ impl<H: SystemRef> Simulator<H> {
                 sys.system()
                     .prepare_jacobians()
                     .map_err(|reason| SimError::NoJacobians { method, reason })?;
-                let stepper = Rosenbrock::new(tab, nz, n, n_err, opts.rtol, opts.atol);
+                let stepper = Rosenbrock::new(tab, nz, n, n_err, opts.rtol, opts.atol)
+                    .with_linear_solver(opts.linear_solver);
                 Work::Rosenbrock(ShapedWork { stepper, info, n, m, k, nz }.build())
             }
             Method::Auto | Method::Dopri5 | Method::Dop853 => {

@@ -52,6 +52,21 @@ pub trait Rhs {
         }
     }
 
+    /// The structurally nonzero entries of `f_x`, `(row, column)`, in the order
+    /// [`Self::jacobian_values`] writes their values, with a key naming the structure (the
+    /// mode): what a sparse factorisation analyses once per key. `None` (the default): only the
+    /// dense [`Self::jacobian`].
+    fn jac_pattern(&self) -> Option<(usize, &[(u32, u32)])> {
+        None
+    }
+
+    /// `f_x`'s values in the order of [`Self::jac_pattern`] and `ft = F_t` (`z.len()`), at
+    /// `(t, z)`. Called only when [`Self::jac_pattern`] gives a pattern.
+    fn jacobian_values(&mut self, t: f64, z: &[f64], vals: &mut [f64], ft: &mut [f64]) {
+        let _ = (t, z, vals, ft);
+        unreachable!("jacobian_values without a jac_pattern");
+    }
+
     /// `out = B v` (n * m) at `(t, z)`, with `xv = [x, v]` (2n, `x` the state part of `z`): the
     /// derivative of the sensitivity right-hand side along the state direction `v`.
     fn sens_coupling(&mut self, t: f64, xv: &[f64], z: &[f64], out: &mut [f64]) {

@@ -171,6 +171,36 @@ pub trait HybridSystem: Sync {
             *out = (a - b) / (tp - tm);
         }
     }
+    /// The structurally nonzero entries of `f_x` in `mode`, `(row, column)`: the entries
+    /// [`Self::flow_jac_values`] writes, in its order. A compiled model knows them from its
+    /// symbolic Jacobian (after [`Self::prepare_jacobians`]); `None` (the default) leaves a
+    /// Rosenbrock stepper with the dense `flow_jac`.
+    fn jac_pattern(&self, mode: usize) -> Option<&[(u32, u32)]> {
+        let _ = mode;
+        None
+    }
+    /// As [`Self::flow_jac`], with `f_x` as the values of [`Self::jac_pattern`]'s entries
+    /// (`vals`, in its order) instead of an `n x n` matrix. The default gathers them from
+    /// `flow_jac`; a compiled model's kernel computes only them.
+    #[allow(clippy::too_many_arguments)]
+    fn flow_jac_values(
+        &self,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        s: &[f64],
+        p: &[f64],
+        vals: &mut [f64],
+        ft: &mut [f64],
+        st: &mut [f64],
+    ) {
+        let n = x.len();
+        let mut fx = vec![0.0; n * n];
+        self.flow_jac(mode, t, x, s, p, &mut fx, ft, st);
+        for (v, &(r, c)) in vals.iter_mut().zip(self.jac_pattern(mode).unwrap_or(&[])) {
+            *v = fx[r as usize * n + c as usize];
+        }
+    }
     /// The derivative of the sensitivity right-hand side along a direction `v` of the state,
     /// `dir = (d/dx (f_x s_j + f_p_j)) v = f_xx[s_j, v] + f_xp_j v` (n * m, column per parameter),
     /// at `(t, x, s)`, with `xv = [x, v]` (2n): the coupling block of the Jacobian of the flow

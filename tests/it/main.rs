@@ -37,6 +37,7 @@ mod sim_ball;
 mod sim_events;
 mod sobol;
 mod stiff;
+mod stiff_chain;
 mod stress_events;
 mod stress_frontend;
 mod sweep;

@@ -25,3 +25,7 @@ pub fn proptest_config(cases: u32) -> Config {
     });
     Config { cases, failure_persistence, ..default }
 }
+
+/// The generated chain models (workload W5 among them), shared with the benches.
+#[path = "../../../benches/support/chain.rs"]
+pub mod chain;

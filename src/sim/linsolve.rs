@@ -1,0 +1,502 @@
+//! Stage 5 (sim): the linear solves of a Rosenbrock step, `W = I / (h gamma) - f_x`, factored
+//! once per attempt and solved for the state block and every sensitivity column.
+//!
+//! Two factorisations. **Dense** (nalgebra's LU with partial pivoting, `n^3 / 3`): for the tens
+//! of states of contact and kinetics models. **Banded**, for models whose Jacobian has a known
+//! structure (a compiled model gives the structurally nonzero entries of `f_x` per mode,
+//! `HybridSystem::jac_pattern`): once per mode, the *symbolic analysis* orders the states by
+//! reverse Cuthill-McKee and measures the band (`kl` below, `ku` above the diagonal) of the
+//! permuted `f_x`; every attempt then fills the band from the kernel's values (only the
+//! structural nonzeros are computed, never an `n x n` matrix) and factors it with partial
+//! pivoting inside the band (LAPACK's `gbtf2`: `n kl (kl + ku)` operations, `n (2 kl + ku + 1)`
+//! numbers). A chain is tridiagonal (`kl = ku = 1`): linear in `n`, in time and memory.
+//!
+//! Why a band and not a general sparse LU: hybc's large models are chains and grids of
+//! compartments, which RCM turns into narrow bands, and a band with partial pivoting is as robust
+//! as the dense LU. faer's general sparse LU would add about 50 crates and minutes of cold build
+//! (README, Choices). A pattern whose band is too wide to pay (a hub coupled to every state) is
+//! solved densely: [`Structure::analyse`] compares the two operation counts.
+
+use nalgebra::{DMatrix, DMatrixViewMut};
+
+/// Which factorisation a Rosenbrock stepper uses (`SimOptions::linear_solver`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LinearSolver {
+    /// Banded from [`SPARSE_MIN_STATES`] states on when the model gives its Jacobian's pattern
+    /// and the band costs fewer operations than the dense LU; dense otherwise.
+    #[default]
+    Auto,
+    /// Always the dense LU.
+    Dense,
+    /// The banded LU whenever the model gives the pattern (tests and measurements).
+    Banded,
+}
+
+/// From this many states the banded factorisation is used (when the model gives its Jacobian's
+/// pattern and the band costs fewer operations than the dense LU). Measured on the diffusion
+/// chain of workload W5 (Rodas5P, 10 gradients, `examples/w5_chain.rs`, README Performance):
+/// a run with the band takes the time of the dense one at 2 states (0.188 ms both), 0.93 of it at
+/// 3, 0.54 at 10, 0.40 at 30 and 0.008 at 1000; the switch is where the band becomes narrower
+/// than the matrix, not a size. The dense LU stays for one and two states, where there is no
+/// band to find.
+pub const SPARSE_MIN_STATES: usize = 3;
+
+/// The symbolic analysis of one pattern: the ordering and the band.
+#[derive(Clone, Debug)]
+pub(crate) struct Structure {
+    /// `perm[i]`: the position of state `i` in the banded order.
+    perm: Vec<usize>,
+    /// Each pattern entry's `(row, column)` in the banded order.
+    at: Vec<(usize, usize)>,
+    kl: usize,
+    ku: usize,
+}
+
+impl Structure {
+    /// Orders the states by reverse Cuthill-McKee on the symmetrised pattern and measures the
+    /// band; `None` when the banded factorisation would cost more than the dense one.
+    pub(crate) fn analyse(n: usize, entries: &[(u32, u32)]) -> Option<Structure> {
+        let perm = rcm(n, entries);
+        let at: Vec<(usize, usize)> =
+            entries.iter().map(|&(r, c)| (perm[r as usize], perm[c as usize])).collect();
+        let (mut kl, mut ku) = (0usize, 0usize);
+        for &(r, c) in &at {
+            kl = kl.max(r.saturating_sub(c));
+            ku = ku.max(c.saturating_sub(r));
+        }
+        // Factor multiplications: banded `n kl (kl + ku)` (pivoting widens the upper band to
+        // `kl + ku`), dense `n^3 / 3`.
+        let banded = n as f64 * kl as f64 * (kl + ku) as f64;
+        let dense = (n as f64).powi(3) / 3.0;
+        (banded < dense).then_some(Structure { perm, at, kl, ku })
+    }
+
+    /// `(kl, ku)`: the band below and above the diagonal.
+    pub(crate) fn band(&self) -> (usize, usize) {
+        (self.kl, self.ku)
+    }
+}
+
+/// Reverse Cuthill-McKee: breadth-first from a node of least degree in each connected
+/// component, neighbours by increasing degree, the order reversed. Returns `perm[i]`, the new
+/// position of node `i`.
+fn rcm(n: usize, entries: &[(u32, u32)]) -> Vec<usize> {
+    let mut adj: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for &(r, c) in entries {
+        let (r, c) = (r as usize, c as usize);
+        if r != c && r < n && c < n {
+            adj[r].push(c);
+            adj[c].push(r);
+        }
+    }
+    for a in &mut adj {
+        a.sort_unstable();
+        a.dedup();
+    }
+    let degree: Vec<usize> = adj.iter().map(Vec::len).collect();
+    let mut by_degree: Vec<usize> = (0..n).collect();
+    by_degree.sort_by_key(|&i| (degree[i], i));
+    let mut order = Vec::with_capacity(n);
+    let mut seen = vec![false; n];
+    let mut queue = std::collections::VecDeque::new();
+    for &start in &by_degree {
+        if seen[start] {
+            continue;
+        }
+        seen[start] = true;
+        queue.push_back(start);
+        while let Some(v) = queue.pop_front() {
+            order.push(v);
+            let mut next: Vec<usize> = adj[v].iter().copied().filter(|&w| !seen[w]).collect();
+            next.sort_by_key(|&w| (degree[w], w));
+            for w in next {
+                seen[w] = true;
+                queue.push_back(w);
+            }
+        }
+    }
+    let mut perm = vec![0; n];
+    for (pos, &v) in order.iter().rev().enumerate() {
+        perm[v] = pos;
+    }
+    perm
+}
+
+/// A banded matrix factored in place with partial pivoting (LAPACK's `gbtf2` layout): column
+/// `j` holds rows `j - (kl + ku) ..= j + kl` at `ab[j * ld + (i + kl + ku - j)]`, the upper part
+/// widened by `kl` for the fill that row exchanges bring.
+#[derive(Clone, Debug, Default)]
+struct Band {
+    n: usize,
+    kl: usize,
+    /// `kl + ku`: the upper band after pivoting.
+    ku2: usize,
+    ld: usize,
+    ab: Vec<f64>,
+    piv: Vec<usize>,
+    /// The right-hand sides in the banded order, row-major.
+    work: Vec<f64>,
+}
+
+impl Band {
+    fn shape(&mut self, n: usize, kl: usize, ku: usize) {
+        self.n = n;
+        self.kl = kl;
+        self.ku2 = kl + ku;
+        self.ld = 2 * kl + ku + 1;
+        self.ab.clear();
+        self.ab.resize(n * self.ld, 0.0);
+        self.piv.resize(n, 0);
+    }
+
+    #[inline(always)]
+    fn idx(&self, i: usize, j: usize) -> usize {
+        debug_assert!(i + self.ku2 >= j && i <= j + self.kl);
+        j * self.ld + (i + self.ku2 - j)
+    }
+
+    /// LU with partial pivoting; `false` when a pivot is zero or not finite.
+    fn factor(&mut self) -> bool {
+        let (n, kl, ku2) = (self.n, self.kl, self.ku2);
+        for j in 0..n {
+            let last = (j + kl).min(n - 1);
+            let (mut p, mut best) = (j, self.ab[self.idx(j, j)].abs());
+            for i in j + 1..=last {
+                let v = self.ab[self.idx(i, j)].abs();
+                if v > best {
+                    (p, best) = (i, v);
+                }
+            }
+            self.piv[j] = p;
+            if best == 0.0 || !best.is_finite() {
+                return false;
+            }
+            let right = (j + ku2).min(n - 1);
+            if p != j {
+                for c in j..=right {
+                    let (a, b) = (self.idx(j, c), self.idx(p, c));
+                    self.ab.swap(a, b);
+                }
+            }
+            let inv = 1.0 / self.ab[self.idx(j, j)];
+            for i in j + 1..=last {
+                let k = self.idx(i, j);
+                self.ab[k] *= inv;
+            }
+            for c in j + 1..=right {
+                let u = self.ab[self.idx(j, c)];
+                if u != 0.0 {
+                    for i in j + 1..=last {
+                        let l = self.ab[self.idx(i, j)];
+                        let k = self.idx(i, c);
+                        self.ab[k] -= l * u;
+                    }
+                }
+            }
+        }
+        true
+    }
+
+    /// Solves in place for `cols` right-hand sides in the banded order, stored row-major
+    /// (`b[i * cols + c]`): every row operation acts on all the columns at once, so the
+    /// substitutions' dependency chains run side by side instead of one column after another.
+    fn solve(&self, b: &mut [f64], cols: usize) {
+        let (n, kl, ku2) = (self.n, self.kl, self.ku2);
+        let row = |i: usize| i * cols..(i + 1) * cols;
+        for j in 0..n {
+            let p = self.piv[j];
+            if p != j {
+                let (head, tail) = b.split_at_mut(p * cols);
+                head[row(j)].swap_with_slice(&mut tail[..cols]);
+            }
+            let last = (j + kl).min(n - 1);
+            if last > j {
+                let (head, tail) = b.split_at_mut((j + 1) * cols);
+                let bj = &head[row(j)];
+                // Column j's multipliers are contiguous in `ab`.
+                let l = &self.ab[self.idx(j + 1, j)..=self.idx(last, j)];
+                for (bi, &l) in tail.chunks_exact_mut(cols).zip(l) {
+                    if l != 0.0 {
+                        for (x, y) in bi.iter_mut().zip(bj) {
+                            *x -= l * y;
+                        }
+                    }
+                }
+            }
+        }
+        for j in (0..n).rev() {
+            let inv = 1.0 / self.ab[self.idx(j, j)];
+            let first = j.saturating_sub(ku2);
+            let (head, tail) = b.split_at_mut(j * cols);
+            let bj = &mut tail[..cols];
+            for x in bj.iter_mut() {
+                *x *= inv;
+            }
+            let u = &self.ab[self.idx(first, j)..self.idx(j, j)];
+            for (bi, &u) in head[first * cols..].chunks_exact_mut(cols).zip(u) {
+                if u != 0.0 {
+                    for (x, y) in bi.iter_mut().zip(&*bj) {
+                        *x -= u * y;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The factorisation of `W` for one stepper: the Jacobian's values, the cached symbolic
+/// analyses (one per mode, by the key the right-hand side gives) and the factors.
+#[derive(Default)]
+pub(crate) struct LinSolve {
+    n: usize,
+    /// `f_x`: row-major `n x n` for the dense path, the pattern's values for the banded one.
+    pub(crate) fx: Vec<f64>,
+    /// The analysis of each mode's pattern once made (`None` inside: the band does not pay).
+    structures: Vec<Option<Option<Structure>>>,
+    /// The mode whose structure `fx` follows, `None` for dense.
+    current: Option<usize>,
+    band: Band,
+    lu: Option<nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>>,
+}
+
+impl LinSolve {
+    pub(crate) fn new(n: usize) -> LinSolve {
+        LinSolve { n, ..LinSolve::default() }
+    }
+
+    /// Chooses the factorisation for the Jacobian about to be evaluated: banded when `pattern`
+    /// (mode `key`'s entries) is given, `choice` allows it and the band pays; sizes `fx` for
+    /// it. Returns whether the Jacobian is wanted as the pattern's values.
+    pub(crate) fn select(&mut self, choice: LinearSolver, pattern: Option<(usize, &[(u32, u32)])>) -> bool {
+        let n = self.n;
+        let banded = match (choice, pattern) {
+            (LinearSolver::Dense, _) | (_, None) => None,
+            (LinearSolver::Auto, Some(_)) if n < SPARSE_MIN_STATES => None,
+            (_, Some((key, entries))) => {
+                if self.structures.len() <= key {
+                    self.structures.resize(key + 1, None);
+                }
+                let s = self.structures[key].get_or_insert_with(|| Structure::analyse(n, entries));
+                s.as_ref().map(|s| (key, entries.len(), s.band()))
+            }
+        };
+        match banded {
+            Some((key, nnz, (kl, ku))) => {
+                if self.current != Some(key) || self.band.n != n {
+                    self.band.shape(n, kl, ku);
+                }
+                self.current = Some(key);
+                self.fx.resize(nnz, 0.0);
+                true
+            }
+            None => {
+                self.current = None;
+                self.fx.resize(n * n, 0.0);
+                false
+            }
+        }
+    }
+
+    /// Factors `W = I / (h gamma) - f_x` with `inv_hg = 1 / (h gamma)`; `false` when singular.
+    pub(crate) fn factor(&mut self, inv_hg: f64) -> bool {
+        let n = self.n;
+        match self.current {
+            Some(key) => {
+                let Some(Some(Some(s))) = self.structures.get(key) else { return false };
+                self.band.ab.fill(0.0);
+                for (&(r, c), &v) in s.at.iter().zip(&self.fx) {
+                    let k = self.band.idx(r, c);
+                    self.band.ab[k] -= v;
+                }
+                for i in 0..n {
+                    let k = self.band.idx(i, i);
+                    self.band.ab[k] += inv_hg;
+                }
+                self.band.factor()
+            }
+            None => {
+                let fx = &self.fx;
+                let w = DMatrix::from_fn(n, n, |i, j| if i == j { inv_hg } else { 0.0 } - fx[i * n + j]);
+                let lu = w.lu();
+                let ok = n == 0 || lu.is_invertible();
+                self.lu = Some(lu);
+                ok
+            }
+        }
+    }
+
+    /// Solves `W y = b` in place for `cols` right-hand sides stored one after another (`n`
+    /// each); `false` when the factorisation is missing or singular.
+    pub(crate) fn solve(&mut self, b: &mut [f64], cols: usize) -> bool {
+        let n = self.n;
+        if n == 0 {
+            return true;
+        }
+        match self.current {
+            Some(key) => {
+                let Some(Some(Some(s))) = self.structures.get(key) else { return false };
+                // Into the banded order, row-major over the columns, and back.
+                let mut work = std::mem::take(&mut self.band.work);
+                work.resize(n * cols, 0.0);
+                for (c, col) in b.chunks_exact(n).take(cols).enumerate() {
+                    for (&v, &at) in col.iter().zip(&s.perm) {
+                        work[at * cols + c] = v;
+                    }
+                }
+                self.band.solve(&mut work, cols);
+                for (c, col) in b.chunks_exact_mut(n).take(cols).enumerate() {
+                    for (v, &at) in col.iter_mut().zip(&s.perm) {
+                        *v = work[at * cols + c];
+                    }
+                }
+                self.band.work = work;
+                true
+            }
+            None => match &self.lu {
+                Some(lu) => lu.solve_mut(&mut DMatrixViewMut::from_slice(&mut b[..n * cols], n, cols)),
+                None => false,
+            },
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A deterministic pseudo-random number in [-1, 1).
+    fn rnd(seed: &mut u64) -> f64 {
+        *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (*seed >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+    }
+
+    /// `W x` for the pattern's values (row-major dense product, the reference).
+    fn w_times(entries: &[(u32, u32)], vals: &[f64], inv_hg: f64, x: &[f64]) -> Vec<f64> {
+        let mut y: Vec<f64> = x.iter().map(|v| inv_hg * v).collect();
+        for (&(r, c), &v) in entries.iter().zip(vals) {
+            y[r as usize] -= v * x[c as usize];
+        }
+        y
+    }
+
+    /// Solves with the banded path and checks the residual against the dense product; the
+    /// entries are shuffled (a scrambled chain: RCM must find the band again).
+    fn check(n: usize, entries: &[(u32, u32)], inv_hg: f64, expect_band: Option<(usize, usize)>) {
+        let mut seed = 7u64;
+        let vals: Vec<f64> = entries.iter().map(|_| 3.0 * rnd(&mut seed)).collect();
+        let mut lin = LinSolve::new(n);
+        assert!(lin.select(LinearSolver::Banded, Some((0, entries))));
+        if let Some(band) = expect_band {
+            let Some(Some(Some(s))) = lin.structures.first() else { panic!("no structure") };
+            assert_eq!(s.band(), band);
+        }
+        lin.fx.copy_from_slice(&vals);
+        assert!(lin.factor(inv_hg));
+        let cols = 3;
+        let b: Vec<f64> = (0..n * cols).map(|_| rnd(&mut seed)).collect();
+        let mut x = b.clone();
+        assert!(lin.solve(&mut x, cols));
+        for c in 0..cols {
+            let wx = w_times(entries, &vals, inv_hg, &x[c * n..(c + 1) * n]);
+            for i in 0..n {
+                let r = (wx[i] - b[c * n + i]).abs();
+                assert!(r < 1e-11, "n {n}: residual {r:e} at {i}, column {c}");
+            }
+        }
+        // The dense path gives the same solution.
+        let mut dense = LinSolve::new(n);
+        assert!(!dense.select(LinearSolver::Dense, Some((0, entries))));
+        for (&(r, c), &v) in entries.iter().zip(&vals) {
+            dense.fx[r as usize * n + c as usize] += v;
+        }
+        assert!(dense.factor(inv_hg));
+        let mut y = b.clone();
+        assert!(dense.solve(&mut y, cols));
+        for (a, b) in x.iter().zip(&y) {
+            assert!((a - b).abs() < 1e-10 * b.abs().max(1.0), "{a} vs {b}");
+        }
+    }
+
+    /// A chain whose states are numbered in a scrambled order.
+    fn scrambled_chain(n: usize) -> Vec<(u32, u32)> {
+        let label = |i: usize| ((i * 37 + 11) % n) as u32;
+        let mut e = Vec::new();
+        for i in 0..n {
+            e.push((label(i), label(i)));
+            if i > 0 {
+                e.push((label(i), label(i - 1)));
+                e.push((label(i - 1), label(i)));
+            }
+        }
+        e
+    }
+
+    #[test]
+    fn a_scrambled_chain_is_found_tridiagonal() {
+        // 37 and 101 are coprime, so `label` is a permutation.
+        check(101, &scrambled_chain(101), 0.5, Some((1, 1)));
+    }
+
+    #[test]
+    fn pivoting_in_the_band() {
+        // `inv_hg = 0` with a zero diagonal in `f_x` (a mass-spring chain's position rows):
+        // without row exchanges the first pivot would be 0.
+        let n = 40;
+        let mut e = Vec::new();
+        for i in 0..n as u32 {
+            if i % 2 == 1 {
+                e.push((i, i));
+            }
+            if i > 0 {
+                e.push((i, i - 1));
+                e.push((i - 1, i));
+            }
+        }
+        check(n, &e, 0.0, None);
+    }
+
+    #[test]
+    fn a_two_dimensional_grid_and_a_missing_diagonal() {
+        // A 12 x 12 grid (five-point coupling, no diagonal entries): RCM gives a band of about
+        // the side, far below dense.
+        let side = 12u32;
+        let id = |x: u32, y: u32| y * side + x;
+        let mut e = Vec::new();
+        for y in 0..side {
+            for x in 0..side {
+                if x > 0 {
+                    e.push((id(x, y), id(x - 1, y)));
+                    e.push((id(x - 1, y), id(x, y)));
+                }
+                if y > 0 {
+                    e.push((id(x, y), id(x, y - 1)));
+                    e.push((id(x, y - 1), id(x, y)));
+                }
+            }
+        }
+        check((side * side) as usize, &e, 2.0, None);
+    }
+
+    #[test]
+    fn a_hub_is_left_dense() {
+        // State 0 coupled both ways to every other: whatever the order, the hub's row and
+        // column span the matrix, and the band costs more than the dense LU.
+        let n = 30u32;
+        let e: Vec<(u32, u32)> = (1..n).flat_map(|i| [(0, i), (i, 0), (i, i)]).collect();
+        assert!(Structure::analyse(n as usize, &e).is_none());
+        let mut lin = LinSolve::new(n as usize);
+        assert!(!lin.select(LinearSolver::Banded, Some((0, &e))));
+        assert_eq!(lin.fx.len(), (n * n) as usize);
+    }
+
+    #[test]
+    fn a_singular_band_is_refused() {
+        // f_x = I and inv_hg = 1: W = 0.
+        let e: Vec<(u32, u32)> = (0..5).map(|i| (i, i)).collect();
+        let mut lin = LinSolve::new(5);
+        assert!(lin.select(LinearSolver::Banded, Some((0, &e))));
+        lin.fx.fill(1.0);
+        assert!(!lin.factor(1.0));
+    }
+}
