@@ -64,6 +64,10 @@ pub(crate) struct SimFlags {
     /// accurate).
     #[arg(long)]
     no_sens_error_control: bool,
+    /// Keep running costs (states that nothing but outputs reads, such as `der(effort) = u^2`)
+    /// in the step-size error control; by default they take none of it.
+    #[arg(long)]
+    quadrature_error_control: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -221,6 +225,7 @@ pub(crate) fn sim_options(model: &Model, args: &SimFlags) -> Result<SimOptions, 
             .map_err(|e| e.to_string())?,
         graze_tol: positive("--graze-tol", args.graze_tol)?,
         sens_error_control: !args.no_sens_error_control,
+        quadrature_error_control: args.quadrature_error_control,
         ..base
     })
 }

@@ -100,6 +100,7 @@ pub fn lower(model: &Model) -> ModelFunctions {
 /// columns in the order given).
 pub fn system_info(model: &Model, grad_params: &[sema::ParamIdx]) -> SystemInfo {
     SystemInfo {
+        quadrature: sema::quadrature_states(model),
         state_names: model.states.iter().map(|s| s.name.clone()).collect(),
         output_names: model.outputs.iter().map(|o| o.name.clone()).collect(),
         param_names: model.params.iter().map(|p| p.name.clone()).collect(),

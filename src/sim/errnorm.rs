@@ -7,11 +7,20 @@
 //! parameters the states, the derivatives through an event time, or one parameter's column
 //! could be 3.3 times less accurate than asked.
 
+/// Whether component `i` of `z = [x, S]` (blocks of `block`) is in the step-size control: not
+/// at a position `excluded` marks (empty: every component is).
+#[inline(always)]
+pub(crate) fn controlled(excluded: &[bool], block: usize, i: usize) -> bool {
+    excluded.is_empty() || !excluded[i % block.max(1)]
+}
+
 /// Accumulates squared scaled errors component by component (in order) and keeps the largest
 /// block norm. `with3` is DOP853's second estimate: a block's norm is then Hairer's
 /// `sum5 / sqrt(count (sum5 + 0.01 sum3))` instead of `sqrt(sum5 / count)`.
-pub(crate) struct BlockNorm {
+pub(crate) struct BlockNorm<'e> {
     block: usize,
+    /// Positions within a block left out of the norm (the quadrature states); empty: none.
+    excluded: &'e [bool],
     next_end: usize,
     sum5: f64,
     sum3: f64,
@@ -19,11 +28,12 @@ pub(crate) struct BlockNorm {
     worst: f64,
 }
 
-impl BlockNorm {
-    /// Blocks of `block` components (the state count; at least 1).
-    pub(crate) fn new(block: usize) -> BlockNorm {
+impl<'e> BlockNorm<'e> {
+    /// Blocks of `block` components (the state count; at least 1), the positions `excluded`
+    /// marks left out of every block (empty: none).
+    pub(crate) fn new(block: usize, excluded: &'e [bool]) -> BlockNorm<'e> {
         let block = block.max(1);
-        BlockNorm { block, next_end: block, sum5: 0.0, sum3: 0.0, used: 0, worst: 0.0 }
+        BlockNorm { block, excluded, next_end: block, sum5: 0.0, sum3: 0.0, used: 0, worst: 0.0 }
     }
 
     /// Component `i`'s scaled errors (`r3` is 0 without a second estimate), or `None` for a
@@ -32,6 +42,9 @@ impl BlockNorm {
     pub(crate) fn add(&mut self, i: usize, r: Option<(f64, f64)>, with3: bool) {
         while i >= self.next_end {
             self.close(with3);
+        }
+        if !self.excluded.is_empty() && self.excluded[i + self.block - self.next_end] {
+            return;
         }
         if let Some((r5, r3)) = r {
             self.sum5 += r5 * r5;
@@ -77,7 +90,7 @@ mod tests {
     #[test]
     fn the_largest_block_counts() {
         // Block 0: errors 1, 1 (norm 1); block 1: 3, 0 (norm sqrt(4.5)); block 2: left out.
-        let mut b = BlockNorm::new(2);
+        let mut b = BlockNorm::new(2, &[]);
         for (i, r) in [Some(1.0), Some(1.0), Some(3.0), Some(0.0), None, None].into_iter().enumerate() {
             b.add(i, r.map(|r| (r, 0.0)), false);
         }
@@ -87,7 +100,7 @@ mod tests {
 
     #[test]
     fn a_nan_block_is_nan() {
-        let mut b = BlockNorm::new(1);
+        let mut b = BlockNorm::new(1, &[]);
         b.add(0, Some((f64::NAN, 0.0)), false);
         b.add(1, Some((2.0, 0.0)), false);
         assert!(b.finish(false).is_nan());
@@ -95,8 +108,18 @@ mod tests {
 
     #[test]
     fn hairers_combination_per_block() {
-        let mut b = BlockNorm::new(1);
+        let mut b = BlockNorm::new(1, &[]);
         b.add(0, Some((3.0, 4.0)), true);
         assert_eq!(b.finish(true), 9.0 / (9.0f64 + 0.16).sqrt());
+    }
+
+    #[test]
+    fn an_excluded_position_is_left_out_of_every_block() {
+        // Blocks of 2 with the second position excluded: only 1 and 3 count.
+        let mut b = BlockNorm::new(2, &[false, true]);
+        for (i, r) in [1.0, 100.0, 3.0, 100.0].into_iter().enumerate() {
+            b.add(i, Some((r, 0.0)), false);
+        }
+        assert_eq!(b.finish(false), 3.0);
     }
 }

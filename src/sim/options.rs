@@ -76,6 +76,11 @@ pub struct SimOptions {
     /// Whether sensitivities take part in the step-size error norm. Off is cheaper, but then the
     /// sensitivities' accuracy is only whatever the state's steps give them.
     pub sens_error_control: bool,
+    /// Whether running costs (quadrature states, `SystemInfo::quadrature`) take part in the
+    /// step-size error norm. Off by default, as CVODES' quadratures: they then cost no steps,
+    /// and are as accurate as the other states' steps make them (an integrand with a faster time
+    /// scale of its own than the dynamics needs this on).
+    pub quadrature_error_control: bool,
     /// Optional cap on the step size (infinite by default).
     pub h_max: f64,
     /// The factorisation of a Rosenbrock method's `W` (`sim::linsolve`): banded for models of
@@ -103,6 +108,7 @@ impl Default for SimOptions {
             max_steps: 1_000_000,
             graze_tol: 1e-2,
             sens_error_control: true,
+            quadrature_error_control: false,
             h_max: f64::INFINITY,
             linear_solver: super::LinearSolver::Auto,
             trajectory: TrajectoryRequest::None,

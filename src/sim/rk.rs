@@ -19,7 +19,7 @@
 //! and `h1 = (0.01 / max(d1, d2))^(1/q)`; the estimate is `min(100 h0, h1)`.
 
 use super::dense::Dense;
-use super::errnorm::BlockNorm;
+use super::errnorm::{controlled, BlockNorm};
 use super::stepper::{Rhs, Stepper};
 use super::sums::{centred_sum, stage_sum};
 #[cfg(doc)]
@@ -60,9 +60,17 @@ pub struct Rk {
     /// `1e-10^(-alpha)` and `1e-4^beta`: the controller's powers at the floors of `err`.
     floors: (f64, f64),
     pub(crate) rhs_calls: usize,
+    /// States left out of the error norm (the quadrature states); empty: none.
+    excluded: Vec<bool>,
 }
 
 impl Rk {
+    /// Leaves the states `excluded` marks out of the error norm (empty: none).
+    pub(crate) fn with_excluded(mut self, excluded: Vec<bool>) -> Rk {
+        self.excluded = excluded;
+        self
+    }
+
     pub(crate) fn new(
         tab: &'static Tableau,
         nz: usize,
@@ -108,6 +116,7 @@ impl Rk {
                 (1e-10f64.powf(-alpha), 1e-4f64.powf(beta))
             },
             rhs_calls: 0,
+            excluded: Vec::new(),
         }
     }
 
@@ -143,7 +152,7 @@ impl Rk {
         let n_states = self.n_states;
         centred_sum(&self.k, self.nz, &self.tab.e, &mut self.err5[..ne]);
         let with3 = self.tab.e3.is_some();
-        let mut norm = BlockNorm::new(n_states);
+        let mut norm = BlockNorm::new(n_states, &self.excluded);
         let scales = y[..ne].iter().zip(&self.y_new[..ne]);
         let skip =
             |i: usize, values: [f64; 4]| MASKED && i >= n_states && values.iter().any(|v| !v.is_finite());
@@ -303,12 +312,20 @@ impl Stepper for Rk {
         let mut d1 = 0.0;
         // The scales' reciprocals, kept for `d2` in `err5` (scratch: every attempt overwrites it).
         let ne = self.n_err;
-        for ((inv, &y), &f) in self.err5[..ne].iter_mut().zip(&y[..ne]).zip(&self.k[..ne]) {
+        let (excluded, block) = (&self.excluded, self.n_states);
+        // A component out of the step-size control (a running cost) gets a zero weight.
+        let mut counted = 0usize;
+        for (i, ((inv, &y), &f)) in self.err5[..ne].iter_mut().zip(&y[..ne]).zip(&self.k[..ne]).enumerate() {
+            if !controlled(excluded, block, i) {
+                *inv = 0.0;
+                continue;
+            }
+            counted += 1;
             *inv = 1.0 / (self.atol + self.rtol * y.abs());
             d0 += (y * *inv).powi(2);
             d1 += (f * *inv).powi(2);
         }
-        let n = self.n_err.max(1) as f64;
+        let n = counted.max(1) as f64;
         let (mut d0, mut d1) = ((d0 / n).sqrt(), (d1 / n).sqrt());
         if !(d0.is_finite() && d1.is_finite()) {
             // A tiny atol at a state or derivative of zero overflowed the squares (1e-300 is

@@ -25,7 +25,7 @@
 //! Dense output: the method's own interpolation (order 4 for Rodas5P, 3 for Rodas4) for every
 //! component, sensitivities included, built with the step (it costs a few vector sums).
 
-use super::errnorm::BlockNorm;
+use super::errnorm::{controlled, BlockNorm};
 use super::linsolve::{LinSolve, LinearSolver};
 use super::row_tableau::RowTableau;
 use super::stepper::{Interpolant, Rhs, Stepper};
@@ -56,6 +56,8 @@ pub struct Rosenbrock {
     /// `jac_fresh` while they belong to it.
     lin: Box<LinSolve>,
     solver: LinearSolver,
+    /// States left out of the error norm (the quadrature states); empty: none.
+    excluded: Vec<bool>,
     ft: Vec<f64>,
     jac_fresh: bool,
     /// Scratch: a stage input, a stage right-hand side, `[x0, v]`, and `B v`.
@@ -96,6 +98,7 @@ impl Rosenbrock {
             f1: vec![0.0; nz],
             lin: Box::new(LinSolve::new(n)),
             solver: LinearSolver::Auto,
+            excluded: Vec::new(),
             ft: vec![0.0; nz],
             jac_fresh: false,
             u: vec![0.0; nz],
@@ -114,6 +117,12 @@ impl Rosenbrock {
     /// The factorisation to use (`SimOptions::linear_solver`).
     pub(crate) fn with_linear_solver(mut self, solver: LinearSolver) -> Rosenbrock {
         self.solver = solver;
+        self
+    }
+
+    /// Leaves the states `excluded` marks out of the error norm (empty: none).
+    pub(crate) fn with_excluded(mut self, excluded: Vec<bool>) -> Rosenbrock {
+        self.excluded = excluded;
         self
     }
 
@@ -184,7 +193,7 @@ impl Rosenbrock {
     /// `MASKED` leaves out sensitivities that are not finite (as `Rk::error`).
     fn error<const MASKED: bool>(&self, y: &[f64]) -> f64 {
         let e = &self.k[(self.tab.stages - 1) * self.nz..];
-        let mut norm = BlockNorm::new(self.n);
+        let mut norm = BlockNorm::new(self.n, &self.excluded);
         for i in 0..self.n_err {
             let (y0, y1, ei) = (y[i], self.y_new[i], e[i]);
             let skip = MASKED && i >= self.n && !(y0.is_finite() && y1.is_finite() && ei.is_finite());
@@ -231,8 +240,15 @@ impl Stepper for Rosenbrock {
     fn initial_step<R: Rhs>(&mut self, t: f64, z: &[f64], h_max: f64, rhs: &mut R) -> f64 {
         let ne = self.n_err;
         let inv = |y: f64| 1.0 / (self.atol + self.rtol * y.abs());
+        // Over the components in the step-size control (a running cost is not).
+        let counted = (0..ne).filter(|&i| controlled(&self.excluded, self.n, i)).count().max(1) as f64;
         let rms = |v: &dyn Fn(usize) -> f64| {
-            ((0..ne).map(|i| (v(i) * inv(z[i])).powi(2)).sum::<f64>() / ne.max(1) as f64).sqrt()
+            ((0..ne)
+                .filter(|&i| controlled(&self.excluded, self.n, i))
+                .map(|i| (v(i) * inv(z[i])).powi(2))
+                .sum::<f64>()
+                / counted)
+                .sqrt()
         };
         let d0 = rms(&|i| z[i]);
         let d1 = rms(&|i| self.f0[i]);

@@ -141,6 +141,17 @@ impl<H: SystemRef> std::fmt::Debug for Simulator<H> {
     }
 }
 
+/// The states left out of the step-size error test: the quadrature states (running costs that
+/// nothing but outputs reads; `SystemInfo::quadrature`), their sensitivities with them, unless
+/// every state is one (then the error test needs them all). Empty: none.
+fn error_test_exclusions(info: &SystemInfo) -> Vec<bool> {
+    let q = &info.quadrature;
+    if q.len() != info.n_states() || q.iter().all(|&b| b) || !q.iter().any(|&b| b) {
+        return Vec::new();
+    }
+    q.clone()
+}
+
 impl<H: SystemRef> Simulator<H> {
     /// Checks the model's shape and the options (an `Err` for an inconsistent shape or an
     /// invalid option) and allocates the scratch buffers.
@@ -152,6 +163,7 @@ impl<H: SystemRef> Simulator<H> {
         let method = opts.method.resolve(opts.rtol);
         let n_err = if opts.sens_error_control { nz } else { n };
         let k = info.n_outputs();
+        let excluded = if opts.quadrature_error_control { Vec::new() } else { error_test_exclusions(info) };
         let work = match method {
             Method::Rodas5p | Method::Rodas4 => {
                 let tab = if method == Method::Rodas5p { &RODAS5P } else { &RODAS4 };
@@ -160,12 +172,13 @@ impl<H: SystemRef> Simulator<H> {
                     .prepare_jacobians()
                     .map_err(|reason| SimError::NoJacobians { method, reason })?;
                 let stepper = Rosenbrock::new(tab, nz, n, n_err, opts.rtol, opts.atol)
-                    .with_linear_solver(opts.linear_solver);
+                    .with_linear_solver(opts.linear_solver)
+                    .with_excluded(excluded);
                 Work::Rosenbrock(ShapedWork { stepper, info, n, m, k, nz }.build())
             }
             Method::Auto | Method::Dopri5 | Method::Dop853 => {
                 let tab = if method == Method::Dop853 { &DOP853 } else { &DOPRI5 };
-                let stepper = Rk::new(tab, nz, n, n_err, opts.rtol, opts.atol);
+                let stepper = Rk::new(tab, nz, n, n_err, opts.rtol, opts.atol).with_excluded(excluded);
                 Work::Explicit(ShapedWork { stepper, info, n, m, k, nz }.build())
             }
         };

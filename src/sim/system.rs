@@ -85,6 +85,10 @@ pub struct SystemInfo {
     pub modes: Vec<ModeInfo>,
     pub events: Vec<EventInfo>,
     pub initial_mode: usize,
+    /// `quadrature[i]`: state `i` is a running cost that no flow, guard, condition or other
+    /// state's reset reads (`sema::quadrature_states`); such states stay out of the step-size
+    /// error test, as CVODES' quadratures do by default. Empty: none.
+    pub quadrature: Vec<bool>,
 }
 
 impl SystemInfo {

@@ -410,6 +410,7 @@ impl Ripple {
                     contact: false,
                 }],
                 initial_mode: 0,
+                quadrature: Vec::new(),
             },
             w,
         }

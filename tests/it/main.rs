@@ -31,6 +31,7 @@ mod juggler;
 mod limits;
 mod periodic;
 mod plot;
+mod quadrature;
 mod run_gradients;
 mod samples;
 mod sim_ball;

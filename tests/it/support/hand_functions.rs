@@ -102,6 +102,7 @@ pub fn ball_info(grad_params: Vec<usize>) -> SystemInfo {
             contact: true,
         }],
         initial_mode: 0,
+        quadrature: Vec::new(),
     }
 }
 
@@ -142,6 +143,7 @@ pub fn output_only(
         modes: vec![ModeInfo { name: "main".into(), events: vec![] }],
         events: vec![],
         initial_mode: 0,
+        quadrature: Vec::new(),
     };
     (funcs, info)
 }

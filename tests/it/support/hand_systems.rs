@@ -68,6 +68,7 @@ impl Ball {
                 modes: vec![ModeInfo { name: "fly".into(), events: mode_events }],
                 events,
                 initial_mode: 0,
+                quadrature: Vec::new(),
             },
             v0,
             ceiling: ceiling.unwrap_or(0.0),
@@ -202,6 +203,7 @@ impl Thermostat {
                 ],
                 events: vec![ev("off", Direction::Rising, 1), ev("on", Direction::Falling, 0)],
                 initial_mode: 0,
+                quadrature: Vec::new(),
             },
             t0,
         }
@@ -310,6 +312,7 @@ impl Counter {
                 modes: vec![ModeInfo { name: "only".into(), events: vec![0, 1] }],
                 events: vec![ev("A"), ev("B")],
                 initial_mode: 0,
+                quadrature: Vec::new(),
             },
             x0,
         }
@@ -428,6 +431,7 @@ impl Oscillator {
                     contact: false,
                 }],
                 initial_mode: 0,
+                quadrature: Vec::new(),
             },
         }
     }
