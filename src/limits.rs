@@ -34,6 +34,13 @@ pub const MAX_BOOTSTRAP: usize = 100_000;
 pub const MAX_STEPS: usize = 1_000_000_000;
 /// Trials of a fit (`--max-iter`): every trial is kept for the report.
 pub const MAX_FIT_ITER: usize = 1_000_000;
+/// Runs of one local optimisation (`hybc optimize --max-iter`): every run is kept for the report.
+pub const MAX_OPTIMIZE_RUNS: usize = 1_000_000;
+/// Starting points of a multi-start optimisation (`--starts`): each is a whole local solve.
+pub const MAX_STARTS: usize = 10_000;
+/// Times of one path constraint (`--subject-to "y@0:2:41 >= 0"`), and constraints of one
+/// problem in all: SLSQP's dense workspace grows as (constraints + parameters)^2.
+pub const MAX_PATH_POINTS: usize = 10_000;
 
 /// A count outside its allowed range: `{what}: at least {min}, found {value}` or
 /// `{what}: at most {max}, found {value}`, `what` naming the flag or keyword.
