@@ -43,7 +43,7 @@ impl OptimizeReport {
 
     /// The optimum as `hybc run --set` values (`h0=1.2`, `u[3]=0.5`), shortest round-trip form.
     pub fn set_list(&self, local: &LocalResult) -> Vec<String> {
-        self.free_names().iter().zip(&local.x).map(|(n, v)| format!("{n}={v}")).collect()
+        self.free_names().iter().zip(&local.x).map(|(n, v)| format!("{n}={}", round_trip(*v))).collect()
     }
 
     /// The same as shell arguments: `--set h0=1.2 --set 'u[3]=0.5'`.
@@ -371,4 +371,16 @@ fn summarize(names: &[String]) -> String {
         return "none".into();
     }
     parts.into_iter().map(|(n, k)| if k > 1 { format!("{n} x{k}") } else { n }).collect::<Vec<_>>().join(", ")
+}
+
+/// The shortest text that reads back as `v`: `{}` (`1.25`), or `{:e}` where that is shorter
+/// (`4.4e-15`, which `{}` writes with fifteen zeros).
+fn round_trip(v: f64) -> String {
+    let plain = format!("{v}");
+    let exp = format!("{v:e}");
+    if exp.len() < plain.len() {
+        exp
+    } else {
+        plain
+    }
 }

@@ -27,6 +27,7 @@ mod jit_diff;
 mod jit_errors;
 mod jit_models;
 mod limits;
+mod optimize;
 mod periodic;
 mod plot;
 mod run_gradients;
