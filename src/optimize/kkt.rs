@@ -115,3 +115,54 @@ pub fn measure(
 fn inf_norm(v: &[f64]) -> f64 {
     v.iter().fold(0.0_f64, |a, x| a.max(x.abs()))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn point(gradient: &[f64], constraints: &[f64], jacobian: &[&[f64]]) -> SmoothPoint {
+        SmoothPoint {
+            objective: 0.0,
+            gradient: gradient.to_vec(),
+            constraints: constraints.to_vec(),
+            jacobian: jacobian.iter().map(|r| r.to_vec()).collect(),
+        }
+    }
+
+    const FREE: [(f64, f64); 2] = [(f64::NEG_INFINITY, f64::INFINITY); 2];
+
+    #[test]
+    fn an_active_inequality_balances_the_gradient_with_a_positive_multiplier() {
+        // min x + y subject to 1 - x - y <= 0, at x + y = 1.
+        let k = measure(&[0.5, 0.5], &FREE, &point(&[1.0, 1.0], &[0.0], &[&[-1.0, -1.0]]), 0, &[1e-8]);
+        assert_eq!(k.multipliers, vec![1.0]);
+        assert!(k.stationarity < 1e-15 && k.violation_ratio == 0.0);
+    }
+
+    #[test]
+    fn an_inequality_pulling_the_wrong_way_is_released_and_the_point_is_not_stationary() {
+        // min x + y subject to x + y - 1 <= 0 at x + y = 1: the objective wants to go down, the
+        // constraint does not stop it.
+        let k = measure(&[0.5, 0.5], &FREE, &point(&[1.0, 1.0], &[0.0], &[&[1.0, 1.0]]), 0, &[1e-8]);
+        assert_eq!(k.multipliers, vec![0.0]);
+        assert!(!k.active[0]);
+        assert_eq!(k.stationarity, 1.0);
+    }
+
+    #[test]
+    fn a_bound_holds_only_a_gradient_pointing_out_of_the_box() {
+        let bounds = [(0.0, 1.0), (0.0, 1.0)];
+        // At x = 0 with df/dx = 1 > 0: held; with df/dx = -1: it should move in.
+        let held = measure(&[0.0, 0.5], &bounds, &point(&[1.0, 0.0], &[], &[]), 0, &[]);
+        assert_eq!((held.at_bound[0], held.stationarity), (-1, 0.0));
+        let loose = measure(&[0.0, 0.5], &bounds, &point(&[-1.0, 0.0], &[], &[]), 0, &[]);
+        assert_eq!(loose.stationarity, 1.0);
+    }
+
+    #[test]
+    fn an_equality_counts_its_violation_against_its_tolerance() {
+        let k = measure(&[1.0], &FREE[..1], &point(&[2.0], &[3e-8], &[&[1.0]]), 1, &[1e-8]);
+        approx::assert_relative_eq!(k.violation_ratio, 3.0);
+        approx::assert_relative_eq!(k.multipliers[0], -2.0);
+    }
+}
