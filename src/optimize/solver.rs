@@ -23,7 +23,7 @@ pub struct Program {
     pub n_eq: usize,
     pub n_ineq: usize,
     /// How much each constraint may be off and still count as met; an optimiser may aim at
-    /// a band of half this width around an equality (see `slsqp`).
+    /// a narrow band within this width around an equality (see `slsqp`).
     pub tolerances: Vec<f64>,
     /// Most evaluations (each one simulation run).
     pub max_evals: usize,
