@@ -290,7 +290,7 @@ pub fn optimize<S: HybridSystem + Sync>(
     };
     let optima = distinct_optima(&locals, &problem.bounds);
     let shown = optima.first().map_or(0, |g| g[0]);
-    let tolerances = tolerances(&layout, &locals[shown].values, &problem.sim);
+    let tolerances = constraint_tolerances(&layout, &locals[shown].values, &problem.sim);
     Ok(OptimizeResult { constraints: layout.constraints, tolerances, locals, optima, solver: solver.name() })
 }
 
@@ -302,7 +302,7 @@ fn report(progress: Option<&Progress<'_>>, start: usize, trial: &Trial) {
 
 /// How far each constraint may be off: the tolerance `hybc fit` allows a target,
 /// `100 (rtol max(|bound|, |value|) + atol)`, at the constraint's value (its bound when unknown).
-fn tolerances(layout: &Layout, values: &[f64], sim: &SimOptions) -> Vec<f64> {
+fn constraint_tolerances(layout: &Layout, values: &[f64], sim: &SimOptions) -> Vec<f64> {
     layout
         .constraints
         .iter()
@@ -352,7 +352,7 @@ fn local<S: HybridSystem>(
         Ok(e) => e,
         Err(r) => return failed(r.to_string(), "not started"),
     };
-    let tolerances = tolerances(layout, &first.values, &problem.sim);
+    let tolerances = constraint_tolerances(layout, &first.values, &problem.sim);
     let program = Program {
         bounds: problem.bounds.iter().map(|b| (b.lower, b.upper)).collect(),
         n_eq: layout.n_eq,
@@ -427,7 +427,7 @@ fn local<S: HybridSystem>(
         status: end.status.clone(),
         trials,
         changes,
-        cusp_notes: run.as_ref().map(|r| cusp_notes(r, problem.system)).unwrap_or_default(),
+        cusp_notes: run.as_ref().map(cusp_notes).unwrap_or_default(),
         run,
     };
     let evaluated = match at_end {
@@ -437,16 +437,12 @@ fn local<S: HybridSystem>(
             return result;
         }
     };
-    let tolerances = tolerances_at(layout, &evaluated.values, &problem.sim);
+    let tolerances = constraint_tolerances(layout, &evaluated.values, &problem.sim);
     let kkt = kkt::measure(&end.x, &program.bounds, &evaluated.point, layout.n_eq, &tolerances);
     result.verdict = verdict(&kkt, opts, &end, &result.trials, &evaluated.events);
     result.values = evaluated.values;
     result.kkt = Some(kkt);
     result
-}
-
-fn tolerances_at(layout: &Layout, values: &[f64], sim: &SimOptions) -> Vec<f64> {
-    tolerances(layout, values, sim)
 }
 
 /// The largest violation of the program's constraints at a point.
@@ -493,7 +489,7 @@ fn verdict(
 }
 
 /// The warnings of a run that make its gradients hold only locally.
-fn cusp_notes<S: HybridSystem>(run: &SimResult, _system: &S) -> Vec<String> {
+fn cusp_notes(run: &SimResult) -> Vec<String> {
     let mut notes: Vec<String> = run
         .warnings
         .iter()
