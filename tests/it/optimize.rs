@@ -167,6 +167,56 @@ fn path_constraint_on_the_first_fall_holds_at_its_last_time() {
     approx::assert_relative_eq!(kkt.multipliers[4], 1.0, max_relative = 1e-6);
 }
 
+#[test]
+fn an_optimum_on_t_end_says_so_with_its_margin() {
+    // Pin the 4th touchdown on T = t_end: t1 (1 + 2 e + 2 e^2 + 2 e^3) = T with t1 = sqrt(2 / g).
+    // The point is a KKT point of its piece, and a cusp of the problem: converged, with a note.
+    let (model, compiled) = compiled("models/ball.hyb", &["e"]);
+    let bounds = vec![Bounds { lower: 0.75, upper: 0.95 }];
+    let r = solve(&model, &compiled, bounds, "e", &["touchdown#4 = 2.5"], &OptimizeOptions::default());
+    let end = r.best().expect("converged");
+    let t1 = (2.0 / G).sqrt();
+    let (mut lo, mut hi) = (0.75_f64, 0.95_f64);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if t1 * (1.0 + 2.0 * (mid + mid * mid + mid.powi(3))) < T {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    approx::assert_relative_eq!(end.x[0], 0.5 * (lo + hi), max_relative = CLOSED_FORM_TOL);
+    assert_eq!(end.cusp_notes.len(), 1, "{:?}", end.cusp_notes);
+    assert!(end.cusp_notes[0].contains("before t_end"), "{}", end.cusp_notes[0]);
+}
+
+#[test]
+fn energies_in_the_jump_between_branches_stall_at_a_cusp() {
+    // Between g e_c^8 = 3.12 and g e_c^6 = 4.16 no e gives the energy (README, Fitting): the
+    // optimiser ends at the jump, and says so (exit 4).
+    let out = hybc(&[
+        "optimize",
+        "models/ball.hyb",
+        "--free",
+        "e",
+        "--minimize",
+        "e",
+        "--subject-to",
+        "energy = 3.5",
+        "--set",
+        "e=0.84",
+        "--quiet",
+        "--format",
+        "json",
+    ]);
+    assert_eq!(out.status.code(), Some(4));
+    let v = json(&out);
+    assert_eq!(v["reason"], "stalled_at_cusp");
+    assert!(!v["sequence_changes"].as_array().expect("changes").is_empty());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("did not converge: stalled at a cusp"), "{err}");
+}
+
 /// Problem 2: the hopper reaching an apex height of 0.9 m with least effort (integral of
 /// thrust^2); no closed form, so the KKT claim is checked independently by finite differences.
 #[test]
