@@ -151,6 +151,7 @@ fn optimize_model(model: &Model, args: &OptimizeArgs) -> Result<ExitCode, String
     if free.is_empty() {
         return Err("--free: name at least one parameter to optimise".to_string());
     }
+    at_most("--free (parameters, vector elements counted)", free.len(), crate::limits::MAX_OPTIMIZE_FREE)?;
     let start = parameter_values(model, &args.set)?.values().to_vec();
     let sim = sim_options(model, &args.sim)?;
     let options = options(args)?;
@@ -168,7 +169,7 @@ fn optimize_model(model: &Model, args: &OptimizeArgs) -> Result<ExitCode, String
     for text in &args.subject_to {
         constraints
             .extend(optimize::parse_constraint(text, &info).map_err(|e| format!("--subject-to: {e}"))?);
-        at_most("--subject-to (constraints in all)", constraints.len(), crate::limits::MAX_PATH_POINTS)?;
+        at_most("--subject-to (constraints in all)", constraints.len(), crate::limits::MAX_CONSTRAINTS)?;
     }
     let problem = OptimizeProblem { system: compiled.native(), start, bounds, objective, constraints, sim };
     let started = Instant::now();

@@ -228,6 +228,12 @@ pub enum OptimizeError {
     StartsNeedBounds { name: String },
     #[error("at least one start")]
     NoStarts,
+    #[error(
+        "{free} free parameters and {constraints} constraints: at most {} and {} (the optimiser's dense workspace)",
+        crate::limits::MAX_OPTIMIZE_FREE,
+        crate::limits::MAX_CONSTRAINTS
+    )]
+    TooLarge { free: usize, constraints: usize },
     #[error("cannot start a worker thread: {0}")]
     Threads(String),
 }
@@ -252,6 +258,12 @@ pub fn optimize<S: HybridSystem + Sync>(
     }
     if opts.starts == 0 {
         return Err(OptimizeError::NoStarts);
+    }
+    // The optimiser's dense workspace grows as (parameters + constraints)^2.
+    if free.len() > crate::limits::MAX_OPTIMIZE_FREE
+        || problem.constraints.len() > crate::limits::MAX_CONSTRAINTS
+    {
+        return Err(OptimizeError::TooLarge { free: free.len(), constraints: problem.constraints.len() });
     }
     for (&j, b) in free.iter().zip(&problem.bounds) {
         let value = problem.start[j];

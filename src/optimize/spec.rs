@@ -125,7 +125,7 @@ pub fn parse_constraint(text: &str, info: &SystemInfo) -> Result<Vec<Constraint>
         let times = parse_grid(grid).ok_or_else(|| SpecError::BadGrid {
             text: text.into(),
             grid: grid.into(),
-            max: crate::limits::MAX_PATH_POINTS,
+            max: crate::limits::MAX_CONSTRAINTS,
         })?;
         let (output, index) = match Observable::parse(name, info).map_err(SpecError::Name)? {
             Observable::Output(i) => (true, i),
@@ -151,7 +151,7 @@ fn parse_grid(grid: &str) -> Option<Vec<f64>> {
     let lo = crate::number::parse_number(lo).ok()?;
     let hi = crate::number::parse_number(hi).ok()?;
     let n: usize = n.parse().ok()?;
-    if lo >= hi || !(2..=crate::limits::MAX_PATH_POINTS).contains(&n) {
+    if lo >= hi || !(2..=crate::limits::MAX_CONSTRAINTS).contains(&n) {
         return None;
     }
     Some(crate::sweep::linspace(lo, hi, n))

@@ -138,6 +138,17 @@ fn ball_starts_find_the_optima_of_three_branches() {
         approx::assert_relative_eq!(*h0, h0_x, max_relative = CLOSED_FORM_TOL);
         approx::assert_relative_eq!(*e, e_x, max_relative = CLOSED_FORM_TOL);
     }
+    // Each start is computed from its index alone: one thread finds the same, bit for bit.
+    let serial = solve(
+        &model,
+        &compiled,
+        ball_bounds(),
+        "h0",
+        &["energy = 2", "y = 0.1"],
+        &OptimizeOptions { threads: 1, ..opts },
+    );
+    assert_eq!(serial.optima, r.optima);
+    assert!(serial.locals.iter().zip(&r.locals).all(|(a, b)| a.x == b.x && a.trials.len() == b.trials.len()));
     // Best first: the 5-bounce branch has the lowest drop.
     assert_eq!(r.best().expect("converged").events().len(), 5);
     // The starts that found none are honest about it: each says why.
@@ -286,6 +297,8 @@ fn json(out: &std::process::Output) -> Value {
 
 #[test]
 fn cli_json_and_the_set_list_reproduce_the_optimum_in_hybc_run() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let svg = dir.path().join("ball.svg");
     let out = hybc(&[
         "optimize",
         "models/ball.hyb",
@@ -302,9 +315,18 @@ fn cli_json_and_the_set_list_reproduce_the_optimum_in_hybc_run() {
         "--format",
         "json",
         "--quiet",
+        "--plot",
+        svg.to_str().expect("utf-8 path"),
     ]);
     assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
     let v = json(&out);
+    // The figure is the optimum's run: its title lists the parameters.
+    let figure = std::fs::read_to_string(&svg).expect("the plot is written");
+    let h0 = v["optimum"]["h0"].as_f64().expect("h0");
+    assert!(
+        figure.starts_with("<svg") && figure.contains(&format!("h0 = {h0}")),
+        "an SVG of the optimum's run"
+    );
     assert_eq!(v["converged"], true);
     assert_eq!(v["reason"], "converged");
     assert_eq!(v["events"].as_array().map(Vec::len), Some(4));
@@ -342,6 +364,9 @@ fn cli_refuses_bad_input_with_usage_errors_and_reports_non_convergence() {
     let (code, err) = case(&["--minimize", "h0", "--subject-to", "y@0:2:1 >= 0"]);
     assert_eq!(code, Some(2));
     assert!(err.contains("path grid"), "{err}");
+    let (code, err) = case(&["--minimize", "h0", "--subject-to", "y@0:2.5:2001 >= 0"]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("N at most 2000"), "{err}");
     let (code, err) = case(&["--minimize", "h0", "--starts", "4"]);
     assert_eq!(code, Some(2));
     assert!(err.contains("`h0` has no finite range"), "{err}");
