@@ -367,6 +367,12 @@ fn cli_refuses_bad_input_with_usage_errors_and_reports_non_convergence() {
     let (code, err) = case(&["--minimize", "h0", "--subject-to", "y@0:2.5:2001 >= 0"]);
     assert_eq!(code, Some(2));
     assert!(err.contains("N at most 2000"), "{err}");
+    let (code, err) = case(&["--minimize", "h0", "--starts", "10001", "--bounds", "h0=0.5:2"]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("--starts: at most 10000"), "{err}");
+    let (code, err) = case(&["--minimize", "h0", "--max-iter", "0"]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("--max-iter: at least 1"), "{err}");
     let (code, err) = case(&["--minimize", "h0", "--starts", "4"]);
     assert_eq!(code, Some(2));
     assert!(err.contains("`h0` has no finite range"), "{err}");
