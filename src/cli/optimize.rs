@@ -54,7 +54,7 @@ pub struct OptimizeArgs {
     set: Vec<String>,
     #[command(flatten)]
     sim: SimFlags,
-    /// Most runs of one local solve.
+    /// Most evaluations of one local solve (each a run; at most this many runs).
     #[arg(long, default_value_t = OptimizeOptions::default().max_iter)]
     max_iter: usize,
     /// Converged when the projected Lagrangian gradient, relative to its largest term, is at most this.

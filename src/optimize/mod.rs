@@ -54,7 +54,9 @@ pub struct OptimizeProblem<'s, S: HybridSystem> {
 /// How long to search and when a point counts as optimal.
 #[derive(Clone, Debug, PartialEq)]
 pub struct OptimizeOptions {
-    /// Most runs of one local solve.
+    /// Most evaluations the optimiser may ask for in one local solve: each is a run, except a
+    /// request for the point it asked for last (served from a cache), so a solve makes at most
+    /// this many runs.
     pub max_iter: usize,
     /// Converged when the projected Lagrangian gradient, relative to its largest term, is at most
     /// this (and every constraint is met to its tolerance).
@@ -118,7 +120,7 @@ pub struct SequenceChange {
 pub enum Verdict {
     /// The KKT conditions hold to the tolerances at the point returned.
     Converged,
-    /// `max_iter` runs were used up first.
+    /// The optimiser used up its `max_iter` evaluations first.
     MaxIterations,
     /// The optimiser stopped where runs nearby have another event sequence (the last such run is
     /// named): the point sits at a cusp or jump of the problem, not at a smooth optimum.

@@ -70,7 +70,7 @@ impl OptimizeReport {
         let runs = r.trials.len();
         match &r.verdict {
             Verdict::Converged => format!("converged after {runs} runs ({}: {}): {measures}", self.result.solver, r.status),
-            Verdict::MaxIterations => format!("did not converge: {runs} runs (--max-iter) used up; {measures}"),
+            Verdict::MaxIterations => format!("did not converge: the optimiser used up its --max-iter evaluations ({runs} runs); {measures}"),
             Verdict::StalledAtCusp { run } => format!(
                 "did not converge: stalled at a cusp: run {run} nearby has another event sequence ({} events at the end), so the problem is not smooth where the optimiser stopped; {measures}; try another start or --starts",
                 r.events().len()

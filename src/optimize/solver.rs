@@ -25,7 +25,7 @@ pub struct Program {
     /// How much each constraint may be off and still count as met; an optimiser may aim at
     /// a narrow band within this width around an equality (see `slsqp`).
     pub tolerances: Vec<f64>,
-    /// Most evaluations (each one simulation run).
+    /// Most evaluations (each one simulation run, unless it repeats the last point).
     pub max_evals: usize,
     /// Stop when a step changes every variable by less than this, relatively.
     pub xtol_rel: f64,

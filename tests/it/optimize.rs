@@ -393,5 +393,8 @@ fn cli_refuses_bad_input_with_usage_errors_and_reports_non_convergence() {
         "3",
     ]);
     assert_eq!(code, Some(4));
-    assert!(err.contains("did not converge: 3 runs (--max-iter) used up"), "{err}");
+    assert!(
+        err.contains("did not converge: the optimiser used up its --max-iter evaluations (3 runs)"),
+        "{err}"
+    );
 }
