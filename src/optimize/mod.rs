@@ -166,7 +166,10 @@ pub struct LocalResult {
     pub verdict: Verdict,
     /// The optimiser's own status word.
     pub status: String,
+    /// The optimiser's evaluations, one run each.
     pub trials: Vec<Trial>,
+    /// Simulation runs in all: the evaluations, and one or two at the end for the report.
+    pub runs: usize,
     pub changes: Vec<SequenceChange>,
     /// The end's run (events, final state, warnings), when it could be run.
     pub run: Option<SimResult>,
@@ -213,7 +216,7 @@ impl OptimizeResult {
     }
 
     pub fn runs(&self) -> usize {
-        self.locals.iter().map(|l| l.trials.len()).sum()
+        self.locals.iter().map(|l| l.runs).sum()
     }
 }
 
@@ -345,7 +348,7 @@ fn local<S: HybridSystem>(
         p
     };
     let sampled = SimOptions { at: sample_times(layout.observables()), ..problem.sim.clone() };
-    let failed = |message: String, status: &str| LocalResult {
+    let failed = |message: String, status: &str, runs: usize| LocalResult {
         start: x0.clone(),
         x: x0.clone(),
         params: start.clone(),
@@ -353,6 +356,7 @@ fn local<S: HybridSystem>(
         kkt: None,
         verdict: Verdict::StartFailed { message },
         status: status.to_string(),
+        runs,
         trials: Vec::new(),
         changes: Vec::new(),
         run: None,
@@ -360,11 +364,11 @@ fn local<S: HybridSystem>(
     };
     let mut simulator = match Simulator::new(problem.system, &sampled) {
         Ok(s) => s,
-        Err(e) => return failed(e.to_string(), "not started"),
+        Err(e) => return failed(e.to_string(), "not started", 0),
     };
     let first = match evaluate::evaluate(&mut simulator, info, layout, &with_free(&x0)) {
         Ok(e) => e,
-        Err(r) => return failed(r.to_string(), "not started"),
+        Err(r) => return failed(r.to_string(), "not started", 1),
     };
     let tolerances = constraint_tolerances(layout, &first.values, &problem.sim);
     let program = Program {
@@ -424,10 +428,15 @@ fn local<S: HybridSystem>(
         };
         solver.solve(&program, &x0, &mut evaluate_at)
     };
-    // The end's values: the last run's when it was at the end, else one more run.
+    // The end's values: the last run's when it was at the end, else one more run; then the end's
+    // whole record (events, warnings) for the report, one more.
+    let mut extra_runs = 1;
     let at_end = match last {
         Some((x, outcome)) if x == end.x => outcome,
-        _ => evaluate::evaluate(&mut simulator, info, layout, &with_free(&end.x)),
+        _ => {
+            extra_runs += 1;
+            evaluate::evaluate(&mut simulator, info, layout, &with_free(&end.x))
+        }
     };
     let params = with_free(&end.x);
     let run = simulator.run(&params).ok();
@@ -439,6 +448,7 @@ fn local<S: HybridSystem>(
         kkt: None,
         verdict: Verdict::Stalled,
         status: end.status.clone(),
+        runs: trials.len() + extra_runs,
         trials,
         changes,
         cusp_notes: run.as_ref().map(cusp_notes).unwrap_or_default(),

@@ -69,7 +69,9 @@ impl OptimizeReport {
             .unwrap_or_default();
         let runs = r.trials.len();
         match &r.verdict {
-            Verdict::Converged => format!("converged after {runs} runs ({}: {}): {measures}", self.result.solver, r.status),
+            Verdict::Converged => {
+                format!("converged after {runs} evaluations ({}: {}): {measures}", self.result.solver, r.status)
+            },
             Verdict::MaxIterations => format!("did not converge: the optimiser used up its --max-iter evaluations ({runs} runs); {measures}"),
             Verdict::StalledAtCusp { run } => format!(
                 "did not converge: stalled at a cusp: run {run} nearby has another event sequence ({} events at the end), so the problem is not smooth where the optimiser stopped; {measures}; try another start or --starts",
@@ -225,9 +227,10 @@ impl OptimizeReport {
             }
         }
         let _ = writeln!(out, "\nset: {}", self.set_arguments(r));
+        let evaluations: usize = self.result.locals.iter().map(|l| l.trials.len()).sum();
         let _ = writeln!(
             out,
-            "{} runs, compile {:.2} ms, optimize {:.2} ms",
+            "{} runs ({evaluations} evaluations, the rest to report the ends), compile {:.2} ms, optimize {:.2} ms",
             self.result.runs(),
             self.compile_seconds * 1e3,
             self.optimize_seconds * 1e3
@@ -243,7 +246,8 @@ impl OptimizeReport {
             "converged": l.converged(),
             "reason": l.verdict.word(),
             "status": l.status,
-            "runs": l.trials.len(),
+            "evaluations": l.trials.len(),
+            "runs": l.runs,
             "events": self.event_names(&l.events()),
             "stationarity": l.kkt.as_ref().map(|k| number_json(k.stationarity)),
             "violation": l.kkt.as_ref().map(|k| number_json(k.violation)),
