@@ -38,6 +38,7 @@ pub mod gradcheck;
 pub mod limits;
 pub mod lower;
 pub mod number;
+pub mod optimize;
 pub mod periodic;
 #[cfg(feature = "plot")]
 pub mod plot;

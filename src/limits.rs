@@ -34,6 +34,18 @@ pub const MAX_BOOTSTRAP: usize = 100_000;
 pub const MAX_STEPS: usize = 1_000_000_000;
 /// Trials of a fit (`--max-iter`): every trial is kept for the report.
 pub const MAX_FIT_ITER: usize = 1_000_000;
+/// Runs of one local optimisation (`hybc optimize --max-iter`): every run is kept for the report.
+pub const MAX_OPTIMIZE_RUNS: usize = 1_000_000;
+/// Starting points of a multi-start optimisation (`--starts`): each is a whole local solve.
+pub const MAX_STARTS: usize = 10_000;
+/// Constraints of one optimisation, each time of a path constraint (`--subject-to
+/// "y@0:2:41 >= 0"`) counted: SLSQP's dense workspace holds about
+/// `(3 n + 2 m) n + (n + 2 m)(n + 1)` doubles for `n` free parameters and `m` constraints (an
+/// equality is two inequalities for the crate), so with [`MAX_OPTIMIZE_FREE`] about 130 MB.
+pub const MAX_CONSTRAINTS: usize = 2_000;
+/// Free parameters of one optimisation (`hybc optimize --free`): see [`MAX_CONSTRAINTS`]; a
+/// vector parameter counts each element.
+pub const MAX_OPTIMIZE_FREE: usize = 1_000;
 
 /// A count outside its allowed range: `{what}: at least {min}, found {value}` or
 /// `{what}: at most {max}, found {value}`, `what` naming the flag or keyword.

@@ -4,6 +4,7 @@
 mod check;
 mod derive;
 mod fit;
+mod optimize;
 mod periodic;
 mod run;
 mod samples;
@@ -44,6 +45,9 @@ enum Command {
     /// A periodic orbit through events: the initial values a run returns to right after a section
     /// event, and the orbit's Floquet multipliers (stability).
     Periodic(periodic::PeriodicArgs),
+    /// Minimise an output, state, event time or parameter subject to constraints on such
+    /// quantities, with exact gradients through events (SLSQP); several seeded starts in parallel.
+    Optimize(optimize::OptimizeArgs),
 }
 
 /// Exit codes, as documented in the README.
@@ -72,6 +76,7 @@ pub fn main() -> ExitCode {
         Command::Sweep(args) => sweep::run(&args),
         Command::Sobol(args) => sobol::run(&args),
         Command::Periodic(args) => periodic::run(&args),
+        Command::Optimize(args) => optimize::run(&args),
     }
 }
 

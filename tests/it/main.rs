@@ -29,6 +29,7 @@ mod jit_errors;
 mod jit_models;
 mod juggler;
 mod limits;
+mod optimize;
 mod periodic;
 mod plot;
 mod quadrature;

@@ -1,0 +1,232 @@
+//! `hybc optimize FILE --free P,.. --minimize Q [--subject-to "Q OP V" ..]`: compile a model once
+//! with the free parameters as gradient parameters, then minimise (`crate::optimize`) from one or
+//! several starts; progress on stderr, the result as a table or JSON, the optimum's trajectory as
+//! a plot.
+
+use std::process::ExitCode;
+use std::time::Instant;
+
+use clap::ValueEnum;
+
+use super::run::{at_most, parameter_values, positive, sim_options, SimFlags};
+use super::{
+    compile_model, load_model, parse_param_list, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED,
+};
+use crate::fit::Bounds;
+use crate::optimize::report::OptimizeReport;
+use crate::optimize::{self, OptimizeOptions, OptimizeProblem, Quantity, Slsqp, Verdict};
+use crate::sema::ParamIdx;
+use crate::sim::{SimOptions, TrajectoryRequest};
+use crate::Model;
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum Format {
+    Table,
+    Json,
+}
+
+#[derive(Debug, clap::Args)]
+#[command(after_help = "Exit codes: 0 converged (KKT conditions hold); 1 the model has errors; 2 a usage \
+                        error; 3 no start can be evaluated (its run stops early or a quantity does not \
+                        exist there); 4 did not converge (iterations, infeasible, stalled at a cusp, \
+                        runs failing).")]
+pub struct OptimizeArgs {
+    #[command(flatten)]
+    model: ModelArg,
+    /// The parameters to optimise: `P1,P2,...` (a vector's name for all its elements), bounded by
+    /// their declared ranges and --bounds.
+    #[arg(long, value_name = "P1,P2")]
+    free: String,
+    /// The objective: an output or a state at the final time, `EVENT#K`, `EVENT#last`,
+    /// `NAME@TIME`, or a parameter.
+    #[arg(long, value_name = "QUANTITY")]
+    minimize: String,
+    /// A constraint (repeatable): `QUANTITY = V`, `QUANTITY <= V`, `QUANTITY >= V`; a path
+    /// constraint `NAME@LO:HI:N >= V` holds at N evenly spaced times.
+    #[arg(long = "subject-to", value_name = "\"Q OP V\"")]
+    subject_to: Vec<String>,
+    /// Bounds of a free parameter (repeatable), within its declared range: `P=LO:HI` (a vector's
+    /// name for every element).
+    #[arg(long = "bounds", value_name = "P=LO:HI")]
+    bounds: Vec<String>,
+    /// Start value of a parameter, or a fixed value of one not optimised (repeatable).
+    #[arg(long = "set", value_name = "P=VALUE")]
+    set: Vec<String>,
+    #[command(flatten)]
+    sim: SimFlags,
+    /// Most evaluations of one local solve (each a run; at most this many runs).
+    #[arg(long, default_value_t = OptimizeOptions::default().max_iter)]
+    max_iter: usize,
+    /// Converged when the projected Lagrangian gradient, relative to its largest term, is at most this.
+    #[arg(long, default_value_t = OptimizeOptions::default().kkt_tol)]
+    kkt_tol: f64,
+    /// The optimiser may stop when a step moves every parameter by less than this, relatively.
+    #[arg(long, default_value_t = OptimizeOptions::default().xtol)]
+    xtol: f64,
+    /// The optimiser may stop when a step changes the objective by less than this, relatively.
+    #[arg(long, default_value_t = OptimizeOptions::default().ftol)]
+    ftol: f64,
+    /// Starting points: the given one, then N - 1 drawn uniformly within the bounds.
+    #[arg(long, default_value_t = 1)]
+    starts: usize,
+    /// Seed of the drawn starts.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Worker threads for the starts (0: one per core).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Output format.
+    #[arg(long, value_enum, default_value = "table")]
+    format: Format,
+    /// Plot the optimum's trajectory (states and outputs, inputs among them) into this file.
+    #[arg(long, value_name = "FILE.svg|.png")]
+    plot: Option<std::path::PathBuf>,
+    /// No progress lines on stderr.
+    #[arg(long)]
+    quiet: bool,
+}
+
+pub fn run(args: &OptimizeArgs) -> ExitCode {
+    let model = match load_model(&args.model.file) {
+        Ok(model) => model,
+        Err(code) => return code,
+    };
+    match optimize_model(&model, args) {
+        Ok(code) => code,
+        Err(message) => usage_error(&message),
+    }
+}
+
+fn options(args: &OptimizeArgs) -> Result<OptimizeOptions, String> {
+    crate::limits::count("--max-iter", args.max_iter, 1, crate::limits::MAX_OPTIMIZE_RUNS)
+        .map_err(|e| e.to_string())?;
+    crate::limits::count("--starts", args.starts, 1, crate::limits::MAX_STARTS).map_err(|e| e.to_string())?;
+    at_most("--threads", args.threads, crate::limits::MAX_THREADS)?;
+    Ok(OptimizeOptions {
+        max_iter: args.max_iter,
+        kkt_tol: positive("--kkt-tol", args.kkt_tol)?,
+        xtol: positive("--xtol", args.xtol)?,
+        ftol: positive("--ftol", args.ftol)?,
+        starts: args.starts,
+        seed: args.seed,
+        threads: args.threads,
+    })
+}
+
+/// The box of every free parameter: its declared range, narrowed by `--bounds`.
+fn bounds(model: &Model, free: &[ParamIdx], flags: &[String]) -> Result<Vec<Bounds>, String> {
+    let params = &model.checked().params;
+    let mut out: Vec<Bounds> = free.iter().map(|p| Bounds::from_range(params[p.0 as usize].range)).collect();
+    for flag in flags {
+        let bad = || format!("--bounds: expected P=LO:HI with finite LO < HI, found `{flag}`");
+        let (name, range) = flag.split_once('=').ok_or_else(bad)?;
+        let (lo, hi) = range.split_once(':').ok_or_else(bad)?;
+        let lo = crate::number::parse_number(lo.trim()).map_err(|_| bad())?;
+        let hi = crate::number::parse_number(hi.trim()).map_err(|_| bad())?;
+        if lo >= hi {
+            return Err(bad());
+        }
+        for p in parse_param_list(model, name, "--bounds")? {
+            let k = free.iter().position(|f| *f == p).ok_or_else(|| {
+                format!(
+                    "--bounds: `{}` is not a free parameter (name it in --free)",
+                    params[p.0 as usize].name
+                )
+            })?;
+            let declared = out[k];
+            if lo < declared.lower || hi > declared.upper {
+                return Err(format!(
+                    "--bounds: [{lo}, {hi}] for `{}` leaves its declared range [{}, {}]",
+                    params[p.0 as usize].name, declared.lower, declared.upper
+                ));
+            }
+            out[k] = Bounds { lower: lo, upper: hi };
+        }
+    }
+    Ok(out)
+}
+
+fn optimize_model(model: &Model, args: &OptimizeArgs) -> Result<ExitCode, String> {
+    let free = parse_param_list(model, &args.free, "--free")?;
+    if free.is_empty() {
+        return Err("--free: name at least one parameter to optimise".to_string());
+    }
+    at_most("--free (parameters, vector elements counted)", free.len(), crate::limits::MAX_OPTIMIZE_FREE)?;
+    let start = parameter_values(model, &args.set)?.values().to_vec();
+    let sim = sim_options(model, &args.sim)?;
+    let options = options(args)?;
+    let bounds = bounds(model, &free, &args.bounds)?;
+    if let Some(path) = &args.plot {
+        crate::plot::ImageFormat::from_path(path).map_err(|e| format!("--plot: {e}"))?;
+    }
+    let compiled = match compile_model(model, &free) {
+        Ok(c) => c,
+        Err(code) => return Ok(code),
+    };
+    let info = compiled.info().clone();
+    let objective = Quantity::parse(&args.minimize, &info).map_err(|e| format!("--minimize: {e}"))?;
+    let mut constraints = Vec::new();
+    for text in &args.subject_to {
+        constraints
+            .extend(optimize::parse_constraint(text, &info).map_err(|e| format!("--subject-to: {e}"))?);
+        at_most("--subject-to (constraints in all)", constraints.len(), crate::limits::MAX_CONSTRAINTS)?;
+    }
+    let problem = OptimizeProblem { system: compiled.native(), start, bounds, objective, constraints, sim };
+    let started = Instant::now();
+    let progress = |start: usize, t: &optimize::Trial| {
+        eprintln!("{}", OptimizeReport::progress_line(&info, options.starts, start, t));
+    };
+    let progress: Option<&optimize::Progress<'_>> = if args.quiet { None } else { Some(&progress) };
+    let result = optimize::optimize(&problem, &options, &Slsqp, progress).map_err(|e| e.to_string())?;
+    let report = OptimizeReport {
+        model: model.name().to_string(),
+        info: info.clone(),
+        objective,
+        options,
+        result,
+        compile_seconds: compiled.compile_seconds(),
+        optimize_seconds: started.elapsed().as_secs_f64(),
+    };
+    if report.result.locals.iter().all(|l| matches!(l.verdict, Verdict::StartFailed { .. })) {
+        eprintln!("error: {}", report.reason());
+        return Ok(ExitCode::from(EXIT_SIM_STOPPED));
+    }
+    match args.format {
+        Format::Table => super::print_out(&report.to_table()),
+        Format::Json => super::print_out(&format!("{}\n", report.to_json())),
+    }
+    if let Some(path) = &args.plot {
+        plot(&compiled, &problem.sim, &report.result.reported().params, path)?;
+    }
+    Ok(if report.converged() {
+        ExitCode::SUCCESS
+    } else {
+        eprintln!("error: {}", report.reason());
+        ExitCode::from(EXIT_GOAL_NOT_MET)
+    })
+}
+
+/// Runs the optimum once more with 1000 samples of the dense output and plots them.
+fn plot(
+    compiled: &crate::Compiled,
+    sim: &SimOptions,
+    params: &[f64],
+    path: &std::path::Path,
+) -> Result<(), String> {
+    let opts = SimOptions {
+        trajectory: TrajectoryRequest::Sample((sim.t_end - sim.t_start) / 1000.0),
+        ..sim.clone()
+    };
+    let started = Instant::now();
+    let result = crate::sim::run(compiled.native(), params, &opts).map_err(|e| format!("--plot: {e}"))?;
+    let report = crate::report::RunReport {
+        model: compiled.model().name().to_string(),
+        t_end: opts.t_end,
+        info: compiled.info().clone(),
+        params: params.to_vec(),
+        result,
+        compile_seconds: compiled.compile_seconds(),
+        run_seconds: started.elapsed().as_secs_f64(),
+    };
+    crate::plot::plot_run(&report, path).map_err(|e| format!("--plot: {e}"))
+}

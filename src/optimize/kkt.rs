@@ -1,0 +1,168 @@
+//! The verdict on a point: do the Karush-Kuhn-Tucker conditions hold there? The optimiser does
+//! not report Lagrange multipliers, so they are estimated here by least squares on the gradients
+//! of the active constraints, over the variables not held at a bound:
+//! `min |grad f + sum_i lambda_i grad c_i|` (equalities always active, an inequality when it is
+//! within its tolerance of its bound). An inequality's multiplier must be >= 0; one that comes out
+//! negative is released (its constraint is not holding the point) and the estimate repeated.
+//! What is left of the Lagrangian's gradient, projected on the box (at a lower bound only its
+//! negative part counts, at an upper bound its positive part), relative to the largest term that
+//! makes it up, is the stationarity residual.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::solver::SmoothPoint;
+
+/// The KKT conditions measured at one point.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Kkt {
+    /// One per constraint: the estimated multiplier (0 for an inactive inequality).
+    pub multipliers: Vec<f64>,
+    /// One per constraint: within its tolerance of its bound (equalities: always).
+    pub active: Vec<bool>,
+    /// One per variable: -1 held at its lower bound, 1 at its upper, 0 free.
+    pub at_bound: Vec<i8>,
+    /// `|P(grad L)|_inf / max(|grad f|_inf, max_i |lambda_i grad c_i|_inf)` (0 when all vanish).
+    pub stationarity: f64,
+    /// Largest violation of a constraint divided by its tolerance (<= 1: every one is met).
+    pub violation_ratio: f64,
+    /// Largest violation of a constraint, in its own units.
+    pub violation: f64,
+}
+
+/// Measures the KKT conditions at `x` from the point's gradients. `n_eq` constraints are
+/// equalities; `tolerances` says how far each may be off.
+pub fn measure(
+    x: &[f64],
+    bounds: &[(f64, f64)],
+    point: &SmoothPoint,
+    n_eq: usize,
+    tolerances: &[f64],
+) -> Kkt {
+    let n = x.len();
+    let m = point.constraints.len();
+    let at_bound: Vec<i8> = x
+        .iter()
+        .zip(bounds)
+        .map(|(&v, &(lo, hi))| {
+            // SLSQP clips to the box, so a held variable sits on its bound to round-off.
+            let eps = 1e-12 * (hi - lo).abs().min(1e300).max(v.abs()).max(1e-300);
+            if v - lo <= eps {
+                -1
+            } else if hi - v <= eps {
+                1
+            } else {
+                0
+            }
+        })
+        .collect();
+    let mut violation: f64 = 0.0;
+    let mut violation_ratio: f64 = 0.0;
+    let mut active = vec![false; m];
+    for i in 0..m {
+        let c = point.constraints[i];
+        let v = if i < n_eq { c.abs() } else { c.max(0.0) };
+        violation = violation.max(v);
+        violation_ratio = violation_ratio.max(v / tolerances[i]);
+        active[i] = i < n_eq || c >= -tolerances[i];
+    }
+    let free: Vec<usize> = (0..n).filter(|&k| at_bound[k] == 0).collect();
+    let mut multipliers = vec![0.0; m];
+    loop {
+        let columns: Vec<usize> = (0..m).filter(|&i| active[i]).collect();
+        multipliers.iter_mut().for_each(|l| *l = 0.0);
+        if !columns.is_empty() && !free.is_empty() {
+            let a = DMatrix::from_fn(free.len(), columns.len(), |r, c| point.jacobian[columns[c]][free[r]]);
+            let b = DVector::from_fn(free.len(), |r, _| -point.gradient[free[r]]);
+            let svd = a.svd(true, true);
+            let eps = 1e-12 * svd.singular_values.max();
+            if let Ok(lambda) = svd.solve(&b, eps) {
+                for (c, &i) in columns.iter().enumerate() {
+                    multipliers[i] = lambda[c];
+                }
+            }
+        }
+        // An inequality pulling the wrong way does not hold the point: release the worst.
+        let wrong = (n_eq..m)
+            .filter(|&i| active[i] && multipliers[i] < 0.0)
+            .min_by(|&a, &b| multipliers[a].total_cmp(&multipliers[b]));
+        match wrong {
+            Some(i) => active[i] = false,
+            None => break,
+        }
+    }
+    let mut residual = point.gradient.clone();
+    let mut scale = inf_norm(&point.gradient);
+    for (&lambda, row) in multipliers.iter().zip(&point.jacobian) {
+        if lambda != 0.0 {
+            let term: Vec<f64> = row.iter().map(|d| lambda * d).collect();
+            scale = scale.max(inf_norm(&term));
+            residual.iter_mut().zip(&term).for_each(|(r, t)| *r += t);
+        }
+    }
+    let projected = residual
+        .iter()
+        .zip(&at_bound)
+        .map(|(&r, &b)| match b {
+            -1 => r.min(0.0),
+            1 => r.max(0.0),
+            _ => r,
+        })
+        .fold(0.0_f64, |a, r| a.max(r.abs()));
+    let stationarity = if scale > 0.0 { projected / scale } else { 0.0 };
+    Kkt { multipliers, active, at_bound, stationarity, violation_ratio, violation }
+}
+
+fn inf_norm(v: &[f64]) -> f64 {
+    v.iter().fold(0.0_f64, |a, x| a.max(x.abs()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn point(gradient: &[f64], constraints: &[f64], jacobian: &[&[f64]]) -> SmoothPoint {
+        SmoothPoint {
+            objective: 0.0,
+            gradient: gradient.to_vec(),
+            constraints: constraints.to_vec(),
+            jacobian: jacobian.iter().map(|r| r.to_vec()).collect(),
+        }
+    }
+
+    const FREE: [(f64, f64); 2] = [(f64::NEG_INFINITY, f64::INFINITY); 2];
+
+    #[test]
+    fn an_active_inequality_balances_the_gradient_with_a_positive_multiplier() {
+        // min x + y subject to 1 - x - y <= 0, at x + y = 1.
+        let k = measure(&[0.5, 0.5], &FREE, &point(&[1.0, 1.0], &[0.0], &[&[-1.0, -1.0]]), 0, &[1e-8]);
+        assert_eq!(k.multipliers, vec![1.0]);
+        assert!(k.stationarity < 1e-15 && k.violation_ratio == 0.0);
+    }
+
+    #[test]
+    fn an_inequality_pulling_the_wrong_way_is_released_and_the_point_is_not_stationary() {
+        // min x + y subject to x + y - 1 <= 0 at x + y = 1: the objective wants to go down, the
+        // constraint does not stop it.
+        let k = measure(&[0.5, 0.5], &FREE, &point(&[1.0, 1.0], &[0.0], &[&[1.0, 1.0]]), 0, &[1e-8]);
+        assert_eq!(k.multipliers, vec![0.0]);
+        assert!(!k.active[0]);
+        assert_eq!(k.stationarity, 1.0);
+    }
+
+    #[test]
+    fn a_bound_holds_only_a_gradient_pointing_out_of_the_box() {
+        let bounds = [(0.0, 1.0), (0.0, 1.0)];
+        // At x = 0 with df/dx = 1 > 0: held; with df/dx = -1: it should move in.
+        let held = measure(&[0.0, 0.5], &bounds, &point(&[1.0, 0.0], &[], &[]), 0, &[]);
+        assert_eq!((held.at_bound[0], held.stationarity), (-1, 0.0));
+        let loose = measure(&[0.0, 0.5], &bounds, &point(&[-1.0, 0.0], &[], &[]), 0, &[]);
+        assert_eq!(loose.stationarity, 1.0);
+    }
+
+    #[test]
+    fn an_equality_counts_its_violation_against_its_tolerance() {
+        let k = measure(&[1.0], &FREE[..1], &point(&[2.0], &[3e-8], &[&[1.0]]), 1, &[1e-8]);
+        approx::assert_relative_eq!(k.violation_ratio, 3.0);
+        approx::assert_relative_eq!(k.multipliers[0], -2.0);
+    }
+}
