@@ -393,13 +393,221 @@ def softball(repeat: int) -> None:
             print(f"  diffrax: missing ({e})")
 
 
+# ---------------------------------------------------------------------------------------------
+# W5: the diffusion chain (benches/support/chain.rs, `diffusion_source`): N cells, conductances
+# d[0..9] (ten equal segments), leak c, cells starting on a ramp, one top-up of x0 by 0.3 when it
+# falls to 0.6; the final cells and d/d(d[0..9]); T = 10, rtol 1e-8, atol 1e-10.
+
+CHAIN_T, CHAIN_RTOL, CHAIN_ATOL = 10.0, 1e-8, 1e-10
+CHAIN_D, CHAIN_C = 50.0, 0.1
+
+
+def chain_text(n: int) -> str:
+    """The model text of `diffusion_source(n, true)`, written here again from its definition."""
+    seg = lambda i: 10 * i // n  # noqa: E731
+    lines = ["model diffusion_chain", "param d[10] = 50 in [0.1, 1000]", "param c = 0.1"]
+    lines += [f"state x{i} = {1.0 - 0.5 * i / n!r}" for i in range(n)]
+    for i in range(n):
+        rhs = f"-c * x{i}"
+        if i > 0:
+            rhs += f" + d[{seg(i - 1)}] * (x{i - 1} - x{i})"
+        if i + 1 < n:
+            rhs += f" - d[{seg(i)}] * (x{i} - x{i + 1})"
+        lines.append(f"der(x{i}) = {rhs}")
+    lines += ["initial mode fill {", "    event top_up when x0 <= 0.6 -> rest {", "        x0 := x0 + 0.3",
+              "    }", "}", "mode rest {", "}", f"output y = x{n - 1}"]
+    return "\n".join(lines) + "\n"
+
+
+def chain_hybc(n: int, method: str, rtol: float = CHAIN_RTOL, atol: float = CHAIN_ATOL):
+    model = hybc.Model(chain_text(n), file_name=f"chain{n}.hyb")
+    start = time.perf_counter()
+    model.simulate(grad=["d"], t_end=0.0 + 1e-9, method=method)  # compiles (and caches)
+    compile_s = time.perf_counter() - start
+
+    def go():
+        return model.simulate(grad=["d"], t_end=CHAIN_T, rtol=rtol, atol=atol, method=method, max_steps=10_000_000)
+
+    return go, compile_s
+
+
+def chain_values(run, n: int) -> tuple[np.ndarray, np.ndarray]:
+    x = np.array([run.state[f"x{i}"] for i in range(n)])
+    d = np.array([run.dstate[f"x{i}"] for i in range(n)])  # (n, 10)
+    return x, d
+
+
+def chain_matrix(n: int, d: np.ndarray, c: float):
+    """x' = A x for the chain (scipy.sparse), the same segments as the model."""
+    import scipy.sparse as sp
+
+    seg = np.array([10 * i // n for i in range(n - 1)])
+    g = d[seg]  # conductance of the link i -- i+1
+    main = -c * np.ones(n)
+    main[:-1] -= g
+    main[1:] -= g
+    return sp.diags([g, main, g], [-1, 0, 1], format="csc")
+
+
+def chain_scipy(n: int, method: str):
+    from scipy.integrate import solve_ivp
+
+    a_fill = chain_matrix(n, np.full(10, CHAIN_D), CHAIN_C)
+    x0 = 1.0 - 0.5 * np.arange(n) / n
+
+    def event(t, x):
+        return x[0] - 0.6
+
+    event.terminal, event.direction = True, -1
+
+    def go():
+        f = lambda t, x: a_fill @ x  # noqa: E731
+        first = solve_ivp(f, (0, CHAIN_T), x0, method=method, jac=a_fill, events=event, rtol=CHAIN_RTOL,
+                          atol=CHAIN_ATOL)
+        t_e, x_e = first.t_events[0][0], first.y_events[0][0].copy()
+        x_e[0] += 0.3
+        second = solve_ivp(f, (t_e, CHAIN_T), x_e, method=method, jac=a_fill, rtol=CHAIN_RTOL, atol=CHAIN_ATOL)
+        return second.y[:, -1], len(first.t) + len(second.t) - 2
+
+    return go
+
+
+def chain_diffrax(n: int):
+    import diffrax
+    import jax
+    import jax.numpy as jnp
+    import optimistix as optx
+
+    jax.config.update("jax_enable_x64", True)
+    seg = jnp.array([10 * i // n for i in range(n - 1)])
+
+    def f(t, x, d):
+        g = d[seg]
+        flow = g * (x[:-1] - x[1:])  # from cell i to i + 1
+        return -CHAIN_C * x + jnp.concatenate([jnp.zeros(1), flow]) - jnp.concatenate([flow, jnp.zeros(1)])
+
+    term, solver = diffrax.ODETerm(f), diffrax.Kvaerno5()
+    controller = diffrax.PIDController(rtol=CHAIN_RTOL, atol=CHAIN_ATOL)
+    event = diffrax.Event(lambda t, y, args, **kw: y[0] - 0.6, optx.Newton(rtol=1e-12, atol=1e-14))
+    x0 = 1.0 - 0.5 * jnp.arange(n) / n
+
+    def final(d):
+        first = diffrax.diffeqsolve(term, solver, 0.0, CHAIN_T, 1e-4, x0, args=d, stepsize_controller=controller,
+                                    event=event, adjoint=diffrax.ForwardMode(), max_steps=1_000_000)
+        x_e = first.ys[-1].at[0].add(0.3)
+        second = diffrax.diffeqsolve(term, solver, first.ts[-1], CHAIN_T, 1e-4, x_e, args=d,
+                                     stepsize_controller=controller, adjoint=diffrax.ForwardMode(),
+                                     max_steps=1_000_000)
+        return second.ys[-1], first.stats["num_accepted_steps"] + second.stats["num_accepted_steps"]
+
+    values = jax.jit(final)
+    jacobian = jax.jit(jax.jacfwd(lambda d: final(d)[0]))
+    d = jnp.full(10, CHAIN_D)
+
+    def go():
+        (x, steps), dx = values(d), jacobian(d)
+        return np.asarray(x), np.asarray(dx), int(steps)
+
+    start = time.perf_counter()
+    go()
+    return go, time.perf_counter() - start
+
+
+def chain_amici(n: int, workdir_root: str = "/tmp/hybc_amici_chain"):
+    """AMICI 1.0.1 (CVODES BDF, forward sensitivities) on the chain as SBML: the cells and a
+    `fired` flag as rate-rule parameters, the top-up an event guarded by the flag."""
+    import amici
+    import libsbml
+
+    doc = libsbml.SBMLDocument(3, 2)
+    m = doc.createModel()
+    m.setId(f"chain{n}")
+    for k in range(10):
+        p = m.createParameter()
+        p.setId(f"d{k}"), p.setValue(CHAIN_D), p.setConstant(True)
+    p = m.createParameter()
+    p.setId("c"), p.setValue(CHAIN_C), p.setConstant(True)
+    for i in range(n):
+        p = m.createParameter()
+        p.setId(f"x{i}"), p.setValue(1.0 - 0.5 * i / n), p.setConstant(False)
+    p = m.createParameter()
+    p.setId("fired"), p.setValue(0.0), p.setConstant(False)
+    seg = lambda i: 10 * i // n  # noqa: E731
+    for i in range(n):
+        rhs = f"-c * x{i}"
+        if i > 0:
+            rhs += f" + d{seg(i - 1)} * (x{i - 1} - x{i})"
+        if i + 1 < n:
+            rhs += f" - d{seg(i)} * (x{i} - x{i + 1})"
+        r = m.createRateRule()
+        r.setVariable(f"x{i}"), r.setMath(libsbml.parseL3Formula(rhs))
+    r = m.createRateRule()
+    r.setVariable("fired"), r.setMath(libsbml.parseL3Formula("0"))
+    e = m.createEvent()
+    e.setId("top_up"), e.setUseValuesFromTriggerTime(True)
+    trig = e.createTrigger()
+    trig.setMath(libsbml.parseL3Formula("x0 <= 0.6 && fired < 0.5"))
+    trig.setInitialValue(False), trig.setPersistent(True)
+    for var, formula in (("x0", "x0 + 0.3"), ("fired", "1")):
+        a = e.createEventAssignment()
+        a.setVariable(var), a.setMath(libsbml.parseL3Formula(formula))
+    workdir = f"{workdir_root}{n}"
+    path = f"{workdir}.xml"
+    libsbml.writeSBMLToFile(doc, path)
+    start = time.perf_counter()
+    model = amici.SbmlImporter(path).sbml2amici(f"chain{n}", workdir, compute_conservation_laws=False)
+    compile_s = time.perf_counter() - start
+    go = amici_runner(model, CHAIN_T, CHAIN_RTOL, CHAIN_ATOL, [f"d{k}" for k in range(10)],
+                      [f"x{i}" for i in range(n)])
+    return go, compile_s
+
+
+def chain(repeat: int, sizes=(10, 100, 1000)) -> None:
+    for n in sizes:
+        print(f"W5 chain, N = {n}, 10 gradients, T = {CHAIN_T:g}, rtol {CHAIN_RTOL:g}, atol {CHAIN_ATOL:g} "
+              "(errors in units of atol + rtol |x|)")
+        ref_go, _ = chain_hybc(n, "rodas5p", 1e-12, 1e-14)
+        ref_x, ref_d = chain_values(ref_go(), n)
+        err = lambda got, want: tol_err(got, want, CHAIN_RTOL, CHAIN_ATOL)  # noqa: E731
+        for method in ("rodas5p", "auto", "dopri5", "dop853"):
+            try:
+                go, compile_s = chain_hybc(n, method)
+                t, run = best_of(go, repeat)
+            except Exception as e:  # noqa: BLE001
+                print(f"  hybc {method:<29} failed: {e}")
+                continue
+            x, d = chain_values(run, n)
+            steps = json.loads(run.to_json())["stats"]["steps"]
+            row(f"hybc {method} (+ 10 gradients)", t, steps, err(x, ref_x), err(d, ref_d),
+                f"compile {compile_s * 1e3:.0f} ms")
+        for method in ("Radau", "BDF"):
+            try:
+                t, (x, steps) = best_of(chain_scipy(n, method), max(1, repeat // 2))
+                row(f"scipy {method} (values only)", t, steps, err(x, ref_x), None)
+            except ImportError as e:
+                print(f"  scipy: missing ({e})")
+        try:
+            go, first = chain_diffrax(n)
+            t, (x, d, steps) = best_of(go, max(1, repeat // 2))
+            row("diffrax Kvaerno5 (+ jacfwd)", t, steps, err(x, ref_x), err(d, ref_d), f"first call {first:.1f} s")
+        except ImportError as e:
+            print(f"  diffrax: missing ({e})")
+        try:
+            go, compile_s = chain_amici(n)
+            t, (x, d, steps) = best_of(go, repeat)
+            row("AMICI 1.0.1 CVODES (+ forward sens)", t, steps, err(x, ref_x), err(d, ref_d),
+                f"model build {compile_s:.0f} s")
+        except ImportError as e:
+            print(f"  AMICI: missing ({e})")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("workloads", nargs="*", default=["robertson"])
     parser.add_argument("--repeat", type=int, default=5)
     args = parser.parse_args()
     for name in args.workloads:
-        {"robertson": robertson, "softball": softball}[name](args.repeat)
+        {"robertson": robertson, "softball": softball, "chain": chain}[name](args.repeat)
 
 
 if __name__ == "__main__":

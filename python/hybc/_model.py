@@ -250,6 +250,78 @@ class Model:
             warnings.warn(note, stacklevel=2)
         return json.loads(report)
 
+    def optimize(
+        self,
+        free: Sequence[str],
+        minimize: str,
+        subject_to: Sequence[str] | str = (),
+        *,
+        bounds: Mapping[str, tuple[float, float]] | None = None,
+        params: Mapping[str, Any] | None = None,
+        starts: int = 1,
+        seed: int = 0,
+        threads: int = 0,
+        max_iter: int = 200,
+        kkt_tol: float = 1e-6,
+        xtol: float = 1e-10,
+        ftol: float = 1e-12,
+        **options: Any,
+    ) -> dict[str, Any]:
+        """Minimises ``minimize`` over the parameters ``free`` subject to the constraints
+        ``subject_to``, as ``hybc optimize`` does (see Optimisation in the README), and returns
+        its report, the dict of ``hybc optimize --format json`` (``optimum``, ``params``,
+        ``objective_value``, ``constraints`` with their multipliers, ``converged``, ``reason``,
+        ``kkt``, ``optima`` from several starts with their event sequences, ``set``,
+        ``sequence_changes``, ``cusp_notes``, ``stats`` ...), with ``"run"``: the
+        :meth:`simulate` run at the reported point, with gradients with respect to ``free``.
+
+        - ``minimize``: an output or a state at the end, ``EVENT#K``, ``EVENT#last``,
+          ``NAME@TIME`` or a parameter.
+        - ``subject_to``: ``"Q = V"``, ``"Q <= V"``, ``"Q >= V"``; a path constraint
+          ``"y@0:2:41 >= 0"`` holds at 41 times.
+        - ``bounds``: ``name -> (lo, hi)`` within the declared ranges (a vector's name for every
+          element); the declared ranges otherwise.
+        - ``params``: the start of the free parameters and the values of the others;
+          ``starts - 1`` more starts are drawn (``seed``) within the bounds, run on ``threads``.
+        - ``options``: the keywords of :meth:`simulate` (``t_end``, ``rtol``, ...).
+
+        A problem that does not converge returns its report with ``converged`` False and the
+        ``reason``; names or constraints the model refuses raise ``ValueError``.
+        """
+        vectors = dict(self._native.vectors)
+        free = _expand_names(_names(free, "free"), vectors)
+        subject_to = [subject_to] if isinstance(subject_to, str) else [str(c) for c in subject_to]
+        if bounds is not None and not isinstance(bounds, Mapping):
+            raise TypeError(f"bounds: expected a dict name -> (lo, hi), found {type(bounds).__name__}")
+        boxes = None
+        if bounds is not None:
+            boxes = {}
+            for name, box in bounds.items():
+                lo, hi = box
+                boxes[str(name)] = (_number(lo, f"bounds: `{name}`"), _number(hi, f"bounds: `{name}`"))
+        _check_counts({"starts": starts, "threads": threads, "max_iter": max_iter, "seed": seed, **options})
+        report = json.loads(
+            _hybc.optimize_report(
+                self._native,
+                free,
+                str(minimize),
+                subject_to,
+                boxes,
+                _param_dict(_expand_vectors(params, vectors)),
+                int(max_iter),
+                float(kkt_tol),
+                float(xtol),
+                float(ftol),
+                int(starts),
+                int(seed),
+                int(threads),
+                **options,
+            )
+        )
+        run_options = {k: v for k, v in options.items()}
+        report["run"] = self.simulate(report["params"], grad=free, **run_options)
+        return report
+
     def sobol_design(
         self,
         problem: Mapping[str, Any],
@@ -540,7 +612,7 @@ def normalise_points(
     return [str(n) for n in names], matrix, {}
 
 
-_COUNTS = ("events", "threads", "max_events", "max_steps", "max_iter")
+_COUNTS = ("events", "threads", "max_events", "max_steps", "max_iter", "starts", "seed")
 
 
 def _check_counts(kw: Mapping[str, Any]) -> None:

@@ -5,7 +5,7 @@
 //! `SimOptions`), `run` (one run's result as Python values and NumPy arrays), `sweep` (many points
 //! in parallel, the columns of `hybc sweep`), `sobol` (Sobol' indices: the library's design and
 //! estimators, a shard of rows at a time), `fit` (`Model.fit`: the library's whole fit, the report
-//! as JSON). Every call that integrates releases the GIL.
+//! as JSON), `optimize` (`Model.optimize`, the same for `hybc optimize`). Every call that integrates releases the GIL.
 //!
 //! Where the JAX primitive plugs in (branch `jax`): a module `jax_ffi` declared below next to the
 //! others, registered by one line in [`_hybc`]; it reaches compiled models through
@@ -15,6 +15,7 @@ mod errors;
 mod fit;
 mod jax_ffi;
 mod model;
+mod optimize;
 mod options;
 mod run;
 mod sobol;
@@ -29,6 +30,7 @@ fn _hybc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<run::Run>()?;
     m.add_function(wrap_pyfunction!(sobol::sobol_analyze, m)?)?;
     m.add_function(wrap_pyfunction!(fit::fit_report, m)?)?;
+    m.add_function(wrap_pyfunction!(optimize::optimize_report, m)?)?;
     jax_ffi::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

@@ -14,7 +14,8 @@ use super::{
 };
 use crate::fit::Bounds;
 use crate::optimize::report::OptimizeReport;
-use crate::optimize::{self, OptimizeOptions, OptimizeProblem, Quantity, Slsqp, Verdict};
+use crate::optimize::request::{self, Failure, Request};
+use crate::optimize::{self, OptimizeOptions, Verdict};
 use crate::sema::ParamIdx;
 use crate::sim::{SimOptions, TrajectoryRequest};
 use crate::Model;
@@ -113,10 +114,9 @@ fn options(args: &OptimizeArgs) -> Result<OptimizeOptions, String> {
     })
 }
 
-/// The box of every free parameter: its declared range, narrowed by `--bounds`.
+/// The box of every free parameter: its declared range, narrowed by `--bounds P=LO:HI`.
 fn bounds(model: &Model, free: &[ParamIdx], flags: &[String]) -> Result<Vec<Bounds>, String> {
-    let params = &model.checked().params;
-    let mut out: Vec<Bounds> = free.iter().map(|p| Bounds::from_range(params[p.0 as usize].range)).collect();
+    let mut narrow = Vec::with_capacity(flags.len());
     for flag in flags {
         let bad = || format!("--bounds: expected P=LO:HI with finite LO < HI, found `{flag}`");
         let (name, range) = flag.split_once('=').ok_or_else(bad)?;
@@ -126,24 +126,9 @@ fn bounds(model: &Model, free: &[ParamIdx], flags: &[String]) -> Result<Vec<Boun
         if lo >= hi {
             return Err(bad());
         }
-        for p in parse_param_list(model, name, "--bounds")? {
-            let k = free.iter().position(|f| *f == p).ok_or_else(|| {
-                format!(
-                    "--bounds: `{}` is not a free parameter (name it in --free)",
-                    params[p.0 as usize].name
-                )
-            })?;
-            let declared = out[k];
-            if lo < declared.lower || hi > declared.upper {
-                return Err(format!(
-                    "--bounds: [{lo}, {hi}] for `{}` leaves its declared range [{}, {}]",
-                    params[p.0 as usize].name, declared.lower, declared.upper
-                ));
-            }
-            out[k] = Bounds { lower: lo, upper: hi };
-        }
+        narrow.push((name.trim().to_string(), lo, hi));
     }
-    Ok(out)
+    request::bounds(model, free, &narrow).map_err(|e| format!("--bounds: {e}"))
 }
 
 fn optimize_model(model: &Model, args: &OptimizeArgs) -> Result<ExitCode, String> {
@@ -164,28 +149,24 @@ fn optimize_model(model: &Model, args: &OptimizeArgs) -> Result<ExitCode, String
         Err(code) => return Ok(code),
     };
     let info = compiled.info().clone();
-    let objective = Quantity::parse(&args.minimize, &info).map_err(|e| format!("--minimize: {e}"))?;
-    let mut constraints = Vec::new();
-    for text in &args.subject_to {
-        constraints
-            .extend(optimize::parse_constraint(text, &info).map_err(|e| format!("--subject-to: {e}"))?);
-        at_most("--subject-to (constraints in all)", constraints.len(), crate::limits::MAX_CONSTRAINTS)?;
-    }
-    let problem = OptimizeProblem { system: compiled.native(), start, bounds, objective, constraints, sim };
-    let started = Instant::now();
+    let starts = options.starts;
     let progress = |start: usize, t: &optimize::Trial| {
-        eprintln!("{}", OptimizeReport::progress_line(&info, options.starts, start, t));
+        eprintln!("{}", OptimizeReport::progress_line(&info, starts, start, t));
     };
     let progress: Option<&optimize::Progress<'_>> = if args.quiet { None } else { Some(&progress) };
-    let result = optimize::optimize(&problem, &options, &Slsqp, progress).map_err(|e| e.to_string())?;
-    let report = OptimizeReport {
-        model: model.name().to_string(),
-        info: info.clone(),
-        objective,
+    let request = Request {
+        minimize: &args.minimize,
+        subject_to: &args.subject_to,
+        bounds,
+        start,
+        sim: sim.clone(),
         options,
-        result,
-        compile_seconds: compiled.compile_seconds(),
-        optimize_seconds: started.elapsed().as_secs_f64(),
+    };
+    let report = match request::run(model, &compiled, request, progress) {
+        Ok(report) => report,
+        Err(Failure::Objective(e)) => return Err(format!("--minimize: {e}")),
+        Err(Failure::Constraint(e)) => return Err(format!("--subject-to: {e}")),
+        Err(Failure::Refused(e)) => return Err(e.to_string()),
     };
     if report.result.locals.iter().all(|l| matches!(l.verdict, Verdict::StartFailed { .. })) {
         eprintln!("error: {}", report.reason());
@@ -196,7 +177,7 @@ fn optimize_model(model: &Model, args: &OptimizeArgs) -> Result<ExitCode, String
         Format::Json => super::print_out(&format!("{}\n", report.to_json())),
     }
     if let Some(path) = &args.plot {
-        plot(&compiled, &problem.sim, &report.result.reported().params, path)?;
+        plot(&compiled, &sim, &report.result.reported().params, path)?;
     }
     Ok(if report.converged() {
         ExitCode::SUCCESS

@@ -23,6 +23,7 @@
 mod evaluate;
 mod kkt;
 pub mod report;
+pub mod request;
 mod slsqp;
 pub mod solver;
 mod spec;

@@ -1,0 +1,93 @@
+//! `Model.optimize`: the library's whole optimisation (`hybc::optimize::request`, what
+//! `hybc optimize` runs) from Python's arguments; the report comes back as the JSON
+//! `hybc optimize --format json` prints (the Python layer adds the run at the optimum).
+
+use std::collections::HashMap;
+
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+
+use hybc::optimize::request::{self, Failure, Request};
+use hybc::optimize::OptimizeOptions;
+
+use crate::errors::{self, ParameterError};
+use crate::model::Model;
+use crate::options::SimKeywords;
+
+/// Minimises `minimize` over `free` subject to `subject_to`, within the declared ranges narrowed
+/// by `bounds`, from `params` (and `starts - 1` seeded starts); returns the report's JSON.
+#[pyfunction]
+#[pyo3(signature = (
+    model, free, minimize, subject_to, bounds, params,
+    max_iter, kkt_tol, xtol, ftol, starts, seed, threads,
+    t_end = None, rtol = None, atol = None, max_events = None, max_steps = None, method = None,
+    graze_tol = None, sens_error_control = None, h_max = None,
+))]
+#[allow(clippy::too_many_arguments)]
+pub fn optimize_report(
+    py: Python<'_>,
+    model: PyRef<'_, Model>,
+    free: Vec<String>,
+    minimize: String,
+    subject_to: Vec<String>,
+    bounds: Option<HashMap<String, (f64, f64)>>,
+    params: Option<HashMap<String, f64>>,
+    max_iter: usize,
+    kkt_tol: f64,
+    xtol: f64,
+    ftol: f64,
+    starts: usize,
+    seed: u64,
+    threads: usize,
+    t_end: Option<f64>,
+    rtol: Option<f64>,
+    atol: Option<f64>,
+    max_events: Option<usize>,
+    max_steps: Option<usize>,
+    method: Option<String>,
+    graze_tol: Option<f64>,
+    sens_error_control: Option<bool>,
+    h_max: Option<f64>,
+) -> PyResult<String> {
+    let keywords =
+        SimKeywords { t_end, rtol, atol, max_events, max_steps, method, graze_tol, sens_error_control, h_max };
+    let inner = model.inner().clone();
+    let sim = keywords.options(&inner)?;
+    if free.is_empty() {
+        return Err(ParameterError::new_err("free: name at least one parameter to optimise"));
+    }
+    let count = |what: &str, v: usize, min: usize, max: usize| {
+        hybc::limits::count(what, v, min, max).map_err(|e| PyValueError::new_err(e.to_string()))
+    };
+    count("max_iter", max_iter, 1, hybc::limits::MAX_OPTIMIZE_RUNS)?;
+    count("starts", starts, 1, hybc::limits::MAX_STARTS)?;
+    count("threads", threads, 0, hybc::limits::MAX_THREADS)?;
+    for (name, v) in [("kkt_tol", kkt_tol), ("xtol", xtol), ("ftol", ftol)] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(PyValueError::new_err(format!("{name}: expected a positive finite number, found {v}")));
+        }
+    }
+    let free_idx = free
+        .iter()
+        .map(|name| inner.param_index(name).map_err(|e| errors::to_py(e.into())))
+        .collect::<PyResult<Vec<_>>>()?;
+    count("free (parameters, vector elements counted)", free_idx.len(), 1, hybc::limits::MAX_OPTIMIZE_FREE)?;
+    let mut narrow: Vec<(String, f64, f64)> =
+        bounds.unwrap_or_default().into_iter().map(|(name, (lo, hi))| (name, lo, hi)).collect();
+    narrow.sort_by(|a, b| a.0.cmp(&b.0));
+    let boxes =
+        request::bounds(&inner, &free_idx, &narrow).map_err(|e| PyValueError::new_err(format!("bounds: {e}")))?;
+    let start = model.param_values(params)?.values().to_vec();
+    let compiled = model.compiled(py, &free)?;
+    let options = OptimizeOptions { max_iter, kkt_tol, xtol, ftol, starts, seed, threads };
+    let report = py.detach(move || {
+        let request = Request { minimize: &minimize, subject_to: &subject_to, bounds: boxes, start, sim, options };
+        request::run(&inner, &compiled, request, None)
+    });
+    match report {
+        Ok(report) => Ok(report.to_json().to_string()),
+        Err(Failure::Objective(e)) => Err(PyValueError::new_err(format!("minimize: {e}"))),
+        Err(Failure::Constraint(e)) => Err(PyValueError::new_err(format!("subject_to: {e}"))),
+        Err(Failure::Refused(e)) => Err(PyRuntimeError::new_err(e.to_string())),
+    }
+}
