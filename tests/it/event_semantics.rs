@@ -302,16 +302,13 @@ const ALL: &[(&str, fn())] = &[
     ),
 ];
 
-/// The tests that fail with a Rosenbrock method, and why: `a_reset_onto_another_guard...`
-/// asserts an event time of exactly 1.0 (1e-15 relative) on a linear clock, which Rodas5P
-/// reaches at 0.9999999999999857 (its coefficients satisfy the order conditions to about 6e-15,
-/// see `event_edges::KNOWN`); `a_dose_at_the_start...` asserts `x = e^-1` to 1e-9 at the
-/// model's rtol 1e-10, which Rodas4 (4th order) misses by 1.02e-9 relative (global error ten
-/// local tolerances, as its order allows).
-const KNOWN: &[&str] = &[
-    "a_reset_onto_another_guard_fires_it_when_the_flow_moves_it_across (Rodas5p)",
-    "a_dose_at_the_start_is_given_at_the_start (Rodas4)",
-];
+/// The tests that fail with a Rosenbrock method, and why: `a_dose_at_the_start...` asserts
+/// `x = e^-1` to 1e-9 at the default rtol 1e-8, which Rodas4 (4th order, error controlled with a
+/// 3rd-order estimate) misses by 1.02e-9 relative: a global error of a tenth of rtol, which is
+/// what rtol allows (no method promises a global error below rtol; DOP853's 8th order gives far
+/// less). (`a_reset_onto_another_guard...`, which failed on Rodas5P's clock drift, passes since
+/// the Rosenbrock steps are exact on clocks, see `row_tableau`.)
+const KNOWN: &[&str] = &["a_dose_at_the_start_is_given_at_the_start (Rodas4)"];
 
 #[test]
 fn every_event_semantics_test_holds_with_the_rosenbrock_methods_but_the_known_ones() {
