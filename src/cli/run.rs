@@ -18,7 +18,8 @@ use crate::{Compiled, Model, Params};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum MethodArg {
-    /// DOP853 when rtol < 1e-7, else Dormand-Prince 5(4).
+    /// DOP853 when rtol < 1e-7, else Dormand-Prince 5(4); switches to Rodas5P while the flow is
+    /// stiff (and back), each stretch reported.
     Auto,
     Dopri5,
     Dop853,

@@ -8,8 +8,10 @@ use serde::Serialize;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Method {
-    /// DOP853 when `rtol < 1e-7` (high accuracy pays for its 12 stages), Dormand-Prince 5(4)
-    /// otherwise.
+    /// Starts with DOP853 when `rtol < 1e-7` (high accuracy pays for its 12 stages),
+    /// Dormand-Prince 5(4) otherwise, and switches to Rodas5P while the flow is stiff and back
+    /// when it is not, by stiffness estimates with hysteresis (`sim::auto`); the stretches are in
+    /// `SimResult::methods`.
     Auto,
     /// Dormand-Prince 5(4), 7 stages (FSAL), 4th-order dense output.
     Dopri5,
@@ -24,7 +26,8 @@ pub enum Method {
 }
 
 impl Method {
-    /// The concrete method `Auto` stands for at tolerance `rtol`.
+    /// The explicit pair `Auto` starts with at tolerance `rtol` (a named method stands for
+    /// itself).
     pub fn resolve(self, rtol: f64) -> Method {
         match self {
             Method::Auto if rtol < 1e-7 => Method::Dop853,

@@ -69,7 +69,7 @@ pub struct Rosenbrock {
     y_new: Vec<f64>,
     /// The error estimate's vector `y1 - y1^` of the last attempt.
     err: Vec<f64>,
-    dense: RowDense,
+    pub(crate) dense: RowDense,
     /// Derivatives of the dense output at [`INTERIOR`], `nz` each.
     interior: Vec<f64>,
     rhs_calls: usize,
@@ -114,6 +114,24 @@ impl Rosenbrock {
             rhs_calls: 0,
             jac_calls: 0,
         }
+    }
+
+    /// `h ||f_x||_inf` for the last attempt: an upper bound of `h` times the spectral radius of
+    /// the state Jacobian (`auto::Auto` switches back to an explicit method when it stays inside
+    /// the explicit method's stability region).
+    pub(crate) fn stiffness(&self) -> f64 {
+        let n = self.n;
+        let norm = (0..n)
+            .map(|i| self.fx[i * n..(i + 1) * n].iter().map(|v| v.abs()).sum::<f64>())
+            .fold(0.0, f64::max);
+        self.h.abs() * norm
+    }
+
+    /// Takes `f0` as the derivative at a new start point (another method's end derivative
+    /// there: `auto::Auto` switching); the Jacobian is evaluated at the next attempt.
+    pub(crate) fn restart_from(&mut self, f0: &[f64]) {
+        self.f0.copy_from_slice(f0);
+        self.jac_fresh = false;
     }
 
     /// Jacobian evaluations (one per start point that an attempt was made from).
@@ -403,7 +421,7 @@ pub struct RowDense {
 const STRIDE: usize = 2 + MAX_DENSE;
 
 impl RowDense {
-    fn new(nz: usize) -> RowDense {
+    pub(crate) fn new(nz: usize) -> RowDense {
         // Until the first build the interpolant is the zero constant.
         RowDense { t0: 0.0, h: 0.0, n_q: 0, coef: vec![0.0; STRIDE * nz] }
     }
