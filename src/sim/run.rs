@@ -51,7 +51,8 @@ pub struct Simulator<H: SystemRef> {
 enum Work {
     Explicit(Workspace<Rk>),
     Rosenbrock(Workspace<Rosenbrock>),
-    Auto(Workspace<Auto>),
+    /// Boxed: both steppers make it the largest by far.
+    Auto(Box<Workspace<Auto>>),
 }
 
 /// One run in progress with the stepper the options chose (see [`Simulator::integrator`]).
@@ -164,7 +165,7 @@ impl<H: SystemRef> Simulator<H> {
                 let rk = Rk::new(tab, nz, n, n_err, opts.rtol, opts.atol);
                 let row = Rosenbrock::new(&RODAS5P, nz, n, n_err, opts.rtol, opts.atol);
                 let stepper = Auto::new(method, rk, row, nz, n);
-                Work::Auto(ShapedWork { stepper, info, n, m, k, nz }.build())
+                Work::Auto(Box::new(ShapedWork { stepper, info, n, m, k, nz }.build()))
             }
             Method::Rodas5p | Method::Rodas4 => {
                 let tab = if method == Method::Rodas5p { &RODAS5P } else { &RODAS4 };
@@ -199,7 +200,7 @@ impl<H: SystemRef> Simulator<H> {
         Ok(match &mut self.work {
             Work::Explicit(w) => run_to_end(Integrator::new(sys, p, &self.opts, w, recorder)),
             Work::Rosenbrock(w) => run_to_end(Integrator::new(sys, p, &self.opts, w, recorder)),
-            Work::Auto(w) => run_to_end(Integrator::new(sys, p, &self.opts, w, recorder)),
+            Work::Auto(w) => run_to_end(Integrator::new(sys, p, &self.opts, &mut **w, recorder)),
         })
     }
 
@@ -215,7 +216,7 @@ impl<H: SystemRef> Simulator<H> {
         Ok(match &mut self.work {
             Work::Explicit(w) => Driver::Explicit(Integrator::new(sys, p, &self.opts, w, recorder)),
             Work::Rosenbrock(w) => Driver::Rosenbrock(Integrator::new(sys, p, &self.opts, w, recorder)),
-            Work::Auto(w) => Driver::Auto(Integrator::new(sys, p, &self.opts, w, recorder)),
+            Work::Auto(w) => Driver::Auto(Integrator::new(sys, p, &self.opts, &mut **w, recorder)),
         })
     }
 

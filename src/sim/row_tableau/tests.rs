@@ -1,6 +1,9 @@
 //! The coefficients of `row_tableau`: derived from the published ones, and satisfying the order
 //! conditions in f64 to a few ulps.
 
+// The order conditions read as the index sums of Hairer and Wanner's table.
+#![allow(clippy::needless_range_loop)]
+
 use super::published::{Published, RODAS4_PUBLISHED, RODAS5P_PUBLISHED};
 use super::*;
 
