@@ -615,11 +615,14 @@ fn an_event_on_t_end_is_a_cusp_with_both_sides_and_one_just_before_has_a_margin(
 #[test]
 fn a_state_event_at_the_instant_of_a_time_event_is_flagged() {
     use hybc::sim::SimWarning;
-    // hit (x = 3 t >= 3 tau) is located a few spacings before tick (t >= tau = 0.3), as two
-    // instants: the order of the two can flip under a parameter change: a cusp, margin 0.
-    // Apart: no flag. (Events of one group, at the same float time, are not flagged: a cascade
-    // from the time event's reset moves with the instant.)
-    let text = "model both\nparam r = 3\nparam tau = 0.3\nparam c = 0\nstate x = 0\nstate m = 0\n\
+    // hit (x = 3 t >= 3 tau + c) is located a few spacings before tick (t >= tau = 0.3) when
+    // c = -1e-15, as two instants: the order of the two can flip under a parameter change: a
+    // cusp, margin 0. At c = 0 the two are at the same instant in exact arithmetic: a method
+    // whose clock is exact (Dormand-Prince, the Rosenbrock methods) locates hit at tick's float
+    // time, one group, not flagged (a cascade from the time event's reset moves with the
+    // instant); one whose clock drifts an ulp (DOP853) locates it a few spacings before, flagged.
+    // Apart (c = 0.1): no flag.
+    let text = "model both\nparam r = 3\nparam tau = 0.3\nparam c = -1e-15\nstate x = 0\nstate m = 0\n\
                 der(x) = r\nder(m) = 0\nevent tick when t >= tau {\n    m := m + 1\n}\n\
                 event hit when x >= r * tau + c {\n    m := 2 * m\n}\n";
     let flagged = |r: &hybc::Run| {
@@ -627,7 +630,10 @@ fn a_state_event_at_the_instant_of_a_time_event_is_flagged() {
     };
     let r = run(text, &["r"], |o| o.t_end = 1.0);
     assert!(flagged(&r), "{:?}", r.warnings());
-    let r = run(&text.replace("param c = 0", "param c = 0.1"), &["r"], |o| o.t_end = 1.0);
+    let r = run(&text.replace("param c = -1e-15", "param c = 0"), &["r"], |o| o.t_end = 1.0);
+    let time = |name: &str| r.events().iter().find(|e| &*e.name == name).expect("fired").time;
+    assert_eq!(flagged(&r), time("hit") != time("tick"), "{:?} {:?}", r.events(), r.warnings());
+    let r = run(&text.replace("param c = -1e-15", "param c = 0.1"), &["r"], |o| o.t_end = 1.0);
     assert!(r.warnings().is_empty(), "{:?}", r.warnings());
 }
 
@@ -796,18 +802,17 @@ const ALL: &[(&str, fn())] = &[
 ///   `x` rounded at each step end is located within an ulp or two of 2.0 by any method (DOPRI5
 ///   forced gives 2.000000000000001, Rodas5P 1.9999999999999996; DOP853, the default at this
 ///   rtol, happens to land on 2.0);
-/// - `a_state_event_at_the_instant_of_a_time_event_is_flagged` needs `hit` (x = 3 t reaching
-///   0.9) located "a few spacings before" `tick` (t = 0.3), which is DOP853's round-off; both
-///   Rosenbrock methods now locate it at the same float time as `tick` (a group, not flagged);
-/// - the t_end cusp (Rodas5P) likewise needs the bounce located on t_end's float;
-/// - the late chirp (Rodas4) at `t0 = 1e6` counts 30 of 32 crossings: its steps there straddle
-///   pairs of roots of a guard that reads only `t` (not a clock drift: no state enters it).
+/// - the t_end cusp (Rodas5P): run to t_end = sqrt(2 / g), the ball's height there is
+///   1.3e-15 (6 ulps of the drop height, accumulated over 5 steps; Dormand-Prince forced ends at
+///   6.7e-16), beyond what the rule for events at t_end takes as round-off (16 eps of the guard's
+///   terms, or the adjacent floats of t), so the bounce does not fire;
+/// - the late chirp (Rodas4) at `t0 = 1e6` counts 30 of 32 crossings (32 at `t0 = 0`): not a
+///   clock drift, since its guard reads only `t`; the cause (Rodas4's step sequence against the
+///   resolution of `t` near 1e6, 1.2e-10, is the suspect) is not yet found.
 const KNOWN: &[&str] = &[
     "a_falling_guard_whose_reset_slows_it_passes_through_once (Rodas5p)",
     "an_event_on_t_end_is_a_cusp_with_both_sides_and_one_just_before_has_a_margin (Rodas5p)",
-    "a_state_event_at_the_instant_of_a_time_event_is_flagged (Rodas5p)",
     "a_chirp_late_in_time_is_not_zeno_and_a_ball_late_in_time_is (Rodas4)",
-    "a_state_event_at_the_instant_of_a_time_event_is_flagged (Rodas4)",
 ];
 
 #[test]
