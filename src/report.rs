@@ -19,6 +19,11 @@ pub struct RunReport {
     pub run_seconds: f64,
 }
 
+/// A method's name as the command line and JSON spell it (`dopri5`, `rodas5p`, ...).
+fn method_name(method: crate::sim::Method) -> String {
+    serde_json::to_value(method).ok().and_then(|v| v.as_str().map(str::to_string)).unwrap_or_default()
+}
+
 impl RunReport {
     /// Whether the run ended as asked (at `t_end` or a `stop` event) rather than early.
     pub fn is_complete(&self) -> bool {
@@ -208,6 +213,7 @@ impl RunReport {
                     "run_seconds": self.run_seconds,
                 })),
             ),
+            ("methods", JsonField::Value(json!(r.methods))),
         ];
         // Only when asked for (`--at`): the contract of a run without samples is unchanged.
         if !r.samples.is_empty() {
@@ -297,9 +303,26 @@ impl RunReport {
             1 => ", 1 flow switch crossed".to_string(),
             k => format!(", {k} flow switches crossed"),
         };
+        // The method that integrated the run, or (`auto` having switched) each stretch's.
+        let methods = match &r.methods[..] {
+            [one] => format!(", method {}", method_name(one.method)),
+            all => {
+                let parts: Vec<String> = all
+                    .iter()
+                    .map(|s| {
+                        let name = method_name(s.method);
+                        format!(
+                            "{name} from {} to {} ({} steps, {} rejected)",
+                            s.from, s.to, s.steps, s.rejected
+                        )
+                    })
+                    .collect();
+                format!("\nmethods: {}", parts.join(", "))
+            }
+        };
         writeln!(
             out,
-            "\n{} steps ({} rejected), {} kernel calls{switches}, compile {:.2} ms, run {:.1} us",
+            "\n{} steps ({} rejected), {} kernel calls{switches}, compile {:.2} ms, run {:.1} us{methods}",
             r.stats.steps,
             r.stats.rejected,
             r.stats.rhs_calls,

@@ -49,8 +49,17 @@ pub fn optimize_report(
     sens_error_control: Option<bool>,
     h_max: Option<f64>,
 ) -> PyResult<String> {
-    let keywords =
-        SimKeywords { t_end, rtol, atol, max_events, max_steps, method, graze_tol, sens_error_control, h_max };
+    let keywords = SimKeywords {
+        t_end,
+        rtol,
+        atol,
+        max_events,
+        max_steps,
+        method,
+        graze_tol,
+        sens_error_control,
+        h_max,
+    };
     let inner = model.inner().clone();
     let sim = keywords.options(&inner)?;
     if free.is_empty() {
@@ -64,7 +73,9 @@ pub fn optimize_report(
     count("threads", threads, 0, hybc::limits::MAX_THREADS)?;
     for (name, v) in [("kkt_tol", kkt_tol), ("xtol", xtol), ("ftol", ftol)] {
         if !(v.is_finite() && v > 0.0) {
-            return Err(PyValueError::new_err(format!("{name}: expected a positive finite number, found {v}")));
+            return Err(PyValueError::new_err(format!(
+                "{name}: expected a positive finite number, found {v}"
+            )));
         }
     }
     let free_idx = free
@@ -75,13 +86,14 @@ pub fn optimize_report(
     let mut narrow: Vec<(String, f64, f64)> =
         bounds.unwrap_or_default().into_iter().map(|(name, (lo, hi))| (name, lo, hi)).collect();
     narrow.sort_by(|a, b| a.0.cmp(&b.0));
-    let boxes =
-        request::bounds(&inner, &free_idx, &narrow).map_err(|e| PyValueError::new_err(format!("bounds: {e}")))?;
+    let boxes = request::bounds(&inner, &free_idx, &narrow)
+        .map_err(|e| PyValueError::new_err(format!("bounds: {e}")))?;
     let start = model.param_values(params)?.values().to_vec();
     let compiled = model.compiled(py, &free)?;
     let options = OptimizeOptions { max_iter, kkt_tol, xtol, ftol, starts, seed, threads };
     let report = py.detach(move || {
-        let request = Request { minimize: &minimize, subject_to: &subject_to, bounds: boxes, start, sim, options };
+        let request =
+            Request { minimize: &minimize, subject_to: &subject_to, bounds: boxes, start, sim, options };
         request::run(&inner, &compiled, request, None)
     });
     match report {

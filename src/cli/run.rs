@@ -18,7 +18,8 @@ use crate::{Compiled, Model, Params};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum MethodArg {
-    /// DOP853 when rtol < 1e-7, else Dormand-Prince 5(4).
+    /// DOP853 when rtol < 1e-7, else Dormand-Prince 5(4); switches to Rodas5P while the flow is
+    /// stiff (and back), each stretch reported.
     Auto,
     Dopri5,
     Dop853,
@@ -64,10 +65,11 @@ pub(crate) struct SimFlags {
     /// accurate).
     #[arg(long)]
     no_sens_error_control: bool,
-    /// Keep running costs (states that nothing but outputs reads, such as `der(effort) = u^2`)
-    /// in the step-size error control; by default they take none of it.
+    /// Leave running costs (states that nothing but outputs reads, such as `der(effort) = u^2`)
+    /// out of the step-size error control (fewer steps where the integrand is smooth, an
+    /// inaccurate integral where it is not).
     #[arg(long)]
-    quadrature_error_control: bool,
+    no_quadrature_error_control: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -225,7 +227,7 @@ pub(crate) fn sim_options(model: &Model, args: &SimFlags) -> Result<SimOptions, 
             .map_err(|e| e.to_string())?,
         graze_tol: positive("--graze-tol", args.graze_tol)?,
         sens_error_control: !args.no_sens_error_control,
-        quadrature_error_control: args.quadrature_error_control,
+        quadrature_error_control: !args.no_quadrature_error_control,
         ..base
     })
 }

@@ -494,15 +494,17 @@ fn verdict(
     if kkt.violation_ratio <= 1.0 && kkt.stationarity <= opts.kkt_tol {
         return Verdict::Converged;
     }
-    if end.out_of_evals {
-        return Verdict::MaxIterations;
-    }
     let recent = &trials[trials.len().saturating_sub(RECENT_RUNS)..];
     // A recent run on another piece: compare its event count, the only part of its sequence kept.
+    // Checked before the evaluation count: a solve that spent its evaluations stepping back and
+    // forth over a cusp stalled there, which says more than that it ran out.
     if let Some(t) =
         recent.iter().rev().find(|t| t.events.is_some_and(|n| n != events.len()) || t.new_sequence)
     {
         return Verdict::StalledAtCusp { run: t.run };
+    }
+    if end.out_of_evals {
+        return Verdict::MaxIterations;
     }
     if let Some(t) = recent.iter().rev().find(|t| t.failure.is_some()) {
         return Verdict::RunsFailing { message: t.failure.clone().unwrap_or_default() };

@@ -6,7 +6,9 @@
 use std::time::Instant;
 
 use super::report::OptimizeReport;
-use super::{optimize, parse_constraint, OptimizeError, OptimizeOptions, OptimizeProblem, Progress, Quantity, Slsqp};
+use super::{
+    optimize, parse_constraint, OptimizeError, OptimizeOptions, OptimizeProblem, Progress, Quantity, Slsqp,
+};
 use crate::fit::Bounds;
 use crate::sema::ParamIdx;
 use crate::sim::SimOptions;
@@ -56,7 +58,10 @@ pub fn bounds(
         };
         for p in indices {
             let k = free.iter().position(|f| *f == p).ok_or_else(|| {
-                format!("`{}` is not a free parameter (name it in the free parameters)", params[p.0 as usize].name)
+                format!(
+                    "`{}` is not a free parameter (name it in the free parameters)",
+                    params[p.0 as usize].name
+                )
             })?;
             let declared = out[k];
             if lo < declared.lower || hi > declared.upper {
@@ -80,7 +85,8 @@ pub fn run(
     progress: Option<&Progress<'_>>,
 ) -> Result<OptimizeReport, Failure> {
     let info = compiled.info().clone();
-    let objective = Quantity::parse(request.minimize, &info).map_err(|e| Failure::Objective(e.to_string()))?;
+    let objective =
+        Quantity::parse(request.minimize, &info).map_err(|e| Failure::Objective(e.to_string()))?;
     let mut constraints = Vec::new();
     for text in request.subject_to {
         constraints.extend(parse_constraint(text, &info).map_err(|e| Failure::Constraint(e.to_string()))?);

@@ -18,7 +18,8 @@ use super::jump::{dot_nonzero, CrossingContext, Jump, JumpOutcome};
 use super::options::SimOptions;
 use super::recorder::{Point, PointKind, Recorder};
 use super::result::{
-    EndCusp, EventRecord, FinalState, Samples, SimError, SimResult, SimStats, SimWarning, StopReason,
+    EndCusp, EventRecord, FinalState, MethodSegment, Samples, SimError, SimResult, SimStats, SimWarning,
+    StopReason,
 };
 use super::rk::Rk;
 use super::stepper::{Interpolant, Rhs, Stepper};
@@ -161,6 +162,10 @@ impl<S: HybridSystem + ?Sized> Rhs for ModeRhs<'_, S> {
 
     fn sens_coupling(&mut self, t: f64, xv: &[f64], z: &[f64], out: &mut [f64]) {
         self.sys.sens_dir(self.mode, t, xv, &z[self.n..], self.p, out);
+    }
+
+    fn prepare(&mut self) -> bool {
+        self.sys.prepare_jacobians().is_ok()
     }
 }
 
@@ -1306,6 +1311,11 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         };
         let mut stats = self.stats;
         stats.rhs_calls = self.stepper.rhs_calls();
+        let methods = self.stepper.segments(t).unwrap_or_else(|| {
+            let method = self.opts.method.resolve(self.opts.rtol);
+            let (steps, rejected) = (stats.steps, stats.rejected);
+            vec![MethodSegment { from: self.opts.t_start, to: t, method, steps, rejected }]
+        });
         let mut warnings = self.warnings;
         near_breakpoints(self.info, &self.events, self.opts.t_end, &mut warnings);
         let end_cusp = match self.before_end {
@@ -1339,6 +1349,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             trajectory: None,
             end_cusp,
             samples,
+            methods,
         }
     }
 }

@@ -49,6 +49,8 @@ pub(crate) struct Structure {
     perm: Vec<usize>,
     /// Each pattern entry's `(row, column)` in the banded order.
     at: Vec<(usize, usize)>,
+    /// Each pattern entry's `(row, column)` as the model numbers the states.
+    entries: Vec<(usize, usize)>,
     kl: usize,
     ku: usize,
 }
@@ -69,7 +71,8 @@ impl Structure {
         // `kl + ku`), dense `n^3 / 3`.
         let banded = n as f64 * kl as f64 * (kl + ku) as f64;
         let dense = (n as f64).powi(3) / 3.0;
-        (banded < dense).then_some(Structure { perm, at, kl, ku })
+        let entries = entries.iter().map(|&(r, c)| (r as usize, c as usize)).collect();
+        (banded < dense).then_some(Structure { perm, at, entries, kl, ku })
     }
 
     /// `(kl, ku)`: the band below and above the diagonal.
@@ -298,8 +301,59 @@ impl LinSolve {
         }
     }
 
-    /// Factors `W = I / (h gamma) - f_x` with `inv_hg = 1 / (h gamma)`; `false` when singular.
-    pub(crate) fn factor(&mut self, inv_hg: f64) -> bool {
+    /// `y += a f_x x` for every block of `n` of `x` and `y` (the state and each sensitivity
+    /// column), from the values in `fx` (dense or the pattern's).
+    pub(crate) fn mul_add(&self, a: f64, x: &[f64], y: &mut [f64]) {
+        let n = self.n;
+        if n == 0 {
+            return;
+        }
+        let entries = self.current.and_then(|key| match self.structures.get(key) {
+            Some(Some(Some(s))) => Some(&s.entries),
+            _ => None,
+        });
+        for (yc, xc) in y.chunks_exact_mut(n).zip(x.chunks_exact(n)) {
+            match entries {
+                Some(entries) => {
+                    for (&(r, c), &v) in entries.iter().zip(&self.fx) {
+                        yc[r] += a * v * xc[c];
+                    }
+                }
+                None => {
+                    for (row, yr) in yc.iter_mut().enumerate() {
+                        let fr = &self.fx[row * n..(row + 1) * n];
+                        *yr += a * fr.iter().zip(xc).map(|(f, x)| f * x).sum::<f64>();
+                    }
+                }
+            }
+        }
+    }
+
+    /// `||f_x||_inf`, the largest absolute row sum of the values in `fx`.
+    pub(crate) fn row_abs_max(&self) -> f64 {
+        let n = self.n;
+        let entries = self.current.and_then(|key| match self.structures.get(key) {
+            Some(Some(Some(s))) => Some(&s.entries),
+            _ => None,
+        });
+        match entries {
+            Some(entries) => {
+                let mut rows = vec![0.0; n];
+                for (&(r, _), &v) in entries.iter().zip(&self.fx) {
+                    rows[r] += v.abs();
+                }
+                rows.into_iter().fold(0.0, f64::max)
+            }
+            None => (0..n)
+                .map(|i| self.fx[i * n..(i + 1) * n].iter().map(|v| v.abs()).sum::<f64>())
+                .fold(0.0, f64::max),
+        }
+    }
+
+    /// Factors `W = I - hg f_x` with `hg = h gamma`; `false` when singular. (This form, not
+    /// `I / hg - f_x`: with `f_x = 0` it is the identity and a stage's solve returns its
+    /// right-hand side exactly, which keeps a clock exact.)
+    pub(crate) fn factor(&mut self, hg: f64) -> bool {
         let n = self.n;
         match self.current {
             Some(key) => {
@@ -307,17 +361,17 @@ impl LinSolve {
                 self.band.ab.fill(0.0);
                 for (&(r, c), &v) in s.at.iter().zip(&self.fx) {
                     let k = self.band.idx(r, c);
-                    self.band.ab[k] -= v;
+                    self.band.ab[k] -= hg * v;
                 }
                 for i in 0..n {
                     let k = self.band.idx(i, i);
-                    self.band.ab[k] += inv_hg;
+                    self.band.ab[k] += 1.0;
                 }
                 self.band.factor()
             }
             None => {
                 let fx = &self.fx;
-                let w = DMatrix::from_fn(n, n, |i, j| if i == j { inv_hg } else { 0.0 } - fx[i * n + j]);
+                let w = DMatrix::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 } - hg * fx[i * n + j]);
                 let lu = w.lu();
                 let ok = n == 0 || lu.is_invertible();
                 self.lu = Some(lu);
@@ -371,11 +425,11 @@ mod tests {
         (*seed >> 11) as f64 / (1u64 << 52) as f64 - 1.0
     }
 
-    /// `W x` for the pattern's values (row-major dense product, the reference).
-    fn w_times(entries: &[(u32, u32)], vals: &[f64], inv_hg: f64, x: &[f64]) -> Vec<f64> {
-        let mut y: Vec<f64> = x.iter().map(|v| inv_hg * v).collect();
+    /// `W x = x - hg f_x x` for the pattern's values (the reference product).
+    fn w_times(entries: &[(u32, u32)], vals: &[f64], hg: f64, x: &[f64]) -> Vec<f64> {
+        let mut y: Vec<f64> = x.to_vec();
         for (&(r, c), &v) in entries.iter().zip(vals) {
-            y[r as usize] -= v * x[c as usize];
+            y[r as usize] -= hg * v * x[c as usize];
         }
         y
     }
@@ -383,6 +437,7 @@ mod tests {
     /// Solves with the banded path and checks the residual against the dense product; the
     /// entries are shuffled (a scrambled chain: RCM must find the band again).
     fn check(n: usize, entries: &[(u32, u32)], inv_hg: f64, expect_band: Option<(usize, usize)>) {
+        let hg = 1.0 / inv_hg;
         let mut seed = 7u64;
         let vals: Vec<f64> = entries.iter().map(|_| 3.0 * rnd(&mut seed)).collect();
         let mut lin = LinSolve::new(n);
@@ -392,13 +447,13 @@ mod tests {
             assert_eq!(s.band(), band);
         }
         lin.fx.copy_from_slice(&vals);
-        assert!(lin.factor(inv_hg));
+        assert!(lin.factor(hg));
         let cols = 3;
         let b: Vec<f64> = (0..n * cols).map(|_| rnd(&mut seed)).collect();
         let mut x = b.clone();
         assert!(lin.solve(&mut x, cols));
         for c in 0..cols {
-            let wx = w_times(entries, &vals, inv_hg, &x[c * n..(c + 1) * n]);
+            let wx = w_times(entries, &vals, hg, &x[c * n..(c + 1) * n]);
             for i in 0..n {
                 let r = (wx[i] - b[c * n + i]).abs();
                 assert!(r < 1e-11, "n {n}: residual {r:e} at {i}, column {c}");
@@ -410,7 +465,7 @@ mod tests {
         for (&(r, c), &v) in entries.iter().zip(&vals) {
             dense.fx[r as usize * n + c as usize] += v;
         }
-        assert!(dense.factor(inv_hg));
+        assert!(dense.factor(hg));
         let mut y = b.clone();
         assert!(dense.solve(&mut y, cols));
         for (a, b) in x.iter().zip(&y) {
@@ -440,8 +495,9 @@ mod tests {
 
     #[test]
     fn pivoting_in_the_band() {
-        // `inv_hg = 0` with a zero diagonal in `f_x` (a mass-spring chain's position rows):
-        // without row exchanges the first pivot would be 0.
+        // `h gamma = 1e8` with a zero diagonal in `f_x` (a mass-spring chain's position rows):
+        // `W = I - 1e8 f_x` has pivots of 1 under entries of 1e8, which only row exchanges keep
+        // stable.
         let n = 40;
         let mut e = Vec::new();
         for i in 0..n as u32 {
@@ -453,7 +509,7 @@ mod tests {
                 e.push((i - 1, i));
             }
         }
-        check(n, &e, 0.0, None);
+        check(n, &e, 1e-8, None);
     }
 
     #[test]
@@ -492,7 +548,7 @@ mod tests {
 
     #[test]
     fn a_singular_band_is_refused() {
-        // f_x = I and inv_hg = 1: W = 0.
+        // f_x = I and h gamma = 1: W = 0.
         let e: Vec<(u32, u32)> = (0..5).map(|i| (i, i)).collect();
         let mut lin = LinSolve::new(5);
         assert!(lin.select(LinearSolver::Banded, Some((0, &e))));

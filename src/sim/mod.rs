@@ -10,6 +10,7 @@
 //! through an observer); `run` (a run from start to end, the reusable `Simulator`), `result`
 //! (what a run reports).
 
+mod auto;
 mod breakpoints;
 mod dense;
 mod errnorm;
@@ -33,6 +34,7 @@ pub mod system;
 mod tableau;
 mod zeno;
 
+pub use auto::{Auto, AutoDense};
 pub use dense::Dense;
 pub use integrator::{Integrator, StepOutcome};
 pub use linsolve::{LinearSolver, SPARSE_MIN_STATES};

@@ -419,6 +419,20 @@ pub struct SimResult {
     pub end_cusp: Option<EndCusp>,
     /// The values at `SimOptions::at`, one per time asked for, in order.
     pub samples: Samples,
+    /// Which method integrated which part of the run, in time order: one segment for a method
+    /// asked for by name, one per switch under `Method::Auto`.
+    pub methods: Vec<MethodSegment>,
+}
+
+/// A stretch of a run integrated by one method (`SimResult::methods`): from `from` to `to`, with
+/// its accepted and rejected steps.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MethodSegment {
+    pub from: f64,
+    pub to: f64,
+    pub method: super::options::Method,
+    pub steps: usize,
+    pub rejected: usize,
 }
 
 /// The values at `SimOptions::at`, one row per time asked for, in order, kept in flat arrays

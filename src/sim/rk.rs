@@ -48,7 +48,7 @@ pub struct Rk {
     pub(crate) h: f64,
     pub(crate) y_new: Vec<f64>,
     pub(crate) ytmp: Vec<f64>,
-    dense: Dense,
+    pub(crate) dense: Dense,
     /// The stages nearest a quarter, a half and three quarters of a step, by ascending `c`: where
     /// a guard's speed is sampled.
     interior: Vec<usize>,
@@ -118,6 +118,34 @@ impl Rk {
             rhs_calls: 0,
             excluded: Vec::new(),
         }
+    }
+
+    /// Hairer's stiffness estimate (Solving ODEs II, IV.2; DOPRI5's and DOP853's tests) after an
+    /// accepted attempt of size `h` from `y`: `h |lambda|` with
+    /// `|lambda| ~ |f(y1) - f(y^)| / |y1 - y^|` over the `n` states, where `y^` is the input of
+    /// the last stage before the end that is also evaluated at `t + h` (DOPRI5's 6th stage), so
+    /// the quotient is a Rayleigh-like estimate of the dominant eigenvalue along the step. 0 for
+    /// a tableau without such a stage. Overwrites the stage-input scratch (free after `attempt`).
+    pub(crate) fn stiffness(&mut self, y: &[f64], n: usize) -> f64 {
+        let s = self.tab.stages;
+        let Some(i) = (1..s - 1).rev().find(|&i| self.tab.c[i] == 1.0) else { return 0.0 };
+        self.stage_input(y, i, self.h);
+        let nz = self.nz;
+        let (f_hat, f_end) = (&self.k[i * nz..i * nz + n], &self.k[(s - 1) * nz..(s - 1) * nz + n]);
+        let num: f64 = f_end.iter().zip(f_hat).map(|(a, b)| (a - b) * (a - b)).sum();
+        let den: f64 = self.y_new[..n].iter().zip(&self.ytmp[..n]).map(|(a, b)| (a - b) * (a - b)).sum();
+        if den > 0.0 {
+            self.h.abs() * (num / den).sqrt()
+        } else {
+            0.0
+        }
+    }
+
+    /// Takes `f0` as the derivative at a new start point (another method's end derivative
+    /// there: `auto::Auto` switching) and forgets the controller's memory, as `restart` does.
+    pub(crate) fn restart_from(&mut self, f0: &[f64]) {
+        self.k[..self.nz].copy_from_slice(f0);
+        self.err_prev_beta = self.floors.1;
     }
 
     /// Stage `i`'s input `ytmp = y + h sum_j a_ij k_j`.

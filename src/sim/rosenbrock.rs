@@ -1,23 +1,24 @@
 //! Stage 5 (sim): the Rosenbrock (ROW) methods Rodas5P and Rodas4 as a [`Stepper`], for stiff
-//! flows. Linearly implicit: one LU factorisation of `W = I / (h gamma) - f_x` per attempted
-//! step (dense, or banded for large models with a known Jacobian pattern: `linsolve.rs`), no
-//! Newton iteration; the stages and coefficients are in `row_tableau.rs`.
+//! flows. Linearly implicit: one LU factorisation of `W = I - h gamma f_x` per attempted step
+//! (dense, or banded for large models with a known Jacobian pattern: `linsolve.rs`), no Newton
+//! iteration; the stages (Hairer & Wanner's original form, not the transformed one: a clock is
+//! then exact to an ulp per step) and coefficients are in `row_tableau.rs`.
 //!
 //! Sensitivities. The integrated vector is `z = [x, S]`, and the method is applied to the whole
 //! system `z' = F(t, z) = [f, f_x S + f_p]`, whose Jacobian is block lower triangular:
 //! `[[f_x, 0], [B, I (x) f_x]]` with `B v = d/dx (f_x s_j + f_p_j) v` per column `j`. So every
 //! stage solves the state block with the LU of `W`, then every sensitivity column with the same
-//! LU, its right-hand side increased by `B k_x` (`Rhs::sens_coupling`, the compiled
-//! `f_xx[s_j, k_x] + f_xp_j k_x`). Evaluated, like `f_x` and `F_t`, at the step's start
+//! LU, its right-hand side increased by `h B (g_x + gamma k_x)` (`Rhs::sens_coupling`, the
+//! compiled `f_xx[s_j, v] + f_xp_j v`; `g = sum_j Gamma_ij k_j`). Evaluated, like `f_x` and `F_t`, at the step's start
 //! `(t0, x0, S0)`, this is exactly what differentiating the state's own stage equations with
-//! respect to the parameters gives (`W k_i = f(u_i) + ...` differentiated: `dW/dp k_i` is
-//! `-B k_i`, `d(f_t)/dp` is `f_xt s + f_pt`): the sensitivities are the derivatives of the
+//! respect to the parameters gives (`W k_i = h f(u_i) + h f_x g_i + ...` differentiated: `dW/dp k_i`
+//! is `-h gamma B k_i`, `d(h f_x g_i)/dp` has `h B g_i`, `d(f_t)/dp` is `f_xt s + f_pt`): the sensitivities are the derivatives of the
 //! computed discrete solution for the step sizes taken, to round-off, whatever the tolerance.
 //! Their error with respect to the true sensitivities is the method's error on the augmented
 //! system, controlled like the states' when `sens_error_control` is on.
 //!
-//! Error control: the embedded solution's difference is the last stage `k_s`;
-//! `err = sqrt(mean_i (k_s,i / sc_i)^2)` with `sc_i = atol + rtol max(|z0_i|, |z1_i|)` over the
+//! Error control: the embedded solution's difference is `sum_j e_j k_j`;
+//! `err = sqrt(mean_i (e_i / sc_i)^2)` with `sc_i = atol + rtol max(|z0_i|, |z1_i|)` over the
 //! controlled components, accepted when `<= 1`. Step sizes: `h 0.9 err^(-1/q)` with `q` the
 //! embedded order plus one, bounded to `[0.2 h, 6 h]` as in Hairer's RODAS, no growth after a
 //! rejection. The Jacobian is evaluated once per start point and kept across rejected attempts.
@@ -27,6 +28,7 @@
 
 use super::errnorm::{controlled, BlockNorm};
 use super::linsolve::{LinSolve, LinearSolver};
+use super::poly::CAP;
 use super::row_tableau::RowTableau;
 use super::stepper::{Interpolant, Rhs, Stepper};
 
@@ -47,7 +49,7 @@ pub struct Rosenbrock {
     rtol: f64,
     atol: f64,
     masked: bool,
-    /// Stages, `stages` blocks of `nz`.
+    /// Stages (as slopes, see `stages`), `stages` blocks of `nz`.
     k: Vec<f64>,
     /// `F` at the start point and at the end of the last attempt.
     f0: Vec<f64>,
@@ -60,14 +62,18 @@ pub struct Rosenbrock {
     excluded: Vec<bool>,
     ft: Vec<f64>,
     jac_fresh: bool,
-    /// Scratch: a stage input, a stage right-hand side, `[x0, v]`, and `B v`.
+    /// Scratch: a stage input, a stage right-hand side, `sum_j Gamma_ij k_j`, `[x0, v]`, and
+    /// `B v`.
     u: Vec<f64>,
+    g: Vec<f64>,
     r: Vec<f64>,
     xv: Vec<f64>,
     dir: Vec<f64>,
     h: f64,
     y_new: Vec<f64>,
-    dense: RowDense,
+    /// The error estimate's vector `y1 - y1^` of the last attempt.
+    err: Vec<f64>,
+    pub(crate) dense: RowDense,
     /// Derivatives of the dense output at [`INTERIOR`], `nz` each.
     interior: Vec<f64>,
     rhs_calls: usize,
@@ -102,11 +108,13 @@ impl Rosenbrock {
             ft: vec![0.0; nz],
             jac_fresh: false,
             u: vec![0.0; nz],
+            g: vec![0.0; nz],
             r: vec![0.0; nz],
             xv: vec![0.0; 2 * n],
             dir: vec![0.0; n * m],
             h: 0.0,
             y_new: vec![0.0; nz],
+            err: vec![0.0; nz],
             dense: RowDense::new(nz),
             interior: vec![0.0; INTERIOR.len() * nz],
             rhs_calls: 0,
@@ -126,6 +134,20 @@ impl Rosenbrock {
         self
     }
 
+    /// `h ||f_x||_inf` for the last attempt: an upper bound of `h` times the spectral radius of
+    /// the state Jacobian (`auto::Auto` switches back to an explicit method when it stays inside
+    /// the explicit method's stability region).
+    pub(crate) fn stiffness(&self) -> f64 {
+        self.h.abs() * self.lin.row_abs_max()
+    }
+
+    /// Takes `f0` as the derivative at a new start point (another method's end derivative
+    /// there: `auto::Auto` switching); the Jacobian is evaluated at the next attempt.
+    pub(crate) fn restart_from(&mut self, f0: &[f64]) {
+        self.f0.copy_from_slice(f0);
+        self.jac_fresh = false;
+    }
+
     /// Jacobian evaluations (one per start point that an attempt was made from).
     pub fn jac_calls(&self) -> usize {
         self.jac_calls
@@ -137,9 +159,18 @@ impl Rosenbrock {
     }
 
     /// All stages of a step of size `h` from `(t, y)`; `false` when `W` is singular.
+    ///
+    /// The original form (`row_tableau`) divided by `h`, with stages `k_i` that are slopes
+    /// (as an explicit method's): `W k_i = F(t + c_i h, y + h sum_j alpha_ij k_j) + h J g_i
+    /// + d_i h F_t` with `g_i = sum_{j<i} Gamma_ij k_j`, `W = I - h gamma J`, and
+    /// `y1 = y + h sum_j b_j k_j`. On a clock every `k_i` is exactly 1, so its step is `h` times
+    /// the f64 sum of the weights, which is 1. On the augmented system
+    /// (`J = [[f_x, 0], [B, I (x) f_x]]`) the state block is solved first, then every
+    /// sensitivity column with `h f_x g_S + h B (g_x + gamma k_x)` added (the coupling rows of
+    /// `h J g_i` and of `W`, one `sens_coupling` call).
     fn stages<R: Rhs>(&mut self, t: f64, y: &[f64], h: f64, rhs: &mut R) -> bool {
         let (n, nz, tab) = (self.n, self.nz, self.tab);
-        if !self.lin.factor(1.0 / (h * tab.gamma)) {
+        if !self.lin.factor(h * tab.gamma) {
             return false;
         }
         self.xv[..n].copy_from_slice(&y[..n]);
@@ -147,33 +178,35 @@ impl Rosenbrock {
             if i == 0 {
                 self.r.copy_from_slice(&self.f0);
             } else {
-                self.u.copy_from_slice(y);
-                for (j, &a) in tab.a[i].iter().enumerate() {
-                    if a != 0.0 {
-                        axpy(a, &self.k[j * nz..(j + 1) * nz], &mut self.u);
-                    }
+                // The increment first, then the start point: a clock's stage input is then
+                // `y + c_i h` to an ulp.
+                combine(tab.alpha[i], tab.c[i], &self.k, nz, &mut self.u);
+                for (u, y) in self.u.iter_mut().zip(y) {
+                    *u = y + h * *u;
                 }
                 rhs.eval(t + tab.c[i] * h, &self.u, &mut self.r);
                 self.rhs_calls += 1;
             }
-            for (j, &c) in tab.cm[i].iter().enumerate() {
-                if c != 0.0 {
-                    axpy(c / h, &self.k[j * nz..(j + 1) * nz], &mut self.r);
-                }
+            if i > 0 {
+                combine(tab.gam[i], tab.d[i] - tab.gamma, &self.k, nz, &mut self.g);
+                // `+= h f_x g` on the state block and on every sensitivity column.
+                self.lin.mul_add(h, &self.g, &mut self.r);
             }
             if tab.d[i] != 0.0 {
                 axpy(h * tab.d[i], &self.ft, &mut self.r);
             }
-            // The state block, then every sensitivity column with the coupling `B k_x` added.
+            // The state block, then every sensitivity column with the coupling added.
             let (rx, rs) = self.r.split_at_mut(n);
             if !self.lin.solve(rx, 1) {
                 return false;
             }
             if !rs.is_empty() {
-                self.xv[n..].copy_from_slice(rx);
+                for ((v, g), k) in self.xv[n..].iter_mut().zip(&self.g[..n]).zip(rx.iter()) {
+                    *v = if i > 0 { g + tab.gamma * k } else { tab.gamma * k };
+                }
                 rhs.sens_coupling(t, &self.xv, y, &mut self.dir);
                 for (r, d) in rs.iter_mut().zip(&self.dir) {
-                    *r += d;
+                    *r += h * d;
                 }
                 let cols = rs.len() / n;
                 if !self.lin.solve(rs, cols) {
@@ -182,17 +215,22 @@ impl Rosenbrock {
             }
             self.k[i * nz..(i + 1) * nz].copy_from_slice(&self.r);
         }
-        // Stiffly accurate: the solution is the last stage's input plus the last stage.
-        let last = tab.stages - 1;
-        self.y_new.copy_from_slice(&self.u);
-        axpy(1.0, &self.k[last * nz..], &mut self.y_new);
+        // The solution and the error estimate `y1 - y1^ = sum_j e_j k_j`, increments first.
+        combine(tab.b, 1.0, &self.k, nz, &mut self.y_new);
+        for (u, y) in self.y_new.iter_mut().zip(y) {
+            *u = y + h * *u;
+        }
+        combine(tab.e, 0.0, &self.k, nz, &mut self.err);
+        for e in self.err.iter_mut() {
+            *e *= h;
+        }
         true
     }
 
-    /// The scaled norm of the last stage (the error estimate) over the controlled components;
+    /// The scaled norm of the error estimate over the controlled components;
     /// `MASKED` leaves out sensitivities that are not finite (as `Rk::error`).
     fn error<const MASKED: bool>(&self, y: &[f64]) -> f64 {
-        let e = &self.k[(self.tab.stages - 1) * self.nz..];
+        let e = &self.err;
         let mut norm = BlockNorm::new(self.n, &self.excluded);
         for i in 0..self.n_err {
             let (y0, y1, ei) = (y[i], self.y_new[i], e[i]);
@@ -201,6 +239,25 @@ impl Rosenbrock {
             norm.add(i, (!skip).then_some((r, 0.0)), false);
         }
         norm.finish(false)
+    }
+}
+
+/// `out = sum_j w_j k_j` over the stages `k` (blocks of `nz`) that `w` weighs, for weights that
+/// sum to `total` (exactly, as `row_tableau`'s tests check), formed as
+/// `total k_0 + sum_{j>0} w_j (k_j - k_0)`: the slope common to all stages is weighted once, so a
+/// component moving at a constant rate `K` (any `K`, not only 1) gets exactly `total K`, as
+/// `sums::centred_sum` does for the explicit pairs' zero-sum rows.
+fn combine(w: &[f64], total: f64, k: &[f64], nz: usize, out: &mut [f64]) {
+    let k0 = &k[..nz];
+    for (o, &a) in out.iter_mut().zip(k0) {
+        *o = total * a;
+    }
+    for (j, &a) in w.iter().enumerate().skip(1) {
+        if a != 0.0 {
+            for ((o, kj), k0) in out.iter_mut().zip(&k[j * nz..(j + 1) * nz]).zip(k0) {
+                *o += a * (kj - k0);
+            }
+        }
     }
 }
 
@@ -360,7 +417,8 @@ impl Stepper for Rosenbrock {
 
 /// The dense output of one Rosenbrock step (an [`Interpolant`]): with `theta = (t - t0) / h`,
 /// `z(theta) = (1 - theta) z0 + theta (z1 + (1 - theta) Q(theta))`,
-/// `Q = q_0 + theta (q_1 + theta q_2)`, `q_r = sum_j H_rj k_j` (`row_tableau`), evaluated as
+/// `Q = q_0 + theta (q_1 + theta q_2)`, `q_r = h sum_j H_rj k_j` (`row_tableau`; `k_j` the
+/// stages as slopes), evaluated as
 /// `z0 + theta ((z1 - z0) + (1 - theta) Q)`: a component that does not move stays exactly
 /// where it is (a counter read at an event time), as with the explicit pairs' form.
 pub struct RowDense {
@@ -374,7 +432,7 @@ pub struct RowDense {
 const STRIDE: usize = 2 + MAX_DENSE;
 
 impl RowDense {
-    fn new(nz: usize) -> RowDense {
+    pub(crate) fn new(nz: usize) -> RowDense {
         // Until the first build the interpolant is the zero constant.
         RowDense { t0: 0.0, h: 0.0, n_q: 0, coef: vec![0.0; STRIDE * nz] }
     }
@@ -388,7 +446,10 @@ impl RowDense {
             c[0] = z0[i];
             c[1] = z1[i] - z0[i];
             for (r, row) in tab.dense.iter().enumerate() {
-                c[2 + r] = row.iter().enumerate().map(|(j, w)| w * k[j * nz + i]).sum();
+                // Centred (the row sums to zero): a constant slope leaves exactly nothing.
+                let k0 = k[i];
+                c[2 + r] =
+                    h * row.iter().enumerate().skip(1).map(|(j, w)| w * (k[j * nz + i] - k0)).sum::<f64>();
             }
         }
     }
@@ -441,6 +502,28 @@ impl Interpolant for RowDense {
     /// of `Interpolant::linear_form` is then sampled at that many points plus one).
     fn degree(&self) -> usize {
         self.n_q + 1
+    }
+    /// Exactly from the coefficients (no sampling, whose round-off put a clock's crossing ulps
+    /// off): with `delta = sum_i w_i (z1_i - z0_i)` and `rho_r = sum_i w_i q_r,i`,
+    /// `P(s) - P(0) = s (delta + (1 - s) sum_r rho_r s^r)`, whose coefficient of `s^(k+1)` is
+    /// `rho_k - rho_(k-1)` (plus `delta` for `k = 0`).
+    fn linear_form(&self, w: &[f64], coef: &mut [f64; CAP]) -> usize {
+        let nq = self.n_q;
+        let (mut delta, mut rho) = (0.0, [0.0; MAX_DENSE + 1]);
+        for (c, &wi) in self.coef.chunks_exact(STRIDE).zip(w) {
+            if wi != 0.0 {
+                delta += wi * c[1];
+                for (acc, q) in rho[..nq].iter_mut().zip(&c[2..2 + nq]) {
+                    *acc += wi * q;
+                }
+            }
+        }
+        coef.fill(0.0);
+        for k in 0..=nq {
+            coef[k + 1] = rho[k] - if k > 0 { rho[k - 1] } else { 0.0 };
+        }
+        coef[1] += delta;
+        nq + 2
     }
 }
 
@@ -563,6 +646,79 @@ mod tests {
             };
             let q = (worst(0.2) / worst(0.1)).log2();
             assert!(q > d as f64 + 0.6, "{}: interpolation error ratio 2^{q}", tab.name);
+        }
+    }
+
+    /// A clock is exact to the ulp: `y' = 1` one step of `h` from `y0` lands within half an ulp
+    /// of `y0 + h` (every stage slope is exactly 1 and the weights sum to exactly 1 in f64), with
+    /// an error estimate of zero; `y' = t` lands within the round-off of its terms: two ulps of
+    /// the result plus an ulp of each weighted slope `h |b_j| (t + (c_j + |d_j|) h)`. With the transformed form a clock was off by up to 109 ulps.
+    #[test]
+    fn a_clock_is_exact_to_the_ulp() {
+        struct Clock(bool);
+        impl Rhs for Clock {
+            fn eval(&mut self, t: f64, _z: &[f64], dz: &mut [f64]) {
+                dz[0] = if self.0 { t } else { 1.0 };
+            }
+            fn jacobian(&mut self, _t: f64, _z: &[f64], fx: &mut [f64], ft: &mut [f64]) {
+                fx[0] = 0.0;
+                ft[0] = if self.0 { 1.0 } else { 0.0 };
+            }
+        }
+        for tab in [&RODAS5P, &RODAS4] {
+            let mut ros = Rosenbrock::new(tab, 1, 1, 1, 1e-6, 1e-6);
+            for i in 0..2000 {
+                // Times and steps spread over [0, 10) and [1e-3, 1), irrational ratios.
+                let t = (i as f64 * 0.618_033_988_749_894_8).fract() * 10.0;
+                let h = 1e-3 + (i as f64 * 0.414_213_562_373_095).fract();
+                let z = [t];
+                ros.restart(t, &z, &mut Clock(false));
+                assert_eq!(ros.attempt(t, &z, h, &mut Clock(false)), 0.0, "{}: a clock's error", tab.name);
+                assert_eq!(ros.end_state()[0], t + h, "{}: {t} + {h}", tab.name);
+                let z = [t * t / 2.0];
+                ros.restart(t, &z, &mut Clock(true));
+                ros.attempt(t, &z, h, &mut Clock(true));
+                let y1 = ros.end_state()[0];
+                let want = z[0] + t * h + h * h / 2.0;
+                // The slopes `t + c_j h + d_j h` and their weighted sum round at their sizes;
+                // the result and `want` at theirs.
+                let terms: f64 =
+                    (0..tab.stages).map(|j| tab.b[j].abs() * (t + (tab.c[j] + tab.d[j].abs()) * h)).sum();
+                let bound = f64::EPSILON * (2.0 * want + h * terms);
+                assert!((y1 - want).abs() <= bound, "{}: {y1} vs {want}", tab.name);
+            }
+        }
+    }
+
+    /// The exact `linear_form` is the polynomial the dense output evaluates: it agrees with
+    /// values of `eval` at a few points to round-off (1e-15 of the step's motion).
+    #[test]
+    fn the_linear_form_is_the_dense_output() {
+        for tab in [&RODAS5P, &RODAS4] {
+            let mut ros = Rosenbrock::new(tab, 2, 1, 2, 1e-6, 1e-6);
+            let mut rhs = WithSens { p: 1.3 };
+            let z = [1.0, 0.0];
+            ros.restart(0.0, &z, &mut rhs);
+            ros.attempt(0.0, &z, 0.3, &mut rhs);
+            let dense = ros.interpolant();
+            let w = [2.0, -0.5];
+            let mut coef = [0.0; CAP];
+            let len = dense.linear_form(&w, &mut coef);
+            assert_eq!(len, dense.degree() + 1);
+            let at = |t: f64| {
+                let mut v = [0.0; 2];
+                dense.eval(t, &mut v);
+                w[0] * v[0] + w[1] * v[1]
+            };
+            for s in [0.1, 0.5, 0.9, 1.0] {
+                let poly: f64 = coef[..len].iter().rev().fold(0.0, |acc, c| acc * s + c);
+                let want = at(0.3 * s) - at(0.0);
+                assert!(
+                    (poly - want).abs() <= 1e-15 * (at(0.3) - at(0.0)).abs(),
+                    "{}: {poly} vs {want}",
+                    tab.name
+                );
+            }
         }
     }
 

@@ -2,6 +2,7 @@
 //! once and keeps the scratch buffers between runs; [`run`] is one run with a fresh one. Each run
 //! is a loop over `Integrator::step` with the trajectory recorder the options ask for.
 
+use super::auto::Auto;
 use super::breakpoints::Breakpoints;
 use super::events::Detector;
 use super::integrator::{Integrator, StepOutcome, Workspace};
@@ -50,12 +51,15 @@ pub struct Simulator<H: SystemRef> {
 enum Work {
     Explicit(Workspace<Rk>),
     Rosenbrock(Workspace<Rosenbrock>),
+    /// Boxed: both steppers make it the largest by far.
+    Auto(Box<Workspace<Auto>>),
 }
 
 /// One run in progress with the stepper the options chose (see [`Simulator::integrator`]).
 pub enum Driver<'a, S: HybridSystem + ?Sized, R: Recorder> {
     Explicit(Integrator<'a, S, R, Rk>),
     Rosenbrock(Integrator<'a, S, R, Rosenbrock>),
+    Auto(Integrator<'a, S, R, Auto>),
 }
 
 impl<S: HybridSystem + ?Sized, R: Recorder> Driver<'_, S, R> {
@@ -64,6 +68,7 @@ impl<S: HybridSystem + ?Sized, R: Recorder> Driver<'_, S, R> {
         match self {
             Driver::Explicit(it) => it.step(),
             Driver::Rosenbrock(it) => it.step(),
+            Driver::Auto(it) => it.step(),
         }
     }
 
@@ -72,6 +77,7 @@ impl<S: HybridSystem + ?Sized, R: Recorder> Driver<'_, S, R> {
         match self {
             Driver::Explicit(it) => it.finish(stopped_by),
             Driver::Rosenbrock(it) => it.finish(stopped_by),
+            Driver::Auto(it) => it.finish(stopped_by),
         }
     }
 }
@@ -165,6 +171,16 @@ impl<H: SystemRef> Simulator<H> {
         let k = info.n_outputs();
         let excluded = if opts.quadrature_error_control { Vec::new() } else { error_test_exclusions(info) };
         let work = match method {
+            // The explicit pair `resolve` picks, with Rodas5P to switch to (`auto`).
+            _ if opts.method == Method::Auto => {
+                let tab = if method == Method::Dop853 { &DOP853 } else { &DOPRI5 };
+                let rk = Rk::new(tab, nz, n, n_err, opts.rtol, opts.atol).with_excluded(excluded.clone());
+                let row = Rosenbrock::new(&RODAS5P, nz, n, n_err, opts.rtol, opts.atol)
+                    .with_linear_solver(opts.linear_solver)
+                    .with_excluded(excluded);
+                let stepper = Auto::new(method, rk, row, nz, n);
+                Work::Auto(Box::new(ShapedWork { stepper, info, n, m, k, nz }.build()))
+            }
             Method::Rodas5p | Method::Rodas4 => {
                 let tab = if method == Method::Rodas5p { &RODAS5P } else { &RODAS4 };
                 let method = tab.name;
@@ -200,6 +216,7 @@ impl<H: SystemRef> Simulator<H> {
         Ok(match &mut self.work {
             Work::Explicit(w) => run_to_end(Integrator::new(sys, p, &self.opts, w, recorder)),
             Work::Rosenbrock(w) => run_to_end(Integrator::new(sys, p, &self.opts, w, recorder)),
+            Work::Auto(w) => run_to_end(Integrator::new(sys, p, &self.opts, &mut **w, recorder)),
         })
     }
 
@@ -215,6 +232,7 @@ impl<H: SystemRef> Simulator<H> {
         Ok(match &mut self.work {
             Work::Explicit(w) => Driver::Explicit(Integrator::new(sys, p, &self.opts, w, recorder)),
             Work::Rosenbrock(w) => Driver::Rosenbrock(Integrator::new(sys, p, &self.opts, w, recorder)),
+            Work::Auto(w) => Driver::Auto(Integrator::new(sys, p, &self.opts, &mut **w, recorder)),
         })
     }
 

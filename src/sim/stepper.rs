@@ -91,6 +91,13 @@ pub trait Rhs {
             *o = (a - b) / (2.0 * h);
         }
     }
+
+    /// Makes [`Self::jacobian`] and [`Self::sens_coupling`] ready; `false` when they cannot be
+    /// had. A stepper that switches to an implicit method mid-run (`auto::Auto`) calls it first:
+    /// the compiled model then compiles its Jacobian kernels on the first switch, not before.
+    fn prepare(&mut self) -> bool {
+        true
+    }
 }
 
 /// Relative step of the default central differences: the cube root of the machine epsilon.
@@ -181,6 +188,11 @@ pub trait Stepper {
     /// approximation of the method's order, good for sampling the signs of a guard's speed). An
     /// explicit method has them for free in its stages.
     fn visit_interior<V: FnMut(f64, &[f64])>(&self, visit: V);
+    /// The stretches of the run each method integrated, for a stepper that switches between
+    /// methods (`auto::Auto`), up to the current point `t`; `None` for a single method.
+    fn segments(&self, _t: f64) -> Option<Vec<super::result::MethodSegment>> {
+        None
+    }
 }
 
 #[cfg(test)]

@@ -1,11 +1,13 @@
 //! Running costs (quadrature states: read by no flow, guard, condition or other state's reset)
-//! stay out of the step-size error test, as CVODES' quadratures do by default: a model with one
-//! takes exactly the steps of the same model without it, however wild its integrand, and the
-//! integral is computed from those steps, not under its own control: an integrand faster than
-//! the dynamics needs `SimOptions::quadrature_error_control` (`--quadrature-error-control`).
+//! left out of the step-size error test (`SimOptions::quadrature_error_control` off,
+//! `--no-quadrature-error-control`; CVODES' default for its quadratures, not hybc's): a model with
+//! one then takes exactly the steps of the same model without it, however wild its integrand,
+//! and the integral is computed from those steps, not under its own control, so an integrand
+//! faster than the dynamics comes out wrong. With the control on (the default) it is right.
 
 use hybc::Model;
 
+/// A run with the running costs out of the error test.
 fn steps(text: &str, grad: &[&str]) -> (usize, hybc::Run) {
     steps_with(text, grad, false)
 }

@@ -259,29 +259,25 @@ fn stiff_jumps_dense_output_matches_the_closed_form_between_jumps() {
     }
 }
 
-/// A ball on a penalty spring-damper instead of a reset: contact stiffness `wc` per unit mass
-/// (`max(0, -y)`), damping ratio `zeta` while in contact (`if y < 0`, a flow switch, located and
-/// crossed with its saltation like an event), no reset; at rest on the spring (`y = -g / wc`)
-/// well before `T = 10`.
-const SOFT_BALL: &str = "model soft_ball
-param g = 9.81
-param wc = 1e6
-param zeta = 0.3
-param h0 = 1
-state y = h0
-state v = 0
-der(y) = v
-der(v) = -g + wc * max(0, -y) - (if y < 0 then 2 * zeta * sqrt(wc) * v else 0)
-";
+/// `models/soft_ball.hyb`: a ball on a penalty spring-damper of bandwidth `wc` instead of a
+/// reset (spring `wc^2 max(0, -y)`, damper `2 zeta wc v` while `y < 0`, a flow switch), at rest
+/// on the spring (`y = -g / wc^2`) well before `T = 10` (its own `t_end` is 0.6, in the flight
+/// after the first bounce).
+fn soft_ball() -> Model {
+    let source =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/models/soft_ball.hyb")).expect("reads");
+    Model::parse(&source).expect("parses")
+}
 
-/// The soft ball at `wc = 1e6` with gradients with respect to the damping and the drop height:
+/// The soft ball at its default `wc = 1e3` (a spring of 1e6) with gradients with respect to the
+/// damping and the drop height:
 /// an explicit pair stops at a million steps (issue #25); Rodas5P completes in a few thousand,
 /// (987 attempts measured, 1200 asserted), its final state at rest on the spring, and its
 /// gradients pass `hybc::gradcheck` at rtol
 /// 1e-8 (the checker's default tolerance there, 1e-3, with its own rules for noise).
 #[test]
 fn the_soft_ball_at_a_stiffness_of_1e6_completes_with_rodas5p_and_its_gradients_check() {
-    let model = Model::parse(SOFT_BALL).expect("parses");
+    let model = soft_ball();
     let compiled = model.compile(&["zeta", "h0"]).expect("compiles");
     let opts =
         SimOptions { t_end: 10.0, rtol: 1e-8, atol: 1e-10, method: Method::Rodas5p, ..SimOptions::default() };
@@ -306,6 +302,59 @@ fn the_soft_ball_at_a_stiffness_of_1e6_completes_with_rodas5p_and_its_gradients_
     )
     .expect("checks");
     assert!(check.passed(), "{check:#?}");
+}
+
+/// The soft ball at a bandwidth of `wc = 1e6` (a spring of 1e12: contact eigenvalues of size
+/// 1e6) with gradients, to `T = 10`: Rodas5P completes in a couple of thousand attempts (1,888
+/// measured with every parameter differentiated, 2,500 asserted), at rest on the spring.
+#[test]
+fn the_soft_ball_at_a_bandwidth_of_1e6_completes_with_rodas5p_in_a_few_thousand_steps() {
+    let model = soft_ball();
+    let compiled = model.compile(&["g", "wc", "zeta", "h0"]).expect("compiles");
+    let p = model.params().with("wc", 1e6).unwrap();
+    let opts = SimOptions { t_end: 10.0, method: Method::Rodas5p, ..model.sim_options() };
+    let run = compiled.simulate(&p, &opts).expect("runs");
+    assert!(run.is_complete(), "{:?}", run.stopped_by());
+    let stats = &run.result().stats;
+    eprintln!("soft ball wc = 1e6 rodas5p: {} steps, {} rejected", stats.steps, stats.rejected);
+    assert!(stats.steps + stats.rejected <= 2500, "{} steps, {} rejected", stats.steps, stats.rejected);
+    let y = run.state("y").unwrap();
+    assert!((y + 9.81e-12).abs() <= 1e-15, "y = {y}");
+    // `auto` completes too: DOP853 through the bounces (each contact a transient of a few
+    // microseconds, over before 15 stiffness tests in a row), Rodas5P from when the ball rests
+    // on the spring: 5,376 steps and 1,482 rejections measured, 10,000 attempts asserted.
+    let opts = SimOptions { method: Method::Auto, ..opts };
+    let run = compiled.simulate(&p, &opts).expect("runs");
+    assert!(run.is_complete(), "{:?}", run.stopped_by());
+    let stats = &run.result().stats;
+    assert!(stats.steps + stats.rejected <= 10_000, "{} steps, {} rejected", stats.steps, stats.rejected);
+    assert_eq!(run.result().methods.last().unwrap().method, Method::Rodas5p, "{:?}", run.result().methods);
+}
+
+/// No stepper fails on the soft ball with "step size underflow": with gradients, at bandwidths
+/// 1e3 and 1e6, each explicit pair either completes or stops at its step budget (20,000 here)
+/// with that message; each Rosenbrock method completes.
+#[test]
+fn no_stepper_underflows_on_the_soft_ball() {
+    let model = soft_ball();
+    let compiled = model.compile(&["g", "wc", "zeta", "h0"]).expect("compiles");
+    for wc in [1e3, 1e6] {
+        let p = model.params().with("wc", wc).unwrap();
+        for method in [Method::Dopri5, Method::Dop853, Method::Rodas5p, Method::Rodas4] {
+            let opts = SimOptions { t_end: 10.0, method, max_steps: 20_000, ..model.sim_options() };
+            let run = compiled.simulate(&p, &opts).expect("runs");
+            let failure = run.report().failure().map(|m| m.to_string());
+            if let Some(message) = &failure {
+                assert!(!message.contains("underflow"), "{method:?} wc = {wc}: {message}");
+                assert!(message.contains("more than 20000 steps"), "{method:?} wc = {wc}: {message}");
+                assert!(!method.is_rosenbrock(), "{method:?} wc = {wc}: {message}");
+            }
+            // At wc = 1e6 the explicit pairs need about 200,000 steps: they stop.
+            if wc == 1e6 && !method.is_rosenbrock() {
+                assert!(failure.is_some(), "{method:?} completed at wc = 1e6");
+            }
+        }
+    }
 }
 
 /// Robertson's kinetics (`k1 = 0.04`, `k2 = 3e7`, `k3 = 1e4`) to `t = 1e5`, with an event when
@@ -394,4 +443,121 @@ fn every_shipped_model_checks_its_gradients_with_the_rosenbrock_methods() {
         }
     }
     assert!(failed.is_empty(), "{failed:#?}");
+}
+
+/// A rate that jumps at `u = 1` from 1 to `k1` (an event on a clock), and, with `relax`, back
+/// to 1 at `u = 3`: `x' = -k (x - cos t)`, stiff while `k = k1 = 1e6`.
+fn jump_model(relax: bool) -> String {
+    let back = if relax { "event relax when u >= 3 {\n    k := k0\n}\n" } else { "" };
+    format!(
+        "model jump\nparam k0 = 1\nparam k1 = 1e6\nstate x = 1\nstate u = 0\nstate k = k0\n\
+         der(x) = -k * (x - cos(t))\nder(u) = 1\nder(k) = 0\nevent stiffen when u >= 1 {{\n    k := k1\n}}\n{back}"
+    )
+}
+
+/// `--method auto` on `text` with gradients for `grad`: the run, after checking that its method
+/// segments tile it (contiguous from the start to the final time) and add up to its step counts.
+fn auto_run(text: &str, grad: &[&str], t_end: f64, rtol: f64) -> hybc::Run {
+    let model = Model::parse(text).expect("parses");
+    let compiled = model.compile(grad).expect("compiles");
+    let opts = SimOptions { t_end, rtol, atol: rtol * 1e-2, method: Method::Auto, ..SimOptions::default() };
+    let run = compiled.simulate(&compiled.params(), &opts).expect("runs");
+    let r = run.result();
+    let segs = &r.methods;
+    assert_eq!(segs[0].from, opts.t_start);
+    assert_eq!(segs.last().unwrap().to, r.final_state.time);
+    for pair in segs.windows(2) {
+        assert_eq!(pair[0].to, pair[1].from, "{segs:?}");
+        assert_ne!(pair[0].method, pair[1].method, "{segs:?}");
+    }
+    assert_eq!(segs.iter().map(|s| s.steps).sum::<usize>(), r.stats.steps, "{segs:?}");
+    assert_eq!(segs.iter().map(|s| s.rejected).sum::<usize>(), r.stats.rejected, "{segs:?}");
+    run
+}
+
+/// `auto` on a rate that jumps from 1 to 1e6 at t = 1: Dormand-Prince up to the jump, Rodas5P
+/// from within 1e-3 after it (15 positive stiffness tests in a row) to the end: 76 steps
+/// measured (400 asserted) where Dormand-Prince forced takes 604,927 (its stability limit
+/// `h < 3.3e-6` for 5 time units) and Rodas5P forced 38.
+/// The `hybc run` summary names both stretches.
+#[test]
+fn auto_switches_to_rodas5p_when_a_rate_jumps_stiff() {
+    let run = auto_run(&jump_model(false), &["k0", "k1"], 6.0, 1e-6);
+    let segs = &run.result().methods;
+    assert_eq!(segs.len(), 2, "{segs:?}");
+    assert_eq!(segs[0].method, Method::Dopri5);
+    assert_eq!(segs[1].method, Method::Rodas5p);
+    assert!(segs[1].from > 1.0 && segs[1].from < 1.001, "{segs:?}");
+    assert!(run.result().stats.steps < 400, "{:?}", run.result().stats);
+    // At rest on the slow manifold x = cos t (to O(1/k1)).
+    assert!((run.state("x").unwrap() - 6f64.cos()).abs() < 1e-5);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("jump.hyb");
+    std::fs::write(&path, jump_model(false) + "simulate t_end = 6, rtol = 1e-6, atol = 1e-8\n").unwrap();
+    let out = crate::support::cli::hybc(&["run", path.to_str().unwrap(), "--grad", "k1"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("methods: dopri5 from 0 to 1.000") && text.contains(", rodas5p from 1.000"),
+        "{text}"
+    );
+    let out = crate::support::cli::hybc(&["run", path.to_str().unwrap(), "--format", "json"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    assert_eq!(json["methods"][1]["method"], "rodas5p");
+    assert_eq!(json["methods"][1]["to"], 6.0);
+}
+
+/// `auto` switches back: the rate relaxes to 1 at t = 3, and once Rodas5P's steps are inside the
+/// explicit stability region (`h ||f_x|| <= 1.6`) for 15 steps in a row the run continues with
+/// Dormand-Prince (three stretches).
+#[test]
+fn auto_switches_back_to_the_explicit_pair_when_the_rate_relaxes() {
+    let run = auto_run(&jump_model(true), &["k0", "k1"], 10.0, 1e-6);
+    let segs = &run.result().methods;
+    let methods: Vec<Method> = segs.iter().map(|s| s.method).collect();
+    assert_eq!(methods, [Method::Dopri5, Method::Rodas5p, Method::Dopri5], "{segs:?}");
+    assert!(segs[2].from > 3.0, "{segs:?}");
+}
+
+/// No shipped model but the soft ball (stiff when at rest on its spring) switches under `auto`
+/// at its own settings: one stretch, the explicit pair the tolerance picks.
+#[test]
+fn auto_never_switches_on_the_non_stiff_shipped_models() {
+    for m in shipped_models() {
+        if m.name == "soft_ball" {
+            continue;
+        }
+        let model = Model::parse(&m.source).expect("parses");
+        let compiled = model.compile::<&str>(&[]).expect("compiles");
+        let opts = model.sim_options();
+        let run = compiled.simulate(&compiled.params(), &opts).expect("runs");
+        let segs = &run.result().methods;
+        assert_eq!(segs.len(), 1, "{}: {segs:?}", m.name);
+        assert_eq!(segs[0].method, Method::Auto.resolve(opts.rtol), "{}", m.name);
+    }
+}
+
+/// Gradients under `auto` pass `hybc::gradcheck` across both switches (the rate model at rtol
+/// 1e-10: at 1e-8 the differences' noise, 3e-11, exceeds `dx/dk1 ~ 1e-14`), and on the soft
+/// ball, which switches to Rodas5P once at rest on its spring.
+#[test]
+fn gradients_under_auto_check_across_the_switches() {
+    let check = |text: &str, grad: &[&str], t_end: f64, rtol: f64, switches: usize| {
+        let model = Model::parse(text).expect("parses");
+        let compiled = model.compile(grad).expect("compiles");
+        let run = auto_run(text, grad, t_end, rtol);
+        assert_eq!(run.result().methods.len(), switches + 1, "{:?}", run.result().methods);
+        let opts =
+            SimOptions { t_end, rtol, atol: rtol * 1e-2, method: Method::Auto, ..SimOptions::default() };
+        let p = compiled.params().values().to_vec();
+        let options = hybc::gradcheck::CheckOptions::for_rtol(rtol);
+        let check =
+            hybc::gradcheck::check(compiled.native(), &p, &opts, run.result(), &options).expect("checks");
+        assert!(check.passed(), "{check:#?}");
+    };
+    // Only k0: the final x depends on k1 = 1e6 through the stiff phase's lag `sin t / k1`,
+    // damped after `relax`, so dx/dk1 is about 1e-14, below what a difference over k1's step
+    // (10) resolves in a run at rtol 1e-10 (2e-12 apart between Rodas5P runs).
+    check(&jump_model(true), &["k0"], 6.0, 1e-10, 2);
+    let soft = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/models/soft_ball.hyb")).unwrap();
+    check(&soft, &["zeta", "h0"], 10.0, 1e-8, 1);
 }
