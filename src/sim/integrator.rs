@@ -1092,14 +1092,21 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         dense.eval(crossing.t_pre, x_pre);
         let mut t_post = t;
         let mut gap = 0.0;
+        // The dense output holds within its step: the search for the far side reads it at most a
+        // step length past the step's end, or 64 spacings of `t` past the crossing for a step
+        // shorter than that (a step ending on the crossing finds the far side some ulps on).
+        // Unbounded, a step of 2e-15 on the soft ball at wc = 1e5 had its dense output read 6e-5
+        // past its end, and DOP853 went on from `y = 7.2e41`.
+        let ulp = t.abs().max(f64::MIN_POSITIVE).next_up() - t.abs().max(f64::MIN_POSITIVE);
+        let reach = (dense.t0() + 2.0 * dense.h()).max(t + 64.0 * ulp);
         for _ in 0..SWITCH_SIDE_TRIES {
             dense.eval(t_post, x_post);
             let g = self.det.guard_now(self.sys, self.mode, pos, t_post, x_post, self.p);
-            if crossing.sigma * g < 0.0 {
+            if crossing.sigma * g < 0.0 || t_post >= reach {
                 break;
             }
             gap = if gap == 0.0 { t_post.next_up() - t_post } else { 2.0 * gap };
-            t_post = t + gap;
+            t_post = (t + gap).min(reach);
         }
         self.switch_post = Some(self.switch_post.map_or(t_post, |tp| tp.max(t_post)));
         if kink {

@@ -331,6 +331,26 @@ fn the_soft_ball_at_a_bandwidth_of_1e6_completes_with_rodas5p_in_a_few_thousand_
     assert_eq!(run.result().methods.last().unwrap().method, Method::Rodas5p, "{:?}", run.result().methods);
 }
 
+/// The soft ball at wc = 1e5 under DOP853 (and `auto`, which runs it through the contacts):
+/// after a flow switch located in a step of 2e-15, the search for the switch's far side read that
+/// step's dense output 6e-5 past its end and the run went on from `y = 7.2e41`. It dissipates:
+/// its energy may never exceed the drop's, and by t = 1.2 the ball is within its first metre.
+#[test]
+fn the_soft_ball_never_gains_energy_across_its_damper_switch_with_dop853() {
+    let soft = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/models/soft_ball.hyb")).unwrap();
+    let model = Model::parse(&soft).expect("parses");
+    let compiled = model.compile(&["zeta", "h0"]).expect("compiles");
+    let mut p = compiled.params();
+    p.set("wc", 1e5).unwrap();
+    for method in [Method::Dop853, Method::Auto] {
+        let opts = SimOptions { t_end: 1.2, rtol: 1e-8, atol: 1e-10, method, ..SimOptions::default() };
+        let run = compiled.simulate(&p, &opts).expect("runs");
+        assert!(run.is_complete(), "{method:?}: {:?}", run.stopped_by());
+        let (y, energy) = (run.state("y").unwrap(), run.output("energy").unwrap());
+        assert!(y.abs() < 1.0 && energy <= 9.81 * 1.0 * (1.0 + 1e-8), "{method:?}: y {y}, energy {energy}");
+    }
+}
+
 /// No stepper fails on the soft ball with "step size underflow": with gradients, at bandwidths
 /// 1e3 and 1e6, each explicit pair either completes or stops at its step budget (20,000 here)
 /// with that message; each Rosenbrock method completes.
