@@ -22,12 +22,20 @@
 //!   changes move the guard's extremum, `d^2 / (2 |g''|)` from zero, by less: kept, with a warning;
 //! - `kappa >= graze_tol`, or `d` within round-off of zero: grazing, `dt_e/dp` does not exist.
 //!
+//! A grazing flow switch can still have a saltation that exists: its term `(f- - f+) dt_e/dp` is
+//! `-(J / d) (g_x S + g_p)` with the flow's jump `J = f- - f+`, and when `J` vanishes with the
+//! crossing speed (a damper `if y < 0 then c v` switched at a guard `y` whose speed is `v`),
+//! `J / d` has a finite limit `c` however badly `d` itself is resolved. `benign_graze` measures
+//! that on an affine guard: it reads the flow on both sides at two points along the guard's
+//! surface where the speed differs, fits `J = c d + J0` per component, and takes `-c (g_x S + g_p)`
+//! when the jump left at zero speed, `J0`, is negligible against `c` times the speeds probed.
+//!
 //! A derivative that does not exist is NaN in `dte` and in `S`, and it voids exactly what depends
 //! on it: every product below skips exact zeros, so `0 * NaN` is never formed and a reset that
 //! removes the dependence (`v := 0` into a mode with no flow) gives derivatives that exist.
 
 use super::events::dot;
-use super::system::HybridSystem;
+use super::system::{GuardShape, HybridSystem};
 
 /// A time and the state at that time.
 pub(crate) type TimedState<'a> = (f64, &'a [f64]);
@@ -81,6 +89,9 @@ pub(crate) struct Jump {
     x_plus: Vec<f64>,
     s_plus: Vec<f64>,
     v: Vec<f64>,
+    /// The guard's curvature `|g''|` and accuracy `delta` at the last crossing judged.
+    curvature: f64,
+    accuracy: f64,
     /// `dt_e/dp` of the last jump (meaningful unless it grazed).
     pub dte: Vec<f64>,
     /// Total derivative of the post-event state (filled when asked for).
@@ -115,6 +126,8 @@ impl Jump {
             x_plus: vec![0.0; n],
             s_plus: vec![0.0; n * m],
             v: vec![0.0; n],
+            curvature: 0.0,
+            accuracy: 0.0,
             dte: vec![0.0; m],
             total: vec![0.0; n * m],
         }
@@ -200,6 +213,28 @@ impl Jump {
         sys.flow(mode, t_pre, x_pre, p, &mut self.f_minus);
         let outcome = self.event_time_gradient(sys, ev, t, x, s, p, context);
         sys.flow(mode, t_post, x_post, p, &mut self.f_plus);
+        if outcome.grazing
+            && sys.info().events[ev].guard == GuardShape::Affine
+            && self.benign_graze(
+                sys,
+                ev,
+                mode,
+                ((t_pre, x_pre), (t_post, x_post)),
+                p,
+                outcome.denominator,
+                context.graze_tol,
+            )
+        {
+            // `self.v` holds the limit `c` of `J / d`: the jump `-c (g_x S + g_p)` exists.
+            for j in 0..self.m {
+                let sj = &mut s[j * n..(j + 1) * n];
+                let numerator = dot_nonzero(&self.gx, sj) + self.gp[j];
+                for (s, c) in sj.iter_mut().zip(&self.v) {
+                    *s -= times_nonzero(*c, numerator);
+                }
+            }
+            return JumpOutcome { grazing: false, margin: None, ..outcome };
+        }
         for (j, &dte) in self.dte.iter().enumerate() {
             for ((s, f_minus), f_plus) in
                 s[j * n..(j + 1) * n].iter_mut().zip(&self.f_minus).zip(&self.f_plus)
@@ -245,6 +280,7 @@ impl Jump {
                 curvature = curvature.max((d1 - d).abs() / (t1 - t));
             }
         }
+        (self.curvature, self.accuracy) = (curvature, accuracy);
         let conditioning = if d == 0.0 { f64::INFINITY } else { curvature * accuracy / (d * d) };
         // A NaN speed or conditioning also counts as grazing (the comparisons are false for NaN).
         let resolved = d.abs() > speed_noise && conditioning < context.graze_tol;
@@ -263,5 +299,89 @@ impl Jump {
         }
         let resolution = if d != 0.0 && (accuracy / d).is_finite() { (accuracy / d).abs() } else { 0.0 };
         JumpOutcome { denominator: d, conditioning, grazing, margin, resolution }
+    }
+
+    /// Whether the flow's jump at the grazing switch `ev` (affine guard, gradient in `gx`)
+    /// vanishes with the crossing speed; if so, its limit `c = lim J / d` is left in `self.v`.
+    /// Runs only at a graze, so it allocates.
+    ///
+    /// The sides `(t_pre, x_pre)` and `(t_post, x_post)` are moved along the guard's surface, by
+    /// `+-h` times the tangential part of the flow: the guard keeps its value and side (it is
+    /// affine; a probe that changes side is refused), while its speed moves by about `|g''| h`,
+    /// with `h` chosen to move it by a tenth of the crossing's speed scale
+    /// `max(|d|, sqrt(|g''| delta))`. From the jumps `J+-` and speeds `d+-` there, per component,
+    /// `c = (J+ - J-) / (d+ - d-)` and the jump left at zero speed
+    /// `J0 = (J+ + J-) / 2 - c (d+ + d-) / 2`. The limit is taken when every `|J0|` is below
+    /// `graze_tol |c (d+ - d-)| / 2` plus what `J0` holds that is not a jump: the flows' round-off
+    /// (`16 eps` of their values) and their change over the `t_post - t_pre` between the sides
+    /// (twice that time times the flow's rate along the surface, read from the same probes). A
+    /// jump that stays finite at zero speed (a force switched on at contact) leaves `J0` at its
+    /// size and is refused: the crossing stays grazing.
+    #[allow(clippy::too_many_arguments)]
+    fn benign_graze<S: HybridSystem + ?Sized>(
+        &mut self,
+        sys: &S,
+        ev: usize,
+        mode: usize,
+        ((t_pre, x_pre), (t_post, x_post)): (TimedState, TimedState),
+        p: &[f64],
+        d: f64,
+        graze_tol: f64,
+    ) -> bool {
+        let n = self.n;
+        let gg = dot(&self.gx, &self.gx);
+        let Some(pos) = sys.info().modes[mode].events.iter().position(|&e| e == ev) else {
+            return false;
+        };
+        if !(self.curvature > 0.0 && self.curvature.is_finite() && d.is_finite() && gg > 0.0) {
+            return false;
+        }
+        let gt = d - dot(&self.gx, &self.f_minus);
+        let h = 0.1 * d.abs().max((self.curvature * self.accuracy).sqrt()) / self.curvature;
+        // The tangential part of the flow before the switch: the trajectory's own direction along
+        // the surface, along which the speed changes at the guard's curvature.
+        let normal = dot(&self.gx, &self.f_minus) / gg;
+        let tangent: Vec<f64> = self.f_minus.iter().zip(&self.gx).map(|(f, g)| f - normal * g).collect();
+        if !(h.is_finite() && h > 0.0) || tangent.iter().all(|v| *v == 0.0) {
+            return false;
+        }
+        let mut guards = vec![0.0; sys.info().modes[mode].events.len()];
+        let mut guard_at = |t: f64, x: &[f64]| {
+            sys.guards(mode, t, x, p, &mut guards);
+            guards[pos]
+        };
+        // flows[side][k]: the flow on the side before (0) or past (1) the switch, probed at -h (0)
+        // or +h (1) along the surface.
+        let mut flows = [[vec![0.0; n], vec![0.0; n]], [vec![0.0; n], vec![0.0; n]]];
+        for (side, (t_side, x_side)) in [(t_pre, x_pre), (t_post, x_post)].into_iter().enumerate() {
+            let g_side = guard_at(t_side, x_side);
+            for (k, sign) in [-1.0, 1.0].into_iter().enumerate() {
+                let probe: Vec<f64> = x_side.iter().zip(&tangent).map(|(x, v)| x + sign * h * v).collect();
+                if guard_at(t_side, &probe) * g_side <= 0.0 {
+                    return false;
+                }
+                sys.flow(mode, t_side, &probe, p, &mut flows[side][k]);
+            }
+        }
+        let speeds = [0, 1].map(|k| dot(&self.gx, &flows[0][k]) + gt);
+        let span = speeds[1] - speeds[0];
+        if !(span.is_finite() && span != 0.0) {
+            return false;
+        }
+        let mid = 0.5 * (speeds[0] + speeds[1]);
+        let gap = (t_post - t_pre).abs();
+        for i in 0..n {
+            let (lo, hi) = (flows[0][0][i] - flows[1][0][i], flows[0][1][i] - flows[1][1][i]);
+            let round_off = 16.0 * f64::EPSILON * flows.iter().flatten().map(|f| f[i].abs()).sum::<f64>();
+            let rate = flows.iter().map(|f| (f[1][i] - f[0][i]).abs() / (2.0 * h)).fold(0.0, f64::max);
+            let not_a_jump = round_off + 2.0 * gap * rate;
+            let c = if (hi - lo).abs() <= round_off { 0.0 } else { (hi - lo) / span };
+            let left = 0.5 * (lo + hi) - c * mid;
+            if !(c.is_finite() && left.abs() <= graze_tol * (c * span).abs() * 0.5 + not_a_jump) {
+                return false;
+            }
+            self.v[i] = c;
+        }
+        true
     }
 }

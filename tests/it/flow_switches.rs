@@ -121,3 +121,102 @@ fn switch_at_the_instant_of_an_event_that_moved_the_state_voids_the_gradients() 
     // The state itself is still right: x(2) = p + 1 + 1 + 2.
     assert_relative_eq!(r.final_state.state[0], 5.0, max_relative = TOL);
 }
+
+/// The dip model: a parabola `y = a (t - 1)^2 / 2 - c` that dips `c` below a floor whose damper,
+/// `if y < 0 then k v`, switches on inside it. The flow's jump at the switch, `k v`, vanishes with
+/// the crossing speed `v`; `PUSH` is the same floor with a force `k` switched on instead, a jump
+/// that does not vanish.
+const DIP: &str = "model dip\nparam a = 1\nparam c = 1e-11\nparam k = 5\n\
+                   state y = 0.5 * a - c\nstate v = -a\nder(y) = v\n\
+                   der(v) = a - (if y < 0 then k * v else 0)\n";
+const PUSH: &str = "model push\nparam a = 1\nparam c = 1e-11\nparam k = 5\n\
+                    state y = 0.5 * a - c\nstate v = -a\nder(y) = v\n\
+                    der(v) = a - (if y < 0 then k else 0)\n";
+
+/// `(t2 - 1)^2` for the dip model, `t2` the exit from the floor, exactly: the entry is at
+/// `1 - r`, `r = sqrt(2 c / a)`, with `v = -a r`; inside, `v' = a - k v` gives
+/// `y(s) = a s / k + (v_e - a / k) (1 - e^(-k s)) / k`, whose root `s* > 0` is found by Newton
+/// (`expm1` keeps the small terms exact). Since `(v - v_free)' = -k v` integrates to `-k` times
+/// the change of `y`, zero over the dip, `v` leaves the floor on the free parabola's velocity,
+/// and `y(T) = a (1 - (t2 - 1)^2) / 2` at `T = 2`.
+fn dip_exit_squared(p: &[f64]) -> f64 {
+    let (a, c, k) = (p[0], p[1], p[2]);
+    let r = (2.0 * c / a).sqrt();
+    let ve = -a * r;
+    let y = |s: f64| a * s / k - (ve - a / k) * (-k * s).exp_m1() / k;
+    let dy = |s: f64| a / k + (ve - a / k) * (-k * s).exp();
+    let mut s = 2.0 * r;
+    for _ in 0..50 {
+        let step = y(s) / dy(s);
+        s -= step;
+        if step.abs() <= 1e-15 * s {
+            break;
+        }
+    }
+    (s - r) * (s - r)
+}
+
+fn simulate_with(src: &str, p: &[f64], t_end: f64, method: hybc::sim::Method) -> SimResult {
+    let model = hybc::check_source(src).expect("model checks");
+    let grad: Vec<ParamIdx> = (0..model.params.len() as u32).map(ParamIdx).collect();
+    let compiled =
+        compile(&lower(&model), system_info(&model, &grad), &CompileOptions::default()).expect("compiles");
+    let opts = SimOptions { t_end, rtol: 1e-10, atol: 1e-12, method, ..SimOptions::default() };
+    run(&compiled, p, &opts).expect("runs")
+}
+
+#[test]
+fn a_grazing_switch_whose_jump_vanishes_with_its_speed_keeps_its_gradients() {
+    // c = 1e-11 against atol 1e-12: kappa = a atol / (2 c) = 0.05, a graze by the rule. The
+    // derivative exists (the saltation's `(J / d)` tends to `k`); dy/dc differs from the free
+    // parabola's -1 by 4.5e-5 through the dip, which the reported value must resolve.
+    use hybc::sim::Method;
+    let p = [1.0, 1e-11, 5.0];
+    // Richardson-extrapolated central differences of the exact `(t2 - 1)^2`, at a step relative
+    // to `c` (`support::reference::derivative` steps by 1e-4 absolute here: far too large).
+    let h = 1e-3 * p[1];
+    let q = |c: f64| dip_exit_squared(&[p[0], c, p[2]]);
+    let central = |h: f64| (q(p[1] + h) - q(p[1] - h)) / (2.0 * h);
+    let dq_exact = (4.0 * central(h / 2.0) - central(h)) / 3.0;
+    let dy_dc = -0.5 * p[0] * dq_exact;
+    assert!((dy_dc + 1.0).abs() > 4e-5, "the dip moves dy/dc off the free -1: {dy_dc}");
+    for method in [Method::Rodas5p, Method::Rodas4, Method::Dopri5, Method::Dop853] {
+        let r = simulate_with(DIP, &p, 2.0, method);
+        let ds = r.final_state.dstate.clone().expect("gradients");
+        assert_eq!(r.stats.switches, 2, "{method:?}: in and out of the floor");
+        assert!(
+            r.warnings.iter().all(|w| !matches!(w, hybc::sim::SimWarning::Grazing { .. })),
+            "{method:?}: no grazing warning for a jump that vanishes: {:?}",
+            r.warnings
+        );
+        // ds is column-major per parameter: [dy/da, dv/da, dy/dc, dv/dc, dy/dk, dv/dk].
+        let y_exact = 0.5 * p[0] * (1.0 - q(p[1]));
+        assert_relative_eq!(r.final_state.state[0], y_exact, max_relative = 1e-9);
+        assert!((ds[2] - dy_dc).abs() < 2e-7, "{method:?}: dy/dc {} against {dy_dc}", ds[2]);
+        assert!((ds[0] - 0.5).abs() < 1e-7, "{method:?}: dy/da {}", ds[0]);
+        assert!(ds[4].abs() < 1e-9 && ds[5].abs() < 1e-9, "{method:?}: d/dk ~ k r^3: {ds:?}");
+        assert!(
+            (ds[1] - 1.0).abs() < 1e-7 && ds[3].abs() < 1e-7,
+            "{method:?}: v leaves on the free parabola: {ds:?}"
+        );
+    }
+}
+
+#[test]
+fn a_grazing_switch_whose_jump_stays_finite_has_no_gradient() {
+    // The same graze with a force switched on at contact: J = k at zero speed, so J / d has no
+    // limit and dt/dc ~ 1 / sqrt(c) reaches the state: no derivative w.r.t. a or c; k acts only
+    // after the graze and keeps its derivative.
+    use hybc::sim::Method;
+    for method in [Method::Rodas5p, Method::Dopri5, Method::Dop853] {
+        let r = simulate_with(PUSH, &[1.0, 1e-11, 5.0], 2.0, method);
+        let ds = r.final_state.dstate.clone().expect("gradients");
+        assert!(
+            r.warnings.iter().any(|w| matches!(w, hybc::sim::SimWarning::Grazing { .. })),
+            "{method:?}: {:?}",
+            r.warnings
+        );
+        assert!(ds[0].is_nan() && ds[2].is_nan(), "{method:?}: {ds:?}");
+        assert!(ds[4].is_finite(), "{method:?}: {ds:?}");
+    }
+}

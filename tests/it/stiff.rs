@@ -331,6 +331,49 @@ fn the_soft_ball_at_a_bandwidth_of_1e6_completes_with_rodas5p_in_a_few_thousand_
     assert_eq!(run.result().methods.last().unwrap().method, Method::Rodas5p, "{:?}", run.result().methods);
 }
 
+/// W4a from wc = 1e5 to 1e8: the ball settles through micro-bounces that graze the damper's
+/// switch `if y < 0`, whose jump `2 zeta wc v` vanishes with the crossing speed `v`; the
+/// derivatives exist (docs/language.md, rule 12) and were NaN before the rule knew it. With
+/// Rodas5P every gradient is finite, no crossing is reported as grazing, the ball rests at
+/// `y = -g / wc^2`, and the gradients pass `hybc::gradcheck` at rtol 1e-8.
+#[test]
+fn the_soft_ball_keeps_its_gradients_through_the_grazes_of_its_damper_up_to_1e8() {
+    let model = soft_ball();
+    let compiled = model.compile(&["zeta", "h0"]).expect("compiles");
+    for wc in [1e5, 1e6, 1e7, 1e8] {
+        let mut p = compiled.params();
+        p.set("wc", wc).unwrap();
+        let opts = SimOptions {
+            t_end: 10.0,
+            rtol: 1e-8,
+            atol: 1e-10,
+            method: Method::Rodas5p,
+            ..SimOptions::default()
+        };
+        let run = compiled.simulate(&p, &opts).expect("runs");
+        assert!(run.is_complete(), "wc = {wc}: {:?}", run.stopped_by());
+        let result = run.result();
+        let ds = result.final_state.dstate.as_ref().expect("gradients");
+        assert!(ds.iter().all(|v| v.is_finite()), "wc = {wc}: {ds:?}");
+        assert!(
+            result.warnings.iter().all(|w| !matches!(w, hybc::sim::SimWarning::Grazing { .. })),
+            "wc = {wc}: {:?}",
+            result.warnings
+        );
+        let y = run.state("y").unwrap();
+        assert!((y + 9.81 / (wc * wc)).abs() <= 1e-3 * 9.81 / (wc * wc), "wc = {wc}: y = {y}");
+        let check = hybc::gradcheck::check(
+            compiled.native(),
+            p.values(),
+            &opts,
+            result,
+            &hybc::gradcheck::CheckOptions::for_rtol(opts.rtol),
+        )
+        .expect("checks");
+        assert!(check.passed(), "wc = {wc}: {check:#?}");
+    }
+}
+
 /// The soft ball at wc = 1e5 under DOP853 (and `auto`, which runs it through the contacts):
 /// after a flow switch located in a step of 2e-15, the search for the switch's far side read that
 /// step's dense output 6e-5 past its end and the run went on from `y = 7.2e41`. It dissipates:
