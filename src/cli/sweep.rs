@@ -11,7 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use super::run::{at_most, parameter_values, sim_options, SimFlags};
 use super::{compile_model, load_model, parse_param_list, usage_error, ModelArg, EXIT_SIM_STOPPED};
-use crate::plot::{self, SweepFigure};
+use crate::plot::{self, Shown, SweepFigure};
 use crate::sema::ParamIdx;
 use crate::sim::SimOptions;
 use crate::sweep::{self, Axis, AxisSpec, Columns, Format, Grid, PointResult, Points, Samples};
@@ -77,6 +77,10 @@ pub struct SweepArgs {
     /// tangents, into this file.
     #[arg(long, value_name = "FILE.svg|.png")]
     plot: Option<PathBuf>,
+    /// The outputs and states the plot shows, a panel each (default: every output, or every
+    /// state for a model without outputs).
+    #[arg(long, value_name = "NAME1,NAME2", requires = "plot")]
+    show: Option<String>,
 }
 
 pub fn run(args: &SweepArgs) -> ExitCode {
@@ -221,6 +225,15 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
     let opts = sim_options(model, &args.sim)?;
     if let Some(path) = &args.plot {
         plot::ImageFormat::from_path(path).map_err(|e| format!("--plot: {e}"))?;
+        for name in args.show.iter().flat_map(|list| list.split(',')).map(str::trim) {
+            if !model.output_names().chain(model.state_names()).any(|known| known == name) {
+                let known: Vec<&str> = model.output_names().chain(model.state_names()).collect();
+                return Err(format!(
+                    "--show: `{name}` is not an output or state of the model (it has {})",
+                    known.join(", ")
+                ));
+            }
+        }
         if points.len() > MAX_PLOT_POINTS {
             return Err(format!(
                 "--plot: the sweep has {} points; a plot keeps every result until it is drawn and takes \
@@ -277,7 +290,19 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
 
     if let Some(path) = &args.plot {
         let (kept_points, results): (Vec<Vec<f64>>, Vec<PointResult>) = streamed.kept.into_iter().unzip();
-        plot_sweep(model, &compiled, &grad, &kept_points, &results, &varied, &opts, args.threads, path)?;
+        let show = args.show.as_deref();
+        plot_sweep(
+            model,
+            &compiled,
+            &grad,
+            &kept_points,
+            &results,
+            &varied,
+            &opts,
+            args.threads,
+            path,
+            show,
+        )?;
     }
     Ok(match streamed.first_ended_early {
         None => ExitCode::SUCCESS,
@@ -308,10 +333,16 @@ fn plot_sweep(
     opts: &SimOptions,
     threads: usize,
     path: &std::path::Path,
+    show: Option<&str>,
 ) -> Result<(), String> {
     let param = varied[0];
     let info = compiled.info();
-    let mut figure = SweepFigure::new("", info, param, points, results, varied.len() == 1);
+    // The names were checked against the model before the sweep ran.
+    let shown = match show {
+        None => Shown::default_for(info),
+        Some(list) => list.split(',').filter_map(|name| Shown::by_name(info, name.trim())).collect(),
+    };
+    let mut figure = SweepFigure::showing("", info, param, points, results, varied.len() == 1, shown);
     let shown = figure.series.first().map_or(0, |s| s.points.len());
     figure.title = format!("{}: final values against {}", model.name(), info.param_names[param]);
     if shown < points.len() {

@@ -19,7 +19,7 @@ use plotters::prelude::*;
 
 pub use run_plot::{plot_run, RunFigure};
 pub use sobol_plot::{plot_sobol, SobolFigure, SobolPanel};
-pub use sweep_plot::{plot_sweep, SweepFigure, SweepSeries, Tangent};
+pub use sweep_plot::{plot_sweep, Shown, SweepFigure, SweepSeries, Tangent};
 
 /// Width of every plot, in pixels.
 pub const WIDTH: u32 = 960;

@@ -1,5 +1,5 @@
-//! The plot of a sweep: a panel per output (per final state when the model has no outputs)
-//! against one varied parameter, a marker per point, and at a few points the tangent whose slope
+//! The plot of a sweep: a panel per output (per final state when the model has no outputs, or
+//! the outputs and states chosen with `--show`) against one varied parameter, a marker per point, and at a few points the tangent whose slope
 //! is the computed gradient, so that the eye can check the gradient against the curve.
 
 use std::path::Path;
@@ -28,6 +28,40 @@ pub struct SweepSeries {
     pub tangents: Vec<Tangent>,
 }
 
+/// A quantity a panel shows: an output or a final state, by index.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Shown {
+    Output(usize),
+    State(usize),
+}
+
+impl Shown {
+    /// Every output, or every state for a model without outputs: the default panels.
+    pub fn default_for(info: &SystemInfo) -> Vec<Shown> {
+        if info.n_outputs() > 0 {
+            (0..info.n_outputs()).map(Shown::Output).collect()
+        } else {
+            (0..info.n_states()).map(Shown::State).collect()
+        }
+    }
+
+    /// The output or state called `name` (outputs first, as names are unique across both).
+    pub fn by_name(info: &SystemInfo, name: &str) -> Option<Shown> {
+        info.output_names
+            .iter()
+            .position(|n| n == name)
+            .map(Shown::Output)
+            .or_else(|| info.state_names.iter().position(|n| n == name).map(Shown::State))
+    }
+
+    fn name(self, info: &SystemInfo) -> &str {
+        match self {
+            Shown::Output(i) => &info.output_names[i],
+            Shown::State(i) => &info.state_names[i],
+        }
+    }
+}
+
 /// A sweep against one parameter, ready to draw.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SweepFigure {
@@ -36,23 +70,31 @@ pub struct SweepFigure {
     pub series: Vec<SweepSeries>,
     /// Join the points by a line (sensible when only this parameter varies).
     pub connect: bool,
+    /// What each series shows, in the order of `series`.
+    shown: Vec<Shown>,
 }
 
-/// The plotted values of a complete run and, when they exist, their gradients (column-per-
-/// parameter): the outputs, or the states for a model without outputs. After a `stop` event the
-/// gradients are the total ones, the derivatives of the values as functions of the parameters.
-fn quantities<'r>(info: &SystemInfo, r: &'r SimResult) -> Option<(&'r [f64], Option<&'r [f64]>)> {
+/// The value of `shown` in a complete run and, when it exists, its gradient row (one entry per
+/// differentiated parameter). After a `stop` event the gradients are the total ones, the
+/// derivatives of the values as functions of the parameters.
+fn quantity(info: &SystemInfo, r: &SimResult, shown: Shown) -> Option<(f64, Option<Vec<f64>>)> {
     let f = &r.final_state;
     let by_event = match r.stopped_by {
         StopReason::TEnd => false,
         StopReason::Event { .. } => true,
         _ => return None,
     };
-    Some(if info.n_outputs() > 0 {
-        (&f.outputs, if by_event { f.doutputs_total.as_deref() } else { f.doutputs.as_deref() })
-    } else {
-        (&f.state, if by_event { f.dstate_total.as_deref() } else { f.dstate.as_deref() })
-    })
+    let (values, grads, i) = match shown {
+        Shown::Output(i) => {
+            (&f.outputs, if by_event { f.doutputs_total.as_deref() } else { f.doutputs.as_deref() }, i)
+        }
+        Shown::State(i) => {
+            (&f.state, if by_event { f.dstate_total.as_deref() } else { f.dstate.as_deref() }, i)
+        }
+    };
+    let rows = values.len();
+    let grad = grads.map(|d| (0..info.n_grad()).map(|j| d[j * rows + i]).collect());
+    Some((values[i], grad))
 }
 
 impl SweepFigure {
@@ -66,14 +108,27 @@ impl SweepFigure {
         results: &[PointResult],
         connect: bool,
     ) -> SweepFigure {
-        let names = if info.n_outputs() > 0 { &info.output_names } else { &info.state_names };
-        let mut series: Vec<SweepSeries> = names
+        Self::showing(title, info, param, points, results, connect, Shown::default_for(info))
+    }
+
+    /// As [`Self::new`], a panel per entry of `shown`.
+    pub fn showing(
+        title: &str,
+        info: &SystemInfo,
+        param: usize,
+        points: &[Vec<f64>],
+        results: &[PointResult],
+        connect: bool,
+        shown: Vec<Shown>,
+    ) -> SweepFigure {
+        let mut series: Vec<SweepSeries> = shown
             .iter()
-            .map(|name| SweepSeries { name: name.clone(), points: Vec::new(), tangents: Vec::new() })
+            .map(|q| SweepSeries { name: q.name(info).to_string(), points: Vec::new(), tangents: Vec::new() })
             .collect();
         for (p, r) in points.iter().zip(results) {
-            if let Some((values, _)) = r.as_ref().ok().and_then(|r| quantities(info, r)) {
-                for (s, &v) in series.iter_mut().zip(values) {
+            let Ok(r) = r else { continue };
+            for (s, &q) in series.iter_mut().zip(&shown) {
+                if let Some((v, _)) = quantity(info, r, q) {
                     s.points.push((p[param], v));
                 }
             }
@@ -81,7 +136,13 @@ impl SweepFigure {
         for s in &mut series {
             s.points.sort_by(|a, b| a.0.total_cmp(&b.0));
         }
-        SweepFigure { title: title.to_string(), param: info.param_names[param].clone(), series, connect }
+        SweepFigure {
+            title: title.to_string(),
+            param: info.param_names[param].clone(),
+            series,
+            connect,
+            shown,
+        }
     }
 
     /// Indices of up to `count` points that ran to their end, spread evenly over the values of
@@ -123,13 +184,13 @@ impl SweepFigure {
                 what: format!("no gradient with respect to {}", info.param_names[param]),
             });
         };
-        let rows = self.series.len();
         for (p, r) in points.iter().zip(results) {
-            let Some((values, Some(d))) = r.as_ref().ok().and_then(|r| quantities(info, r)) else {
-                continue; // grazing or ended early: no gradient to draw
-            };
-            for (i, s) in self.series.iter_mut().enumerate() {
-                s.tangents.push(Tangent { x: p[param], y: values[i], slope: d[j * rows + i] });
+            let Ok(r) = r else { continue };
+            for (s, &q) in self.series.iter_mut().zip(&self.shown) {
+                // Grazing or ended early: no gradient to draw.
+                if let Some((y, Some(d))) = quantity(info, r, q) {
+                    s.tangents.push(Tangent { x: p[param], y, slope: d[j] });
+                }
             }
         }
         Ok(())

@@ -635,3 +635,33 @@ fn a_data_file_that_names_nothing_or_holds_no_number_is_refused_with_its_line() 
         assert!(err.contains(needle), "{text}: {err}");
     }
 }
+
+/// The soft floor tends to the hard reset: the damping ratio that loses the energy of a hard
+/// bounce with `e = 0.8` (`E = e^2 g h0` after the first bounce) tends to the linear
+/// spring-damper's `exp(-zeta pi / sqrt(1 - zeta^2)) = e` as `wc` grows, with a gap from gravity
+/// acting during the contact that falls as `1 / wc` (2.2e-4 at 1e3 measured; `0.3 / wc` asserted,
+/// and at least `0.1 / wc`, so that a fit that ignored the contact's gravity would fail too).
+/// docs/tutorial.md, section 8, quotes these fits.
+#[test]
+fn the_soft_balls_damping_fitted_to_a_hard_bounce_tends_to_the_closed_form_as_1_over_wc() {
+    // Bisection on the closed form, independent of hybc.
+    let restitution = |z: f64| (-z * std::f64::consts::PI / (1.0 - z * z).sqrt()).exp();
+    let zeta_closed = bisect(|z| restitution(z) - 0.8, 0.01, 0.5);
+    assert!((zeta_closed - 0.0708503).abs() < 1e-7, "{zeta_closed}");
+    let model = concat!(env!("CARGO_MANIFEST_DIR"), "/models/soft_ball.hyb");
+    let target = format!("energy={}", 0.64 * 9.81);
+    for wc in [1e3, 1e4, 1e5] {
+        let set_wc = format!("wc={wc}");
+        let out = hybc(&[
+            "fit", model, "--free", "zeta", "--target", &target, "--set", "zeta=0.3", "--set", &set_wc,
+            "--format", "json",
+        ]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let report: Value = serde_json::from_slice(&out.stdout).expect("json");
+        assert_eq!(report["converged"], true, "{report}");
+        let zeta = report["params"]["zeta"].as_f64().unwrap();
+        let gap = zeta_closed - zeta;
+        assert!(gap > 0.1 / wc && gap < 0.3 / wc, "wc = {wc}: zeta {zeta} against {zeta_closed}");
+        assert!(report["stats"]["runs"].as_u64().unwrap() <= 8, "{report}");
+    }
+}

@@ -179,6 +179,59 @@ fn tangent_slopes_are_central_differences_of_the_plotted_values() {
     assert!(figure.add_tangents(h0_info, 1, &at_points, &at_results).is_err());
 }
 
+/// `--show` picks the panels: states as well as outputs, by name, each with the tangents of its
+/// own gradient row; a state's tangent is the central difference of that state.
+#[test]
+fn shown_states_get_their_own_values_and_tangents() {
+    use hybc::plot::Shown;
+    let model = hybc::check_source(include_str!("../../models/ball.hyb")).expect("ball");
+    let funcs = lower(&model);
+    let grad = [ParamIdx(2)];
+    let compiled = compile(&funcs, system_info(&model, &grad), &CompileOptions::default()).expect("compiles");
+    let info = hybc::sim::HybridSystem::info(&compiled);
+    let opts = SimOptions { t_end: 0.45, rtol: 1e-12, atol: 1e-14, ..SimOptions::default() };
+    let base: Vec<f64> = model.params.iter().map(|p| p.default).collect();
+    let points = sweep::full_grid(&base, &[(2, sweep::linspace(0.8, 1.2, 5))]);
+    let results = sweep::run_points(&compiled, &points, &opts, 2, &|| ()).expect("pool");
+    let shown = vec![Shown::by_name(info, "v").unwrap(), Shown::by_name(info, "energy").unwrap()];
+    assert_eq!(shown, [Shown::State(1), Shown::Output(0)]);
+    assert_eq!(Shown::by_name(info, "nope"), None);
+    let mut figure = SweepFigure::showing("ball", info, 2, &points, &results, true, shown);
+    figure.add_tangents(info, 2, &points, &results).expect("h0 is differentiated");
+    assert_eq!(figure.series.iter().map(|s| s.name.as_str()).collect::<Vec<_>>(), ["v", "energy"]);
+    let h = 1e-6;
+    let v_at = |h0: f64| {
+        let mut p = base.clone();
+        p[2] = h0;
+        sim::run(&compiled, &p, &opts).expect("runs").final_state.state[1]
+    };
+    for t in &figure.series[0].tangents {
+        assert_eq!(t.y, v_at(t.x));
+        assert_relative_eq!(
+            t.slope,
+            (v_at(t.x + h) - v_at(t.x - h)) / (2.0 * h),
+            max_relative = 1e-6,
+            epsilon = 1e-8
+        );
+    }
+    let out = hybc(&[
+        "sweep",
+        "models/ball.hyb",
+        "--vary",
+        "h0=0.8:1.2:3",
+        "--plot",
+        "/nonexistent/x.svg",
+        "--show",
+        "y,bogus",
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--show: `bogus` is not an output or state of the model (it has energy, y, v)"),
+        "{err}"
+    );
+}
+
 #[test]
 fn unknown_plot_formats_are_usage_errors_and_write_nothing() {
     for args in [
