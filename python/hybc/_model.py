@@ -282,12 +282,23 @@ class Model:
         - ``bounds``: ``name -> (lo, hi)`` within the declared ranges (a vector's name for every
           element); the declared ranges otherwise.
         - ``params``: the start of the free parameters and the values of the others;
-          ``starts - 1`` more starts are drawn (``seed``) within the bounds, run on ``threads``.
+          ``starts - 1`` more starts are drawn (``seed``) within the bounds, run on ``threads``
+          (:func:`hybc.dask.optimize` runs them on a Dask cluster, with the same report).
         - ``options``: the keywords of :meth:`simulate` (``t_end``, ``rtol``, ...).
 
         A problem that does not converge returns its report with ``converged`` False and the
         ``reason``; names or constraints the model refuses raise ``ValueError``.
         """
+        problem = self._optimize_problem(
+            free, minimize, subject_to, bounds, params, starts, seed, threads, max_iter, kkt_tol, xtol, ftol, options
+        )
+        report = json.loads(_hybc.optimize_report(self._native, *problem.args, **problem.options))
+        return self._with_run(report, problem)
+
+    def _optimize_problem(
+        self, free, minimize, subject_to, bounds, params, starts, seed, threads, max_iter, kkt_tol, xtol, ftol, options
+    ) -> "_OptimizeProblem":
+        """The checked arguments of ``_hybc.optimize_report`` (shared with ``hybc.dask.optimize``)."""
         vectors = dict(self._native.vectors)
         free = _expand_names(_names(free, "free"), vectors)
         subject_to = [subject_to] if isinstance(subject_to, str) else [str(c) for c in subject_to]
@@ -300,26 +311,25 @@ class Model:
                 lo, hi = box
                 boxes[str(name)] = (_number(lo, f"bounds: `{name}`"), _number(hi, f"bounds: `{name}`"))
         _check_counts({"starts": starts, "threads": threads, "max_iter": max_iter, "seed": seed, **options})
-        report = json.loads(
-            _hybc.optimize_report(
-                self._native,
-                free,
-                str(minimize),
-                subject_to,
-                boxes,
-                _param_dict(_expand_vectors(params, vectors)),
-                int(max_iter),
-                float(kkt_tol),
-                float(xtol),
-                float(ftol),
-                int(starts),
-                int(seed),
-                int(threads),
-                **options,
-            )
+        args = (
+            free,
+            str(minimize),
+            subject_to,
+            boxes,
+            _param_dict(_expand_vectors(params, vectors)),
+            int(max_iter),
+            float(kkt_tol),
+            float(xtol),
+            float(ftol),
+            int(starts),
+            int(seed),
+            int(threads),
         )
-        run_options = {k: v for k, v in options.items()}
-        report["run"] = self.simulate(report["params"], grad=free, **run_options)
+        return _OptimizeProblem(free, boxes, args, dict(options))
+
+    def _with_run(self, report: dict[str, Any], problem: "_OptimizeProblem") -> dict[str, Any]:
+        """``report`` with ``"run"``: the run at its reported point, with gradients w.r.t. ``free``."""
+        report["run"] = self.simulate(report["params"], grad=problem.free, **problem.options)
         return report
 
     def sobol_design(
@@ -744,3 +754,13 @@ def grid(**axes: Any) -> dict[str, np.ndarray]:
 
 def _from_source(text: str, file_name: str) -> Model:
     return Model(text, file_name=file_name)
+
+
+class _OptimizeProblem:
+    """An optimisation's checked arguments: the free names (vectors expanded), the bounds, the
+    positional arguments of ``_hybc.optimize_report`` and the simulation keywords."""
+
+    __slots__ = ("free", "bounds", "args", "options")
+
+    def __init__(self, free: list[str], bounds: dict | None, args: tuple, options: dict[str, Any]):
+        self.free, self.bounds, self.args, self.options = free, bounds, args, options

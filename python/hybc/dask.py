@@ -1,5 +1,6 @@
-"""Sweeps and Sobol' analyses sharded over a Dask distributed cluster:
-``hybc.dask.sweep(model, points, client=...)``, ``hybc.dask.sobol(model, problem, outputs, n, ...)``.
+"""Sweeps, Sobol' analyses and multi-start optimisations sharded over a Dask distributed cluster:
+``hybc.dask.sweep(model, points, client=...)``, ``hybc.dask.sobol(model, problem, outputs, n, ...)``,
+``hybc.dask.optimize(model, free, minimize, subject_to, starts=N, ...)``.
 
 Same points, keywords and result as :meth:`hybc.Model.sweep`, and the result equals the local
 sweep exactly (every point is an independent run; a run's result depends only on its point).
@@ -17,6 +18,13 @@ description travels, each task computes its rows from their indices (``hybc::sob
 returns their outputs; the client puts them end to end in row order and runs the same estimator
 as :meth:`hybc.Model.sobol`, so the indices are identical to the local ones.
 
+With :func:`optimize` each task runs a range of the starts of the same seeded draw (only the
+problem's arguments travel) and returns its report; the client merges them
+(``hybc::optimize::request::merge_shards``: the optima grouped again over every start, the
+reported end from the shard that ran it), so the report equals :meth:`hybc.Model.optimize`'s
+with the same ``starts`` and ``seed``, timings apart (``stats.optimize_seconds`` adds the
+shards' times).
+
 Each task runs its shard on one thread unless ``threads=`` is given: the parallelism comes from
 Dask's worker processes and threads. Dask is an optional dependency (``pip install ./python[dask]``).
 """
@@ -29,6 +37,9 @@ from typing import Any
 
 import numpy as np
 
+import json
+
+from . import _hybc
 from ._model import Model, Samples, SobolResult, SobolSpec, _sobol_spec, _check_counts, normalise_points, sobol_result, sweep_matrix
 
 # One Model per (text, file name) in this process (a Dask worker). Guarded: a worker runs tasks
@@ -143,6 +154,65 @@ def _sobol_shard(
     indices, with the runs that ended early among them."""
     model = _worker_model(text, file_name)
     return model._native.sobol_evaluate(*spec.design_args(), spec.outputs, start, stop, **kw)
+
+def optimize(
+    model: Model,
+    free: Sequence[str],
+    minimize: str,
+    subject_to: Sequence[str] | str = (),
+    *,
+    starts: int,
+    seed: int = 0,
+    client: Any = None,
+    shards: int | None = None,
+    bounds: Mapping[str, tuple[float, float]] | None = None,
+    params: Mapping[str, Any] | None = None,
+    max_iter: int = 200,
+    kkt_tol: float = 1e-6,
+    xtol: float = 1e-10,
+    ftol: float = 1e-12,
+    **options: Any,
+) -> dict[str, Any]:
+    """:meth:`hybc.Model.optimize` with its ``starts`` on a Dask cluster, with the same report
+    (the distinct optima over every start, best first, each with its event sequence and the
+    starts that reached it) and ``"run"`` at the reported point.
+
+    ``client``: a ``distributed.Client`` (default: the current one). ``shards``: the number of
+    tasks (default: one per worker thread, at most one per start), each a range of the starts,
+    run on one thread. Other arguments as :meth:`hybc.Model.optimize`.
+    """
+    from distributed import default_client
+
+    client = client if client is not None else default_client()
+    problem = model._optimize_problem(
+        free, minimize, subject_to, bounds, params, starts, seed, 1, max_iter, kkt_tol, xtol, ftol, options
+    )
+    if shards is None:
+        shards = sum(client.nthreads().values()) or 1
+    if not isinstance(shards, int) or isinstance(shards, bool) or shards < 1:
+        raise ValueError(f"shards: expected a positive integer, found {shards!r}")
+    # A problem the library refuses (a constraint, a start outside its bounds) raises in every
+    # task; Dask raises the first on the client with its type and message.
+    cuts = np.linspace(0, starts, min(shards, starts) + 1).round().astype(np.int64)
+    futures = [
+        client.submit(
+            _optimize_shard, model.source, model.file_name, problem.args, problem.options, int(a), int(b),
+            pure=False,
+        )
+        for a, b in zip(cuts[:-1], cuts[1:])
+    ]
+    reports = client.gather(futures)
+    merged = json.loads(_hybc.optimize_merge(model._native, problem.free, problem.bounds, reports))
+    return model._with_run(merged, problem)
+
+
+def _optimize_shard(
+    text: str, file_name: str, args: tuple, options: dict[str, Any], first: int, last: int
+) -> str:
+    """The JSON report of starts ``[first, last)`` of the optimisation ``args``, on this worker."""
+    model = _worker_model(text, file_name)
+    return _hybc.optimize_report(model._native, *args, shard=(first, last), **options)
+
 
 def _worker_model(text: str, file_name: str) -> Model:
     key = (text, file_name)

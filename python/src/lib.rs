@@ -31,6 +31,7 @@ fn _hybc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sobol::sobol_analyze, m)?)?;
     m.add_function(wrap_pyfunction!(fit::fit_report, m)?)?;
     m.add_function(wrap_pyfunction!(optimize::optimize_report, m)?)?;
+    m.add_function(wrap_pyfunction!(optimize::optimize_merge, m)?)?;
     jax_ffi::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

@@ -20,6 +20,7 @@ use crate::options::SimKeywords;
 #[pyo3(signature = (
     model, free, minimize, subject_to, bounds, params,
     max_iter, kkt_tol, xtol, ftol, starts, seed, threads,
+    shard = None,
     t_end = None, rtol = None, atol = None, max_events = None, max_steps = None, method = None,
     graze_tol = None, sens_error_control = None, h_max = None,
 ))]
@@ -39,6 +40,7 @@ pub fn optimize_report(
     starts: usize,
     seed: u64,
     threads: usize,
+    shard: Option<(usize, usize)>,
     t_end: Option<f64>,
     rtol: Option<f64>,
     atol: Option<f64>,
@@ -78,19 +80,17 @@ pub fn optimize_report(
             )));
         }
     }
-    let free_idx = free
-        .iter()
-        .map(|name| inner.param_index(name).map_err(|e| errors::to_py(e.into())))
-        .collect::<PyResult<Vec<_>>>()?;
-    count("free (parameters, vector elements counted)", free_idx.len(), 1, hybc::limits::MAX_OPTIMIZE_FREE)?;
-    let mut narrow: Vec<(String, f64, f64)> =
-        bounds.unwrap_or_default().into_iter().map(|(name, (lo, hi))| (name, lo, hi)).collect();
-    narrow.sort_by(|a, b| a.0.cmp(&b.0));
-    let boxes = request::bounds(&inner, &free_idx, &narrow)
-        .map_err(|e| PyValueError::new_err(format!("bounds: {e}")))?;
+    let boxes = free_boxes(&model, &free, bounds)?;
     let start = model.param_values(params)?.values().to_vec();
     let compiled = model.compiled(py, &free)?;
-    let options = OptimizeOptions { max_iter, kkt_tol, xtol, ftol, starts, seed, threads };
+    if let Some((first, last)) = shard {
+        if !(first < last && last <= starts) {
+            return Err(PyValueError::new_err(format!(
+                "shard: expected FIRST < LAST <= starts ({starts}), found ({first}, {last})"
+            )));
+        }
+    }
+    let options = OptimizeOptions { max_iter, kkt_tol, xtol, ftol, starts, seed, threads, shard };
     let report = py.detach(move || {
         let request =
             Request { minimize: &minimize, subject_to: &subject_to, bounds: boxes, start, sim, options };
@@ -102,4 +102,46 @@ pub fn optimize_report(
         Err(Failure::Constraint(e)) => Err(PyValueError::new_err(format!("subject_to: {e}"))),
         Err(Failure::Refused(e)) => Err(PyRuntimeError::new_err(e.to_string())),
     }
+}
+
+/// The box of every free parameter: declared ranges narrowed by `bounds`.
+fn free_boxes(
+    model: &Model,
+    free: &[String],
+    bounds: Option<HashMap<String, (f64, f64)>>,
+) -> PyResult<Vec<hybc::fit::Bounds>> {
+    let inner = model.inner();
+    let free_idx = free
+        .iter()
+        .map(|name| inner.param_index(name).map_err(|e| errors::to_py(e.into())))
+        .collect::<PyResult<Vec<_>>>()?;
+    hybc::limits::count(
+        "free (parameters, vector elements counted)",
+        free_idx.len(),
+        1,
+        hybc::limits::MAX_OPTIMIZE_FREE,
+    )
+    .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let mut narrow: Vec<(String, f64, f64)> =
+        bounds.unwrap_or_default().into_iter().map(|(name, (lo, hi))| (name, lo, hi)).collect();
+    narrow.sort_by(|a, b| a.0.cmp(&b.0));
+    request::bounds(inner, &free_idx, &narrow).map_err(|e| PyValueError::new_err(format!("bounds: {e}")))
+}
+
+/// The report of a whole multi-start from the JSON reports of its shards (in start order), as
+/// `hybc::optimize::request::merge_shards`: what one process running every start reports.
+#[pyfunction]
+pub fn optimize_merge(
+    model: PyRef<'_, Model>,
+    free: Vec<String>,
+    bounds: Option<HashMap<String, (f64, f64)>>,
+    reports: Vec<String>,
+) -> PyResult<String> {
+    let boxes = free_boxes(&model, &free, bounds)?;
+    let shards = reports
+        .iter()
+        .map(|r| serde_json::from_str(r).map_err(|e| PyValueError::new_err(format!("reports: {e}"))))
+        .collect::<PyResult<Vec<serde_json::Value>>>()?;
+    let merged = request::merge_shards(&shards, &boxes).map_err(PyValueError::new_err)?;
+    Ok(merged.to_string())
 }

@@ -91,3 +91,37 @@ def test_sobol_errors_are_raised_before_any_task(client, ball):
         hybc.dask.sobol(ball, {"names": ["e"], "bounds": [[0.5, 0.9]]}, ["nothing"], 8, client=client)
     with pytest.raises(ValueError, match="shards"):
         hybc.dask.sobol(ball, {"names": ["e"], "bounds": [[0.5, 0.9]]}, ["energy"], 8, client=client, shards=0)
+
+
+def without_timings(report):
+    report = dict(report)
+    report.pop("run")
+    stats = dict(report.pop("stats"))
+    stats.pop("optimize_seconds")
+    stats.pop("compile_seconds")
+    return report, stats
+
+
+@pytest.mark.parametrize("shards", [None, 3, 16])
+def test_multi_start_optimisation_equals_the_local_one(client, ball, shards):
+    # The ball's two-parameter exercise: 16 seeded starts over h0 in [0.5, 2] find three bounce
+    # branches; spread over 2 workers in 2, 3 or 16 shards the report is the local one.
+    problem = (["h0", "e"], "h0", ["energy = 2", "y = 0.1"])
+    kw = dict(bounds={"h0": (0.5, 2), "e": (0.75, 0.95)}, starts=16, seed=1)
+    local = ball.optimize(*problem, **kw)
+    shared = hybc.dask.optimize(ball, *problem, client=client, shards=shards, **kw)
+    assert len(local["optima"]) == 3, local["optima"]
+    assert [o["starts"] for o in shared["optima"]] == [o["starts"] for o in local["optima"]]
+    assert sorted(i for o in shared["optima"] for i in o["starts"]) == [
+        s["index"] for s in local["starts"] if s["converged"]
+    ]
+    assert without_timings(shared) == without_timings(local)
+    assert shared["run"].outputs["energy"] == local["run"].outputs["energy"]
+
+
+def test_a_refused_multi_start_raises_as_the_local_one(client, ball):
+    # h0 has no declared range: several starts need bounds for it.
+    with pytest.raises(RuntimeError, match="has no finite range"):
+        ball.optimize(["h0", "e"], "h0", ["energy = 2"], starts=4)
+    with pytest.raises(RuntimeError, match="has no finite range"):
+        hybc.dask.optimize(ball, ["h0", "e"], "h0", ["energy = 2"], starts=4, client=client)

@@ -111,6 +111,7 @@ fn options(args: &OptimizeArgs) -> Result<OptimizeOptions, String> {
         starts: args.starts,
         seed: args.seed,
         threads: args.threads,
+        shard: None,
     })
 }
 

@@ -72,6 +72,10 @@ pub struct OptimizeOptions {
     pub seed: u64,
     /// Worker threads for the starts (0: one per core).
     pub threads: usize,
+    /// Only the starts `first..last` of the `starts` (the same seeded draw): one shard of a
+    /// multi-start spread over processes (`hybc.dask.optimize`). `request::merge_shards` puts
+    /// the shards' reports together into the report of the whole. `None`: every start.
+    pub shard: Option<(usize, usize)>,
 }
 
 impl Default for OptimizeOptions {
@@ -84,6 +88,7 @@ impl Default for OptimizeOptions {
             starts: 1,
             seed: 0,
             threads: 0,
+            shard: None,
         }
     }
 }
@@ -154,6 +159,8 @@ impl Verdict {
 /// One local solve from one start.
 #[derive(Clone, Debug)]
 pub struct LocalResult {
+    /// Which start this is (0 the problem's own, then the drawn ones in order).
+    pub index: usize,
     /// Free parameters at the start and at the end.
     pub start: Vec<f64>,
     pub x: Vec<f64>,
@@ -242,6 +249,8 @@ pub enum OptimizeError {
     TooLarge { free: usize, constraints: usize },
     #[error("cannot start a worker thread: {0}")]
     Threads(String),
+    #[error("shard {first}..{last} of {starts} starts: expected first < last <= starts")]
+    Shard { first: usize, last: usize, starts: usize },
 }
 
 /// Progress: called after every run with the start's index and the run.
@@ -291,21 +300,28 @@ pub fn optimize<S: HybridSystem + Sync>(
         }
         p
     };
+    let (first, last) = opts.shard.unwrap_or((0, opts.starts));
+    if !(first < last && last <= opts.starts) {
+        return Err(OptimizeError::Shard { first, last, starts: opts.starts });
+    }
     let layout = Layout::new(problem.objective, &problem.constraints);
-    let locals: Vec<LocalResult> = if opts.starts == 1 {
-        vec![local(problem, &layout, opts, solver, start_of(0), &|t| report(progress, 0, t))]
+    let mut locals: Vec<LocalResult> = if last - first == 1 {
+        vec![local(problem, &layout, opts, solver, start_of(first), &|t| report(progress, first, t))]
     } else {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(opts.threads)
             .build()
             .map_err(|e| OptimizeError::Threads(e.to_string()))?;
         pool.install(|| {
-            (0..opts.starts)
+            (first..last)
                 .into_par_iter()
                 .map(|i| local(problem, &layout, opts, solver, start_of(i), &|t| report(progress, i, t)))
                 .collect()
         })
     };
+    for (l, index) in locals.iter_mut().zip(first..) {
+        l.index = index;
+    }
     let optima = distinct_optima(&locals, &problem.bounds);
     let shown = optima.first().map_or(0, |g| g[0]);
     let tolerances = constraint_tolerances(&layout, &locals[shown].values, &problem.sim);
@@ -350,6 +366,7 @@ fn local<S: HybridSystem>(
     };
     let sampled = SimOptions { at: sample_times(layout.observables()), ..problem.sim.clone() };
     let failed = |message: String, status: &str, runs: usize| LocalResult {
+        index: 0,
         start: x0.clone(),
         x: x0.clone(),
         params: start.clone(),
@@ -442,6 +459,7 @@ fn local<S: HybridSystem>(
     let params = with_free(&end.x);
     let run = simulator.run(&params).ok();
     let mut result = LocalResult {
+        index: 0,
         start: x0.clone(),
         x: end.x.clone(),
         params,
@@ -547,14 +565,39 @@ fn cusp_notes(run: &SimResult) -> Vec<String> {
 
 /// Groups converged ends into distinct optima, best objective first.
 fn distinct_optima(locals: &[LocalResult], bounds: &[Bounds]) -> Vec<Vec<usize>> {
-    let mut order: Vec<usize> = (0..locals.len()).filter(|&i| locals[i].converged()).collect();
-    order.sort_by(|&a, &b| locals[a].values[0].total_cmp(&locals[b].values[0]).then(a.cmp(&b)));
+    let ends: Vec<End<usize>> = locals
+        .iter()
+        .map(|l| End {
+            converged: l.converged(),
+            objective: l.values.first().copied(),
+            events: l.events(),
+            x: &l.x,
+        })
+        .collect();
+    group_optima(&ends, bounds)
+}
+
+/// What the grouping of optima reads of one local solve's end (`E`: how its events are named).
+pub(crate) struct End<'a, E> {
+    pub converged: bool,
+    pub objective: Option<f64>,
+    pub events: Vec<E>,
+    pub x: &'a [f64],
+}
+
+/// The converged ends grouped into distinct optima, best first (ties by start order): two ends
+/// are the same optimum when they have the same event sequence and every free parameter agrees
+/// to 1e-6 of its scale (its bounds' width, else its size). Indices into `ends`.
+pub(crate) fn group_optima<E: PartialEq>(ends: &[End<'_, E>], bounds: &[Bounds]) -> Vec<Vec<usize>> {
+    let objective = |i: usize| ends[i].objective.unwrap_or(f64::NAN);
+    let mut order: Vec<usize> = (0..ends.len()).filter(|&i| ends[i].converged).collect();
+    order.sort_by(|&a, &b| objective(a).total_cmp(&objective(b)).then(a.cmp(&b)));
     let mut groups: Vec<Vec<usize>> = Vec::new();
     for i in order {
         let same = |g: &Vec<usize>| {
-            let r = &locals[g[0]];
-            r.events() == locals[i].events()
-                && r.x.iter().zip(&locals[i].x).zip(bounds).all(|((a, b), bd)| {
+            let r = &ends[g[0]];
+            r.events == ends[i].events
+                && r.x.iter().zip(ends[i].x).zip(bounds).all(|((a, b), bd)| {
                     let width = bd.upper - bd.lower;
                     let scale = if width.is_finite() { width } else { a.abs().max(b.abs()).max(1.0) };
                     (a - b).abs() <= 1e-6 * scale

@@ -240,6 +240,7 @@ impl OptimizeReport {
 
     fn local_json(&self, l: &LocalResult) -> Value {
         json!({
+            "index": l.index,
             "start": self.free_object(&l.start),
             "params": self.free_object(&l.x),
             "objective": l.values.first().map(|v| number_json(*v)),
@@ -321,7 +322,7 @@ impl OptimizeReport {
                     "params": self.free_object(&l.x),
                     "objective": number_json(l.values[0]),
                     "events": self.event_names(&l.events()),
-                    "starts": g,
+                    "starts": g.iter().map(|&i| self.result.locals[i].index).collect::<Vec<_>>(),
                     "set": self.set_list(l),
                 })
             })
@@ -379,7 +380,7 @@ fn summarize(names: &[String]) -> String {
 
 /// The shortest text that reads back as `v`: `{}` (`1.25`), or `{:e}` where that is shorter
 /// (`4.4e-15`, which `{}` writes with fifteen zeros).
-fn round_trip(v: f64) -> String {
+pub(crate) fn round_trip(v: f64) -> String {
     let plain = format!("{v}");
     let exp = format!("{v:e}");
     if exp.len() < plain.len() {
