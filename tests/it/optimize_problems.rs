@@ -282,9 +282,12 @@ fn the_compass_gaits_fastest_periodic_gait_at_a_cost_of_transport_is_a_stable_ga
     assert_eq!(p["stable"], true, "{}", p["multipliers"]);
     assert_eq!(p["trivial"], 1);
 
-    // The envelope theorem: d pace* / d c = -lambda. Central difference of two more solves.
+    // The envelope theorem: d pace* / d c = -lambda. Central difference of two more solves: each
+    // optimal pace is exact to about lambda times the bound's tolerance (1e-9 x 0.3, 2e-7 of the
+    // slope after dividing by 2 dc) and the truncation is dc^2 pace''' / 6 (the multiplier moves
+    // from 0.31 to 0.49 between c = 0.1 and 0.2); measured: 1.2e-5 relative.
     let dc = 1e-3;
     let (up, down) = (fastest_gait(0.1 + dc), fastest_gait(0.1 - dc));
     let slope = (number(&up["objective_value"]) - number(&down["objective_value"])) / (2.0 * dc);
-    approx::assert_relative_eq!(-slope, number(&cot["multiplier"]), max_relative = 1e-3);
+    approx::assert_relative_eq!(-slope, number(&cot["multiplier"]), max_relative = 1e-4);
 }
