@@ -40,21 +40,7 @@ pub fn measure(
 ) -> Kkt {
     let n = x.len();
     let m = point.constraints.len();
-    let at_bound: Vec<i8> = x
-        .iter()
-        .zip(bounds)
-        .map(|(&v, &(lo, hi))| {
-            // SLSQP clips to the box, so a held variable sits on its bound to round-off.
-            let eps = 1e-12 * (hi - lo).abs().min(1e300).max(v.abs()).max(1e-300);
-            if v - lo <= eps {
-                -1
-            } else if hi - v <= eps {
-                1
-            } else {
-                0
-            }
-        })
-        .collect();
+    let at_bound = held(x, bounds);
     let mut violation: f64 = 0.0;
     let mut violation_ratio: f64 = 0.0;
     let mut active = vec![false; m];
@@ -112,6 +98,28 @@ pub fn measure(
     Kkt { multipliers, active, at_bound, stationarity, violation_ratio, violation }
 }
 
+/// Per variable: -1 held at its lower bound, 1 at its upper, 0 free. SLSQP clips to the box only
+/// to round-off of the step it solves for (a thrust held at 0 comes back as 3.5e-15 next to one
+/// of 23), so "on the bound" means within 1e-12 of the variable's scale: its bound's and its own
+/// magnitude, or that of the largest variable when its box is wider than that. Not the box's
+/// width alone: in [0, 1e13] that called k = 5 held at 0 and projected away the gradient of k^2.
+pub(super) fn held(x: &[f64], bounds: &[(f64, f64)]) -> Vec<i8> {
+    let largest = inf_norm(x);
+    x.iter()
+        .zip(bounds)
+        .map(|(&v, &(lo, hi))| {
+            let scale = |bound: f64| bound.abs().max(v.abs()).max((hi - lo).min(largest)).max(1e-300);
+            if lo.is_finite() && v - lo <= 1e-12 * scale(lo) {
+                -1
+            } else if hi.is_finite() && hi - v <= 1e-12 * scale(hi) {
+                1
+            } else {
+                0
+            }
+        })
+        .collect()
+}
+
 fn inf_norm(v: &[f64]) -> f64 {
     v.iter().fold(0.0_f64, |a, x| a.max(x.abs()))
 }
@@ -157,6 +165,22 @@ mod tests {
         assert_eq!((held.at_bound[0], held.stationarity), (-1, 0.0));
         let loose = measure(&[0.0, 0.5], &bounds, &point(&[-1.0, 0.0], &[], &[]), 0, &[]);
         assert_eq!(loose.stationarity, 1.0);
+    }
+
+    #[test]
+    fn on_a_bound_means_within_round_off_of_the_variables_scale_not_of_the_boxs_width() {
+        // SLSQP's clipping noise next to a large variable: held.
+        assert_eq!(held(&[3.5e-15, 23.4], &[(0.0, 100.0), (0.0, 100.0)]), vec![-1, 0]);
+        // A wide box does not make an interior point held: k = 5 in [0, 1e13] is free, and the
+        // gradient of k^2 there is not projected away.
+        assert_eq!(held(&[5.0], &[(0.0, 1e13)]), vec![0]);
+        let k = measure(&[5.0], &[(0.0, 1e13)], &point(&[10.0], &[], &[]), 0, &[]);
+        assert_eq!(k.stationarity, 1.0);
+        // Nor does a half-infinite or unbounded box.
+        assert_eq!(held(&[5.0, 5.0], &[(0.0, f64::INFINITY), FREE[0]]), vec![0, 0]);
+        // Exactly on a bound, and at either end of a tiny box.
+        assert_eq!(held(&[0.0, 1e-6], &[(0.0, 1.0), (0.0, 1e-6)]), vec![-1, 1]);
+        assert_eq!(held(&[-2.0 - 1e-13], &[(-2.0 - 1e-13, 0.0)]), vec![-1]);
     }
 
     #[test]

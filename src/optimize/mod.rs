@@ -402,7 +402,7 @@ fn local<S: HybridSystem>(
     let mut changes: Vec<SequenceChange> = Vec::new();
     let mut previous: Option<Vec<usize>> = None;
     let mut last: Option<(Vec<f64>, Result<Evaluated, Rejection>)> = None;
-    let end = {
+    let mut end = {
         let mut evaluate_at = |x: &[f64]| -> Option<SmoothPoint> {
             let run = trials.len();
             let outcome = if run == 0 {
@@ -446,6 +446,16 @@ fn local<S: HybridSystem>(
         };
         solver.solve(&program, &x0, &mut evaluate_at)
     };
+    // A variable the verdict counts as held (`kkt::held`: on its bound to round-off) is put on
+    // it, so that the report and the `set:` list say 0 where the box holds a thrust at 0.
+    let sides = kkt::held(&end.x, &program.bounds);
+    for ((v, &(lo, hi)), side) in end.x.iter_mut().zip(&program.bounds).zip(sides) {
+        match side {
+            -1 => *v = lo,
+            1 => *v = hi,
+            _ => {}
+        }
+    }
     // The end's values: the last run's when it was at the end, else one more run; then the end's
     // whole record (events, warnings) for the report, one more.
     let mut extra_runs = 1;

@@ -641,7 +641,7 @@ fn a_data_file_that_names_nothing_or_holds_no_number_is_refused_with_its_line() 
 /// spring-damper's `exp(-zeta pi / sqrt(1 - zeta^2)) = e` as `wc` grows, with a gap from gravity
 /// acting during the contact that falls as `1 / wc` (2.2e-4 at 1e3 measured; `0.3 / wc` asserted,
 /// and at least `0.1 / wc`, so that a fit that ignored the contact's gravity would fail too).
-/// docs/tutorial.md, section 8, quotes these fits.
+/// docs/tutorial.md, section 13, quotes these fits.
 #[test]
 fn the_soft_balls_damping_fitted_to_a_hard_bounce_tends_to_the_closed_form_as_1_over_wc() {
     // Bisection on the closed form, independent of hybc.

@@ -30,6 +30,7 @@ mod jit_models;
 mod juggler;
 mod limits;
 mod optimize;
+mod optimize_problems;
 mod periodic;
 mod plot;
 mod quadrature;

@@ -271,6 +271,10 @@ fn hopper_apex_least_effort_satisfies_kkt_by_finite_differences() {
         let ((f1, c1), (f0, c0)) = (at(&up), at(&down));
         ((f1 - f0) / (2.0 * h), (c1 - c0) / (2.0 * h))
     };
+    // The knots the box holds are reported on it, not at SLSQP's clipping noise (3.5e-15).
+    for k in (0..7).filter(|&k| kkt.at_bound[k] == -1) {
+        assert_eq!(end.x[k], 0.0, "u[{k}]");
+    }
     let grads: Vec<(f64, f64)> = (0..7).map(diff).collect();
     let free: Vec<usize> = (0..7).filter(|&k| kkt.at_bound[k] == 0).collect();
     assert!(free.len() >= 2, "at least two thrust values are free at the optimum: {:?}", end.x);
@@ -438,4 +442,42 @@ fn a_multi_start_in_shards_merges_into_the_report_of_one_process() {
     assert!(request::merge_shards(&[b.clone(), a.clone()], &ball_bounds()).is_err(), "out of order");
     assert!(request::merge_shards(&[b], &ball_bounds()).is_err(), "starts 0..8 missing");
     assert!(request::merge_shards(&[a], &ball_bounds()[..1]).is_err(), "bounds for another problem");
+}
+
+#[test]
+fn a_wide_box_does_not_make_an_interior_point_look_held_at_its_bound() {
+    // min k^2 over k in [0, 1e13], stopped after the start (k = 5, gradient 10): not converged.
+    // With "on the bound" measured against the box's width (1e-12 x 1e13 = 10), k = 5 counted as
+    // held at 0, its gradient was projected away, and the start was called a KKT point.
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let path = dir.path().join("wide.hyb");
+    std::fs::write(
+        &path,
+        "model wide\nparam k = 5 in [0, 1e13]\nstate x = 0\nder(x) = 1\noutput f = k^2\nsimulate t_end = 1\n",
+    )
+    .expect("writes");
+    let file = path.to_str().expect("utf-8 path");
+    let stopped = hybc(&[
+        "optimize",
+        file,
+        "--free",
+        "k",
+        "--minimize",
+        "f",
+        "--max-iter",
+        "1",
+        "--quiet",
+        "--format",
+        "json",
+    ]);
+    assert_eq!(stopped.status.code(), Some(4), "{}", String::from_utf8_lossy(&stopped.stdout));
+    let v = json(&stopped);
+    assert_eq!(v["reason"], "max_iterations");
+    assert_eq!(v["at_bound"], serde_json::json!({}));
+    // Given the evaluations it needs, it ends at the lower bound, held there exactly.
+    let solved =
+        json(&hybc(&["optimize", file, "--free", "k", "--minimize", "f", "--quiet", "--format", "json"]));
+    assert_eq!(solved["reason"], "converged");
+    assert_eq!(solved["optimum"]["k"], 0.0);
+    assert_eq!(solved["at_bound"]["k"], "lower");
 }

@@ -2,8 +2,8 @@
 //! (from the repository root, with this build's binary), and the numbers in what it prints (stderr
 //! first, then stdout: the order a terminal shows for these commands, whose warnings come before
 //! the report) must equal the numbers pasted below the command, in order. Equal means within a
-//! relative 1e-9, one unit of the tenth significant digit hybc prints. The statistics line
-//! (`... kernel calls, compile ... ms, run ... us`) is left out on both sides: it holds timings.
+//! relative 1e-9, one unit of the tenth significant digit hybc prints. Timings are left out on
+//! both sides (see `numbers`). Arguments are split as a shell splits them, quotes included.
 //!
 //! After a change that moves printed numbers, `HYBC_BLESS=1 cargo test --release --test it tutorial`
 //! rewrites every pasted output with what this build prints (release, so that the pasted
@@ -34,10 +34,7 @@ fn examples(doc: &str) -> Vec<Example> {
         }
         if let Some(command) = line.strip_prefix("$ hybc ") {
             out.extend(current.take());
-            current = Some(Example {
-                args: command.split_whitespace().map(String::from).collect(),
-                expected: String::new(),
-            });
+            current = Some(Example { args: words(command), expected: String::new() });
         } else if let Some(ex) = current.as_mut() {
             ex.expected.push_str(line);
             ex.expected.push('\n');
@@ -48,10 +45,48 @@ fn examples(doc: &str) -> Vec<Example> {
     out
 }
 
+/// A command's arguments as a POSIX shell splits them, for the quoting the tutorial uses: words
+/// split at whitespace, except inside '...' or "..." (which are removed), so that
+/// `--subject-to "y >= 0.9"` is one argument, as it is when a reader pastes it.
+fn words(command: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut word: Option<String> = None;
+    let mut quote: Option<char> = None;
+    for c in command.chars() {
+        match (quote, c) {
+            (Some(q), c) if c == q => quote = None,
+            (Some(_), c) => word.get_or_insert_with(String::new).push(c),
+            (None, '\'' | '"') => {
+                quote = Some(c);
+                word.get_or_insert_with(String::new);
+            }
+            (None, c) if c.is_whitespace() => out.extend(word.take()),
+            (None, c) => word.get_or_insert_with(String::new).push(c),
+        }
+    }
+    assert!(quote.is_none(), "unclosed quote in `{command}`");
+    out.extend(word);
+    out
+}
+
+#[test]
+fn words_keep_quoted_arguments_whole() {
+    assert_eq!(
+        words(r#"optimize m.hyb --subject-to "y >= 0.9" --set 'u[0]=1'  --quiet"#),
+        ["optimize", "m.hyb", "--subject-to", "y >= 0.9", "--set", "u[0]=1", "--quiet"]
+    );
+}
+
 /// The numbers in `text`, in order, leaving out digits that are part of a name (`h0`, `dt1`) and
-/// the statistics lines (`..., compile ... ms, ...`: they hold timings).
+/// the timings: a run's statistics line (`... kernel calls, compile ... ms, run ... us`) whole,
+/// an optimisation's or a fit's (`21 runs (20 evaluations, ...), compile ... ms, optimize ... ms`)
+/// from its timings on (its counts of runs and evaluations are compared).
 fn numbers(text: &str) -> Vec<f64> {
-    text.lines().filter(|l| !l.contains(", compile ")).flat_map(numbers_in).collect()
+    text.lines()
+        .filter(|l| !l.contains("kernel calls, compile"))
+        .map(|l| l.find(", compile ").map_or(l, |i| &l[..i]))
+        .flat_map(numbers_in)
+        .collect()
 }
 
 #[test]
@@ -80,7 +115,7 @@ fn blessed(root: &str, doc: &str) -> String {
             if let Some(command) = line.strip_prefix("$ hybc ") {
                 out.push_str(line);
                 out.push('\n');
-                let args: Vec<String> = command.split_whitespace().map(String::from).collect();
+                let args = words(command);
                 out.push_str(&printed(root, &args));
                 skipping = true;
                 continue;
