@@ -360,7 +360,7 @@ def soft_diffrax(wc: float):
 
 
 def softball(repeat: int) -> None:
-    for wc in (1e2, 1e3, 1e4, 1e5, 1e6):
+    for wc in (1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8):
         print(f"W4a soft ball, wc = {wc:g}, T = {SOFT_T:g}, rtol {SOFT_RTOL:g}, atol {SOFT_ATOL:g} "
               "(errors in units of atol + rtol |x|)")
         ref_x, ref_d = soft_values(soft_hybc(wc, "rodas5p", 1e-11, 1e-14)())
