@@ -7,6 +7,7 @@ use std::collections::HashMap;
 
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
 use hybc::fit::request::{self, Failure, Request};
 use hybc::fit::FitOptions;
@@ -20,10 +21,7 @@ use crate::options::SimKeywords;
 #[pyfunction]
 #[pyo3(signature = (
     model, free, targets, data, params,
-    max_iter, xtol, gtol, ftol,
-    t_end = None, rtol = None, atol = None, max_events = None, max_steps = None, method = None,
-    graze_tol = None, sens_error_control = None, h_max = None,
-))]
+    max_iter, xtol, gtol, ftol, **sim))]
 #[allow(clippy::too_many_arguments)]
 pub fn fit_report(
     py: Python<'_>,
@@ -36,27 +34,9 @@ pub fn fit_report(
     xtol: f64,
     gtol: f64,
     ftol: f64,
-    t_end: Option<f64>,
-    rtol: Option<f64>,
-    atol: Option<f64>,
-    max_events: Option<usize>,
-    max_steps: Option<usize>,
-    method: Option<String>,
-    graze_tol: Option<f64>,
-    sens_error_control: Option<bool>,
-    h_max: Option<f64>,
+    sim: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<(String, Vec<String>)> {
-    let keywords = SimKeywords {
-        t_end,
-        rtol,
-        atol,
-        max_events,
-        max_steps,
-        method,
-        graze_tol,
-        sens_error_control,
-        h_max,
-    };
+    let keywords = SimKeywords::from_kwargs(sim)?;
     let inner = model.inner();
     let sim = keywords.options(inner)?;
     if free.is_empty() {

@@ -142,9 +142,7 @@ impl Model {
     }
 
     /// One run; see `hybc.Model.simulate`.
-    #[pyo3(signature = (params = None, *, grad = None, trajectory = None, at = None, t_end = None,
-        rtol = None, atol = None, max_events = None, max_steps = None, method = None, graze_tol = None,
-        sens_error_control = None, h_max = None))]
+    #[pyo3(signature = (params = None, *, grad = None, trajectory = None, at = None, **sim))]
     #[allow(clippy::too_many_arguments)]
     fn simulate(
         &self,
@@ -153,27 +151,9 @@ impl Model {
         grad: Option<Vec<String>>,
         trajectory: Option<&Bound<'_, PyAny>>,
         at: Option<Vec<f64>>,
-        t_end: Option<f64>,
-        rtol: Option<f64>,
-        atol: Option<f64>,
-        max_events: Option<usize>,
-        max_steps: Option<usize>,
-        method: Option<String>,
-        graze_tol: Option<f64>,
-        sens_error_control: Option<bool>,
-        h_max: Option<f64>,
+        sim: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Run> {
-        let keywords = SimKeywords {
-            t_end,
-            rtol,
-            atol,
-            max_events,
-            max_steps,
-            method,
-            graze_tol,
-            sens_error_control,
-            h_max,
-        };
+        let keywords = SimKeywords::from_kwargs(sim)?;
         let mut opts = keywords.options(&self.model)?;
         opts.trajectory = trajectory_request(trajectory)?;
         opts.at = crate::options::sample_times(at)?;
@@ -219,9 +199,7 @@ impl Model {
     ///
     /// With `check_only`, everything is checked (points, options, gradient names) and nothing is
     /// compiled or run: an empty dict comes back.
-    #[pyo3(signature = (names, points, fixed = None, *, grad = None, events = 5, threads = 0, check_only = false,
-        t_end = None, rtol = None, atol = None, max_events = None, max_steps = None, method = None,
-        graze_tol = None, sens_error_control = None, h_max = None))]
+    #[pyo3(signature = (names, points, fixed = None, *, grad = None, events = 5, threads = 0, check_only = false, **sim))]
     #[allow(clippy::too_many_arguments)]
     fn sweep<'py>(
         &self,
@@ -233,27 +211,9 @@ impl Model {
         events: usize,
         threads: usize,
         check_only: bool,
-        t_end: Option<f64>,
-        rtol: Option<f64>,
-        atol: Option<f64>,
-        max_events: Option<usize>,
-        max_steps: Option<usize>,
-        method: Option<String>,
-        graze_tol: Option<f64>,
-        sens_error_control: Option<bool>,
-        h_max: Option<f64>,
+        sim: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let keywords = SimKeywords {
-            t_end,
-            rtol,
-            atol,
-            max_events,
-            max_steps,
-            method,
-            graze_tol,
-            sens_error_control,
-            h_max,
-        };
+        let keywords = SimKeywords::from_kwargs(sim)?;
         let opts = keywords.options(&self.model)?;
         sweep::check_counts(events, threads)?;
         if let Some(name) = names.iter().find(|n| fixed.as_ref().is_some_and(|f| f.contains_key(*n))) {
@@ -301,8 +261,7 @@ impl Model {
     /// runs that ended early by status word, the first such row (0-based). With `check_only`,
     /// everything is checked (problem, outputs, options) and nothing is run: `None` comes back.
     #[pyo3(signature = (priors, n, second_order, seed, fixed, outputs, start, stop, *, threads = 0,
-        check_only = false, t_end = None, rtol = None, atol = None, max_events = None, max_steps = None,
-        method = None, graze_tol = None, sens_error_control = None, h_max = None))]
+        check_only = false, **sim))]
     #[allow(clippy::too_many_arguments)]
     fn sobol_evaluate<'py>(
         &self,
@@ -317,27 +276,9 @@ impl Model {
         stop: usize,
         threads: usize,
         check_only: bool,
-        t_end: Option<f64>,
-        rtol: Option<f64>,
-        atol: Option<f64>,
-        max_events: Option<usize>,
-        max_steps: Option<usize>,
-        method: Option<String>,
-        graze_tol: Option<f64>,
-        sens_error_control: Option<bool>,
-        h_max: Option<f64>,
+        sim: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<Option<sobol::Evaluated<'py>>> {
-        let keywords = SimKeywords {
-            t_end,
-            rtol,
-            atol,
-            max_events,
-            max_steps,
-            method,
-            graze_tol,
-            sens_error_control,
-            h_max,
-        };
+        let keywords = SimKeywords::from_kwargs(sim)?;
         let opts = keywords.options(&self.model)?;
         sweep::check_counts(0, threads)?;
         let fixed = fixed.unwrap_or_default();

@@ -6,6 +6,7 @@ use std::collections::HashMap;
 
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
 use hybc::optimize::request::{self, Failure, Request};
 use hybc::optimize::OptimizeOptions;
@@ -20,10 +21,7 @@ use crate::options::SimKeywords;
 #[pyo3(signature = (
     model, free, minimize, subject_to, bounds, params,
     max_iter, kkt_tol, xtol, ftol, starts, seed, threads,
-    shard = None,
-    t_end = None, rtol = None, atol = None, max_events = None, max_steps = None, method = None,
-    graze_tol = None, sens_error_control = None, h_max = None,
-))]
+    shard = None, **sim))]
 #[allow(clippy::too_many_arguments)]
 pub fn optimize_report(
     py: Python<'_>,
@@ -41,27 +39,9 @@ pub fn optimize_report(
     seed: u64,
     threads: usize,
     shard: Option<(usize, usize)>,
-    t_end: Option<f64>,
-    rtol: Option<f64>,
-    atol: Option<f64>,
-    max_events: Option<usize>,
-    max_steps: Option<usize>,
-    method: Option<String>,
-    graze_tol: Option<f64>,
-    sens_error_control: Option<bool>,
-    h_max: Option<f64>,
+    sim: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<String> {
-    let keywords = SimKeywords {
-        t_end,
-        rtol,
-        atol,
-        max_events,
-        max_steps,
-        method,
-        graze_tol,
-        sens_error_control,
-        h_max,
-    };
+    let keywords = SimKeywords::from_kwargs(sim)?;
     let inner = model.inner().clone();
     let sim = keywords.options(&inner)?;
     if free.is_empty() {

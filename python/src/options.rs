@@ -2,12 +2,16 @@
 //! the run defaults, then the keywords, checked as `hybc run` checks its flags (the message names
 //! the keyword and the value).
 
-use pyo3::exceptions::PyValueError;
+use pyo3::conversion::FromPyObjectOwned;
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
 use hybc::{Method, SimOptions, TrajectoryRequest};
 
-/// The simulation keywords shared by `simulate` and `sweep`; `None` keeps the model's value.
+/// The simulation keywords shared by `simulate`, `sweep`, `sobol`, `fit` and `optimize`, read
+/// from the `**options` of the call (one parser, so that every entry point takes the same
+/// keywords with the same checks); `None` keeps the model's value.
 #[derive(Clone, Debug, Default)]
 pub struct SimKeywords {
     pub t_end: Option<f64>,
@@ -18,8 +22,23 @@ pub struct SimKeywords {
     pub method: Option<String>,
     pub graze_tol: Option<f64>,
     pub sens_error_control: Option<bool>,
+    pub quadrature_error_control: Option<bool>,
     pub h_max: Option<f64>,
 }
+
+/// The keywords [`SimKeywords::from_kwargs`] takes, in the order an error lists them.
+const KEYWORDS: [&str; 10] = [
+    "t_end",
+    "rtol",
+    "atol",
+    "max_events",
+    "max_steps",
+    "method",
+    "graze_tol",
+    "sens_error_control",
+    "quadrature_error_control",
+    "h_max",
+];
 
 fn positive(name: &str, v: f64) -> PyResult<f64> {
     if v.is_finite() && v > 0.0 {
@@ -30,6 +49,50 @@ fn positive(name: &str, v: f64) -> PyResult<f64> {
 }
 
 impl SimKeywords {
+    /// The keywords in `kwargs` (a call's `**options`); an unknown one is a `TypeError` naming
+    /// the known ones, a value of the wrong type one naming the keyword. `None` values are unset.
+    pub fn from_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<SimKeywords> {
+        let mut out = SimKeywords::default();
+        let Some(kwargs) = kwargs else { return Ok(out) };
+        for (key, value) in kwargs.iter() {
+            let key: String = key.extract()?;
+            if value.is_none() {
+                continue;
+            }
+            fn get<'py, T: FromPyObjectOwned<'py>>(
+                key: &str,
+                value: &Bound<'py, PyAny>,
+            ) -> PyResult<Option<T>> {
+                value.extract().map(Some).map_err(|_| {
+                    let found = value.get_type().name().map_or_else(|_| "?".to_string(), |n| n.to_string());
+                    PyTypeError::new_err(format!(
+                        "{key}: expected {}, found {found}",
+                        std::any::type_name::<T>()
+                    ))
+                })
+            }
+            match key.as_str() {
+                "t_end" => out.t_end = get(&key, &value)?,
+                "rtol" => out.rtol = get(&key, &value)?,
+                "atol" => out.atol = get(&key, &value)?,
+                "max_events" => out.max_events = get(&key, &value)?,
+                "max_steps" => out.max_steps = get(&key, &value)?,
+                "method" => out.method = get(&key, &value)?,
+                "graze_tol" => out.graze_tol = get(&key, &value)?,
+                "sens_error_control" => out.sens_error_control = get(&key, &value)?,
+                "quadrature_error_control" => out.quadrature_error_control = get(&key, &value)?,
+                "h_max" => out.h_max = get(&key, &value)?,
+                _ => {
+                    return Err(PyTypeError::new_err(format!(
+                        "unexpected keyword argument '{key}' (the simulation keywords are {})",
+                        KEYWORDS.join(", ")
+                    )))
+                }
+            }
+        }
+        Ok(out)
+    }
+
     /// The options of a run of `model` with these keywords.
     pub fn options(&self, model: &hybc::Model) -> PyResult<SimOptions> {
         let base = model.sim_options();
@@ -75,6 +138,7 @@ impl SimKeywords {
             .map_err(|e| PyValueError::new_err(e.to_string()))?,
             graze_tol: positive("graze_tol", self.graze_tol.unwrap_or(base.graze_tol))?,
             sens_error_control: self.sens_error_control.unwrap_or(base.sens_error_control),
+            quadrature_error_control: self.quadrature_error_control.unwrap_or(base.quadrature_error_control),
             h_max,
             ..base
         })

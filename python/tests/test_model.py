@@ -1,5 +1,6 @@
 """hybc.Model and Model.simulate against closed forms; errors a user can make."""
 
+import json
 import math
 import pickle
 
@@ -334,3 +335,23 @@ def test_values_at_times_match_the_ball_between_bounces(ball):
     assert ball.simulate().samples is None
     with pytest.raises(Exception, match="sample time"):
         ball.simulate(at=[0.5, 0.2])
+
+
+def test_simulation_keywords_are_one_set_with_one_check(ball):
+    # One parser reads the simulation keywords of every entry point: an unknown keyword names the
+    # known ones, a wrong type names the keyword, and quadrature_error_control reaches the run.
+    with pytest.raises(TypeError, match=r"unexpected keyword argument 'rtoll' \(the simulation keywords are t_end, rtol"):
+        ball.simulate(rtoll=1e-6)
+    with pytest.raises(TypeError, match=r"unexpected keyword argument 'rtoll'"):
+        ball.sweep({"e": [0.5, 0.6]}, rtoll=1e-6)
+    with pytest.raises(TypeError, match=r"unexpected keyword argument 'rtoll'"):
+        ball.optimize(["e"], "energy", rtoll=1e-6)
+    with pytest.raises(TypeError, match=r"method: expected"):
+        ball.simulate(method=5)
+    # The juggler's running cost out of the step-size control: the steps of
+    # `hybc run models/juggler.hyb --no-quadrature-error-control` (49 against 50 measured).
+    juggler = hybc.Model.from_file(MODELS / "juggler.hyb")
+    steps = lambda run: json.loads(run.to_json())["stats"]["steps"]  # noqa: E731
+    on, off = juggler.simulate(), juggler.simulate(quadrature_error_control=False)
+    assert steps(off) < steps(on)
+    assert off.state["y"] == pytest.approx(on.state["y"], rel=1e-6)

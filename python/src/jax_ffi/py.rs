@@ -6,6 +6,7 @@ use std::collections::HashMap;
 
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
 use super::function::{Engine, Function, Input, Selector};
 use super::{handler, registry};
@@ -30,9 +31,7 @@ pub fn jax_handler_address() -> usize {
 /// times at which the columns are read too.
 #[pyfunction]
 #[pyo3(signature = (
-    model, params, columns, events, values, at = None,
-    t_end = None, rtol = None, atol = None, max_events = None, max_steps = None, method = None,
-    graze_tol = None, sens_error_control = None, h_max = None,
+    model, params, columns, events, values, at = None, **sim,
 ))]
 #[allow(clippy::too_many_arguments)]
 pub fn jax_register(
@@ -43,27 +42,9 @@ pub fn jax_register(
     events: usize,
     values: HashMap<String, f64>,
     at: Option<Vec<f64>>,
-    t_end: Option<f64>,
-    rtol: Option<f64>,
-    atol: Option<f64>,
-    max_events: Option<usize>,
-    max_steps: Option<usize>,
-    method: Option<String>,
-    graze_tol: Option<f64>,
-    sens_error_control: Option<bool>,
-    h_max: Option<f64>,
+    sim: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<u64> {
-    let keywords = SimKeywords {
-        t_end,
-        rtol,
-        atol,
-        max_events,
-        max_steps,
-        method,
-        graze_tol,
-        sens_error_control,
-        h_max,
-    };
+    let keywords = SimKeywords::from_kwargs(sim)?;
     // Each slot is a row of every output's Jacobian too: the cap of `hybc sweep --events`.
     hybc::limits::count("events", events, 0, hybc::limits::MAX_EVENT_COLUMNS)
         .map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))?;
