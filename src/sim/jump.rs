@@ -74,6 +74,11 @@ pub(crate) struct Jump {
     gx: Vec<f64>,
     gp: Vec<f64>,
     rx: Vec<f64>,
+    /// `R_x`'s nonzero entries row by row (`(column, value)`, row `i` at
+    /// `rx_rows[i]..rx_rows[i + 1]`): a reset touches few states, so the products below run over
+    /// these instead of `n^2` entries per sensitivity column.
+    rx_nz: Vec<(usize, f64)>,
+    rx_rows: Vec<usize>,
     rp: Vec<f64>,
     rt: Vec<f64>,
     f_minus: Vec<f64>,
@@ -108,6 +113,8 @@ impl Jump {
             gx: vec![0.0; n],
             gp: vec![0.0; m],
             rx: vec![0.0; n * n],
+            rx_nz: Vec::new(),
+            rx_rows: vec![0; n + 1],
             rp: vec![0.0; n * m],
             rt: vec![0.0; n],
             f_minus: vec![0.0; n],
@@ -156,19 +163,28 @@ impl Jump {
         sys.reset(ev, t, x, p, &mut self.x_plus);
         sys.reset_jac(ev, t, x, p, &mut self.rx, &mut self.rp, &mut self.rt);
         sys.flow(mode_new, t, &self.x_plus, p, &mut self.f_plus);
+        self.rx_nz.clear();
+        for (i, row) in self.rx.chunks_exact(n.max(1)).take(n).enumerate() {
+            self.rx_rows[i] = self.rx_nz.len();
+            self.rx_nz.extend(row.iter().enumerate().filter(|(_, v)| **v != 0.0).map(|(c, &v)| (c, v)));
+        }
+        self.rx_rows[n] = self.rx_nz.len();
+        // The products over a row's nonzeros, in column order: the sums of `dot_nonzero` over
+        // the whole row, term for term.
+        let (nz, rows) = (&self.rx_nz, &self.rx_rows);
+        let row_dot =
+            |i: usize, b: &[f64]| -> f64 { nz[rows[i]..rows[i + 1]].iter().map(|&(c, v)| v * b[c]).sum() };
         // v = R_x f- + R_t - f+, the jump of the velocity seen through the reset.
         for i in 0..n {
-            let row = &self.rx[i * n..(i + 1) * n];
-            self.v[i] = dot(row, &self.f_minus) + self.rt[i] - self.f_plus[i];
+            self.v[i] = row_dot(i, &self.f_minus) + self.rt[i] - self.f_plus[i];
         }
         for j in 0..m {
             let sj = &s[j * n..(j + 1) * n];
             for i in 0..n {
-                let row = &self.rx[i * n..(i + 1) * n];
-                let rs = dot_nonzero(row, sj);
+                let rs = row_dot(i, sj);
                 self.s_plus[j * n + i] = rs + self.rp[j * n + i] + times_nonzero(self.v[i], self.dte[j]);
                 if want_total {
-                    let rf = dot(row, &self.f_minus);
+                    let rf = row_dot(i, &self.f_minus);
                     self.total[j * n + i] =
                         rs + self.rp[j * n + i] + times_nonzero(rf + self.rt[i], self.dte[j]);
                 }
