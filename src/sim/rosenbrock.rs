@@ -250,18 +250,15 @@ impl Rosenbrock {
     }
 }
 
-/// Components per block of [`combine2`]: its outputs and the stages' blocks stay in the L1 cache
-/// while every stage is added.
-const BLOCK: usize = 256;
-
 /// `out_r = sum_j w_rj k_j` for two weight rows `(w_r, total_r)` over the stages `k` (blocks of
 /// `nz`; `w_r` weighs the first `w_r.len()` of them), for weights that sum to `total_r` (exactly,
 /// as `row_tableau`'s tests check), formed as `total k_0 + sum_{j>0} w_j (k_j - k_0)`: the slope
 /// common to all stages is weighted once, so a component moving at a constant rate `K` (any `K`,
 /// not only 1) gets exactly `total K`, as `sums::centred_sum` does for the explicit pairs' zero-sum
 /// rows. Then `finish(component, [out_0, out_1])` per component. Both rows are summed block by
-/// block in one pass over the stages (each component's sums in the order of the stages, the
-/// zero weights skipped, so the result does not depend on the blocking).
+/// block in one pass over the stages, each difference `k_j - k_0` formed once (each component's
+/// sums in the order of the stages, the zero weights skipped, so the result does not depend on
+/// the blocking).
 fn combine2(
     rows: [(&[f64], f64); 2],
     k: &[f64],
@@ -281,6 +278,8 @@ fn combine2(
         for j in 1..stages {
             let kj = &k[j * nz + start..j * nz + end];
             let weight = |r: usize| rows[r].0.get(j).copied().unwrap_or(0.0);
+            // A zero weight adds nothing (not even `0 * NaN` from a sensitivity that does not
+            // exist).
             let (a, b) = (weight(0), weight(1));
             if a != 0.0 && b != 0.0 {
                 for (((o0, o1), kj), k0) in o0.iter_mut().zip(o1.iter_mut()).zip(kj).zip(k0) {
@@ -299,6 +298,10 @@ fn combine2(
         }
     }
 }
+
+/// Components per block of [`combine2`]: its outputs and the stages' blocks stay in the L1 cache
+/// while every stage is added.
+const BLOCK: usize = 256;
 
 /// `o += a (kj - k0)`.
 fn add_weighted(a: f64, kj: &[f64], k0: &[f64], o: &mut [f64]) {
@@ -476,6 +479,8 @@ pub struct RowDense {
 }
 
 const STRIDE: usize = 2 + MAX_DENSE;
+/// Components whose dense rows [`RowDense::build`] sums together in registers.
+const DENSE_REGS: usize = 4;
 
 impl RowDense {
     pub(crate) fn new(nz: usize) -> RowDense {
@@ -488,35 +493,50 @@ impl RowDense {
         self.t0 = t0;
         self.h = h;
         self.n_q = tab.dense.len();
-        let rows = tab.dense;
-        // Block by block of components, each stage's difference formed once for all rows.
-        for start in (0..nz).step_by(BLOCK) {
-            let end = (start + BLOCK).min(nz);
-            let k0 = &k[start..end];
-            // Centred (each row sums to zero): a constant slope leaves exactly nothing. The sums
-            // start from -0.0 as `Iterator::sum` does.
-            let mut acc = [[-0.0f64; BLOCK]; MAX_DENSE];
-            let mut d = [0.0f64; BLOCK];
-            for j in 1..tab.stages {
-                let kj = &k[j * nz + start..j * nz + end];
-                for ((d, kj), k0) in d.iter_mut().zip(kj).zip(k0) {
-                    *d = kj - k0;
-                }
-                for (acc, row) in acc.iter_mut().zip(rows) {
-                    let w = row[j];
-                    for (a, d) in acc.iter_mut().zip(&d[..end - start]) {
-                        *a += w * d;
-                    }
+        let mut i0 = 0;
+        while i0 + DENSE_REGS <= nz {
+            self.build_block::<DENSE_REGS>(tab, h, z0, z1, k, i0);
+            i0 += DENSE_REGS;
+        }
+        for i in i0..nz {
+            self.build_block::<1>(tab, h, z0, z1, k, i);
+        }
+    }
+
+    /// Components `i0..i0 + W` of [`Self::build`]: every dense row's sum held in registers while
+    /// each stage's block is read once, the stage's difference formed once for all rows.
+    #[inline(always)]
+    fn build_block<const W: usize>(
+        &mut self,
+        tab: &RowTableau,
+        h: f64,
+        z0: &[f64],
+        z1: &[f64],
+        k: &[f64],
+        i0: usize,
+    ) {
+        let nz = z0.len();
+        let k0: [f64; W] = k[i0..i0 + W].try_into().expect("a block of W");
+        // Centred (each row sums to zero): a constant slope leaves exactly nothing. The sums
+        // start from -0.0 as `Iterator::sum` does.
+        let mut acc = [[-0.0f64; W]; MAX_DENSE];
+        for j in 1..tab.stages {
+            let kj: [f64; W] = k[j * nz + i0..j * nz + i0 + W].try_into().expect("a block of W");
+            let d: [f64; W] = std::array::from_fn(|l| kj[l] - k0[l]);
+            for (acc, row) in acc.iter_mut().zip(tab.dense) {
+                let w = row[j];
+                for (a, d) in acc.iter_mut().zip(&d) {
+                    *a += w * d;
                 }
             }
-            let coef = &mut self.coef[start * STRIDE..end * STRIDE];
-            for (e, c) in coef.chunks_exact_mut(STRIDE).enumerate() {
-                let i = start + e;
-                c[0] = z0[i];
-                c[1] = z1[i] - z0[i];
-                for (r, acc) in acc.iter().enumerate().take(rows.len()) {
-                    c[2 + r] = h * acc[e];
-                }
+        }
+        let coef = &mut self.coef[i0 * STRIDE..(i0 + W) * STRIDE];
+        for (l, c) in coef.chunks_exact_mut(STRIDE).enumerate() {
+            let i = i0 + l;
+            c[0] = z0[i];
+            c[1] = z1[i] - z0[i];
+            for (r, acc) in acc.iter().enumerate().take(tab.dense.len()) {
+                c[2 + r] = h * acc[l];
             }
         }
     }
