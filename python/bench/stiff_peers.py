@@ -557,6 +557,8 @@ def chain_amici(n: int, workdir_root: str = "/tmp/hybc_amici_chain", reuse: bool
     workdir = f"{workdir_root}{n}"
     path = f"{workdir}.xml"
     if reuse and pathlib.Path(workdir).is_dir():
+        import amici.sim.sundials  # noqa: F401  (the built module checks its SWIG version there)
+
         module = amici.import_model_module(f"chain{n}", workdir)
         model, compile_s = module.get_model(), float("nan")
     else:
