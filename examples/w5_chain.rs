@@ -7,7 +7,8 @@
 //!
 //! Run: `cargo run --release --example w5_chain [N ...]` (default 10 30 100 300 1000); each size
 //! in its own process gives a clean peak memory: `for n in 10 100 1000; do ...; done`. The
-//! figures are in README, Performance. `W5_CASES=banded` runs only the cases whose name holds it.
+//! figures are in README, Performance. `W5_CASES=banded` runs only the cases whose name holds it;
+//! `W5_REPS=k` runs each case k times (for profiles).
 
 use hybc::sim::{LinearSolver, Method, SimOptions};
 use hybc::Model;
@@ -75,7 +76,10 @@ fn main() {
                 ..SimOptions::default()
             };
             let mut sim = compiled.simulator(&opts).unwrap();
-            let reps = if n >= 300 && linear_solver == LinearSolver::Dense { 1 } else { 5 };
+            // `W5_REPS=k` repeats each run k times (profiles), else best of 5 (1 for the dense
+            // LU from 300 states).
+            let reps = std::env::var("W5_REPS").ok().and_then(|r| r.parse().ok());
+            let reps = reps.unwrap_or(if n >= 300 && linear_solver == LinearSolver::Dense { 1 } else { 5 });
             let (ms, r) = best(reps, || sim.run(&p).unwrap());
             let r = r.result();
             println!(

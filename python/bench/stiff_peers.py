@@ -1,6 +1,7 @@
 """Stiff workloads of issue #25, hybc against its peers, in the same minutes (outside CI).
 
     python python/bench/stiff_peers.py [robertson] [softball] [chain] [--repeat 5]
+        [--sizes 10,100,1000] [--peers hybc,scipy,diffrax,amici] [--reuse-amici]
 
 Needs a venv with hybc (pip install ./python), scipy, jax==0.10.2 with diffrax, and for AMICI
 `pip install amici==1.0.1` (a source build: cmake, swig and a CBLAS, e.g. Debian's
@@ -513,9 +514,11 @@ def chain_diffrax(n: int):
     return go, time.perf_counter() - start
 
 
-def chain_amici(n: int, workdir_root: str = "/tmp/hybc_amici_chain"):
+def chain_amici(n: int, workdir_root: str = "/tmp/hybc_amici_chain", reuse: bool = False):
     """AMICI 1.0.1 (CVODES BDF, forward sensitivities) on the chain as SBML: the cells and a
-    `fired` flag as rate-rule parameters, the top-up an event guarded by the flag."""
+    `fired` flag as rate-rule parameters, the top-up an event guarded by the flag. With `reuse`,
+    a model already built in the work directory is imported instead of built again (the build
+    at N = 1000 takes many minutes; its time is then reported as not measured)."""
     import amici
     import libsbml
 
@@ -553,23 +556,34 @@ def chain_amici(n: int, workdir_root: str = "/tmp/hybc_amici_chain"):
         a.setVariable(var), a.setMath(libsbml.parseL3Formula(formula))
     workdir = f"{workdir_root}{n}"
     path = f"{workdir}.xml"
-    libsbml.writeSBMLToFile(doc, path)
-    start = time.perf_counter()
-    model = amici.SbmlImporter(path).sbml2amici(f"chain{n}", workdir, compute_conservation_laws=False)
-    compile_s = time.perf_counter() - start
+    if reuse and pathlib.Path(workdir).is_dir():
+        import amici.sim.sundials  # noqa: F401  (the built module checks its SWIG version there)
+
+        module = amici.import_model_module(f"chain{n}", workdir)
+        model, compile_s = module.get_model(), float("nan")
+    else:
+        libsbml.writeSBMLToFile(doc, path)
+        start = time.perf_counter()
+        model = amici.SbmlImporter(path).sbml2amici(f"chain{n}", workdir, compute_conservation_laws=False)
+        compile_s = time.perf_counter() - start
     go = amici_runner(model, CHAIN_T, CHAIN_RTOL, CHAIN_ATOL, [f"d{k}" for k in range(10)],
                       [f"x{i}" for i in range(n)])
     return go, compile_s
 
 
-def chain(repeat: int, sizes=(10, 100, 1000)) -> None:
+ALL_PEERS = ("hybc", "scipy", "diffrax", "amici")
+
+
+def chain(repeat: int, sizes=(10, 100, 1000), peers=ALL_PEERS, reuse_amici: bool = False) -> None:
+    """`peers` chooses who runs (at N = 1000 diffrax's dense Jacobian makes it slow to trace and
+    run); the reference is always computed."""
     for n in sizes:
         print(f"W5 chain, N = {n}, 10 gradients, T = {CHAIN_T:g}, rtol {CHAIN_RTOL:g}, atol {CHAIN_ATOL:g} "
               "(errors in units of atol + rtol |x|)")
         ref_go, _ = chain_hybc(n, "rodas5p", 1e-12, 1e-14)
         ref_x, ref_d = chain_values(ref_go(), n)
         err = lambda got, want: tol_err(got, want, CHAIN_RTOL, CHAIN_ATOL)  # noqa: E731
-        for method in ("rodas5p", "auto", "dopri5", "dop853"):
+        for method in ("rodas5p", "auto", "dopri5", "dop853") if "hybc" in peers else ():
             try:
                 go, compile_s = chain_hybc(n, method)
                 t, run = best_of(go, repeat)
@@ -580,23 +594,27 @@ def chain(repeat: int, sizes=(10, 100, 1000)) -> None:
             steps = json.loads(run.to_json())["stats"]["steps"]
             row(f"hybc {method} (+ 10 gradients)", t, steps, err(x, ref_x), err(d, ref_d),
                 f"compile {compile_s * 1e3:.0f} ms")
-        for method in ("Radau", "BDF"):
+        for method in ("Radau", "BDF") if "scipy" in peers else ():
             try:
                 t, (x, steps) = best_of(chain_scipy(n, method), max(1, repeat // 2))
                 row(f"scipy {method} (values only)", t, steps, err(x, ref_x), None)
             except ImportError as e:
                 print(f"  scipy: missing ({e})")
         try:
+            if "diffrax" not in peers:
+                raise ImportError("not asked for (--peers)")
             go, first = chain_diffrax(n)
             t, (x, d, steps) = best_of(go, max(1, repeat // 2))
             row("diffrax Kvaerno5 (+ jacfwd)", t, steps, err(x, ref_x), err(d, ref_d), f"first call {first:.1f} s")
         except ImportError as e:
             print(f"  diffrax: missing ({e})")
         try:
-            go, compile_s = chain_amici(n)
+            if "amici" not in peers:
+                raise ImportError("not asked for (--peers)")
+            go, compile_s = chain_amici(n, reuse=reuse_amici)
             t, (x, d, steps) = best_of(go, repeat)
-            row("AMICI 1.0.1 CVODES (+ forward sens)", t, steps, err(x, ref_x), err(d, ref_d),
-                f"model build {compile_s:.0f} s")
+            build = "model reused (--reuse-amici)" if compile_s != compile_s else f"model build {compile_s:.0f} s"
+            row("AMICI 1.0.1 CVODES (+ forward sens)", t, steps, err(x, ref_x), err(d, ref_d), build)
         except ImportError as e:
             print(f"  AMICI: missing ({e})")
 
@@ -605,9 +623,17 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("workloads", nargs="*", default=["robertson"])
     parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--sizes", default="10,100,1000", help="the chain's sizes N, comma-separated")
+    parser.add_argument("--peers", default=",".join(ALL_PEERS), help="chain: who runs, comma-separated")
+    parser.add_argument("--reuse-amici", action="store_true", help="chain: import AMICI models already built")
     args = parser.parse_args()
+    sizes = tuple(int(n) for n in args.sizes.split(","))
+    peers = tuple(args.peers.split(","))
     for name in args.workloads:
-        {"robertson": robertson, "softball": softball, "chain": chain}[name](args.repeat)
+        if name == "chain":
+            chain(args.repeat, sizes, peers, args.reuse_amici)
+        else:
+            {"robertson": robertson, "softball": softball}[name](args.repeat)
 
 
 if __name__ == "__main__":

@@ -78,6 +78,8 @@ impl Kernel {
 pub struct CompiledModel {
     info: SystemInfo,
     kernels: ModelKernels<Kernel>,
+    /// Each event's `R_x` entries, in the order its `reset_jac` kernel writes their values.
+    reset_patterns: Vec<Vec<(u32, u32)>>,
     n_kernels: usize,
     module: Mutex<Option<JITModule>>,
     /// The model's functions, kept to compile the stiff kernels on demand (their second
@@ -126,6 +128,11 @@ impl CompiledModel {
         match build_kernels(&mut module, funcs, &parts) {
             Ok(kernels) => Ok(CompiledModel {
                 info,
+                reset_patterns: funcs
+                    .events
+                    .iter()
+                    .map(|ev| ev.reset_x.entries.iter().map(|&(i, c, _)| (i, c)).collect())
+                    .collect(),
                 // A kernel cut into parts is the parts plus their driver.
                 n_kernels: parts.iter().map(|(_, p)| if p.len() > 1 { p.len() + 1 } else { 1 }).sum(),
                 kernels,
@@ -492,6 +499,39 @@ impl HybridSystem for CompiledModel {
     }
 
     fn reset_jac(
+        &self,
+        event: usize,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+        rx: &mut [f64],
+        rp: &mut [f64],
+        rt: &mut [f64],
+    ) {
+        // The kernel writes `R_x`'s entries; the dense matrix is for callers that want it (the
+        // integrator asks for the entries).
+        let n = self.info.n_states();
+        match (self.kernels.reset_jac.get(event), self.reset_patterns.get(event)) {
+            (Some(k), Some(pattern)) if rx.len() == n * n => {
+                let mut vals = vec![0.0; pattern.len()];
+                if k.call(t, x, &[], p, [&mut vals, rp, rt]).is_some() {
+                    rx.fill(0.0);
+                    for (&(r, c), v) in pattern.iter().zip(vals) {
+                        rx[r as usize * n + c as usize] = v;
+                    }
+                } else {
+                    rx.fill(f64::NAN);
+                }
+            }
+            _ => poison([rx, rp, rt]),
+        }
+    }
+
+    fn reset_jac_pattern(&self, event: usize) -> Option<&[(u32, u32)]> {
+        self.reset_patterns.get(event).map(Vec::as_slice)
+    }
+
+    fn reset_jac_values(
         &self,
         event: usize,
         t: f64,

@@ -395,10 +395,14 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
             reset.write(0, i, Term::Expr(r))?;
         }
 
-        let mut rj = KernelPlan::new(format!("event{ev_idx}_reset_jac"), dims.lens(n, 0, [n * n, n * m, n]));
-        rj.prefill = [true; 3];
-        for &(i, c, e) in &ev.reset_x.entries {
-            rj.write(0, i as usize * n + c as usize, Term::Expr(e))?;
+        // `R_x` as its structurally nonzero entries, in the order of `reset_x` (the pattern
+        // `CompiledModel::reset_jac_pattern` gives): every one is written, so it needs no zero
+        // fill, and a reset's Jacobian takes memory in its entries, not `n^2`.
+        let nnz = ev.reset_x.entries.len();
+        let mut rj = KernelPlan::new(format!("event{ev_idx}_reset_jac"), dims.lens(n, 0, [nnz, n * m, n]));
+        rj.prefill = [false, true, true];
+        for (k, &(_, _, e)) in ev.reset_x.entries.iter().enumerate() {
+            rj.write(0, k, Term::Expr(e))?;
         }
         for &(i, param, e) in &ev.reset_p.entries {
             if let Some(c) = dims.grad_col[param as usize] {

@@ -81,7 +81,16 @@ pub(crate) struct Jump {
     m: usize,
     gx: Vec<f64>,
     gp: Vec<f64>,
+    /// `R_x`: the values of the system's pattern (`reset_jac_pattern`), or the dense matrix
+    /// (`n^2`, sized on first use) for a system without one.
     rx: Vec<f64>,
+    /// `R_x`'s nonzero entries row by row in column order (`(column, value)`, row `i` at
+    /// `rx_rows[i]..rx_rows[i + 1]`): a reset touches few states, so the products below run over
+    /// these instead of `n^2` entries per sensitivity column.
+    rx_nz: Vec<(usize, f64)>,
+    rx_rows: Vec<usize>,
+    /// Scratch: the nonzero entries `(row, column, value)` of a pattern, sorted.
+    rx_sorted: Vec<(usize, usize, f64)>,
     rp: Vec<f64>,
     rt: Vec<f64>,
     f_minus: Vec<f64>,
@@ -118,7 +127,10 @@ impl Jump {
             m,
             gx: vec![0.0; n],
             gp: vec![0.0; m],
-            rx: vec![0.0; n * n],
+            rx: Vec::new(),
+            rx_nz: Vec::new(),
+            rx_rows: vec![0; n + 1],
+            rx_sorted: Vec::new(),
             rp: vec![0.0; n * m],
             rt: vec![0.0; n],
             f_minus: vec![0.0; n],
@@ -167,21 +179,24 @@ impl Jump {
             None => self.event_time_gradient(sys, ev, t, x, s, p, context),
         };
         sys.reset(ev, t, x, p, &mut self.x_plus);
-        sys.reset_jac(ev, t, x, p, &mut self.rx, &mut self.rp, &mut self.rt);
+        self.reset_jacobian(sys, ev, t, x, p);
         sys.flow(mode_new, t, &self.x_plus, p, &mut self.f_plus);
+        // The products over a row's nonzeros, in column order: the sums of `dot_nonzero` over
+        // the whole row, term for term.
+        let (nz, rows) = (&self.rx_nz, &self.rx_rows);
+        let row_dot =
+            |i: usize, b: &[f64]| -> f64 { nz[rows[i]..rows[i + 1]].iter().map(|&(c, v)| v * b[c]).sum() };
         // v = R_x f- + R_t - f+, the jump of the velocity seen through the reset.
         for i in 0..n {
-            let row = &self.rx[i * n..(i + 1) * n];
-            self.v[i] = dot(row, &self.f_minus) + self.rt[i] - self.f_plus[i];
+            self.v[i] = row_dot(i, &self.f_minus) + self.rt[i] - self.f_plus[i];
         }
         for j in 0..m {
             let sj = &s[j * n..(j + 1) * n];
             for i in 0..n {
-                let row = &self.rx[i * n..(i + 1) * n];
-                let rs = dot_nonzero(row, sj);
+                let rs = row_dot(i, sj);
                 self.s_plus[j * n + i] = rs + self.rp[j * n + i] + times_nonzero(self.v[i], self.dte[j]);
                 if want_total {
-                    let rf = dot(row, &self.f_minus);
+                    let rf = row_dot(i, &self.f_minus);
                     self.total[j * n + i] =
                         rs + self.rp[j * n + i] + times_nonzero(rf + self.rt[i], self.dte[j]);
                 }
@@ -190,6 +205,45 @@ impl Jump {
         x.copy_from_slice(&self.x_plus);
         s.copy_from_slice(&self.s_plus);
         outcome
+    }
+
+    /// `R_x` (into `rx_nz`, `rx_rows`), `R_p` and `R_t` of event `ev` at `(t, x)`.
+    fn reset_jacobian<S: HybridSystem + ?Sized>(&mut self, sys: &S, ev: usize, t: f64, x: &[f64], p: &[f64]) {
+        let n = self.n;
+        self.rx_nz.clear();
+        match sys.reset_jac_pattern(ev) {
+            Some(pattern) => {
+                self.rx.resize(pattern.len(), 0.0);
+                sys.reset_jac_values(ev, t, x, p, &mut self.rx, &mut self.rp, &mut self.rt);
+                self.rx_sorted.clear();
+                self.rx_sorted.extend(
+                    pattern
+                        .iter()
+                        .zip(&self.rx)
+                        .filter(|(_, v)| **v != 0.0)
+                        .map(|(&(r, c), &v)| (r as usize, c as usize, v)),
+                );
+                self.rx_sorted.sort_unstable_by_key(|&(r, c, _)| (r, c));
+                let mut k = 0;
+                for i in 0..n {
+                    self.rx_rows[i] = self.rx_nz.len();
+                    while k < self.rx_sorted.len() && self.rx_sorted[k].0 == i {
+                        self.rx_nz.push((self.rx_sorted[k].1, self.rx_sorted[k].2));
+                        k += 1;
+                    }
+                }
+            }
+            None => {
+                self.rx.resize(n * n, 0.0);
+                sys.reset_jac(ev, t, x, p, &mut self.rx, &mut self.rp, &mut self.rt);
+                for (i, row) in self.rx.chunks_exact(n.max(1)).take(n).enumerate() {
+                    self.rx_rows[i] = self.rx_nz.len();
+                    self.rx_nz
+                        .extend(row.iter().enumerate().filter(|(_, v)| **v != 0.0).map(|(c, &v)| (c, v)));
+                }
+            }
+        }
+        self.rx_rows[n] = self.rx_nz.len();
     }
 
     /// Applies the flow switch `ev` (an implicit event: no reset, no mode change) at time `t`,

@@ -47,10 +47,23 @@ pub const SPARSE_MIN_STATES: usize = 3;
 pub(crate) struct Structure {
     /// `perm[i]`: the position of state `i` in the banded order.
     perm: Vec<usize>,
+    /// `perm` is the identity: a single right-hand side is solved in place.
+    identity: bool,
     /// Each pattern entry's `(row, column)` in the banded order.
     at: Vec<(usize, usize)>,
     /// Each pattern entry's `(row, column)` as the model numbers the states.
     entries: Vec<(usize, usize)>,
+    /// The entries' positions in the pattern grouped by row (in pattern order within a row),
+    /// row `r` at `row_start[r]..row_start[r + 1]`: row sums and products without a scratch
+    /// row or scattered updates.
+    by_row: Vec<usize>,
+    row_start: Vec<usize>,
+    /// When the pattern fills a band of the model's own numbering exactly (every position from
+    /// `kl0` below to `ku0` above the diagonal an entry, once: a chain), `(kl0, ku0)` and each
+    /// entry's slot in diagonal storage (`diagonal * n + row`); the product `f_x x` then runs
+    /// along contiguous diagonals. With a hole in the band a zero slot would multiply an
+    /// entry of `x` the pattern does not read (a NaN there must not spread), so then no.
+    diagonals: Option<(usize, usize, Vec<usize>)>,
     kl: usize,
     ku: usize,
 }
@@ -59,20 +72,45 @@ impl Structure {
     /// Orders the states by reverse Cuthill-McKee on the symmetrised pattern and measures the
     /// band; `None` when the banded factorisation would cost more than the dense one.
     pub(crate) fn analyse(n: usize, entries: &[(u32, u32)]) -> Option<Structure> {
-        let perm = rcm(n, entries);
-        let at: Vec<(usize, usize)> =
-            entries.iter().map(|&(r, c)| (perm[r as usize], perm[c as usize])).collect();
-        let (mut kl, mut ku) = (0usize, 0usize);
-        for &(r, c) in &at {
-            kl = kl.max(r.saturating_sub(c));
-            ku = ku.max(c.saturating_sub(r));
-        }
+        let entries: Vec<(usize, usize)> = entries.iter().map(|&(r, c)| (r as usize, c as usize)).collect();
         // Factor multiplications: banded `n kl (kl + ku)` (pivoting widens the upper band to
         // `kl + ku`), dense `n^3 / 3`.
-        let banded = n as f64 * kl as f64 * (kl + ku) as f64;
+        let cost = |(kl, ku): (usize, usize)| n as f64 * kl as f64 * (kl + ku) as f64;
+        let natural = band_of(entries.iter().copied());
+        let ordered = rcm(n, &entries);
+        let reordered = band_of(entries.iter().map(|&(r, c)| (ordered[r], ordered[c])));
+        // The model's own numbering when it is as narrow (a chain written in order): the
+        // solves' permutation is then the identity, read in order.
+        let (perm, (kl, ku)) =
+            if cost(natural) <= cost(reordered) { ((0..n).collect(), natural) } else { (ordered, reordered) };
+        let at: Vec<(usize, usize)> = entries.iter().map(|&(r, c)| (perm[r], perm[c])).collect();
         let dense = (n as f64).powi(3) / 3.0;
-        let entries = entries.iter().map(|&(r, c)| (r as usize, c as usize)).collect();
-        (banded < dense).then_some(Structure { perm, at, entries, kl, ku })
+        let mut row_start = vec![0usize; n + 1];
+        for &(r, _) in &entries {
+            row_start[r + 1] += 1;
+        }
+        for r in 0..n {
+            row_start[r + 1] += row_start[r];
+        }
+        let mut next = row_start.clone();
+        let mut by_row = vec![0usize; entries.len()];
+        for (k, &(r, _)) in entries.iter().enumerate() {
+            by_row[next[r]] = k;
+            next[r] += 1;
+        }
+        let diagonals = full_band(n, &entries, natural);
+        let identity = perm.iter().enumerate().all(|(i, &p)| i == p);
+        (cost((kl, ku)) < dense).then_some(Structure {
+            perm,
+            identity,
+            at,
+            entries,
+            by_row,
+            row_start,
+            diagonals,
+            kl,
+            ku,
+        })
     }
 
     /// `(kl, ku)`: the band below and above the diagonal.
@@ -81,13 +119,43 @@ impl Structure {
     }
 }
 
+/// `(kl, ku)`: the band below and above the diagonal that `entries` span.
+fn band_of(entries: impl Iterator<Item = (usize, usize)>) -> (usize, usize) {
+    entries.fold((0, 0), |(kl, ku), (r, c)| (kl.max(r.saturating_sub(c)), ku.max(c.saturating_sub(r))))
+}
+
+/// Each entry's slot `(c - r + kl) * n + r` in diagonal storage when the entries fill the band
+/// `(kl, ku)` exactly, every position once; `None` otherwise (or when the band's storage would
+/// be large against the pattern).
+fn full_band(
+    n: usize,
+    entries: &[(usize, usize)],
+    (kl, ku): (usize, usize),
+) -> Option<(usize, usize, Vec<usize>)> {
+    let width = kl + ku + 1;
+    // Positions in the band: `n` per diagonal less the ends it loses.
+    let positions = width * n - (kl * (kl + 1) + ku * (ku + 1)) / 2;
+    if n == 0 || width > n || entries.len() != positions {
+        return None;
+    }
+    let mut seen = vec![false; width * n];
+    let mut slots = Vec::with_capacity(entries.len());
+    for &(r, c) in entries {
+        let slot = (c + kl - r) * n + r;
+        if std::mem::replace(&mut seen[slot], true) {
+            return None;
+        }
+        slots.push(slot);
+    }
+    Some((kl, ku, slots))
+}
+
 /// Reverse Cuthill-McKee: breadth-first from a node of least degree in each connected
 /// component, neighbours by increasing degree, the order reversed. Returns `perm[i]`, the new
 /// position of node `i`.
-fn rcm(n: usize, entries: &[(u32, u32)]) -> Vec<usize> {
+fn rcm(n: usize, entries: &[(usize, usize)]) -> Vec<usize> {
     let mut adj: Vec<Vec<usize>> = vec![Vec::new(); n];
     for &(r, c) in entries {
-        let (r, c) = (r as usize, c as usize);
         if r != c && r < n && c < n {
             adj[r].push(c);
             adj[c].push(r);
@@ -138,6 +206,8 @@ struct Band {
     ld: usize,
     ab: Vec<f64>,
     piv: Vec<usize>,
+    /// `1 / u_jj`, the pivots' reciprocals (the solves multiply by them).
+    inv: Vec<f64>,
     /// The right-hand sides in the banded order, row-major.
     work: Vec<f64>,
 }
@@ -151,6 +221,7 @@ impl Band {
         self.ab.clear();
         self.ab.resize(n * self.ld, 0.0);
         self.piv.resize(n, 0);
+        self.inv.resize(n, 0.0);
     }
 
     #[inline(always)]
@@ -183,6 +254,7 @@ impl Band {
                 }
             }
             let inv = 1.0 / self.ab[self.idx(j, j)];
+            self.inv[j] = inv;
             for i in j + 1..=last {
                 let k = self.idx(i, j);
                 self.ab[k] *= inv;
@@ -204,7 +276,81 @@ impl Band {
     /// Solves in place for `cols` right-hand sides in the banded order, stored row-major
     /// (`b[i * cols + c]`): every row operation acts on all the columns at once, so the
     /// substitutions' dependency chains run side by side instead of one column after another.
+    /// Rows of up to 16 columns are fixed-size arrays (the row operations unrolled).
     fn solve(&self, b: &mut [f64], cols: usize) {
+        macro_rules! fixed {
+            ($($c:literal)*) => {
+                match cols {
+                    $($c => self.solve_rows::<$c>(b.as_chunks_mut::<$c>().0),)*
+                    _ => self.solve_any(b, cols),
+                }
+            };
+        }
+        fixed!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16)
+    }
+
+    /// [`Self::solve`] for rows of `C` columns. The row that the next step needs first (row
+    /// `j + 1` going down, `j - 1` going up) is carried in registers instead of being stored
+    /// and loaded again: that store and load were on the substitution's dependency chain, which
+    /// bounds the solve's speed. The operations and their order are those of
+    /// [`Self::solve_any`].
+    fn solve_rows<const C: usize>(&self, b: &mut [[f64; C]]) {
+        let (n, kl, ku2, ld) = (self.n, self.kl, self.ku2, self.ld);
+        if n == 0 {
+            return;
+        }
+        let sub = |row: &mut [f64; C], m: f64, by: &[f64; C]| {
+            if m != 0.0 {
+                for (x, y) in row.iter_mut().zip(by) {
+                    *x -= m * y;
+                }
+            }
+        };
+        // Row j with every earlier column's update applied.
+        let mut cur = b[0];
+        for j in 0..n {
+            let p = self.piv[j];
+            if p != j {
+                std::mem::swap(&mut cur, &mut b[p]);
+            }
+            let last = (j + kl).min(n - 1);
+            // Column j's multipliers are contiguous in `ab`.
+            let l = &self.ab[j * ld + ku2 + 1..j * ld + ku2 + 1 + (last - j)];
+            let mut next = if j + 1 < n { b[j + 1] } else { cur };
+            if let Some((&l1, rest)) = l.split_first() {
+                sub(&mut next, l1, &cur);
+                for (bi, &l) in b[j + 2..=last].iter_mut().zip(rest) {
+                    sub(bi, l, &cur);
+                }
+            }
+            b[j] = cur;
+            cur = next;
+        }
+        // Row j with every later row's update applied.
+        let mut cur = b[n - 1];
+        for j in (0..n).rev() {
+            for x in cur.iter_mut() {
+                *x *= self.inv[j];
+            }
+            b[j] = cur;
+            let first = j.saturating_sub(ku2);
+            let u = &self.ab[j * ld + ku2 - (j - first)..j * ld + ku2];
+            if let Some((&u1, rest)) = u.split_last() {
+                let mut next = b[j - 1];
+                sub(&mut next, u1, &cur);
+                for (bi, &u) in b[first..j - 1].iter_mut().zip(rest) {
+                    sub(bi, u, &cur);
+                }
+                cur = next;
+            } else if j > 0 {
+                // No band above the diagonal: the next row has no update.
+                cur = b[j - 1];
+            }
+        }
+    }
+
+    /// [`Self::solve`] for rows of any width.
+    fn solve_any(&self, b: &mut [f64], cols: usize) {
         let (n, kl, ku2) = (self.n, self.kl, self.ku2);
         let row = |i: usize| i * cols..(i + 1) * cols;
         for j in 0..n {
@@ -229,12 +375,11 @@ impl Band {
             }
         }
         for j in (0..n).rev() {
-            let inv = 1.0 / self.ab[self.idx(j, j)];
             let first = j.saturating_sub(ku2);
             let (head, tail) = b.split_at_mut(j * cols);
             let bj = &mut tail[..cols];
             for x in bj.iter_mut() {
-                *x *= inv;
+                *x *= self.inv[j];
             }
             let u = &self.ab[self.idx(first, j)..self.idx(j, j)];
             for (bi, &u) in head[first * cols..].chunks_exact_mut(cols).zip(u) {
@@ -260,6 +405,8 @@ pub(crate) struct LinSolve {
     /// The mode whose structure `fx` follows, `None` for dense.
     current: Option<usize>,
     band: Band,
+    /// `f_x` in diagonal storage (`Structure::diagonals`), filled by [`Self::factor`].
+    diag: Vec<f64>,
     lu: Option<nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>>,
 }
 
@@ -301,22 +448,41 @@ impl LinSolve {
         }
     }
 
+    /// The banded analysis `fx` follows, `None` on the dense path.
+    fn structure(&self) -> Option<&Structure> {
+        match self.structures.get(self.current?) {
+            Some(Some(Some(s))) => Some(s),
+            _ => None,
+        }
+    }
+
     /// `y += a f_x x` for every block of `n` of `x` and `y` (the state and each sensitivity
-    /// column), from the values in `fx` (dense or the pattern's).
+    /// column), from the values in `fx` (dense or the pattern's; on the banded path as of the
+    /// last [`Self::factor`], which the stepper calls first). Each `y_r` gets its row's terms
+    /// in the pattern's order, or by column on a full band.
     pub(crate) fn mul_add(&self, a: f64, x: &[f64], y: &mut [f64]) {
         let n = self.n;
         if n == 0 {
             return;
         }
-        let entries = self.current.and_then(|key| match self.structures.get(key) {
-            Some(Some(Some(s))) => Some(&s.entries),
-            _ => None,
-        });
+        let structure = self.structure();
         for (yc, xc) in y.chunks_exact_mut(n).zip(x.chunks_exact(n)) {
-            match entries {
-                Some(entries) => {
-                    for (&(r, c), &v) in entries.iter().zip(&self.fx) {
-                        yc[r] += a * v * xc[c];
+            match structure {
+                Some(Structure { diagonals: Some((kl, ku, _)), .. }) => {
+                    // Diagonal by diagonal, contiguous: `y_r += a f_(r, r + d) x_(r + d)`.
+                    for (k, diag) in self.diag.chunks_exact(n).take(kl + ku + 1).enumerate() {
+                        let (rows, x0) = if k < *kl { (kl - k..n, 0) } else { (0..n - (k - kl), k - kl) };
+                        let xs = &xc[x0..];
+                        for ((y, v), x) in yc[rows.clone()].iter_mut().zip(&diag[rows]).zip(xs) {
+                            *y += a * v * x;
+                        }
+                    }
+                }
+                Some(s) => {
+                    for (r, yr) in yc.iter_mut().enumerate() {
+                        for &k in &s.by_row[s.row_start[r]..s.row_start[r + 1]] {
+                            *yr += a * self.fx[k] * xc[s.entries[k].1];
+                        }
                     }
                 }
                 None => {
@@ -329,21 +495,19 @@ impl LinSolve {
         }
     }
 
-    /// `||f_x||_inf`, the largest absolute row sum of the values in `fx`.
+    /// `||f_x||_inf`, the largest absolute row sum of the values in `fx` (no allocation: the
+    /// auto stepper asks after every Rodas5P step).
     pub(crate) fn row_abs_max(&self) -> f64 {
         let n = self.n;
-        let entries = self.current.and_then(|key| match self.structures.get(key) {
-            Some(Some(Some(s))) => Some(&s.entries),
-            _ => None,
-        });
-        match entries {
-            Some(entries) => {
-                let mut rows = vec![0.0; n];
-                for (&(r, _), &v) in entries.iter().zip(&self.fx) {
-                    rows[r] += v.abs();
-                }
-                rows.into_iter().fold(0.0, f64::max)
-            }
+        match self.structure() {
+            Some(s) => (0..n)
+                .map(|r| {
+                    s.by_row[s.row_start[r]..s.row_start[r + 1]]
+                        .iter()
+                        .map(|&k| self.fx[k].abs())
+                        .sum::<f64>()
+                })
+                .fold(0.0, f64::max),
             None => (0..n)
                 .map(|i| self.fx[i * n..(i + 1) * n].iter().map(|v| v.abs()).sum::<f64>())
                 .fold(0.0, f64::max),
@@ -358,6 +522,12 @@ impl LinSolve {
         match self.current {
             Some(key) => {
                 let Some(Some(Some(s))) = self.structures.get(key) else { return false };
+                if let Some((kl, ku, slots)) = &s.diagonals {
+                    self.diag.resize((kl + ku + 1) * n, 0.0);
+                    for (&slot, &v) in slots.iter().zip(&self.fx) {
+                        self.diag[slot] = v;
+                    }
+                }
                 self.band.ab.fill(0.0);
                 for (&(r, c), &v) in s.at.iter().zip(&self.fx) {
                     let k = self.band.idx(r, c);
@@ -390,18 +560,31 @@ impl LinSolve {
         match self.current {
             Some(key) => {
                 let Some(Some(Some(s))) = self.structures.get(key) else { return false };
-                // Into the banded order, row-major over the columns, and back.
+                if cols == 1 && s.identity {
+                    self.band.solve(&mut b[..n], 1);
+                    return true;
+                }
+                // Into the banded order, row-major over the columns, and back, a block of
+                // states at a time (its rows of `work` stay in the cache while every column
+                // passes).
                 let mut work = std::mem::take(&mut self.band.work);
                 work.resize(n * cols, 0.0);
-                for (c, col) in b.chunks_exact(n).take(cols).enumerate() {
-                    for (&v, &at) in col.iter().zip(&s.perm) {
-                        work[at * cols + c] = v;
+                const STATES: usize = 64;
+                for start in (0..n).step_by(STATES) {
+                    let end = (start + STATES).min(n);
+                    for (c, col) in b.chunks_exact(n).take(cols).enumerate() {
+                        for (&v, &at) in col[start..end].iter().zip(&s.perm[start..end]) {
+                            work[at * cols + c] = v;
+                        }
                     }
                 }
                 self.band.solve(&mut work, cols);
-                for (c, col) in b.chunks_exact_mut(n).take(cols).enumerate() {
-                    for (v, &at) in col.iter_mut().zip(&s.perm) {
-                        *v = work[at * cols + c];
+                for start in (0..n).step_by(STATES) {
+                    let end = (start + STATES).min(n);
+                    for (c, col) in b.chunks_exact_mut(n).take(cols).enumerate() {
+                        for (v, &at) in col[start..end].iter_mut().zip(&s.perm[start..end]) {
+                            *v = work[at * cols + c];
+                        }
                     }
                 }
                 self.band.work = work;
@@ -448,29 +631,86 @@ mod tests {
         }
         lin.fx.copy_from_slice(&vals);
         assert!(lin.factor(hg));
-        let cols = 3;
-        let b: Vec<f64> = (0..n * cols).map(|_| rnd(&mut seed)).collect();
-        let mut x = b.clone();
-        assert!(lin.solve(&mut x, cols));
-        for c in 0..cols {
-            let wx = w_times(entries, &vals, hg, &x[c * n..(c + 1) * n]);
-            for i in 0..n {
-                let r = (wx[i] - b[c * n + i]).abs();
-                assert!(r < 1e-11, "n {n}: residual {r:e} at {i}, column {c}");
-            }
-        }
-        // The dense path gives the same solution.
         let mut dense = LinSolve::new(n);
         assert!(!dense.select(LinearSolver::Dense, Some((0, entries))));
         for (&(r, c), &v) in entries.iter().zip(&vals) {
             dense.fx[r as usize * n + c as usize] += v;
         }
         assert!(dense.factor(hg));
-        let mut y = b.clone();
-        assert!(dense.solve(&mut y, cols));
-        for (a, b) in x.iter().zip(&y) {
-            assert!((a - b).abs() < 1e-10 * b.abs().max(1.0), "{a} vs {b}");
+        // One column (solved in place when the order is the model's), a few (fixed-size rows),
+        // and more than the fixed sizes.
+        for cols in [1, 3, 20] {
+            let b: Vec<f64> = (0..n * cols).map(|_| rnd(&mut seed)).collect();
+            let mut x = b.clone();
+            assert!(lin.solve(&mut x, cols));
+            for c in 0..cols {
+                let wx = w_times(entries, &vals, hg, &x[c * n..(c + 1) * n]);
+                for i in 0..n {
+                    let r = (wx[i] - b[c * n + i]).abs();
+                    assert!(r < 1e-11, "n {n}: residual {r:e} at {i}, column {c} of {cols}");
+                }
+            }
+            // The dense path gives the same solution.
+            let mut y = b.clone();
+            assert!(dense.solve(&mut y, cols));
+            for (a, b) in x.iter().zip(&y) {
+                assert!((a - b).abs() < 1e-10 * b.abs().max(1.0), "{a} vs {b}");
+            }
         }
+        // `y += a f_x x` and the row sums agree with the dense matrix's.
+        let a = 0.7;
+        let x: Vec<f64> = (0..3 * n).map(|_| rnd(&mut seed)).collect();
+        let y0: Vec<f64> = (0..3 * n).map(|_| rnd(&mut seed)).collect();
+        let (mut y, mut want) = (y0.clone(), y0);
+        lin.mul_add(a, &x, &mut y);
+        dense.mul_add(a, &x, &mut want);
+        for (got, want) in y.iter().zip(&want) {
+            assert!((got - want).abs() <= 1e-14 * want.abs().max(1.0), "{got} vs {want}");
+        }
+        let (got, want) = (lin.row_abs_max(), dense.row_abs_max());
+        assert!((got - want).abs() <= 1e-14 * want, "{got} vs {want}");
+    }
+
+    /// A chain numbered in order: the model's own order is kept (no permutation) and the
+    /// pattern fills the tridiagonal band, so products run along its diagonals.
+    #[test]
+    fn a_chain_in_order_keeps_its_numbering_and_its_diagonals() {
+        let n = 50u32;
+        let e: Vec<(u32, u32)> =
+            (0..n).flat_map(|i| [(i, i.saturating_sub(1)), (i, i), (i, (i + 1).min(n - 1))]).collect();
+        let mut e: Vec<(u32, u32)> =
+            e.into_iter().collect::<std::collections::BTreeSet<_>>().into_iter().collect();
+        // Not sorted by row: the products must not depend on the pattern's order.
+        e.reverse();
+        let s = Structure::analyse(n as usize, &e).expect("a band");
+        assert!(s.identity);
+        assert_eq!(s.band(), (1, 1));
+        assert!(s.diagonals.is_some());
+        check(n as usize, &e, 0.5, Some((1, 1)));
+    }
+
+    /// A band with a hole (the chain without the entry (2, 3)) is not stored by diagonals: a NaN
+    /// in `x` at 3, which row 2 does not read, stays out of `y_2`.
+    #[test]
+    fn a_hole_in_the_band_keeps_a_nan_where_it_is() {
+        let n = 8u32;
+        let e: Vec<(u32, u32)> = (0..n)
+            .flat_map(|i| [(i, i), (i, i + 1), (i + 1, i)])
+            .filter(|&(r, c)| r < n && c < n && (r, c) != (2, 3))
+            .collect();
+        let s = Structure::analyse(n as usize, &e).expect("a band");
+        assert!(s.diagonals.is_none());
+        check(n as usize, &e, 0.5, None);
+        let mut lin = LinSolve::new(n as usize);
+        assert!(lin.select(LinearSolver::Banded, Some((0, &e))));
+        lin.fx.fill(1.0);
+        assert!(lin.factor(0.1));
+        let mut x = vec![1.0; n as usize];
+        x[3] = f64::NAN;
+        let mut y = vec![0.0; n as usize];
+        lin.mul_add(1.0, &x, &mut y);
+        assert_eq!(y[2], 2.0);
+        assert!(y[3].is_nan() && y[4].is_nan());
     }
 
     /// A chain whose states are numbered in a scrambled order.

@@ -74,7 +74,8 @@ pub struct Rosenbrock {
     /// The error estimate's vector `y1 - y1^` of the last attempt.
     err: Vec<f64>,
     pub(crate) dense: RowDense,
-    /// Derivatives of the dense output at [`INTERIOR`], `nz` each.
+    /// Derivatives of the dense output at [`INTERIOR`], of the states only (`n` each): the event
+    /// detector reads guard speeds, which depend on the states alone.
     interior: Vec<f64>,
     rhs_calls: usize,
     jac_calls: usize,
@@ -116,7 +117,7 @@ impl Rosenbrock {
             y_new: vec![0.0; nz],
             err: vec![0.0; nz],
             dense: RowDense::new(nz),
-            interior: vec![0.0; INTERIOR.len() * nz],
+            interior: vec![0.0; INTERIOR.len() * n],
             rhs_calls: 0,
             jac_calls: 0,
         }
@@ -175,28 +176,33 @@ impl Rosenbrock {
         }
         self.xv[..n].copy_from_slice(&y[..n]);
         for i in 0..tab.stages {
+            // Stage `i` is formed in its own slot of `k`: the earlier stages are read, never
+            // copied.
+            let (done, rest) = self.k.split_at_mut(i * nz);
+            let ki = &mut rest[..nz];
             if i == 0 {
-                self.r.copy_from_slice(&self.f0);
+                ki.copy_from_slice(&self.f0);
             } else {
-                // The increment first, then the start point: a clock's stage input is then
-                // `y + c_i h` to an ulp.
-                combine(tab.alpha[i], tab.c[i], &self.k, nz, &mut self.u);
-                for (u, y) in self.u.iter_mut().zip(y) {
-                    *u = y + h * *u;
-                }
-                rhs.eval(t + tab.c[i] * h, &self.u, &mut self.r);
+                // The stage input (its increment first, then the start point: a clock's stage
+                // input is then `y + c_i h` to an ulp) and `g` in one pass over the stages.
+                let (u, g) = (&mut self.u, &mut self.g);
+                combine2(
+                    [(tab.alpha[i], tab.c[i]), (tab.gam[i], tab.d[i] - tab.gamma)],
+                    done,
+                    nz,
+                    [u, g],
+                    |e, [u, _]| *u = y[e] + h * *u,
+                );
+                rhs.eval(t + tab.c[i] * h, &self.u, ki);
                 self.rhs_calls += 1;
-            }
-            if i > 0 {
-                combine(tab.gam[i], tab.d[i] - tab.gamma, &self.k, nz, &mut self.g);
                 // `+= h f_x g` on the state block and on every sensitivity column.
-                self.lin.mul_add(h, &self.g, &mut self.r);
+                self.lin.mul_add(h, &self.g, ki);
             }
             if tab.d[i] != 0.0 {
-                axpy(h * tab.d[i], &self.ft, &mut self.r);
+                axpy(h * tab.d[i], &self.ft, ki);
             }
             // The state block, then every sensitivity column with the coupling added.
-            let (rx, rs) = self.r.split_at_mut(n);
+            let (rx, rs) = ki.split_at_mut(n);
             if !self.lin.solve(rx, 1) {
                 return false;
             }
@@ -213,17 +219,19 @@ impl Rosenbrock {
                     return false;
                 }
             }
-            self.k[i * nz..(i + 1) * nz].copy_from_slice(&self.r);
         }
-        // The solution and the error estimate `y1 - y1^ = sum_j e_j k_j`, increments first.
-        combine(tab.b, 1.0, &self.k, nz, &mut self.y_new);
-        for (u, y) in self.y_new.iter_mut().zip(y) {
-            *u = y + h * *u;
-        }
-        combine(tab.e, 0.0, &self.k, nz, &mut self.err);
-        for e in self.err.iter_mut() {
-            *e *= h;
-        }
+        // The solution and the error estimate `y1 - y1^ = sum_j e_j k_j` in one pass,
+        // increments first.
+        combine2(
+            [(tab.b, 1.0), (tab.e, 0.0)],
+            &self.k,
+            nz,
+            [&mut self.y_new, &mut self.err],
+            |e, [y1, err]| {
+                *y1 = y[e] + h * *y1;
+                *err *= h;
+            },
+        );
         true
     }
 
@@ -242,22 +250,63 @@ impl Rosenbrock {
     }
 }
 
-/// `out = sum_j w_j k_j` over the stages `k` (blocks of `nz`) that `w` weighs, for weights that
-/// sum to `total` (exactly, as `row_tableau`'s tests check), formed as
-/// `total k_0 + sum_{j>0} w_j (k_j - k_0)`: the slope common to all stages is weighted once, so a
-/// component moving at a constant rate `K` (any `K`, not only 1) gets exactly `total K`, as
-/// `sums::centred_sum` does for the explicit pairs' zero-sum rows.
-fn combine(w: &[f64], total: f64, k: &[f64], nz: usize, out: &mut [f64]) {
+/// `out_r = sum_j w_rj k_j` for two weight rows `(w_r, total_r)` over the stages `k` (blocks of
+/// `nz`; `w_r` weighs the first `w_r.len()` of them), for weights that sum to `total_r` (exactly,
+/// as `row_tableau`'s tests check), formed as `total k_0 + sum_{j>0} w_j (k_j - k_0)`: the slope
+/// common to all stages is weighted once, so a component moving at a constant rate `K` (any `K`,
+/// not only 1) gets exactly `total K`, as `sums::centred_sum` does for the explicit pairs' zero-sum
+/// rows. Then `finish(component, [out_0, out_1])` per component. Both rows are summed block by
+/// block in one pass over the stages, each difference `k_j - k_0` formed once (each component's
+/// sums in the order of the stages, the zero weights skipped, so the result does not depend on
+/// the blocking).
+fn combine2(
+    rows: [(&[f64], f64); 2],
+    k: &[f64],
+    nz: usize,
+    out: [&mut [f64]; 2],
+    mut finish: impl FnMut(usize, [&mut f64; 2]),
+) {
+    let [o0, o1] = out;
     let k0 = &k[..nz];
-    for (o, &a) in out.iter_mut().zip(k0) {
-        *o = total * a;
-    }
-    for (j, &a) in w.iter().enumerate().skip(1) {
-        if a != 0.0 {
-            for ((o, kj), k0) in out.iter_mut().zip(&k[j * nz..(j + 1) * nz]).zip(k0) {
-                *o += a * (kj - k0);
+    let stages = rows[0].0.len().max(rows[1].0.len());
+    for start in (0..nz).step_by(BLOCK) {
+        let end = (start + BLOCK).min(nz);
+        let (o0, o1, k0) = (&mut o0[start..end], &mut o1[start..end], &k0[start..end]);
+        for ((a, b), &k) in o0.iter_mut().zip(o1.iter_mut()).zip(k0) {
+            (*a, *b) = (rows[0].1 * k, rows[1].1 * k);
+        }
+        for j in 1..stages {
+            let kj = &k[j * nz + start..j * nz + end];
+            let weight = |r: usize| rows[r].0.get(j).copied().unwrap_or(0.0);
+            // A zero weight adds nothing (not even `0 * NaN` from a sensitivity that does not
+            // exist).
+            let (a, b) = (weight(0), weight(1));
+            if a != 0.0 && b != 0.0 {
+                for (((o0, o1), kj), k0) in o0.iter_mut().zip(o1.iter_mut()).zip(kj).zip(k0) {
+                    let d = kj - k0;
+                    *o0 += a * d;
+                    *o1 += b * d;
+                }
+            } else if a != 0.0 {
+                add_weighted(a, kj, k0, o0);
+            } else if b != 0.0 {
+                add_weighted(b, kj, k0, o1);
             }
         }
+        for (e, (a, b)) in o0.iter_mut().zip(o1.iter_mut()).enumerate() {
+            finish(start + e, [a, b]);
+        }
+    }
+}
+
+/// Components per block of [`combine2`]: its outputs and the stages' blocks stay in the L1 cache
+/// while every stage is added.
+const BLOCK: usize = 256;
+
+/// `o += a (kj - k0)`.
+fn add_weighted(a: f64, kj: &[f64], k0: &[f64], o: &mut [f64]) {
+    for ((o, kj), k0) in o.iter_mut().zip(kj).zip(k0) {
+        *o += a * (kj - k0);
     }
 }
 
@@ -363,8 +412,8 @@ impl Stepper for Rosenbrock {
         }
         self.dense.build(self.tab, t, h, z, &self.y_new, &self.k);
         for (slot, &theta) in INTERIOR.iter().enumerate() {
-            let nz = self.nz;
-            self.dense.eval_deriv(t + theta * h, &mut self.interior[slot * nz..(slot + 1) * nz]);
+            let n = self.n;
+            self.dense.eval_deriv(t + theta * h, &mut self.interior[slot * n..(slot + 1) * n]);
         }
         err
     }
@@ -410,7 +459,7 @@ impl Stepper for Rosenbrock {
 
     fn visit_interior<V: FnMut(f64, &[f64])>(&self, mut visit: V) {
         for (slot, &theta) in INTERIOR.iter().enumerate() {
-            visit(theta, &self.interior[slot * self.nz..(slot + 1) * self.nz]);
+            visit(theta, &self.interior[slot * self.n..(slot + 1) * self.n]);
         }
     }
 }
@@ -430,6 +479,8 @@ pub struct RowDense {
 }
 
 const STRIDE: usize = 2 + MAX_DENSE;
+/// Components whose dense rows [`RowDense::build`] sums together in registers.
+const DENSE_REGS: usize = 4;
 
 impl RowDense {
     pub(crate) fn new(nz: usize) -> RowDense {
@@ -442,14 +493,50 @@ impl RowDense {
         self.t0 = t0;
         self.h = h;
         self.n_q = tab.dense.len();
-        for (i, c) in self.coef.chunks_exact_mut(STRIDE).enumerate() {
+        let mut i0 = 0;
+        while i0 + DENSE_REGS <= nz {
+            self.build_block::<DENSE_REGS>(tab, h, z0, z1, k, i0);
+            i0 += DENSE_REGS;
+        }
+        for i in i0..nz {
+            self.build_block::<1>(tab, h, z0, z1, k, i);
+        }
+    }
+
+    /// Components `i0..i0 + W` of [`Self::build`]: every dense row's sum held in registers while
+    /// each stage's block is read once, the stage's difference formed once for all rows.
+    #[inline(always)]
+    fn build_block<const W: usize>(
+        &mut self,
+        tab: &RowTableau,
+        h: f64,
+        z0: &[f64],
+        z1: &[f64],
+        k: &[f64],
+        i0: usize,
+    ) {
+        let nz = z0.len();
+        let k0: [f64; W] = k[i0..i0 + W].try_into().expect("a block of W");
+        // Centred (each row sums to zero): a constant slope leaves exactly nothing. The sums
+        // start from -0.0 as `Iterator::sum` does.
+        let mut acc = [[-0.0f64; W]; MAX_DENSE];
+        for j in 1..tab.stages {
+            let kj: [f64; W] = k[j * nz + i0..j * nz + i0 + W].try_into().expect("a block of W");
+            let d: [f64; W] = std::array::from_fn(|l| kj[l] - k0[l]);
+            for (acc, row) in acc.iter_mut().zip(tab.dense) {
+                let w = row[j];
+                for (a, d) in acc.iter_mut().zip(&d) {
+                    *a += w * d;
+                }
+            }
+        }
+        let coef = &mut self.coef[i0 * STRIDE..(i0 + W) * STRIDE];
+        for (l, c) in coef.chunks_exact_mut(STRIDE).enumerate() {
+            let i = i0 + l;
             c[0] = z0[i];
             c[1] = z1[i] - z0[i];
-            for (r, row) in tab.dense.iter().enumerate() {
-                // Centred (the row sums to zero): a constant slope leaves exactly nothing.
-                let k0 = k[i];
-                c[2 + r] =
-                    h * row.iter().enumerate().skip(1).map(|(j, w)| w * (k[j * nz + i] - k0)).sum::<f64>();
+            for (r, acc) in acc.iter().enumerate().take(tab.dense.len()) {
+                c[2 + r] = h * acc[l];
             }
         }
     }

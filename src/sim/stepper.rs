@@ -186,7 +186,9 @@ pub trait Stepper {
     /// Calls `visit` with derivatives at a few interior points of the last attempt, in time
     /// order: the point's position in the step (in `(0, 1)`) and the derivative there (an
     /// approximation of the method's order, good for sampling the signs of a guard's speed). An
-    /// explicit method has them for free in its stages.
+    /// explicit method has them for free in its stages. The slice holds at least the states'
+    /// derivatives (its first `n` components, all that a guard's speed reads); a Rosenbrock
+    /// method computes only those.
     fn visit_interior<V: FnMut(f64, &[f64])>(&self, visit: V);
     /// The stretches of the run each method integrated, for a stepper that switches between
     /// methods (`auto::Auto`), up to the current point `t`; `None` for a single method.

@@ -266,6 +266,32 @@ pub trait HybridSystem: Sync {
         rt: &mut [f64],
     );
 
+    /// The structurally nonzero entries `(row, column)` of event `event`'s `R_x`, in the order
+    /// [`Self::reset_jac_values`] writes their values; `None` (the default): only the dense
+    /// [`Self::reset_jac`]. A large model's reset touches few states: its saltation then costs
+    /// time and memory in these entries, not `n^2`.
+    fn reset_jac_pattern(&self, event: usize) -> Option<&[(u32, u32)]> {
+        let _ = event;
+        None
+    }
+
+    /// [`Self::reset_jac`] with `rx` the values of [`Self::reset_jac_pattern`]'s entries. Called
+    /// only when it gives a pattern.
+    #[allow(clippy::too_many_arguments)]
+    fn reset_jac_values(
+        &self,
+        event: usize,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+        rx: &mut [f64],
+        rp: &mut [f64],
+        rt: &mut [f64],
+    ) {
+        let _ = (event, t, x, p, rx, rp, rt);
+        unreachable!("reset_jac_values without a reset_jac_pattern");
+    }
+
     /// Outputs `y = h(t, x, p)`.
     fn outputs(&self, t: f64, x: &[f64], p: &[f64], y: &mut [f64]);
     /// Output Jacobians `yx` (k * n, row-major), `yp` (k * m), `yt` (k).

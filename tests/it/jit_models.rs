@@ -110,6 +110,18 @@ fn compare(name: &str, jit: &dyn HybridSystem, reference: &dyn HybridSystem, p: 
                 [rx, rp, rt].concat()
             };
             assert_bits(&what("reset_jac"), &rj(jit), &rj(reference));
+            // The entries the integrator asks for: the pattern's values, scattered, are the
+            // same matrix (the reference has no pattern: only the dense form).
+            assert!(reference.reset_jac_pattern(event).is_none());
+            let pattern = jit.reset_jac_pattern(event).expect("a compiled model gives R_x's pattern");
+            let (mut vals, mut rp, mut rt) =
+                (vec![f64::NAN; pattern.len()], vec![f64::NAN; n * m], vec![f64::NAN; n]);
+            jit.reset_jac_values(event, t, &x, p, &mut vals, &mut rp, &mut rt);
+            let mut rx = vec![0.0; n * n];
+            for (&(r, c), v) in pattern.iter().zip(vals) {
+                rx[r as usize * n + c as usize] = v;
+            }
+            assert_bits(&what("reset_jac_values"), &[rx, rp, rt].concat(), &rj(reference));
         }
         let (a, b) = run2(&|s, o| s.outputs(t, &x, p, o), k);
         assert_bits(&what("outputs"), &a, &b);
