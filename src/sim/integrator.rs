@@ -726,7 +726,15 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                     self.record_samples(t_fire, true);
                 }
                 let singular_at_start = self.stepper.masked() && self.start_derivative_not_finite();
-                self.stepper.interpolant().eval(t_fire, self.z);
+                if t_fire == t1 {
+                    // On the step's end: the step's own end state. The dense output reproduces
+                    // it only to round-off, and a guard found across there by the end values
+                    // (an event at `t_end`, `x = 0.3 t` reaching 0.3) could be read back on its
+                    // pre-crossing side and skipped as moved back by an earlier reset.
+                    self.z.copy_from_slice(self.stepper.end_state());
+                } else {
+                    self.stepper.interpolant().eval(t_fire, self.z);
+                }
                 self.t = t_fire;
                 self.land_before_switch = None;
                 if self.stepper.masked() {
