@@ -704,6 +704,25 @@ impl Detector {
         control
     }
 
+    /// The guard of event `ev` (at `pos` in `mode`) and its speed `g_x f + g_t` at an explicit
+    /// state `x` with flow `f`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn guard_and_speed<S: HybridSystem + ?Sized>(
+        &mut self,
+        sys: &S,
+        mode: usize,
+        pos: usize,
+        ev: usize,
+        t: f64,
+        x: &[f64],
+        f: &[f64],
+        p: &[f64],
+    ) -> (f64, f64) {
+        let g = self.guard_now(sys, mode, pos, t, x, p);
+        let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
+        (g, dot(&self.gx, f) + gt)
+    }
+
     /// One guard of `mode` at an explicit state.
     pub fn guard_now<S: HybridSystem + ?Sized>(
         &mut self,

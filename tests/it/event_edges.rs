@@ -825,3 +825,17 @@ fn every_event_edges_test_holds_with_every_method() {
     }
     assert!(failed.is_empty(), "failures with a forced method: {failed:?}");
 }
+
+/// The same with the landing on event instants the other way round from each method's default
+/// (`SimOptions::land_events`: the explicit pairs landing, the Rosenbrock methods not).
+#[test]
+fn every_event_edges_test_holds_with_every_method_landing_or_not() {
+    use hybc::sim::Method;
+    let mut failed = Vec::new();
+    for (method, land) in
+        [(Method::Rodas5p, false), (Method::Rodas4, false), (Method::Dopri5, true), (Method::Dop853, true)]
+    {
+        failed.extend(crate::support::runs::every_test_landing(method, land, ALL));
+    }
+    assert!(failed.is_empty(), "failures: {failed:?}");
+}
