@@ -71,3 +71,29 @@ fn landing_on_events_makes_event_time_gradients_as_accurate_as_values() {
     let rodas = event_gradient_error(&run(1e-8, Method::Rodas5p, None), &reference);
     assert!(rodas < 2e-8, "{rodas:e}");
 }
+
+#[test]
+fn land_events_on_the_command_line_lands_the_explicit_default_within_its_tolerance() {
+    use crate::support::cli::hybc;
+    let run = |extra: &[&str]| {
+        let mut args = vec!["run", "models/thermostat.hyb", "--grad", "all", "--format", "json"];
+        args.extend_from_slice(extra);
+        let out = hybc(&args);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).expect("json")
+    };
+    let times = |v: &serde_json::Value| -> Vec<f64> {
+        v["events"].as_array().unwrap().iter().map(|e| e["time"].as_f64().unwrap()).collect()
+    };
+    let rhs_calls = |v: &serde_json::Value| v["stats"]["rhs_calls"].as_u64().unwrap();
+    let (plain, landed) = (run(&[]), run(&["--land-events"]));
+    // The same 30 switches, the same steps; one more attempt per event (DOP853: 12 evaluations).
+    assert_eq!(times(&plain).len(), 30);
+    assert_eq!(times(&plain).len(), times(&landed).len());
+    assert_eq!(plain["stats"]["steps"], landed["stats"]["steps"]);
+    assert_eq!(rhs_calls(&landed) - rhs_calls(&plain), 12 * 30);
+    // Both within the model's tolerances (rtol 1e-10) of each other.
+    for (a, b) in times(&plain).iter().zip(times(&landed)) {
+        assert!((a - b).abs() <= 1e-9 * a.abs(), "{a} {b}");
+    }
+}
