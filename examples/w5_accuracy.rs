@@ -3,7 +3,8 @@
 //! refilled whenever it drains to half (`x0 := 1` at `x0 <= 0.5`, 19 refills in T = 10: every
 //! refill moves the sensitivities through an event), the 10 conductances differentiated. Each
 //! method at rtol 1e-8 (atol 1e-10), with and without the sensitivities in the error control,
-//! against DOP853 at rtol 1e-12 (atol 1e-14). Printed: steps, the largest error of the final
+//! and with them, landing a step on each event instant or not (`SimOptions::land_events`),
+//! against DOP853 at rtol 1e-12 (atol 1e-14) landing on each. Printed: steps, the largest error of the final
 //! states (relative to the largest state), of the final sensitivities (relative to the largest
 //! sensitivity), of the event times, of the event-time gradients (relative to the largest of
 //! each event's), and the worst relative error of a single final sensitivity entry (entries
@@ -46,22 +47,23 @@ fn main() {
     let model = Model::parse(&refill_source(10)).unwrap();
     let c = model.compile(&D_NAMES).unwrap();
     let p = c.params();
-    let run = |rtol: f64, method: Method, sens_error_control: bool| {
+    let run = |rtol: f64, method: Method, sens_error_control: bool, land: bool| {
         let opts = SimOptions {
             t_end: 10.0,
             rtol,
             atol: rtol / 100.0,
             method,
             sens_error_control,
+            land_events: Some(land),
             ..SimOptions::default()
         };
         c.simulate(&p, &opts).unwrap().into_result()
     };
-    let reference = run(1e-12, Method::Dop853, true);
+    let reference = run(1e-12, Method::Dop853, true, true);
     let (xr, sr) = (&reference.final_state.state, reference.final_state.dstate.as_ref().unwrap());
     for method in [Method::Dopri5, Method::Dop853, Method::Rodas5p] {
-        for sens in [false, true] {
-            let r = run(1e-8, method, sens);
+        for (sens, land) in [(false, false), (true, false), (true, true)] {
+            let r = run(1e-8, method, sens, land);
             let (x, s) = (&r.final_state.state, r.final_state.dstate.as_ref().unwrap());
             let ex = max_abs(&x.iter().zip(xr).map(|(a, b)| a - b).collect::<Vec<_>>()) / max_abs(xr);
             let es = max_abs(&s.iter().zip(sr).map(|(a, b)| a - b).collect::<Vec<_>>()) / max_abs(sr);
@@ -79,7 +81,7 @@ fn main() {
                 .map(|(a, b)| (a - b).abs() / b.abs())
                 .fold(0.0, f64::max);
             println!(
-                "{method:?} sens in error control {sens}: {} steps ({} rejected), {}/{} events; final states \
+                "{method:?} sens in error control {sens}, landing {land}: {} steps ({} rejected), {}/{} events; final states \
                  {ex:.1e}, final sensitivities {es:.1e}, event times {et:.1e}, event-time gradients \
                  {eg:.1e}, worst sensitivity entry {worst:.1e}",
                 r.stats.steps,

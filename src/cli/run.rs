@@ -70,6 +70,11 @@ pub(crate) struct SimFlags {
     /// inaccurate integral where it is not).
     #[arg(long)]
     no_quadrature_error_control: bool,
+    /// Land a step on every event instant, with every method (the Rosenbrock methods do by
+    /// default): the pre-event state, its sensitivities and the event time from a step end under
+    /// the error control, not from the dense output; one more step attempt per event.
+    #[arg(long)]
+    land_events: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -228,6 +233,7 @@ pub(crate) fn sim_options(model: &Model, args: &SimFlags) -> Result<SimOptions, 
         graze_tol: positive("--graze-tol", args.graze_tol)?,
         sens_error_control: !args.no_sens_error_control,
         quadrature_error_control: !args.no_quadrature_error_control,
+        land_events: if args.land_events { Some(true) } else { base.land_events },
         ..base
     })
 }

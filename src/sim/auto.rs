@@ -231,6 +231,24 @@ impl Stepper for Auto {
         }
     }
 
+    /// As the active method.
+    fn lands_on_events(&self) -> bool {
+        if self.stiff {
+            self.row.lands_on_events()
+        } else {
+            self.rk.lands_on_events()
+        }
+    }
+
+    /// The active method lands; the stiffness tests and statistics see only attempts.
+    fn land<R: Rhs>(&mut self, t: f64, z: &[f64], h: f64, rhs: &mut R) -> f64 {
+        if self.stiff {
+            self.row.land(t, z, h, rhs)
+        } else {
+            self.rk.land(t, z, h, rhs)
+        }
+    }
+
     fn end_state(&self) -> &[f64] {
         if self.stiff {
             self.row.end_state()

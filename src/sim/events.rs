@@ -46,6 +46,9 @@ const ERROR_SPREAD: f64 = 1.5625;
 const FEW_GUARDS: usize = 4;
 /// Bisection steps to the boundary where a guard stops being finite (to about 1e-9 of the step).
 const NAN_BISECTIONS: usize = 30;
+/// Most samples of a guard that reads only the time in one step it does not resolve
+/// ([`Detector::refine_time_guard`]): 1023 halvings at most, a bound on the work of a step.
+const MAX_TIME_SAMPLES: usize = 1024;
 
 /// A crossing located in the current step.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -126,6 +129,9 @@ pub(crate) struct Detector {
     speed_max: Vec<f64>,
     /// Nonlinear guards: values and speeds at the [`INTERIOR`] points of the step.
     interior: [(Vec<f64>, Vec<f64>); 2],
+    /// Nonlinear guards the current step does not resolve (`check_resolution`): it was taken
+    /// anyway, shorter than the floor of the resolution of `t`.
+    unresolved: Vec<bool>,
     pub pending: Vec<Pending>,
     /// Per position: what the current step's scan found.
     pub found: Vec<Finding>,
@@ -270,6 +276,7 @@ impl Detector {
             speed_noise1: per_event(),
             speed_changes: vec![0; ne],
             interior: [(per_event(), per_event()), (per_event(), per_event())],
+            unresolved: vec![false; ne],
             pending: vec![Pending::None; ne],
             found: vec![Finding::Nothing; ne],
             group: Vec::with_capacity(ne),
@@ -386,7 +393,8 @@ impl Detector {
             if einfo.implicit || !g.is_finite() || g * speed >= 0.0 {
                 continue;
             }
-            let (noise, speed_noise) = self.noise_at(1, sys, info, mode, pos, p);
+            let (_, speed_noise) = self.noise_at(1, sys, info, mode, pos, p);
+            let noise = self.carried_round_off(sys, ev, p);
             let located = 4.0 * speed.abs() * (t.abs().next_up() - t.abs());
             if g.abs() > noise + located {
                 continue;
@@ -403,6 +411,20 @@ impl Detector {
             }
         }
         !self.group.is_empty()
+    }
+
+    /// The round-off a guard's value at the step's end carries from the step:
+    /// `16 eps (sum_i |g_x,i| max(|x_i(t0)|, |x_i(t1)|) + |g_t t1|)`. A state at the end is its
+    /// value at the start plus the step's increment, rounded at the scale of the larger: a ball
+    /// dropped from 1 m (Rodas5P, five steps) reaches the floor at `t_end = sqrt(2 / g)` with
+    /// `y = 1.3e-15`, six spacings of its drop height, where `16 eps |y|` is nothing.
+    fn carried_round_off<S: HybridSystem + ?Sized>(&mut self, sys: &S, ev: usize, p: &[f64]) -> f64 {
+        let (t, x1) = (self.at[1].0, &self.at[1].1);
+        let gt = sys.guard_grad(ev, t, x1, p, &mut self.gx, &mut self.gp);
+        let x0 = &self.at[0].1;
+        let terms: f64 =
+            self.gx.iter().zip(x0.iter().zip(x1)).map(|(g, (a, b))| g.abs() * a.abs().max(b.abs())).sum();
+        16.0 * EPS * (terms + (gt * t).abs())
     }
 
     /// Guard values and speeds at the end of the stepper's last attempt, which ends at `t`, with
@@ -637,6 +659,7 @@ impl Detector {
             let (g0, g1) = (self.g0[pos], self.g1[pos]);
             let (m0, m1) = (h * self.dg0[pos], h * self.dg1[pos]);
             let inner = [self.interior[0].0[pos], self.interior[1].0[pos]];
+            self.unresolved[pos] = false;
             if !(g0.is_finite() && g1.is_finite() && m0.is_finite() && m1.is_finite())
                 || inner.iter().any(|g| !g.is_finite())
             {
@@ -671,6 +694,7 @@ impl Detector {
             let miss = ERROR_SPREAD * miss;
             if miss > allowed {
                 control.resolved = false;
+                self.unresolved[pos] = true;
             }
             // The miss shrinks like h^4 and the variation like h once the step resolves the
             // guard's shape: the cube root of their ratio; far from that, a quarter.
@@ -678,6 +702,25 @@ impl Detector {
             control.factor = control.factor.min(factor);
         }
         control
+    }
+
+    /// The guard of event `ev` (at `pos` in `mode`) and its speed `g_x f + g_t` at an explicit
+    /// state `x` with flow `f`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn guard_and_speed<S: HybridSystem + ?Sized>(
+        &mut self,
+        sys: &S,
+        mode: usize,
+        pos: usize,
+        ev: usize,
+        t: f64,
+        x: &[f64],
+        f: &[f64],
+        p: &[f64],
+    ) -> (f64, f64) {
+        let g = self.guard_now(sys, mode, pos, t, x, p);
+        let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
+        (g, dot(&self.gx, f) + gt)
     }
 
     /// One guard of `mode` at an explicit state.
@@ -776,6 +819,9 @@ impl Detector {
                         self.samples.push(Sample { t: t0 + s * dense.h(), g, dg, extremum: false });
                     }
                     self.samples.push(Sample { t: t1, g: g1, dg: dg1, extremum: false });
+                    if self.unresolved[pos] && einfo.time_only {
+                        self.refine_time_guard(sys, ev, mode, ne, pos, dense, p);
+                    }
                     self.add_extrema_between_samples(sys, ev, mode, ne, pos, dense, p);
                 }
                 GuardShape::Affine if self.speed_changes[pos] >= 2 || self.may_come_near(pos) => {
@@ -805,6 +851,57 @@ impl Detector {
                 }
             }
             self.found[pos] = self.scan_samples(sys, dir, ev, mode, ne, pos, dense, p);
+        }
+    }
+
+    /// A guard that reads only the time, in a step that does not resolve it (taken anyway, being
+    /// shorter than the floor `1e-9 max(|t|, 1)`, long late in time: 1e-3 at `t = 1e6`): its
+    /// samples in time order are refined where they do not resolve it, since it is known exactly
+    /// at any time (the dense output's state is not read). Each piece between samples is halved
+    /// until the cubic through its ends' values and speeds predicts the value and speed at its
+    /// midpoint to within [`RESOLUTION`] of its variation, as `check_resolution` asks of a step,
+    /// up to [`MAX_TIME_SAMPLES`]. A chirp at `t0 = 1e6` had two crossings `2e-4` apart inside
+    /// one such step of `6e-4`, between samples that did not show them.
+    #[allow(clippy::too_many_arguments)]
+    fn refine_time_guard<S: HybridSystem + ?Sized, I: Interpolant>(
+        &mut self,
+        sys: &S,
+        ev: usize,
+        mode: usize,
+        ne: usize,
+        pos: usize,
+        dense: &I,
+        p: &[f64],
+    ) {
+        let noise = self.noise0[pos].max(self.noise1[pos]);
+        let mut k = 0;
+        while k + 1 < self.samples.len() && self.samples.len() < MAX_TIME_SAMPLES {
+            let (a, b) = (self.samples[k], self.samples[k + 1]);
+            let w = b.t - a.t;
+            let mid = a.t + 0.5 * w;
+            // The Hermite cubic of the piece at its midpoint: value and speed.
+            let predicted = 0.5 * (a.g + b.g) + 0.125 * w * (a.dg - b.dg);
+            let predicted_speed = 1.5 * (b.g - a.g) / w - 0.25 * (a.dg + b.dg);
+            if !(mid > a.t && mid < b.t && predicted.is_finite() && predicted_speed.is_finite()) {
+                k += 1;
+                continue;
+            }
+            let g = self.guard_on_dense(sys, mode, ne, pos, mid, dense, p);
+            let dg = self.speed_on_dense(sys, ev, mid, dense, p);
+            self.samples.insert(k + 1, Sample { t: mid, g, dg, extremum: false });
+            if !(g.is_finite() && dg.is_finite()) {
+                // Left to the scan, which finds where the guard stops being finite.
+                return;
+            }
+            let miss = (g - predicted).abs().max(0.25 * w * (dg - predicted_speed).abs());
+            let variation =
+                [(b.g - a.g).abs(), (g - a.g).abs(), w * a.dg.abs(), w * b.dg.abs(), w * dg.abs()]
+                    .into_iter()
+                    .fold(0.0, f64::max);
+            if miss <= RESOLUTION * variation + noise {
+                // Resolved: both halves stand.
+                k += 2;
+            }
         }
     }
 

@@ -63,6 +63,13 @@ const GUARD_RESOLUTION_FLOOR: f64 = 1e-9;
 const NEXT_CROSSING_REACH: f64 = 1.5;
 /// Growth of the step size allowed by a resolved nonlinear guard, per step.
 const GUARD_GROWTH: f64 = 4.0;
+/// The largest Newton correction of a landed event instant, relative to the landed step: the
+/// dense output's error moves the root by far less; more means something else went wrong, and
+/// the dense output's state is taken.
+const LANDING_CORRECTION: f64 = 1e-3;
+/// Floating-point spacings of `t` a landed instant moves on at most until every guard of its
+/// group is on the crossed side.
+const LANDING_NUDGES: usize = 8;
 /// Rounds of cascading events at one instant before the run stops as stuck.
 pub(crate) const MAX_CASCADE_ROUNDS: usize = 100;
 
@@ -726,7 +733,19 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                     self.record_samples(t_fire, true);
                 }
                 let singular_at_start = self.stepper.masked() && self.start_derivative_not_finite();
-                self.stepper.interpolant().eval(t_fire, self.z);
+                let t_fire = if t_fire == t1 {
+                    // On the step's end: the step's own end state. The dense output reproduces
+                    // it only to round-off, and a guard found across there by the end values (an
+                    // event at `t_end`, `x = 0.3 t` reaching 0.3) could be read back on its
+                    // pre-crossing side and skipped as moved back by an earlier reset.
+                    self.z.copy_from_slice(self.stepper.end_state());
+                    t_fire
+                } else if let Some(t_landed) = self.land_on_event(t0, t_fire, &mut rhs) {
+                    t_landed
+                } else {
+                    self.stepper.interpolant().eval(t_fire, self.z);
+                    t_fire
+                };
                 self.t = t_fire;
                 self.land_before_switch = None;
                 if self.stepper.masked() {
@@ -736,6 +755,77 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 self.fire_instant(h_next)
             }
         }
+    }
+
+    /// Retakes the step from `(t0, z)` landing on the event instant `t_fire` located inside it
+    /// on the dense output (`Stepper::land`), so that the state and sensitivities the events jump
+    /// from come from a step end under the error control, not from the dense output, which no
+    /// error test controls (a Rosenbrock interpolant is of order 3 to 4; an explicit one is poor
+    /// for components at the stability boundary). The landed state's guards are then off zero by
+    /// the dense output's error: the instant moves by one Newton step with the guards' speeds
+    /// there (the latest of the group's, so that every guard has crossed), and the state and
+    /// sensitivities with it to first order, `z + dt F(z)` (an error of order `dt^2`), then by
+    /// floating-point spacings until every guard of the group is on its crossed side (rule 1:
+    /// the first time found there). Writes that state into `z` and returns the instant; `None`
+    /// (the caller takes the dense output's state at `t_fire`, as without landing) when landing
+    /// is off, when the group holds a touch, an event fired on its guard at the step's start or a
+    /// flow switch (their state and sides are the dense output's: `cross_switch`), when the
+    /// landed step fails its error test (it is shorter, so rarely) or when the correction is not
+    /// small against the step.
+    fn land_on_event<F: Rhs>(&mut self, t0: f64, t_fire: f64, rhs: &mut F) -> Option<f64> {
+        if t_fire <= t0 || !self.lands_on_events() {
+            return None;
+        }
+        let evs = &self.info.modes[self.mode].events;
+        let plain = |&(ev, c): &(usize, Crossing)| !(c.touch || c.on_guard || self.info.events[ev].implicit);
+        if !self.det.group.iter().all(plain) {
+            return None;
+        }
+        let h = t_fire - t0;
+        let err = self.stepper.land(t0, self.z, h, rhs);
+        // A NaN error (nothing finite) fails too.
+        if err.is_nan() || err > 1.0 {
+            return None;
+        }
+        let n = self.n;
+        self.z.copy_from_slice(self.stepper.end_state());
+        let f = self.stepper.end_derivative();
+        let mut dt = f64::NEG_INFINITY;
+        for gi in 0..self.det.group.len() {
+            let (ev, _) = self.det.group[gi];
+            let pos = evs.iter().position(|&e| e == ev)?;
+            let (g, speed) =
+                self.det.guard_and_speed(self.sys, self.mode, pos, ev, t_fire, &self.z[..n], &f[..n], self.p);
+            dt = dt.max(-g / speed);
+        }
+        if !(dt.is_finite() && dt.abs() <= LANDING_CORRECTION * h) {
+            return None;
+        }
+        let end = self.stepper.end_state();
+        let mut t = t_fire + dt;
+        for _ in 0..LANDING_NUDGES {
+            let dt = t - t_fire;
+            for ((z, &e), &d) in self.z.iter_mut().zip(end).zip(f) {
+                *z = e + dt * d;
+            }
+            let mut crossed = true;
+            for gi in 0..self.det.group.len() {
+                let (ev, c) = self.det.group[gi];
+                let pos = evs.iter().position(|&e| e == ev)?;
+                let g = self.det.guard_now(self.sys, self.mode, pos, t, &self.z[..n], self.p);
+                crossed &= c.sigma * g <= 0.0;
+            }
+            if crossed {
+                return (t > t0).then_some(t);
+            }
+            t = t.next_up();
+        }
+        None
+    }
+
+    /// Whether event instants inside a step are landed on ([`Self::land_on_event`]).
+    fn lands_on_events(&self) -> bool {
+        self.opts.land_events.unwrap_or_else(|| self.stepper.lands_on_events())
     }
 
     /// Fires the group selected at the current instant, then the events that cascade from it

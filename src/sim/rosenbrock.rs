@@ -74,6 +74,9 @@ pub struct Rosenbrock {
     /// The error estimate's vector `y1 - y1^` of the last attempt.
     err: Vec<f64>,
     pub(crate) dense: RowDense,
+    /// The dense output a landing step builds (`Stepper::land`), so that the last attempt's
+    /// stays.
+    landed: RowDense,
     /// Derivatives of the dense output at [`INTERIOR`], of the states only (`n` each): the event
     /// detector reads guard speeds, which depend on the states alone.
     interior: Vec<f64>,
@@ -117,6 +120,7 @@ impl Rosenbrock {
             y_new: vec![0.0; nz],
             err: vec![0.0; nz],
             dense: RowDense::new(nz),
+            landed: RowDense::new(nz),
             interior: vec![0.0; INTERIOR.len() * n],
             rhs_calls: 0,
             jac_calls: 0,
@@ -434,6 +438,21 @@ impl Stepper for Rosenbrock {
     fn shrink(&self, err: f64) -> f64 {
         let fac = if err.is_finite() { SAFETY * err.powf(-1.0 / self.q()) } else { FAC_MIN };
         self.h * fac.clamp(FAC_MIN, 1.0)
+    }
+
+    /// An attempt builds its dense output with it: the landing step's goes to `landed`. The
+    /// Jacobian at the start is still fresh (nothing was accepted), so this costs the stages and
+    /// one factorisation.
+    fn land<R: Rhs>(&mut self, t: f64, z: &[f64], h: f64, rhs: &mut R) -> f64 {
+        std::mem::swap(&mut self.dense, &mut self.landed);
+        let err = self.attempt(t, z, h, rhs);
+        std::mem::swap(&mut self.dense, &mut self.landed);
+        err
+    }
+
+    /// By default: the dense output is of order 3 (Rodas4) or 4 (Rodas5P).
+    fn lands_on_events(&self) -> bool {
+        true
     }
 
     /// The dense output was built with the attempt.

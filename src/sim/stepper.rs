@@ -164,6 +164,16 @@ pub trait Stepper {
     /// the last `accept`). Returns the scaled error: `<= 1` accepts; infinite when anything was
     /// not finite.
     fn attempt<R: Rhs>(&mut self, t: f64, z: &[f64], h: f64, rhs: &mut R) -> f64;
+    /// Retakes the last attempt from its start `(t, z)` with the shorter length `h`, to land a
+    /// step on an event located at `t + h` on its dense output: the end state, its derivative and
+    /// [`Self::masked`] become this step's, under the same error control (the error is returned
+    /// as by [`Self::attempt`]), while [`Self::interpolant`] stays the last attempt's, which the
+    /// event was located on. Nothing of the controller changes: a restart follows.
+    fn land<R: Rhs>(&mut self, t: f64, z: &[f64], h: f64, rhs: &mut R) -> f64;
+    /// Whether event instants are landed on ([`Self::land`]) unless the options say
+    /// (`SimOptions::land_events`): a method whose dense output is of lower order than its steps
+    /// gains most from it.
+    fn lands_on_events(&self) -> bool;
     /// The end state of the last attempt.
     fn end_state(&self) -> &[f64];
     /// The derivative at the end state of the last attempt.

@@ -58,6 +58,11 @@ pub struct EventInfo {
     /// speed `g_x f + g_t` reads (a bounce, a stop). Such an event that leaves the state on its
     /// guard with the flow carrying it through again is stuck, not a fresh crossing.
     pub contact: bool,
+    /// Whether the guard reads no state (`sin(w t^2) crosses 0`, a flow switch of
+    /// `if sin(w t) > 0.9`): its value at any time is known exactly, without the dense output,
+    /// so a step that does not resolve it can be sampled more densely instead
+    /// (`events::Detector::scan`). `false` is always safe.
+    pub time_only: bool,
 }
 
 /// The shape of a guard along a trajectory, from its symbolic derivatives.

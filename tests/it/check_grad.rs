@@ -408,6 +408,7 @@ impl Ripple {
                     kink: false,
                     guard: GuardShape::Affine,
                     contact: false,
+                    time_only: false,
                 }],
                 initial_mode: 0,
                 quadrature: Vec::new(),

@@ -322,3 +322,17 @@ fn every_event_semantics_test_holds_with_the_rosenbrock_methods() {
     }
     assert!(failed.is_empty(), "failed with a Rosenbrock method: {failed:?}");
 }
+
+/// And with the landing on event instants the other way round from each method's default
+/// (`SimOptions::land_events`): the explicit pairs landing, the Rosenbrock methods not.
+#[test]
+fn every_event_semantics_test_holds_landing_on_events_or_not() {
+    use hybc::sim::Method;
+    let mut failed = Vec::new();
+    for (method, land) in
+        [(Method::Rodas5p, false), (Method::Rodas4, false), (Method::Dopri5, true), (Method::Dop853, true)]
+    {
+        failed.extend(crate::support::runs::every_test_landing(method, land, ALL));
+    }
+    assert!(failed.is_empty(), "failures: {failed:?}");
+}

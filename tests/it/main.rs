@@ -12,6 +12,7 @@ mod compass_gait;
 mod convergence;
 mod derive_snapshots;
 mod event_edges;
+mod event_landing;
 mod event_semantics;
 mod expr_growth;
 mod expr_props;

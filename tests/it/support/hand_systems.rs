@@ -43,6 +43,7 @@ impl Ball {
             kink: false,
             guard: GuardShape::Affine,
             contact: true,
+            time_only: false,
         }];
         let mut mode_events = vec![0];
         if ceiling.is_some() {
@@ -56,6 +57,7 @@ impl Ball {
                 kink: false,
                 guard: GuardShape::Affine,
                 contact: true,
+                time_only: false,
             });
             mode_events.push(1);
         }
@@ -190,6 +192,7 @@ impl Thermostat {
             kink: false,
             guard: GuardShape::Affine,
             contact: false,
+            time_only: false,
         };
         Thermostat {
             info: SystemInfo {
@@ -302,6 +305,7 @@ impl Counter {
             kink: false,
             guard: GuardShape::Affine,
             contact: false,
+            time_only: false,
         };
         Counter {
             info: SystemInfo {
@@ -429,6 +433,7 @@ impl Oscillator {
                     kink: false,
                     guard: GuardShape::Affine,
                     contact: false,
+                    time_only: false,
                 }],
                 initial_mode: 0,
                 quadrature: Vec::new(),

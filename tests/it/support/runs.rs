@@ -10,6 +10,7 @@ use hybc::{Model, Run, SimOptions};
 
 thread_local! {
     static METHOD: Cell<Option<Method>> = const { Cell::new(None) };
+    static LAND: Cell<Option<bool>> = const { Cell::new(None) };
 }
 
 /// The model's `simulate` options, with the method of an enclosing [`with_method`].
@@ -17,6 +18,9 @@ pub fn options(model: &Model) -> SimOptions {
     let mut o = model.sim_options();
     if let Some(method) = METHOD.get() {
         o.method = method;
+    }
+    if let Some(land) = LAND.get() {
+        o.land_events = Some(land);
     }
     o
 }
@@ -27,6 +31,14 @@ pub fn with_method<T>(method: Method, body: impl FnOnce() -> T) -> T {
     let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(body));
     METHOD.set(before);
     out.unwrap_or_else(|e| std::panic::resume_unwind(e))
+}
+
+/// [`every_test_with`], with `SimOptions::land_events` forced to `land` as well.
+pub fn every_test_landing(method: Method, land: bool, tests: &[(&str, fn())]) -> Vec<String> {
+    let before = LAND.replace(Some(land));
+    let failed = every_test_with(method, tests).into_iter().map(|f| format!("{f} landing {land}")).collect();
+    LAND.set(before);
+    failed
 }
 
 /// Runs every test of `tests` under `method`; returns the names of those that failed (each

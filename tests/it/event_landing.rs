@@ -1,0 +1,99 @@
+//! Landing a step on each event instant (`SimOptions::land_events`, `Stepper::land`): the state
+//! and sensitivities the events jump from come from a step end under the error control, not from
+//! the dense output. Measured on the W5 diffusion chain of `examples/w5_accuracy.rs` (10 cells, a
+//! source refilled 19 times, the 10 conductances differentiated) against DOP853 at rtol 1e-12.
+
+use hybc::sim::{Method, SimOptions, SimResult};
+use hybc::Model;
+
+fn refill_chain(n: usize) -> String {
+    let seg = |i: usize| 10 * i / n;
+    let mut s = String::from("model refill_chain\nparam d[10] = 50 in [0.1, 1000]\nparam c = 0.1\n");
+    for i in 0..n {
+        s.push_str(&format!("state x{i} = {}\n", if i == 0 { 1 } else { 0 }));
+    }
+    for i in 0..n {
+        let mut rhs = format!("-c * x{i}");
+        if i > 0 {
+            rhs.push_str(&format!(" + d[{}] * (x{} - x{i})", seg(i - 1), i - 1));
+        }
+        if i + 1 < n {
+            rhs.push_str(&format!(" - d[{}] * (x{i} - x{})", seg(i), i + 1));
+        }
+        s.push_str(&format!("der(x{i}) = {rhs}\n"));
+    }
+    s.push_str("event refill when x0 <= 0.5 {\n    x0 := 1\n}\n");
+    s
+}
+
+/// The largest error of the event-time gradients of `r` against `reference`, relative to the
+/// largest entry of each event's gradient.
+fn event_gradient_error(r: &SimResult, reference: &SimResult) -> f64 {
+    assert_eq!(r.events.len(), reference.events.len());
+    let max_abs = |v: &[f64]| v.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+    let mut worst = 0.0f64;
+    for (e, er) in r.events.iter().zip(&reference.events) {
+        let (a, b) = (e.dtime.as_ref().unwrap(), er.dtime.as_ref().unwrap());
+        let diff: Vec<f64> = a.iter().zip(b).map(|(a, b)| a - b).collect();
+        worst = worst.max(max_abs(&diff) / max_abs(b));
+    }
+    worst
+}
+
+#[test]
+fn landing_on_events_makes_event_time_gradients_as_accurate_as_values() {
+    let names: Vec<String> = (0..10).map(|k| format!("d[{k}]")).collect();
+    let names: Vec<&str> = names.iter().map(String::as_str).collect();
+    let model = Model::parse(&refill_chain(10)).unwrap();
+    let c = model.compile(&names).unwrap();
+    let p = c.params();
+    let run = |rtol: f64, method: Method, land_events: Option<bool>| {
+        let opts = SimOptions {
+            t_end: 10.0,
+            rtol,
+            atol: rtol / 100.0,
+            method,
+            land_events,
+            ..SimOptions::default()
+        };
+        c.simulate(&p, &opts).unwrap().into_result()
+    };
+    let reference = run(1e-12, Method::Dop853, Some(true));
+    assert_eq!(reference.events.len(), 19);
+    // DOP853 at rtol 1e-8 (measured: 2.3e-6 from the dense output, 9.0e-8 landed; the final
+    // states are within 1.4e-10, so a gradient is still some 100 times less accurate than a value
+    // of this chain, no longer 1000).
+    let dense = event_gradient_error(&run(1e-8, Method::Dop853, None), &reference);
+    let landed = event_gradient_error(&run(1e-8, Method::Dop853, Some(true)), &reference);
+    assert!(dense > 1e-6, "{dense:e}");
+    assert!(landed < 4e-7, "{landed:e}");
+    // Rodas5P lands by default (measured: 3.5e-8 from the dense output, 5.3e-9 landed).
+    let rodas = event_gradient_error(&run(1e-8, Method::Rodas5p, None), &reference);
+    assert!(rodas < 2e-8, "{rodas:e}");
+}
+
+#[test]
+fn land_events_on_the_command_line_lands_the_explicit_default_within_its_tolerance() {
+    use crate::support::cli::hybc;
+    let run = |extra: &[&str]| {
+        let mut args = vec!["run", "models/thermostat.hyb", "--grad", "all", "--format", "json"];
+        args.extend_from_slice(extra);
+        let out = hybc(&args);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).expect("json")
+    };
+    let times = |v: &serde_json::Value| -> Vec<f64> {
+        v["events"].as_array().unwrap().iter().map(|e| e["time"].as_f64().unwrap()).collect()
+    };
+    let rhs_calls = |v: &serde_json::Value| v["stats"]["rhs_calls"].as_u64().unwrap();
+    let (plain, landed) = (run(&[]), run(&["--land-events"]));
+    // The same 30 switches, the same steps; one more attempt per event (DOP853: 12 evaluations).
+    assert_eq!(times(&plain).len(), 30);
+    assert_eq!(times(&plain).len(), times(&landed).len());
+    assert_eq!(plain["stats"]["steps"], landed["stats"]["steps"]);
+    assert_eq!(rhs_calls(&landed) - rhs_calls(&plain), 12 * 30);
+    // Both within the model's tolerances (rtol 1e-10) of each other.
+    for (a, b) in times(&plain).iter().zip(times(&landed)) {
+        assert!((a - b).abs() <= 1e-9 * a.abs(), "{a} {b}");
+    }
+}
