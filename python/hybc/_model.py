@@ -109,7 +109,9 @@ class Model:
         ``max_steps``, ``method`` (``"auto"``, ``"dopri5"``, ``"dop853"``, or the Rosenbrock
         methods for stiff models ``"rodas5p"``, ``"rodas4"``), ``graze_tol``,
         ``sens_error_control``, ``quadrature_error_control`` (``False``: running costs out of the
-        step-size control, ``--no-quadrature-error-control``), ``h_max``; unset ones come from the
+        step-size control, ``--no-quadrature-error-control``), ``land_events`` (``True``: every method
+        retakes a step to land on each event, ``--land-events``; ``False``: none does; unset: the
+        Rosenbrock methods do, the explicit ones do not), ``h_max``; unset ones come from the
         model's ``simulate`` line, then the defaults of ``hybc run``. The same keywords, with the
         same checks, go with :meth:`sweep`, :meth:`sobol`, :meth:`fit`, :meth:`optimize` and
         ``hybc.jax``. The GIL is released while the model compiles and runs.

@@ -240,7 +240,7 @@ def function(
       (``"samples"``); at most 10^7 numbers (values and Jacobian entries) per point.
     - ``sim_kw``: the keywords of ``Model.simulate``: ``t_end``, ``rtol``, ``atol``,
       ``max_events``, ``max_steps``, ``method``, ``graze_tol``, ``sens_error_control``,
-      ``quadrature_error_control``, ``h_max`` (the model's ``simulate`` line and the run defaults otherwise).
+      ``quadrature_error_control``, ``land_events``, ``h_max`` (the model's ``simulate`` line and the run defaults otherwise).
 
     The model is compiled here (twice: without and with sensitivities, each cached per model).
     A bad name or option raises at once (``hybc.ParameterError``, ``ValueError``).

@@ -23,11 +23,12 @@ pub struct SimKeywords {
     pub graze_tol: Option<f64>,
     pub sens_error_control: Option<bool>,
     pub quadrature_error_control: Option<bool>,
+    pub land_events: Option<bool>,
     pub h_max: Option<f64>,
 }
 
 /// The keywords [`SimKeywords::from_kwargs`] takes, in the order an error lists them.
-const KEYWORDS: [&str; 10] = [
+const KEYWORDS: [&str; 11] = [
     "t_end",
     "rtol",
     "atol",
@@ -37,6 +38,7 @@ const KEYWORDS: [&str; 10] = [
     "graze_tol",
     "sens_error_control",
     "quadrature_error_control",
+    "land_events",
     "h_max",
 ];
 
@@ -81,6 +83,7 @@ impl SimKeywords {
                 "graze_tol" => out.graze_tol = get(&key, &value)?,
                 "sens_error_control" => out.sens_error_control = get(&key, &value)?,
                 "quadrature_error_control" => out.quadrature_error_control = get(&key, &value)?,
+                "land_events" => out.land_events = get(&key, &value)?,
                 "h_max" => out.h_max = get(&key, &value)?,
                 _ => {
                     return Err(PyTypeError::new_err(format!(
@@ -139,6 +142,7 @@ impl SimKeywords {
             graze_tol: positive("graze_tol", self.graze_tol.unwrap_or(base.graze_tol))?,
             sens_error_control: self.sens_error_control.unwrap_or(base.sens_error_control),
             quadrature_error_control: self.quadrature_error_control.unwrap_or(base.quadrature_error_control),
+            land_events: self.land_events.or(base.land_events),
             h_max,
             ..base
         })

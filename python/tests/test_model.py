@@ -355,3 +355,13 @@ def test_simulation_keywords_are_one_set_with_one_check(ball):
     on, off = juggler.simulate(), juggler.simulate(quadrature_error_control=False)
     assert steps(off) < steps(on)
     assert off.state["y"] == pytest.approx(on.state["y"], rel=1e-6)
+
+
+def test_land_events_is_the_clis_flag(ball):
+    # `hybc run models/ball.hyb --grad e --land-events`: the same events and bounce times to the
+    # tolerances, one more step attempt per bounce (more right-hand-side evaluations, same steps).
+    rhs = lambda run: json.loads(run.to_json())["stats"]["rhs_calls"]  # noqa: E731
+    plain, landed = ball.simulate(grad=["e"]), ball.simulate(grad=["e"], land_events=True)
+    assert len(landed.event_times) == len(plain.event_times) > 0
+    np.testing.assert_allclose(landed.event_times, plain.event_times, rtol=1e-9)
+    assert rhs(landed) > rhs(plain)
