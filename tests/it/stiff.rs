@@ -1,6 +1,7 @@
 //! Stiff models and the Rosenbrock steppers (issue #25): the compiled Jacobian kernels against
-//! central differences of the flow kernels, a stiff hybrid problem in closed form (values,
-//! gradients and the dense output, each Rosenbrock method), the soft ball and Robertson's
+//! central differences of the flow kernels, stiff hybrid problems in closed form (values,
+//! gradients and the dense output: with time events, each Rosenbrock method; with a state event
+//! that cuts steps, every stepper), the soft ball and Robertson's
 //! kinetics with their step counts and gradient checks.
 
 use hybc::sim::{HybridSystem, Method, SimOptions, TrajectoryRequest};
@@ -256,6 +257,126 @@ fn stiff_jumps_dense_output_matches_the_closed_form_between_jumps() {
             checked += 1;
         }
         assert!(checked > 1500, "{method:?}: {checked} samples checked");
+    }
+}
+
+/// The same stiff pair with a *state* event, so that steps are cut by it (the jumps above are
+/// time events, which the steps land on): `y1' = -y1`, `y2' = 999 y1 - 1000 y2`, and when `y1`
+/// falls to 1/2 both jump by `J`. From `y1(0) = a`, `y2(0) = b`: the k-th event at
+/// `t_k = ln(2a) + (k - 1) ln(1 + 2J)`, `y1 = (1/2 + J) e^-(t - t_k)` after it, and
+/// `y2 = y1 + (b - a) e^-1000t` throughout (a jump leaves `y2 - y1` alone).
+fn state_jump_model() -> &'static str {
+    "model kicks\nparam a = 1\nparam b = 3\nparam J = 0.25\n\
+     state y1 = a\nstate y2 = b\nder(y1) = -y1\nder(y2) = 999 * y1 - 1000 * y2\n\
+     event kick when y1 <= 0.5 {\n  y1 := y1 + J\n  y2 := y2 + J\n}\n"
+}
+
+/// The closed form of `state_jump_model` at `t` (not an event time): `[y1, y2]`, their
+/// derivatives `[[dy1/dp, dy2/dp]]` for `p = (a, b, J)`, and the event times before `t`.
+fn state_jump_exact(t: f64, (a, b, jump): (f64, f64, f64)) -> ([f64; 2], [[f64; 2]; 3]) {
+    let period = (1.0 + 2.0 * jump).ln();
+    let t1 = (2.0 * a).ln();
+    let e1000 = (-1000.0 * t).exp();
+    let (y1, dy1) = if t < t1 {
+        (a * (-t).exp(), [(-t).exp(), 0.0, 0.0])
+    } else {
+        let k = ((t - t1) / period).floor() + 1.0;
+        let tk = t1 + (k - 1.0) * period;
+        let y1 = (0.5 + jump) * (-(t - tk)).exp();
+        (y1, [y1 / a, 0.0, (-(t - tk)).exp() + y1 * (k - 1.0) * 2.0 / (1.0 + 2.0 * jump)])
+    };
+    let y2 = y1 + (b - a) * e1000;
+    ([y1, y2], [[dy1[0], dy1[0] - e1000], [0.0, e1000], [dy1[2], dy1[2]]])
+}
+
+/// Every stepper (both Rosenbrock methods, both explicit pairs and `auto`) against the closed
+/// form of a stiff problem whose steps are cut by a state event: the event times and their
+/// gradients (`1e-9`), the final state and gradients (`1e-8`, `1e-7`), and the dense output at
+/// the midpoint of every step an event cut and of every first step after an event (values and
+/// sensitivities, `1e-7` relative, floor `1e-9`), where interpolants are built on a step that
+/// ends at an event or starts from a reset.
+#[test]
+fn a_stiff_state_event_matches_its_closed_form_and_interpolant_with_every_stepper() {
+    let params = ["a", "b", "J"];
+    let p = (1.0, 3.0, 0.25);
+    let model = Model::parse(state_jump_model()).expect("parses");
+    let compiled = model.compile(&params).expect("compiles");
+    let t_end = 5.0;
+    let period = (1.5f64).ln();
+    let n_events = ((t_end - 2f64.ln()) / period).floor() as usize + 1;
+    let tol = |want: f64, rel: f64, floor: f64| rel * want.abs() + floor;
+    for method in [Method::Rodas5p, Method::Rodas4, Method::Dopri5, Method::Dop853, Method::Auto] {
+        let base = SimOptions { t_end, rtol: 1e-10, atol: 1e-12, method, ..SimOptions::default() };
+        let opts = SimOptions { trajectory: TrajectoryRequest::Steps, ..base.clone() };
+        let run = compiled.simulate(&compiled.params(), &opts).expect("runs");
+        assert!(run.is_complete(), "{method:?}: {:?}", run.stopped_by());
+        assert_eq!(run.events().len(), n_events, "{method:?}");
+        for (k, ev) in run.events().iter().enumerate() {
+            let want = 2f64.ln() + k as f64 * period;
+            assert!((ev.time - want).abs() <= 1e-9 * want, "{method:?} t_{k}: {} vs {want}", ev.time);
+            let dt = ev.dtime.as_ref().expect("event-time gradients");
+            let dwant = [1.0 / p.0, 0.0, k as f64 * 2.0 / (1.0 + 2.0 * p.2)];
+            for j in 0..3 {
+                assert!(
+                    (dt[j] - dwant[j]).abs() <= tol(dwant[j], 1e-9, 1e-12),
+                    "{method:?} dt_{k}/d{}",
+                    params[j]
+                );
+            }
+        }
+        let (y, d) = state_jump_exact(t_end, p);
+        for (i, name) in ["y1", "y2"].iter().enumerate() {
+            let got = run.state(name).expect("state");
+            assert!((got - y[i]).abs() <= tol(y[i], 1e-8, 0.0), "{method:?} {name}: {got} vs {}", y[i]);
+            for (j, param) in params.iter().enumerate() {
+                let got = run.dstate(name, param).expect("gradient");
+                assert!(
+                    (got - d[j][i]).abs() <= tol(d[j][i], 1e-7, 1e-10),
+                    "{method:?} d{name}/d{param}: {got} vs {}",
+                    d[j][i]
+                );
+            }
+        }
+        // The steps around each event, from the trajectory of step ends (both sides of each
+        // event are rows at its time): the midpoints of the step the event cut and of the next.
+        let rows = run.result().trajectory.as_ref().expect("trajectory");
+        let times: Vec<f64> = rows.iter().map(|r| r.t).collect();
+        let mut mids = Vec::new();
+        for ev in run.events() {
+            let before = times.iter().rev().find(|&&t| t < ev.time).copied().expect("a step before");
+            let after = times.iter().find(|&&t| t > ev.time).copied().expect("a step after");
+            mids.push(0.5 * (before + ev.time));
+            mids.push(0.5 * (ev.time + after));
+        }
+        let sampled = SimOptions { at: mids.clone(), ..base };
+        let run = compiled.simulate(&compiled.params(), &sampled).expect("runs");
+        assert_eq!(run.result().samples.len(), mids.len());
+        for s in run.result().samples.iter() {
+            assert!(s.reached);
+            let (y, d) = state_jump_exact(s.time, p);
+            let ds = s.dstate.expect("sensitivities");
+            for i in 0..2 {
+                assert!(
+                    (s.state[i] - y[i]).abs() <= tol(y[i], 1e-7, 1e-9),
+                    "{method:?} t {}: y{} {} vs {}",
+                    s.time,
+                    i + 1,
+                    s.state[i],
+                    y[i]
+                );
+                for j in 0..3 {
+                    assert!(
+                        (ds[j * 2 + i] - d[j][i]).abs() <= tol(d[j][i], 1e-7, 1e-9),
+                        "{method:?} t {}: dy{}/d{} {} vs {}",
+                        s.time,
+                        i + 1,
+                        params[j],
+                        ds[j * 2 + i],
+                        d[j][i]
+                    );
+                }
+            }
+        }
     }
 }
 
