@@ -53,7 +53,8 @@ impl RunStatus {
                 | SimWarning::ResetOntoGuard { .. } => status = RunStatus::NotDifferentiable,
                 SimWarning::NearGrazing { .. }
                 | SimWarning::StartsAcross { .. }
-                | SimWarning::NearBreakpoint { .. } => {}
+                | SimWarning::NearBreakpoint { .. }
+                | SimWarning::CostUnresolved { .. } => {}
             }
         }
         status

@@ -108,8 +108,8 @@ class Model:
         the values after its events). ``options``: ``t_end``, ``rtol``, ``atol``, ``max_events``,
         ``max_steps``, ``method`` (``"auto"``, ``"dopri5"``, ``"dop853"``, or the Rosenbrock
         methods for stiff models ``"rodas5p"``, ``"rodas4"``), ``graze_tol``,
-        ``sens_error_control``, ``quadrature_error_control`` (``False``: running costs out of the
-        step-size control, ``--no-quadrature-error-control``), ``land_events`` (``True``: every method
+        ``sens_error_control``, ``quadrature_error_control`` (``True``: running costs under the
+        step-size control, ``--quadrature-error-control``; by default they are out of it), ``land_events`` (``True``: every method
         retakes a step to land on each event, ``--land-events``; ``False``: none does; unset: the
         Rosenbrock methods do, the explicit ones do not), ``h_max``; unset ones come from the
         model's ``simulate`` line, then the defaults of ``hybc run``. The same keywords, with the

@@ -348,11 +348,12 @@ def test_simulation_keywords_are_one_set_with_one_check(ball):
         ball.optimize(["e"], "energy", rtoll=1e-6)
     with pytest.raises(TypeError, match=r"method: expected"):
         ball.simulate(method=5)
-    # The juggler's running cost out of the step-size control: the steps of
-    # `hybc run models/juggler.hyb --no-quadrature-error-control` (49 against 50 measured).
+    # The juggler's running cost out of the step-size control (the default) and in it: the steps
+    # of `hybc run models/juggler.hyb` and `... --quadrature-error-control` (49 against 50 measured).
     juggler = hybc.Model.from_file(MODELS / "juggler.hyb")
     steps = lambda run: json.loads(run.to_json())["stats"]["steps"]  # noqa: E731
-    on, off = juggler.simulate(), juggler.simulate(quadrature_error_control=False)
+    on, off = juggler.simulate(quadrature_error_control=True), juggler.simulate()
+    assert steps(off) == steps(juggler.simulate(quadrature_error_control=False))
     assert steps(off) < steps(on)
     assert off.state["y"] == pytest.approx(on.state["y"], rel=1e-6)
 

@@ -65,10 +65,14 @@ pub(crate) struct SimFlags {
     /// accurate).
     #[arg(long)]
     no_sens_error_control: bool,
-    /// Leave running costs (states that nothing but outputs reads, such as `der(effort) = u^2`)
-    /// out of the step-size error control (fewer steps where the integrand is smooth, an
-    /// inaccurate integral where it is not).
-    #[arg(long)]
+    /// Put running costs (states that nothing but outputs reads, such as `der(effort) = u^2`)
+    /// under the step-size error control. By default they take no part in it (as CVODES'
+    /// quadratures), and a run warns when one's own error exceeded the tolerance on a step.
+    #[arg(long, overrides_with = "no_quadrature_error_control")]
+    quadrature_error_control: bool,
+    /// Leave running costs out of the step-size error control: the default, accepted so that
+    /// scripts written for earlier builds (where control was the default) keep working.
+    #[arg(long, hide = true, overrides_with = "quadrature_error_control")]
     no_quadrature_error_control: bool,
     /// Land a step on every event instant, with every method (the Rosenbrock methods do by
     /// default): the pre-event state, its sensitivities and the event time from a step end under
@@ -232,7 +236,7 @@ pub(crate) fn sim_options(model: &Model, args: &SimFlags) -> Result<SimOptions, 
             .map_err(|e| e.to_string())?,
         graze_tol: positive("--graze-tol", args.graze_tol)?,
         sens_error_control: !args.no_sens_error_control,
-        quadrature_error_control: !args.no_quadrature_error_control,
+        quadrature_error_control: args.quadrature_error_control,
         land_events: if args.land_events { Some(true) } else { base.land_events },
         ..base
     })

@@ -322,6 +322,14 @@ impl Stepper for Auto {
         }
     }
 
+    fn outside_error(&self) -> (f64, usize) {
+        if self.stiff {
+            self.row.outside_error()
+        } else {
+            self.rk.outside_error()
+        }
+    }
+
     fn visit_interior<V: FnMut(f64, &[f64])>(&self, visit: V) {
         if self.stiff {
             self.row.visit_interior(visit)

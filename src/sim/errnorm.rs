@@ -26,6 +26,9 @@ pub(crate) struct BlockNorm<'e> {
     sum3: f64,
     used: usize,
     worst: f64,
+    /// The largest scaled error of an excluded state (first block only) and its position: a
+    /// running cost's own error, kept aside so that the run can say when it was not resolved.
+    outside: (f64, usize),
 }
 
 impl<'e> BlockNorm<'e> {
@@ -33,7 +36,16 @@ impl<'e> BlockNorm<'e> {
     /// marks left out of every block (empty: none).
     pub(crate) fn new(block: usize, excluded: &'e [bool]) -> BlockNorm<'e> {
         let block = block.max(1);
-        BlockNorm { block, excluded, next_end: block, sum5: 0.0, sum3: 0.0, used: 0, worst: 0.0 }
+        BlockNorm {
+            block,
+            excluded,
+            next_end: block,
+            sum5: 0.0,
+            sum3: 0.0,
+            used: 0,
+            worst: 0.0,
+            outside: (0.0, 0),
+        }
     }
 
     /// Component `i`'s scaled errors (`r3` is 0 without a second estimate), or `None` for a
@@ -44,6 +56,23 @@ impl<'e> BlockNorm<'e> {
             self.close(with3);
         }
         if !self.excluded.is_empty() && self.excluded[i + self.block - self.next_end] {
+            // Out of the test, but its error is measured as a block of its own would be (the
+            // states' values only: a cost's sensitivities follow its value).
+            if let Some((r5, r3)) = r.filter(|_| self.next_end == self.block) {
+                let e = if with3 {
+                    let den = r5 * r5 + 0.01 * r3 * r3;
+                    if den == 0.0 {
+                        0.0
+                    } else {
+                        r5 * r5 / den.sqrt()
+                    }
+                } else {
+                    r5.abs()
+                };
+                if e > self.outside.0 {
+                    self.outside = (e, i);
+                }
+            }
             return;
         }
         if let Some((r5, r3)) = r {
@@ -74,6 +103,13 @@ impl<'e> BlockNorm<'e> {
         self.sum5 = 0.0;
         self.sum3 = 0.0;
         self.used = 0;
+    }
+
+    /// The largest scaled error among the excluded states (the running costs) and the state's
+    /// index: above 1, the step would have failed its error test had they been in it. `(0, 0)`
+    /// when none is excluded.
+    pub(crate) fn outside(&self) -> (f64, usize) {
+        self.outside
     }
 
     /// The largest block norm (0 when nothing was added).
@@ -120,6 +156,8 @@ mod tests {
         for (i, r) in [1.0, 100.0, 3.0, 100.0].into_iter().enumerate() {
             b.add(i, Some((r, 0.0)), false);
         }
+        // The excluded state's own error is kept aside (first block only), not in the norm.
+        assert_eq!(b.outside(), (100.0, 1));
         assert_eq!(b.finish(false), 3.0);
     }
 }

@@ -206,6 +206,9 @@ pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = R
     h: f64,
     attempts: usize,
     nonfinite_rejects: usize,
+    /// Accepted steps on which a running cost left out of the error test had a scaled error
+    /// above 1 (`Stepper::outside_error`): how many, the worst, its time and state.
+    unresolved_cost: Option<UnresolvedCost>,
     /// A group prepared at the current instant (events that start on their guard), fired by the
     /// next `step` before any integration.
     immediate: bool,
@@ -291,6 +294,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             h: 0.0,
             attempts: 0,
             nonfinite_rejects: 0,
+            unresolved_cost: None,
             immediate: false,
             instant: None,
             step_mode: info.initial_mode,
@@ -670,6 +674,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 guard_factor = control.factor.min(GUARD_GROWTH);
             }
         }
+        self.note_cost_error(t0);
         let h_next = self.stepper.grow(err).min(h_try * guard_factor);
         self.stats.steps += 1;
         let mut selection = if for_events {
@@ -1383,6 +1388,21 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// The run's result, ended by `stopped_by`: events, the final state with its sensitivities
     /// and the outputs' (chained through the output Jacobians), warnings, statistics. The
     /// trajectory is the recorder's to give.
+    /// Keeps count of the accepted steps (from `t0`) on which a running cost out of the error
+    /// test was not resolved: its own scaled error above 1, where a controlled state's step
+    /// would have been rejected (docs/language.md, "Running costs and the step size").
+    fn note_cost_error(&mut self, t0: f64) {
+        let (e, state) = self.stepper.outside_error();
+        if e > 1.0 {
+            let u =
+                self.unresolved_cost.get_or_insert(UnresolvedCost { steps: 0, worst: 0.0, time: t0, state });
+            u.steps += 1;
+            if e > u.worst {
+                (u.worst, u.time, u.state) = (e, t0, state);
+            }
+        }
+    }
+
     pub fn finish(mut self, stopped_by: StopReason) -> SimResult {
         self.record_at_current_point();
         let mut samples = std::mem::take(&mut self.samples);
@@ -1414,6 +1434,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             vec![MethodSegment { from: self.opts.t_start, to: t, method, steps, rejected }]
         });
         let mut warnings = self.warnings;
+        if let Some(UnresolvedCost { steps, worst, time, state }) = self.unresolved_cost {
+            let state: Arc<str> = self.info.state_names[state].as_str().into();
+            warnings.push(SimWarning::CostUnresolved { state, steps, worst, time });
+        }
         near_breakpoints(self.info, &self.events, self.opts.t_end, &mut warnings);
         let end_cusp = match self.before_end {
             Some((z, first)) if matches!(stopped_by, StopReason::TEnd) && first < self.events.len() => {
@@ -1529,4 +1553,14 @@ fn near_breakpoints(info: &SystemInfo, events: &[EventRecord], t_end: f64, warni
             });
         }
     }
+}
+
+/// Accepted steps on which a running cost left out of the error test had a scaled error above 1.
+#[derive(Clone, Copy, Debug)]
+struct UnresolvedCost {
+    steps: usize,
+    /// The largest scaled error, the start of its step and the state's index.
+    worst: f64,
+    time: f64,
+    state: usize,
 }

@@ -80,10 +80,10 @@ pub struct SimOptions {
     /// sensitivities' accuracy is only whatever the state's steps give them.
     pub sens_error_control: bool,
     /// Whether running costs (quadrature states, `SystemInfo::quadrature`) take part in the
-    /// step-size error norm. On by default: off (as CVODES' quadratures by default) they cost no
-    /// steps and are only as accurate as the other states' steps make them, which saved 5% of
-    /// the steps on one shipped model and cost 7% on another, and lets an integrand with a time
-    /// scale of its own go unresolved (docs/language.md).
+    /// step-size error norm. Off by default, as CVODES' quadratures: a cost that nothing reads
+    /// does not drive the step size; a step on which its own error exceeds the tolerance is
+    /// reported (`SimWarning::CostUnresolved`), and on puts it back in the test
+    /// (docs/language.md, "Running costs and the step size").
     pub quadrature_error_control: bool,
     /// Optional cap on the step size (infinite by default).
     pub h_max: f64,
@@ -120,7 +120,7 @@ impl Default for SimOptions {
             max_steps: 1_000_000,
             graze_tol: 1e-2,
             sens_error_control: true,
-            quadrature_error_control: true,
+            quadrature_error_control: false,
             h_max: f64::INFINITY,
             land_events: None,
             linear_solver: super::LinearSolver::Auto,

@@ -177,6 +177,11 @@ pub enum SimWarning {
     /// than `margin`; `margin` 0 is on the breakpoint itself (a cusp; at `t_end` the other side's
     /// values are in `SimResult::end_cusp`).
     NearBreakpoint { event: usize, name: Arc<str>, time: f64, breakpoint: Arc<str>, margin: f64 },
+    /// A running cost (a quadrature state), left out of the step-size error test, had a local
+    /// error estimate above its tolerance on `steps` accepted steps (the worst `worst` times the
+    /// tolerance, on the step from `time`): its value and derivatives may be less accurate than
+    /// `rtol` asks. `SimOptions::quadrature_error_control` puts it back in the test.
+    CostUnresolved { state: Arc<str>, steps: usize, worst: f64, time: f64 },
 }
 
 impl fmt::Display for SimWarning {
@@ -223,6 +228,14 @@ impl fmt::Display for SimWarning {
                 "the run starts on the crossed side of the guard of event `{name}` (t = {time}, guard \
                  {guard:e}): it fires only after the guard has gone back across zero; check the initial \
                  values"
+            ),
+            SimWarning::CostUnresolved { state, steps, worst, time } => write!(
+                f,
+                "running cost `{state}` is outside the step-size error test (the default) and its \
+                 local error exceeded the tolerance on {steps} step{} (worst {worst:.3e} times, from \
+                 t = {time}): it may be less accurate than --rtol; --quadrature-error-control puts \
+                 it under the error test",
+                if *steps == 1 { "" } else { "s" }
             ),
             SimWarning::NotDifferentiable { time, state, param, count } => write!(
                 f,

@@ -62,6 +62,8 @@ pub struct Rk {
     pub(crate) rhs_calls: usize,
     /// States left out of the error norm (the quadrature states); empty: none.
     excluded: Vec<bool>,
+    /// The last attempt's largest scaled error among them, and the state (`BlockNorm::outside`).
+    outside: (f64, usize),
 }
 
 impl Rk {
@@ -117,6 +119,7 @@ impl Rk {
             },
             rhs_calls: 0,
             excluded: Vec::new(),
+            outside: (0.0, 0),
         }
     }
 
@@ -201,6 +204,7 @@ impl Rk {
                 }
             }
         }
+        self.outside = norm.outside();
         norm.finish(with3)
     }
 }
@@ -279,6 +283,10 @@ impl Stepper for Rk {
 
     fn masked(&self) -> bool {
         self.masked
+    }
+
+    fn outside_error(&self) -> (f64, usize) {
+        self.outside
     }
 
     fn visit_interior<V: FnMut(f64, &[f64])>(&self, mut visit: V) {

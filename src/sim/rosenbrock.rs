@@ -60,6 +60,8 @@ pub struct Rosenbrock {
     solver: LinearSolver,
     /// States left out of the error norm (the quadrature states); empty: none.
     excluded: Vec<bool>,
+    /// The last attempt's largest scaled error among them, and the state (`BlockNorm::outside`).
+    outside: (f64, usize),
     ft: Vec<f64>,
     jac_fresh: bool,
     /// Scratch: a stage input, a stage right-hand side, `sum_j Gamma_ij k_j`, `[x0, v]`, and
@@ -109,6 +111,7 @@ impl Rosenbrock {
             lin: Box::new(LinSolve::new(n)),
             solver: LinearSolver::Auto,
             excluded: Vec::new(),
+            outside: (0.0, 0),
             ft: vec![0.0; nz],
             jac_fresh: false,
             u: vec![0.0; nz],
@@ -241,7 +244,7 @@ impl Rosenbrock {
 
     /// The scaled norm of the error estimate over the controlled components;
     /// `MASKED` leaves out sensitivities that are not finite (as `Rk::error`).
-    fn error<const MASKED: bool>(&self, y: &[f64]) -> f64 {
+    fn error<const MASKED: bool>(&mut self, y: &[f64]) -> f64 {
         let e = &self.err;
         let mut norm = BlockNorm::new(self.n, &self.excluded);
         for i in 0..self.n_err {
@@ -250,6 +253,7 @@ impl Rosenbrock {
             let r = ei / (self.atol + self.rtol * y0.abs().max(y1.abs()));
             norm.add(i, (!skip).then_some((r, 0.0)), false);
         }
+        self.outside = norm.outside();
         norm.finish(false)
     }
 }
@@ -474,6 +478,10 @@ impl Stepper for Rosenbrock {
 
     fn masked(&self) -> bool {
         self.masked
+    }
+
+    fn outside_error(&self) -> (f64, usize) {
+        self.outside
     }
 
     fn visit_interior<V: FnMut(f64, &[f64])>(&self, mut visit: V) {

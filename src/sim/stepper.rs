@@ -193,6 +193,10 @@ pub trait Stepper {
     /// Whether the last attempt found sensitivities that are not finite at its finite end state
     /// (and judged its error without them): derivatives that do not exist from there on.
     fn masked(&self) -> bool;
+    /// The last attempt's largest scaled error among the states left out of its error test (the
+    /// running costs), and that state's index: above 1, the step would have failed the test
+    /// with them in it. `(0, 0)` when none is left out.
+    fn outside_error(&self) -> (f64, usize);
     /// Calls `visit` with derivatives at a few interior points of the last attempt, in time
     /// order: the point's position in the step (in `(0, 1)`) and the derivative there (an
     /// approximation of the method's order, good for sampling the signs of a guard's speed). An
