@@ -78,9 +78,14 @@ impl FactorCosts {
 }
 
 /// `Auto` takes the sparse LU when its multiply-adds times this factor are fewer than the
-/// band's and the dense LU's: the price of its indirect addressing against the band's
-/// contiguous columns. MEASURED (README, Performance): see the constant's value's note there.
-pub const SPARSE_COST: f64 = 3.0;
+/// band's and the dense LU's: the price of its indirect addressing (and of its solves, which
+/// are not counted) against the band's contiguous columns and nalgebra's dense kernels.
+/// Measured on whole Rodas5P runs with 10 gradients (`examples/sparse_hub.rs`, README,
+/// Performance): the sparse and the banded LU take the same time on 2-D grids whose counts'
+/// ratio is 5.2 to 5.7 (a 12 x 12 grid: 29.3 ms both; the band is 2-5% faster below, the sparse
+/// LU 6% faster at 16 x 16 and 17% at 24 x 24), and the sparse and the dense LU on a hub of 5
+/// states (ratio 5.2: 0.65 against 0.63 ms; a 3 x 3 grid, ratio 4.3: the sparse LU 17% faster).
+pub const SPARSE_COST: f64 = 5.0;
 
 /// From this many states the banded factorisation is used (when the model gives its Jacobian's
 /// pattern and the band costs fewer operations than the dense LU). Measured on the diffusion
