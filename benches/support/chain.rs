@@ -75,15 +75,18 @@ pub fn hub_source(n: usize, with_event: bool) -> String {
     for i in 1..n {
         s.push_str(&format!("state x{i} = {}\n", diffusion_start(i, n)));
     }
-    let mut hub = String::new();
     for i in 1..n {
-        if i > 1 {
-            hub.push_str(" + ");
-        }
-        hub.push_str(&format!("d[{}] * (x{i} - x0)", seg(i)));
         s.push_str(&format!("der(x{i}) = -d[{}] * (x{i} - x0) - c * x{i}\n", seg(i)));
     }
-    s.push_str(&format!("der(x0) = {hub}\n"));
+    // The hub's sum in parts of 50 leaves (`let`s: a line holds at most 4096 characters).
+    let leaves: Vec<usize> = (1..n).collect();
+    let mut parts = Vec::new();
+    for (k, group) in leaves.chunks(50).enumerate() {
+        let terms: Vec<String> = group.iter().map(|&i| format!("d[{}] * (x{i} - x0)", seg(i))).collect();
+        s.push_str(&format!("let hub{k} = {}\n", terms.join(" + ")));
+        parts.push(format!("hub{k}"));
+    }
+    s.push_str(&format!("der(x0) = {}\n", parts.join(" + ")));
     if with_event {
         s.push_str("initial mode fill {\n    event top_up when x1 <= 0.6 -> rest {\n        x1 := x1 + 0.3\n    }\n}\nmode rest {\n}\n");
     }
