@@ -78,14 +78,15 @@ impl FactorCosts {
 }
 
 /// `Auto` takes the sparse LU when its multiply-adds times this factor are fewer than the
-/// band's and the dense LU's: the price of its indirect addressing (and of its solves, which
-/// are not counted) against the band's contiguous columns and nalgebra's dense kernels.
-/// Measured on whole Rodas5P runs with 10 gradients (`examples/sparse_hub.rs`, README,
-/// Performance): the sparse and the banded LU take the same time on 2-D grids whose counts'
-/// ratio is 5.2 to 5.7 (a 12 x 12 grid: 29.3 ms both; the band is 2-5% faster below, the sparse
-/// LU 6% faster at 16 x 16 and 17% at 24 x 24), and the sparse and the dense LU on a hub of 5
-/// states (ratio 5.2: 0.65 against 0.63 ms; a 3 x 3 grid, ratio 4.3: the sparse LU 17% faster).
-pub const SPARSE_COST: f64 = 5.0;
+/// band's and the dense LU's: the price of its indirect addressing against the band's
+/// contiguous columns and the dense LU's kernels. Measured on whole Rodas5P runs with 10
+/// gradients (`examples/sparse_hub.rs`, README, Performance), where the paths tie: the sparse
+/// and the banded LU on the W5 chain (counts equal: the band 0-4% faster at 10, 100 and 1000
+/// states), a 3-state hub (ratio 1.5: within 3% either way) and a 3 x 3 grid (ratio 2.9: the
+/// sparse LU 3-5% faster, 6% at 4 x 4, 10% at 5 x 5); the sparse and the dense LU on a 2 x 2
+/// grid (ratio 1.5: within 1%), a 3-state hub (2.25: within 2%) and a 4-state hub (3.6: the
+/// sparse LU 5% faster).
+pub const SPARSE_COST: f64 = 2.0;
 
 /// From this many states the banded factorisation is used (when the model gives its Jacobian's
 /// pattern and the band costs fewer operations than the dense LU). Measured on the diffusion
@@ -107,6 +108,8 @@ pub(crate) struct Rows {
     /// row or scattered updates.
     by_row: Vec<usize>,
     row_start: Vec<usize>,
+    /// The column of each entry of `by_row`.
+    row_col: Vec<usize>,
     /// When the pattern fills a band of the model's own numbering exactly (every position from
     /// `kl0` below to `ku0` above the diagonal an entry, once: a chain), `(kl0, ku0)` and each
     /// entry's slot in diagonal storage (`diagonal * n + row`); the product `f_x x` then runs
@@ -131,7 +134,8 @@ impl Rows {
             next[r] += 1;
         }
         let diagonals = full_band(n, &entries, band_of(entries.iter().copied()));
-        Rows { entries, by_row, row_start, diagonals }
+        let row_col = by_row.iter().map(|&k| entries[k].1).collect();
+        Rows { entries, by_row, row_start, row_col, diagonals }
     }
 }
 
@@ -556,8 +560,10 @@ pub(crate) struct LinSolve {
     sparse_in_dense: bool,
     /// Attempts on the sparse path factored densely because a static pivot failed (tests).
     pub(crate) sparse_fallbacks: usize,
-    /// `f_x` in diagonal storage (`Rows::diagonals`), filled by [`Self::factor`].
+    /// `f_x` in diagonal storage (`Rows::diagonals`), or else its values in the order of
+    /// `Rows::by_row`, filled by [`Self::factor`] for the products.
     diag: Vec<f64>,
+    fx_rows: Vec<f64>,
     lu: Option<nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>>,
 }
 
@@ -645,10 +651,15 @@ impl LinSolve {
                     }
                 }
                 Some(s) => {
+                    // `fx_rows`: the values in `by_row`'s order, contiguous.
                     for (r, yr) in yc.iter_mut().enumerate() {
-                        for &k in &s.by_row[s.row_start[r]..s.row_start[r + 1]] {
-                            *yr += a * self.fx[k] * xc[s.entries[k].1];
+                        let range = s.row_start[r]..s.row_start[r + 1];
+                        // In a register (the same sums in the same order).
+                        let mut acc = *yr;
+                        for (&v, &col) in self.fx_rows[range.clone()].iter().zip(&s.row_col[range]) {
+                            acc += a * v * xc[col];
                         }
+                        *yr = acc;
                     }
                 }
                 None => {
@@ -680,13 +691,17 @@ impl LinSolve {
         }
     }
 
-    /// `f_x` in diagonal storage when the pattern fills a band exactly (for [`Self::mul_add`]).
-    fn fill_diagonals(diag: &mut Vec<f64>, rows: &Rows, fx: &[f64], n: usize) {
+    /// `f_x` for [`Self::mul_add`]: in diagonal storage when the pattern fills a band exactly,
+    /// else in row order.
+    fn fill_products(diag: &mut Vec<f64>, fx_rows: &mut Vec<f64>, rows: &Rows, fx: &[f64], n: usize) {
         if let Some((kl, ku, slots)) = &rows.diagonals {
             diag.resize((kl + ku + 1) * n, 0.0);
             for (&slot, &v) in slots.iter().zip(fx) {
                 diag[slot] = v;
             }
+        } else {
+            fx_rows.clear();
+            fx_rows.extend(rows.by_row.iter().map(|&k| fx[k]));
         }
     }
 
@@ -698,7 +713,7 @@ impl LinSolve {
         match self.current {
             Path::Band(key) => {
                 let Some(Some(Some(s))) = self.modes.get(key).map(|m| &m.band) else { return false };
-                Self::fill_diagonals(&mut self.diag, &s.rows, &self.fx, n);
+                Self::fill_products(&mut self.diag, &mut self.fx_rows, &s.rows, &self.fx, n);
                 self.band.ab.fill(0.0);
                 for (&(r, c), &v) in s.at.iter().zip(&self.fx) {
                     let k = self.band.idx(r, c);
@@ -712,7 +727,7 @@ impl LinSolve {
             }
             Path::Sparse(key) => {
                 let Some(Some(Some(s))) = self.modes.get(key).map(|m| &m.sparse) else { return false };
-                Self::fill_diagonals(&mut self.diag, &s.rows, &self.fx, n);
+                Self::fill_products(&mut self.diag, &mut self.fx_rows, &s.rows, &self.fx, n);
                 self.sparse_in_dense = false;
                 if self.sparse.factor(&s.sym, &self.fx, hg) {
                     return true;

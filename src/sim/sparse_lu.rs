@@ -224,6 +224,58 @@ impl Numeric {
                 work[at * cols + c] = v;
             }
         }
+        // Rows of up to 16 columns as fixed-size arrays (the row operations unrolled).
+        macro_rules! fixed {
+            ($($c:literal)*) => {
+                match cols {
+                    $($c => self.substitute_rows::<$c>(s, work.as_chunks_mut::<$c>().0),)*
+                    _ => self.substitute_any(s, &mut work, cols),
+                }
+            };
+        }
+        fixed!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16);
+        for (c, col) in b.chunks_exact_mut(n).take(cols).enumerate() {
+            for (v, &at) in col.iter_mut().zip(&s.perm) {
+                *v = work[at * cols + c];
+            }
+        }
+        self.work = work;
+    }
+
+    /// The substitutions of [`Self::solve`] on rows of `C` columns (the operations of
+    /// [`Self::substitute_any`], in its order).
+    fn substitute_rows<const C: usize>(&self, s: &Symbolic, x: &mut [[f64; C]]) {
+        for j in 0..s.n {
+            let xj = x[j];
+            for q in s.diag[j] + 1..s.ptr[j + 1] {
+                let (i, l) = (s.idx[q], self.vals[q]);
+                if l != 0.0 {
+                    for (x, y) in x[i].iter_mut().zip(&xj) {
+                        *x -= l * y;
+                    }
+                }
+            }
+        }
+        for j in (0..s.n).rev() {
+            let mut xj = x[j];
+            for v in xj.iter_mut() {
+                *v *= self.inv[j];
+            }
+            x[j] = xj;
+            for q in s.ptr[j]..s.diag[j] {
+                let (i, u) = (s.idx[q], self.vals[q]);
+                if u != 0.0 {
+                    for (x, y) in x[i].iter_mut().zip(&xj) {
+                        *x -= u * y;
+                    }
+                }
+            }
+        }
+    }
+
+    /// The substitutions of [`Self::solve`] on `work`, row-major with `cols` columns.
+    fn substitute_any(&self, s: &Symbolic, work: &mut [f64], cols: usize) {
+        let n = s.n;
         // `L y = b`, unit diagonal, column by column.
         for j in 0..n {
             let (head, tail) = work.split_at_mut((j + 1) * cols);
@@ -254,11 +306,5 @@ impl Numeric {
                 }
             }
         }
-        for (c, col) in b.chunks_exact_mut(n).take(cols).enumerate() {
-            for (v, &at) in col.iter_mut().zip(&s.perm) {
-                *v = work[at * cols + c];
-            }
-        }
-        self.work = work;
     }
 }
