@@ -3,8 +3,8 @@
 //! 1e-10) on generated models (`benches/support/chain.rs`): a hub of N states (`hub_source`, an
 //! arrowhead `f_x`), a `side x side` grid (`grid_source`) and the W5 diffusion chain
 //! (`diffusion_source`), each with its top-up event. For each model: the multiply-adds of one
-//! factorisation by path (`FactorCosts`), `Auto`'s choice, and the run time of each path, best
-//! of a few runs.
+//! factorisation by path (`FactorCosts`, and the time of the band's and the sparse symbolic
+//! analyses together), `Auto`'s choice, and the run time of each path, best of a few runs.
 //!
 //! Run: `cargo run --release --example sparse_hub [hub:N | grid:SIDE | chain:N ...]` (default
 //! hub:100 hub:300 hub:1000 grid:32). `SPARSE_REPS=k`: best of k (default 5; 1 for the dense LU
@@ -53,10 +53,12 @@ fn main() {
         let compiled = model.compile(&D_NAMES).unwrap();
         compiled.native().prepare_jacobians().unwrap();
         let pattern = compiled.native().jac_pattern(0).expect("a pattern").to_vec();
+        let start = Instant::now();
         let costs = FactorCosts::of(n, &pattern);
+        let analysis_ms = start.elapsed().as_secs_f64() * 1e3;
         let show = |c: Option<f64>| c.map_or("-".to_string(), |c| format!("{c:.3e}"));
         println!(
-            "{arg} ({n} states, {} entries): multiply-adds dense {:.3e}, banded {}, sparse {}; auto picks {:?}",
+            "{arg} ({n} states, {} entries): multiply-adds dense {:.3e}, banded {}, sparse {} (both analyses {analysis_ms:.1} ms); auto picks {:?}",
             pattern.len(),
             costs.dense,
             show(costs.banded),
