@@ -1,21 +1,38 @@
 //! Stage 5 (sim): the linear solves of a Rosenbrock step, `W = I / (h gamma) - f_x`, factored
 //! once per attempt and solved for the state block and every sensitivity column.
 //!
-//! Two factorisations. **Dense** (nalgebra's LU with partial pivoting, `n^3 / 3`): for the tens
-//! of states of contact and kinetics models. **Banded**, for models whose Jacobian has a known
-//! structure (a compiled model gives the structurally nonzero entries of `f_x` per mode,
-//! `HybridSystem::jac_pattern`): once per mode, the *symbolic analysis* orders the states by
-//! reverse Cuthill-McKee and measures the band (`kl` below, `ku` above the diagonal) of the
-//! permuted `f_x`; every attempt then fills the band from the kernel's values (only the
-//! structural nonzeros are computed, never an `n x n` matrix) and factors it with partial
-//! pivoting inside the band (LAPACK's `gbtf2`: `n kl (kl + ku)` operations, `n (2 kl + ku + 1)`
-//! numbers). A chain is tridiagonal (`kl = ku = 1`): linear in `n`, in time and memory.
+//! Three factorisations. **Dense** (nalgebra's LU with partial pivoting, `n^3 / 3`): for the tens
+//! of states of contact and kinetics models, and for any model whose Jacobian pattern is
+//! unknown. The two structured ones use the pattern a compiled model gives (the structurally
+//! nonzero entries of `f_x` per mode, `HybridSystem::jac_pattern`): the kernel computes only
+//! those entries (`fx` holds their values, never an `n x n` matrix), and each mode's pattern is
+//! analysed once (cached by the mode's key).
 //!
-//! Why a band and not a general sparse LU: hybc's large models are chains and grids of
-//! compartments, which RCM turns into narrow bands, and a band with partial pivoting is as robust
-//! as the dense LU. faer's general sparse LU would add about 50 crates and minutes of cold build
-//! (README, Choices). A pattern whose band is too wide to pay (a hub coupled to every state) is
-//! solved densely: [`Structure::analyse`] compares the two operation counts.
+//! **Banded**: the *symbolic analysis* orders the states by reverse Cuthill-McKee and measures
+//! the band (`kl` below, `ku` above the diagonal) of the permuted `f_x`; every attempt fills the
+//! band and factors it with partial pivoting inside the band (LAPACK's `gbtf2`: `n kl (kl + ku)`
+//! operations, `n (2 kl + ku + 1)` numbers). A chain is tridiagonal (`kl = ku = 1`): linear in
+//! `n`, in time and memory. As robust as the dense LU.
+//!
+//! **Sparse** (`sparse_lu.rs`), for patterns no narrow band fits (a hub coupled to every state:
+//! an arrowhead, whose band is the whole matrix; a 2-D grid of `k x k` cells, band `k`, band
+//! cost `n^2`): the analysis orders the states by exact minimum degree on the symmetrised
+//! pattern and computes the static fill pattern of `L` and `U` (a hub then has no fill: it is
+//! eliminated last); every attempt factors into that pattern with the pivots on the diagonal in
+//! that order (static pivoting, no row exchanges, no allocation), each pivot accepted only when
+//! `|u_jj| >= 0.1 max |a_ij|` over its column of the remaining matrix
+//! (`sparse_lu::PIVOT_THRESHOLD`). When a pivot fails, that attempt is factored by the dense LU
+//! instead (counted in `LinSolve::sparse_fallbacks`): a failed static pivot costs time, never a
+//! wrong solve. `W = I - h gamma f_x` has the identity on its diagonal, so for small steps and
+//! for diffusive (diagonally dominant) Jacobians the static pivots pass.
+//!
+//! Choice (`LinearSolver::Auto`, per mode, from [`SPARSE_MIN_STATES`] states): the least of the
+//! factorisations' multiply-adds, dense `n^3 / 3`, banded `n kl (kl + ku)` and sparse
+//! `sum_k (c_k^2 + c_k)` (`c_k` entries below the diagonal in column `k` of `L`) times
+//! [`SPARSE_COST`], measured where the paths' run times tie (README, Performance). A chain
+//! keeps the band (equal counts; the band's solves run in registers), hubs and grids take the
+//! sparse LU. Why not faer's sparse LU: about 50 crates and minutes of cold build (README,
+//! Choices); the hand-written one is some 300 lines.
 
 use nalgebra::{DMatrix, DMatrixViewMut};
 
@@ -81,20 +98,21 @@ impl FactorCosts {
 /// band's and the dense LU's: the price of its indirect addressing against the band's
 /// contiguous columns and the dense LU's kernels. Measured on whole Rodas5P runs with 10
 /// gradients (`examples/sparse_hub.rs`, README, Performance), where the paths tie: the sparse
-/// and the banded LU on the W5 chain (counts equal: the band 0-4% faster at 10, 100 and 1000
+/// and the banded LU on the W5 chain (counts equal: within 4% either way at 10, 100 and 1000
 /// states), a 3-state hub (ratio 1.5: within 3% either way) and a 3 x 3 grid (ratio 2.9: the
 /// sparse LU 3-5% faster, 6% at 4 x 4, 10% at 5 x 5); the sparse and the dense LU on a 2 x 2
 /// grid (ratio 1.5: within 1%), a 3-state hub (2.25: within 2%) and a 4-state hub (3.6: the
 /// sparse LU 5% faster).
 pub const SPARSE_COST: f64 = 2.0;
 
-/// From this many states the banded factorisation is used (when the model gives its Jacobian's
-/// pattern and the band costs fewer operations than the dense LU). Measured on the diffusion
+/// From this many states `Auto` uses a structured factorisation, banded or sparse (when the
+/// model gives its Jacobian's pattern and it costs fewer operations than the dense LU). Measured
+/// for the band on the diffusion
 /// chain of workload W5 (Rodas5P, 10 gradients, `examples/w5_chain.rs`, README Performance):
 /// a run with the band takes the time of the dense one at 2 states (0.188 ms both), 0.93 of it at
 /// 3, 0.54 at 10, 0.40 at 30 and 0.008 at 1000; the switch is where the band becomes narrower
 /// than the matrix, not a size. The dense LU stays for one and two states, where there is no
-/// band to find.
+/// band to find (nor, at 2 states, a sparse LU to gain: a 2 x 2 grid's four states tie).
 pub const SPARSE_MIN_STATES: usize = 3;
 
 /// A pattern's entries grouped by row, for the products `f_x x` and the row sums of every
