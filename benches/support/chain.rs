@@ -1,5 +1,6 @@
 //! The generated chain models shared by the benches, the examples and the tests
-//! (`tests/it/support`): `chain_source` (`benches/jit.rs`), `diffusion_source` (workload W5).
+//! (`tests/it/support`): `chain_source` (`benches/jit.rs`), `diffusion_source` (workload W5),
+//! `hub_source` and `grid_source` (the sparse LU, `examples/sparse_hub.rs`).
 // Each includer (benches, examples, tests) uses only some of the generators.
 #![allow(dead_code)]
 
@@ -58,4 +59,78 @@ pub fn diffusion_source(n: usize, with_event: bool) -> String {
 /// reads back exactly).
 pub fn diffusion_start(i: usize, n: usize) -> f64 {
     1.0 - 0.5 * i as f64 / n as f64
+}
+
+/// A hub of `n` states (a thermal network with an ambient node): the hub `x0` exchanges with
+/// each leaf `x1 ..= x(n-1)` through the conductance `d[j]` of the leaf's tenth (`j = 10 (i - 1)
+/// / (n - 1)`), the leaves leak at rate `c`: `der(x_i) = -d (x_i - x0) - c x_i`, `der(x0) =
+/// sum_i d (x_i - x0)`. `f_x` is an arrowhead (no narrow band fits it: the hub's row and column
+/// span the matrix); the hub's own rate is about `-d n`, stiff for large `n`. The leaves start
+/// on a ramp, the hub at 0.5; with `with_event`, leaf `x1` is topped up by 0.3 once when it has
+/// drained to 0.6 (near t = 2).
+pub fn hub_source(n: usize, with_event: bool) -> String {
+    assert!(n >= 3, "a hub and at least two leaves");
+    let seg = |i: usize| 10 * (i - 1) / (n - 1);
+    let mut s = String::from("model hub\nparam d[10] = 50 in [0.1, 1000]\nparam c = 0.1\nstate x0 = 0.5\n");
+    for i in 1..n {
+        s.push_str(&format!("state x{i} = {}\n", diffusion_start(i, n)));
+    }
+    for i in 1..n {
+        s.push_str(&format!("der(x{i}) = -d[{}] * (x{i} - x0) - c * x{i}\n", seg(i)));
+    }
+    // The hub's sum in parts of 50 leaves (`let`s: a line holds at most 4096 characters).
+    let leaves: Vec<usize> = (1..n).collect();
+    let mut parts = Vec::new();
+    for (k, group) in leaves.chunks(50).enumerate() {
+        let terms: Vec<String> = group.iter().map(|&i| format!("d[{}] * (x{i} - x0)", seg(i))).collect();
+        s.push_str(&format!("let hub{k} = {}\n", terms.join(" + ")));
+        parts.push(format!("hub{k}"));
+    }
+    s.push_str(&format!("der(x0) = {}\n", parts.join(" + ")));
+    if with_event {
+        s.push_str("initial mode fill {\n    event top_up when x1 <= 0.6 -> rest {\n        x1 := x1 + 0.3\n    }\n}\nmode rest {\n}\n");
+    }
+    s.push_str("output y = x0\n");
+    s
+}
+
+/// A `side x side` grid of cells (`n = side^2` states, cell `(x, y)` is `x(y side + x)`), each
+/// exchanging with its four neighbours through the conductance `d[j]` of its band of rows
+/// (`j = 10 y / side`) and leaking at rate `c`; the cells start on a ramp and, with
+/// `with_event`, cell 0 is topped up by 0.3 once when it has drained to 0.6 (as
+/// [`diffusion_source`]). Reverse Cuthill-McKee gives it a band of about `side`.
+pub fn grid_source(side: usize, with_event: bool) -> String {
+    assert!(side >= 2, "a grid of at least 2 x 2");
+    let n = side * side;
+    let id = |x: usize, y: usize| y * side + x;
+    let mut s = String::from("model grid\nparam d[10] = 50 in [0.1, 1000]\nparam c = 0.1\n");
+    for i in 0..n {
+        s.push_str(&format!("state x{i} = {}\n", diffusion_start(i, n)));
+    }
+    for y in 0..side {
+        for x in 0..side {
+            let i = id(x, y);
+            let mut rhs = format!("-c * x{i}");
+            let mut link =
+                |j: usize, row: usize| rhs.push_str(&format!(" + d[{}] * (x{j} - x{i})", 10 * row / side));
+            if x > 0 {
+                link(id(x - 1, y), y);
+            }
+            if x + 1 < side {
+                link(id(x + 1, y), y);
+            }
+            if y > 0 {
+                link(id(x, y - 1), y - 1);
+            }
+            if y + 1 < side {
+                link(id(x, y + 1), y);
+            }
+            s.push_str(&format!("der(x{i}) = {rhs}\n"));
+        }
+    }
+    if with_event {
+        s.push_str("initial mode fill {\n    event top_up when x0 <= 0.6 -> rest {\n        x0 := x0 + 0.3\n    }\n}\nmode rest {\n}\n");
+    }
+    s.push_str(&format!("output y = x{}\n", n - 1));
+    s
 }

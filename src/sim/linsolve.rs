@@ -1,56 +1,124 @@
 //! Stage 5 (sim): the linear solves of a Rosenbrock step, `W = I / (h gamma) - f_x`, factored
 //! once per attempt and solved for the state block and every sensitivity column.
 //!
-//! Two factorisations. **Dense** (nalgebra's LU with partial pivoting, `n^3 / 3`): for the tens
-//! of states of contact and kinetics models. **Banded**, for models whose Jacobian has a known
-//! structure (a compiled model gives the structurally nonzero entries of `f_x` per mode,
-//! `HybridSystem::jac_pattern`): once per mode, the *symbolic analysis* orders the states by
-//! reverse Cuthill-McKee and measures the band (`kl` below, `ku` above the diagonal) of the
-//! permuted `f_x`; every attempt then fills the band from the kernel's values (only the
-//! structural nonzeros are computed, never an `n x n` matrix) and factors it with partial
-//! pivoting inside the band (LAPACK's `gbtf2`: `n kl (kl + ku)` operations, `n (2 kl + ku + 1)`
-//! numbers). A chain is tridiagonal (`kl = ku = 1`): linear in `n`, in time and memory.
+//! Three factorisations. **Dense** (nalgebra's LU with partial pivoting, `n^3 / 3`): for the tens
+//! of states of contact and kinetics models, and for any model whose Jacobian pattern is
+//! unknown. The two structured ones use the pattern a compiled model gives (the structurally
+//! nonzero entries of `f_x` per mode, `HybridSystem::jac_pattern`): the kernel computes only
+//! those entries (`fx` holds their values, never an `n x n` matrix), and each mode's pattern is
+//! analysed once (cached by the mode's key).
 //!
-//! Why a band and not a general sparse LU: hybc's large models are chains and grids of
-//! compartments, which RCM turns into narrow bands, and a band with partial pivoting is as robust
-//! as the dense LU. faer's general sparse LU would add about 50 crates and minutes of cold build
-//! (README, Choices). A pattern whose band is too wide to pay (a hub coupled to every state) is
-//! solved densely: [`Structure::analyse`] compares the two operation counts.
+//! **Banded**: the *symbolic analysis* orders the states by reverse Cuthill-McKee and measures
+//! the band (`kl` below, `ku` above the diagonal) of the permuted `f_x`; every attempt fills the
+//! band and factors it with partial pivoting inside the band (LAPACK's `gbtf2`: `n kl (kl + ku)`
+//! operations, `n (2 kl + ku + 1)` numbers). A chain is tridiagonal (`kl = ku = 1`): linear in
+//! `n`, in time and memory. As robust as the dense LU.
+//!
+//! **Sparse** (`sparse_lu.rs`), for patterns no narrow band fits (a hub coupled to every state:
+//! an arrowhead, whose band is the whole matrix; a 2-D grid of `k x k` cells, band `k`, band
+//! cost `n^2`): the analysis orders the states by exact minimum degree on the symmetrised
+//! pattern and computes the static fill pattern of `L` and `U` (a hub then has no fill: it is
+//! eliminated last); every attempt factors into that pattern with the pivots on the diagonal in
+//! that order (static pivoting, no row exchanges, no allocation), each pivot accepted only when
+//! `|u_jj| >= 0.1 max |a_ij|` over its column of the remaining matrix
+//! (`sparse_lu::PIVOT_THRESHOLD`). When a pivot fails, that attempt is factored by the dense LU
+//! instead (counted in `LinSolve::sparse_fallbacks`): a failed static pivot costs time, never a
+//! wrong solve. `W = I - h gamma f_x` has the identity on its diagonal, so for small steps and
+//! for diffusive (diagonally dominant) Jacobians the static pivots pass.
+//!
+//! Choice (`LinearSolver::Auto`, per mode, from [`SPARSE_MIN_STATES`] states): the least of the
+//! factorisations' multiply-adds, dense `n^3 / 3`, banded `n kl (kl + ku)` and sparse
+//! `sum_k (c_k^2 + c_k)` (`c_k` entries below the diagonal in column `k` of `L`) times
+//! [`SPARSE_COST`], measured where the paths' run times tie (README, Performance). A chain
+//! keeps the band (equal counts; the band's solves run in registers), hubs and grids take the
+//! sparse LU. Why not faer's sparse LU: about 50 crates and minutes of cold build (README,
+//! Choices); the hand-written one is some 300 lines.
 
 use nalgebra::{DMatrix, DMatrixViewMut};
+
+use super::sparse_lu::{Numeric, Symbolic};
 
 /// Which factorisation a Rosenbrock stepper uses (`SimOptions::linear_solver`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum LinearSolver {
-    /// Banded from [`SPARSE_MIN_STATES`] states on when the model gives its Jacobian's pattern
-    /// and the band costs fewer operations than the dense LU; dense otherwise.
+    /// From [`SPARSE_MIN_STATES`] states on, when the model gives its Jacobian's pattern, the
+    /// cheapest of the dense, the banded and the sparse LU by their operation counts (the
+    /// sparse one weighted by [`SPARSE_COST`]); dense otherwise.
     #[default]
     Auto,
     /// Always the dense LU.
     Dense,
-    /// The banded LU whenever the model gives the pattern (tests and measurements).
+    /// The banded LU whenever the model gives the pattern and the band costs fewer operations
+    /// than the dense LU (tests and measurements).
     Banded,
+    /// The sparse LU (minimum-degree order, static pivots) whenever the model gives the pattern
+    /// and the fill stays below the dense LU's cost (tests and measurements).
+    Sparse,
 }
 
-/// From this many states the banded factorisation is used (when the model gives its Jacobian's
-/// pattern and the band costs fewer operations than the dense LU). Measured on the diffusion
+impl LinearSolver {
+    /// The factorisation this choice uses for a mode of `n` states whose `f_x` has the
+    /// structural nonzeros `pattern` (`HybridSystem::jac_pattern`): `Dense`, `Banded` or
+    /// `Sparse` (the analysis a stepper makes once per mode).
+    pub fn resolve(self, n: usize, pattern: &[(u32, u32)]) -> LinearSolver {
+        let mut lin = LinSolve::new(n);
+        lin.select(self, Some((0, pattern)));
+        match lin.current {
+            Path::Dense => LinearSolver::Dense,
+            Path::Band(_) => LinearSolver::Banded,
+            Path::Sparse(_) => LinearSolver::Sparse,
+        }
+    }
+}
+
+/// The multiply-adds of one factorisation of `W` for a pattern, by path (measurements).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FactorCosts {
+    /// `n^3 / 3`.
+    pub dense: f64,
+    /// `n kl (kl + ku)` after reverse Cuthill-McKee; `None` when above the dense count.
+    pub banded: Option<f64>,
+    /// The minimum-degree order's count (before the [`SPARSE_COST`] weight); `None` when above
+    /// the dense count.
+    pub sparse: Option<f64>,
+}
+
+impl FactorCosts {
+    /// The counts for a mode of `n` states whose `f_x` has the structural nonzeros `pattern`.
+    pub fn of(n: usize, pattern: &[(u32, u32)]) -> FactorCosts {
+        let dense = dense_cost(n);
+        let banded = Structure::analyse(n, pattern).map(|s| band_cost(n, s.band()));
+        let sparse = SparseStructure::analyse(n, pattern, dense).map(|s| s.sym.flops());
+        FactorCosts { dense, banded, sparse }
+    }
+}
+
+/// `Auto` takes the sparse LU when its multiply-adds times this factor are fewer than the
+/// band's and the dense LU's: the price of its indirect addressing against the band's
+/// contiguous columns and the dense LU's kernels. Measured on whole Rodas5P runs with 10
+/// gradients (`examples/sparse_hub.rs`, README, Performance), where the paths tie: the sparse
+/// and the banded LU on the W5 chain (counts equal: within 4% either way at 10, 100 and 1000
+/// states), a 3-state hub (ratio 1.5: within 3% either way) and a 3 x 3 grid (ratio 2.9: the
+/// sparse LU 3-5% faster, 6% at 4 x 4, 10% at 5 x 5); the sparse and the dense LU on a 2 x 2
+/// grid (ratio 1.5: within 1%), a 3-state hub (2.25: within 2%) and a 4-state hub (3.6: the
+/// sparse LU 5% faster).
+pub const SPARSE_COST: f64 = 2.0;
+
+/// From this many states `Auto` uses a structured factorisation, banded or sparse (when the
+/// model gives its Jacobian's pattern and it costs fewer operations than the dense LU). Measured
+/// for the band on the diffusion
 /// chain of workload W5 (Rodas5P, 10 gradients, `examples/w5_chain.rs`, README Performance):
 /// a run with the band takes the time of the dense one at 2 states (0.188 ms both), 0.93 of it at
 /// 3, 0.54 at 10, 0.40 at 30 and 0.008 at 1000; the switch is where the band becomes narrower
 /// than the matrix, not a size. The dense LU stays for one and two states, where there is no
-/// band to find.
+/// band to find (nor, at 2 states, a sparse LU to gain: a 2 x 2 grid's four states tie).
 pub const SPARSE_MIN_STATES: usize = 3;
 
-/// The symbolic analysis of one pattern: the ordering and the band.
+/// A pattern's entries grouped by row, for the products `f_x x` and the row sums of every
+/// structured path.
 #[derive(Clone, Debug)]
-pub(crate) struct Structure {
-    /// `perm[i]`: the position of state `i` in the banded order.
-    perm: Vec<usize>,
-    /// `perm` is the identity: a single right-hand side is solved in place.
-    identity: bool,
-    /// Each pattern entry's `(row, column)` in the banded order.
-    at: Vec<(usize, usize)>,
+pub(crate) struct Rows {
     /// Each pattern entry's `(row, column)` as the model numbers the states.
     entries: Vec<(usize, usize)>,
     /// The entries' positions in the pattern grouped by row (in pattern order within a row),
@@ -58,33 +126,18 @@ pub(crate) struct Structure {
     /// row or scattered updates.
     by_row: Vec<usize>,
     row_start: Vec<usize>,
+    /// The column of each entry of `by_row`.
+    row_col: Vec<usize>,
     /// When the pattern fills a band of the model's own numbering exactly (every position from
     /// `kl0` below to `ku0` above the diagonal an entry, once: a chain), `(kl0, ku0)` and each
     /// entry's slot in diagonal storage (`diagonal * n + row`); the product `f_x x` then runs
     /// along contiguous diagonals. With a hole in the band a zero slot would multiply an
     /// entry of `x` the pattern does not read (a NaN there must not spread), so then no.
     diagonals: Option<(usize, usize, Vec<usize>)>,
-    kl: usize,
-    ku: usize,
 }
 
-impl Structure {
-    /// Orders the states by reverse Cuthill-McKee on the symmetrised pattern and measures the
-    /// band; `None` when the banded factorisation would cost more than the dense one.
-    pub(crate) fn analyse(n: usize, entries: &[(u32, u32)]) -> Option<Structure> {
-        let entries: Vec<(usize, usize)> = entries.iter().map(|&(r, c)| (r as usize, c as usize)).collect();
-        // Factor multiplications: banded `n kl (kl + ku)` (pivoting widens the upper band to
-        // `kl + ku`), dense `n^3 / 3`.
-        let cost = |(kl, ku): (usize, usize)| n as f64 * kl as f64 * (kl + ku) as f64;
-        let natural = band_of(entries.iter().copied());
-        let ordered = rcm(n, &entries);
-        let reordered = band_of(entries.iter().map(|&(r, c)| (ordered[r], ordered[c])));
-        // The model's own numbering when it is as narrow (a chain written in order): the
-        // solves' permutation is then the identity, read in order.
-        let (perm, (kl, ku)) =
-            if cost(natural) <= cost(reordered) { ((0..n).collect(), natural) } else { (ordered, reordered) };
-        let at: Vec<(usize, usize)> = entries.iter().map(|&(r, c)| (perm[r], perm[c])).collect();
-        let dense = (n as f64).powi(3) / 3.0;
+impl Rows {
+    fn new(n: usize, entries: Vec<(usize, usize)>) -> Rows {
         let mut row_start = vec![0usize; n + 1];
         for &(r, _) in &entries {
             row_start[r + 1] += 1;
@@ -98,16 +151,48 @@ impl Structure {
             by_row[next[r]] = k;
             next[r] += 1;
         }
-        let diagonals = full_band(n, &entries, natural);
+        let diagonals = full_band(n, &entries, band_of(entries.iter().copied()));
+        let row_col = by_row.iter().map(|&k| entries[k].1).collect();
+        Rows { entries, by_row, row_start, row_col, diagonals }
+    }
+}
+
+/// The symbolic analysis of one pattern for the banded path: the ordering and the band.
+#[derive(Clone, Debug)]
+pub(crate) struct Structure {
+    /// `perm[i]`: the position of state `i` in the banded order.
+    perm: Vec<usize>,
+    /// `perm` is the identity: a single right-hand side is solved in place.
+    identity: bool,
+    /// Each pattern entry's `(row, column)` in the banded order.
+    at: Vec<(usize, usize)>,
+    rows: Rows,
+    kl: usize,
+    ku: usize,
+}
+
+impl Structure {
+    /// Orders the states by reverse Cuthill-McKee on the symmetrised pattern and measures the
+    /// band; `None` when the banded factorisation would cost more than the dense one.
+    pub(crate) fn analyse(n: usize, entries: &[(u32, u32)]) -> Option<Structure> {
+        let entries: Vec<(usize, usize)> = entries.iter().map(|&(r, c)| (r as usize, c as usize)).collect();
+        let natural = band_of(entries.iter().copied());
+        let ordered = rcm(n, &entries);
+        let reordered = band_of(entries.iter().map(|&(r, c)| (ordered[r], ordered[c])));
+        // The model's own numbering when it is as narrow (a chain written in order): the
+        // solves' permutation is then the identity, read in order.
+        let (perm, (kl, ku)) = if band_cost(n, natural) <= band_cost(n, reordered) {
+            ((0..n).collect(), natural)
+        } else {
+            (ordered, reordered)
+        };
+        let at: Vec<(usize, usize)> = entries.iter().map(|&(r, c)| (perm[r], perm[c])).collect();
         let identity = perm.iter().enumerate().all(|(i, &p)| i == p);
-        (cost((kl, ku)) < dense).then_some(Structure {
+        (band_cost(n, (kl, ku)) < dense_cost(n)).then(|| Structure {
             perm,
             identity,
             at,
-            entries,
-            by_row,
-            row_start,
-            diagonals,
+            rows: Rows::new(n, entries),
             kl,
             ku,
         })
@@ -116,6 +201,78 @@ impl Structure {
     /// `(kl, ku)`: the band below and above the diagonal.
     pub(crate) fn band(&self) -> (usize, usize) {
         (self.kl, self.ku)
+    }
+}
+
+/// Multiply-adds of the banded factorisation: `n kl (kl + ku)` (pivoting widens the upper band
+/// to `kl + ku`).
+fn band_cost(n: usize, (kl, ku): (usize, usize)) -> f64 {
+    n as f64 * kl as f64 * (kl + ku) as f64
+}
+
+/// Multiply-adds of the dense LU: `n^3 / 3`.
+fn dense_cost(n: usize) -> f64 {
+    (n as f64).powi(3) / 3.0
+}
+
+/// The symbolic analysis of one pattern for the sparse path: the minimum-degree order and the
+/// factors' fill pattern (`sparse_lu`).
+#[derive(Clone, Debug)]
+pub(crate) struct SparseStructure {
+    sym: Symbolic,
+    rows: Rows,
+}
+
+impl SparseStructure {
+    /// `None` when the factorisation would cost more than `cap` multiply-adds.
+    fn analyse(n: usize, entries: &[(u32, u32)], cap: f64) -> Option<SparseStructure> {
+        let entries: Vec<(usize, usize)> = entries.iter().map(|&(r, c)| (r as usize, c as usize)).collect();
+        let sym = Symbolic::analyse(n, &entries, cap)?;
+        Some(SparseStructure { sym, rows: Rows::new(n, entries) })
+    }
+}
+
+/// The analyses of one mode's pattern, each made when first wanted (`None` inside: that path
+/// does not pay), and `Auto`'s choice.
+#[derive(Clone, Debug, Default)]
+struct Mode {
+    band: Option<Option<Structure>>,
+    sparse: Option<Option<SparseStructure>>,
+    auto: Option<LinearSolver>,
+}
+
+impl Mode {
+    fn band(&mut self, n: usize, entries: &[(u32, u32)]) -> bool {
+        self.band.get_or_insert_with(|| Structure::analyse(n, entries)).is_some()
+    }
+
+    /// The sparse analysis, stopped at `cap` multiply-adds.
+    fn sparse(&mut self, n: usize, entries: &[(u32, u32)], cap: f64) -> bool {
+        self.sparse.get_or_insert_with(|| SparseStructure::analyse(n, entries, cap)).is_some()
+    }
+
+    /// `Auto`'s choice: the least of the dense count, the band's and the sparse count times
+    /// [`SPARSE_COST`] (the sparse analysis stopped where it can no longer win).
+    fn auto(&mut self, n: usize, entries: &[(u32, u32)]) -> LinearSolver {
+        if let Some(choice) = self.auto {
+            return choice;
+        }
+        let dense = dense_cost(n);
+        let band = if self.band(n, entries) {
+            self.band.as_ref().and_then(|b| b.as_ref()).map(|s| band_cost(n, s.band()))
+        } else {
+            None
+        };
+        let best = band.unwrap_or(f64::INFINITY).min(dense);
+        let choice = if self.sparse(n, entries, best / SPARSE_COST) {
+            LinearSolver::Sparse
+        } else if band.is_some() {
+            LinearSolver::Banded
+        } else {
+            LinearSolver::Dense
+        };
+        self.auto = Some(choice);
+        choice
     }
 }
 
@@ -393,20 +550,38 @@ impl Band {
     }
 }
 
+/// Which factorisation a mode's `W` is factored with.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+enum Path {
+    #[default]
+    Dense,
+    /// The banded LU of mode `key`'s analysis.
+    Band(usize),
+    /// The sparse LU of mode `key`'s analysis.
+    Sparse(usize),
+}
+
 /// The factorisation of `W` for one stepper: the Jacobian's values, the cached symbolic
 /// analyses (one per mode, by the key the right-hand side gives) and the factors.
 #[derive(Default)]
 pub(crate) struct LinSolve {
     n: usize,
-    /// `f_x`: row-major `n x n` for the dense path, the pattern's values for the banded one.
+    /// `f_x`: row-major `n x n` for the dense path, the pattern's values for the structured ones.
     pub(crate) fx: Vec<f64>,
-    /// The analysis of each mode's pattern once made (`None` inside: the band does not pay).
-    structures: Vec<Option<Option<Structure>>>,
-    /// The mode whose structure `fx` follows, `None` for dense.
-    current: Option<usize>,
+    /// The analyses of each mode's pattern once made.
+    modes: Vec<Mode>,
+    /// The path `fx` follows.
+    current: Path,
     band: Band,
-    /// `f_x` in diagonal storage (`Structure::diagonals`), filled by [`Self::factor`].
+    sparse: Numeric,
+    /// On the sparse path, this attempt's static pivots failed: `lu` holds the dense factors.
+    sparse_in_dense: bool,
+    /// Attempts on the sparse path factored densely because a static pivot failed (tests).
+    pub(crate) sparse_fallbacks: usize,
+    /// `f_x` in diagonal storage (`Rows::diagonals`), or else its values in the order of
+    /// `Rows::by_row`, filled by [`Self::factor`] for the products.
     diag: Vec<f64>,
+    fx_rows: Vec<f64>,
     lu: Option<nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>>,
 }
 
@@ -415,49 +590,64 @@ impl LinSolve {
         LinSolve { n, ..LinSolve::default() }
     }
 
-    /// Chooses the factorisation for the Jacobian about to be evaluated: banded when `pattern`
-    /// (mode `key`'s entries) is given, `choice` allows it and the band pays; sizes `fx` for
-    /// it. Returns whether the Jacobian is wanted as the pattern's values.
+    /// Chooses the factorisation for the Jacobian about to be evaluated: banded or sparse when
+    /// `pattern` (mode `key`'s entries) is given, `choice` allows it and it pays (the analysis
+    /// made once per mode); sizes `fx` for it. Returns whether the Jacobian is wanted as the
+    /// pattern's values.
     pub(crate) fn select(&mut self, choice: LinearSolver, pattern: Option<(usize, &[(u32, u32)])>) -> bool {
         let n = self.n;
-        let banded = match (choice, pattern) {
-            (LinearSolver::Dense, _) | (_, None) => None,
-            (LinearSolver::Auto, Some(_)) if n < SPARSE_MIN_STATES => None,
+        let path = match (choice, pattern) {
+            (LinearSolver::Dense, _) | (_, None) => Path::Dense,
+            (LinearSolver::Auto, Some(_)) if n < SPARSE_MIN_STATES => Path::Dense,
             (_, Some((key, entries))) => {
-                if self.structures.len() <= key {
-                    self.structures.resize(key + 1, None);
+                if self.modes.len() <= key {
+                    self.modes.resize_with(key + 1, Mode::default);
                 }
-                let s = self.structures[key].get_or_insert_with(|| Structure::analyse(n, entries));
-                s.as_ref().map(|s| (key, entries.len(), s.band()))
+                let mode = &mut self.modes[key];
+                let choice = match choice {
+                    LinearSolver::Auto => mode.auto(n, entries),
+                    c => c,
+                };
+                match choice {
+                    LinearSolver::Banded if mode.band(n, entries) => Path::Band(key),
+                    // Forced: up to the dense count (at least 10^6, for small tests).
+                    LinearSolver::Sparse if mode.sparse(n, entries, dense_cost(n).max(1e6)) => {
+                        Path::Sparse(key)
+                    }
+                    _ => Path::Dense,
+                }
             }
         };
-        match banded {
-            Some((key, nnz, (kl, ku))) => {
-                if self.current != Some(key) || self.band.n != n {
+        match path {
+            Path::Band(key) => {
+                let Some(Some(s)) = &self.modes[key].band else { unreachable!("analysed above") };
+                let (nnz, (kl, ku)) = (s.rows.entries.len(), s.band());
+                if self.current != path || self.band.n != n {
                     self.band.shape(n, kl, ku);
                 }
-                self.current = Some(key);
                 self.fx.resize(nnz, 0.0);
-                true
             }
-            None => {
-                self.current = None;
-                self.fx.resize(n * n, 0.0);
-                false
+            Path::Sparse(key) => {
+                let Some(Some(s)) = &self.modes[key].sparse else { unreachable!("analysed above") };
+                self.fx.resize(s.rows.entries.len(), 0.0);
             }
+            Path::Dense => self.fx.resize(n * n, 0.0),
         }
+        self.current = path;
+        path != Path::Dense
     }
 
-    /// The banded analysis `fx` follows, `None` on the dense path.
-    fn structure(&self) -> Option<&Structure> {
-        match self.structures.get(self.current?) {
-            Some(Some(Some(s))) => Some(s),
-            _ => None,
+    /// The pattern `fx` follows, `None` on the dense path.
+    fn rows(&self) -> Option<&Rows> {
+        match self.current {
+            Path::Dense => None,
+            Path::Band(key) => self.modes.get(key)?.band.as_ref()?.as_ref().map(|s| &s.rows),
+            Path::Sparse(key) => self.modes.get(key)?.sparse.as_ref()?.as_ref().map(|s| &s.rows),
         }
     }
 
     /// `y += a f_x x` for every block of `n` of `x` and `y` (the state and each sensitivity
-    /// column), from the values in `fx` (dense or the pattern's; on the banded path as of the
+    /// column), from the values in `fx` (dense or the pattern's; on a structured path as of the
     /// last [`Self::factor`], which the stepper calls first). Each `y_r` gets its row's terms
     /// in the pattern's order, or by column on a full band.
     pub(crate) fn mul_add(&self, a: f64, x: &[f64], y: &mut [f64]) {
@@ -465,10 +655,10 @@ impl LinSolve {
         if n == 0 {
             return;
         }
-        let structure = self.structure();
+        let rows = self.rows();
         for (yc, xc) in y.chunks_exact_mut(n).zip(x.chunks_exact(n)) {
-            match structure {
-                Some(Structure { diagonals: Some((kl, ku, _)), .. }) => {
+            match rows {
+                Some(Rows { diagonals: Some((kl, ku, _)), .. }) => {
                     // Diagonal by diagonal, contiguous: `y_r += a f_(r, r + d) x_(r + d)`.
                     for (k, diag) in self.diag.chunks_exact(n).take(kl + ku + 1).enumerate() {
                         let (rows, x0) = if k < *kl { (kl - k..n, 0) } else { (0..n - (k - kl), k - kl) };
@@ -479,10 +669,15 @@ impl LinSolve {
                     }
                 }
                 Some(s) => {
+                    // `fx_rows`: the values in `by_row`'s order, contiguous.
                     for (r, yr) in yc.iter_mut().enumerate() {
-                        for &k in &s.by_row[s.row_start[r]..s.row_start[r + 1]] {
-                            *yr += a * self.fx[k] * xc[s.entries[k].1];
+                        let range = s.row_start[r]..s.row_start[r + 1];
+                        // In a register (the same sums in the same order).
+                        let mut acc = *yr;
+                        for (&v, &col) in self.fx_rows[range.clone()].iter().zip(&s.row_col[range]) {
+                            acc += a * v * xc[col];
                         }
+                        *yr = acc;
                     }
                 }
                 None => {
@@ -499,7 +694,7 @@ impl LinSolve {
     /// auto stepper asks after every Rodas5P step).
     pub(crate) fn row_abs_max(&self) -> f64 {
         let n = self.n;
-        match self.structure() {
+        match self.rows() {
             Some(s) => (0..n)
                 .map(|r| {
                     s.by_row[s.row_start[r]..s.row_start[r + 1]]
@@ -514,20 +709,29 @@ impl LinSolve {
         }
     }
 
+    /// `f_x` for [`Self::mul_add`]: in diagonal storage when the pattern fills a band exactly,
+    /// else in row order.
+    fn fill_products(diag: &mut Vec<f64>, fx_rows: &mut Vec<f64>, rows: &Rows, fx: &[f64], n: usize) {
+        if let Some((kl, ku, slots)) = &rows.diagonals {
+            diag.resize((kl + ku + 1) * n, 0.0);
+            for (&slot, &v) in slots.iter().zip(fx) {
+                diag[slot] = v;
+            }
+        } else {
+            fx_rows.clear();
+            fx_rows.extend(rows.by_row.iter().map(|&k| fx[k]));
+        }
+    }
+
     /// Factors `W = I - hg f_x` with `hg = h gamma`; `false` when singular. (This form, not
     /// `I / hg - f_x`: with `f_x = 0` it is the identity and a stage's solve returns its
     /// right-hand side exactly, which keeps a clock exact.)
     pub(crate) fn factor(&mut self, hg: f64) -> bool {
         let n = self.n;
         match self.current {
-            Some(key) => {
-                let Some(Some(Some(s))) = self.structures.get(key) else { return false };
-                if let Some((kl, ku, slots)) = &s.diagonals {
-                    self.diag.resize((kl + ku + 1) * n, 0.0);
-                    for (&slot, &v) in slots.iter().zip(&self.fx) {
-                        self.diag[slot] = v;
-                    }
-                }
+            Path::Band(key) => {
+                let Some(Some(Some(s))) = self.modes.get(key).map(|m| &m.band) else { return false };
+                Self::fill_products(&mut self.diag, &mut self.fx_rows, &s.rows, &self.fx, n);
                 self.band.ab.fill(0.0);
                 for (&(r, c), &v) in s.at.iter().zip(&self.fx) {
                     let k = self.band.idx(r, c);
@@ -539,7 +743,26 @@ impl LinSolve {
                 }
                 self.band.factor()
             }
-            None => {
+            Path::Sparse(key) => {
+                let Some(Some(Some(s))) = self.modes.get(key).map(|m| &m.sparse) else { return false };
+                Self::fill_products(&mut self.diag, &mut self.fx_rows, &s.rows, &self.fx, n);
+                self.sparse_in_dense = false;
+                if self.sparse.factor(&s.sym, &self.fx, hg) {
+                    return true;
+                }
+                // A static pivot failed: this attempt with the dense LU (partial pivoting).
+                self.sparse_fallbacks += 1;
+                self.sparse_in_dense = true;
+                let mut w = DMatrix::identity(n, n);
+                for (&(r, c), &v) in s.rows.entries.iter().zip(&self.fx) {
+                    w[(r, c)] -= hg * v;
+                }
+                let lu = w.lu();
+                let ok = lu.is_invertible();
+                self.lu = Some(lu);
+                ok
+            }
+            Path::Dense => {
                 let fx = &self.fx;
                 let w = DMatrix::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 } - hg * fx[i * n + j]);
                 let lu = w.lu();
@@ -558,8 +781,8 @@ impl LinSolve {
             return true;
         }
         match self.current {
-            Some(key) => {
-                let Some(Some(Some(s))) = self.structures.get(key) else { return false };
+            Path::Band(key) => {
+                let Some(Some(Some(s))) = self.modes.get(key).map(|m| &m.band) else { return false };
                 if cols == 1 && s.identity {
                     self.band.solve(&mut b[..n], 1);
                     return true;
@@ -590,7 +813,12 @@ impl LinSolve {
                 self.band.work = work;
                 true
             }
-            None => match &self.lu {
+            Path::Sparse(key) if !self.sparse_in_dense => {
+                let Some(Some(Some(s))) = self.modes.get(key).map(|m| &m.sparse) else { return false };
+                self.sparse.solve(&s.sym, b, cols);
+                true
+            }
+            Path::Sparse(_) | Path::Dense => match &self.lu {
                 Some(lu) => lu.solve_mut(&mut DMatrixViewMut::from_slice(&mut b[..n * cols], n, cols)),
                 None => false,
             },
@@ -626,7 +854,7 @@ mod tests {
         let mut lin = LinSolve::new(n);
         assert!(lin.select(LinearSolver::Banded, Some((0, entries))));
         if let Some(band) = expect_band {
-            let Some(Some(Some(s))) = lin.structures.first() else { panic!("no structure") };
+            let Some(Some(s)) = &lin.modes[0].band else { panic!("no structure") };
             assert_eq!(s.band(), band);
         }
         lin.fx.copy_from_slice(&vals);
@@ -685,7 +913,7 @@ mod tests {
         let s = Structure::analyse(n as usize, &e).expect("a band");
         assert!(s.identity);
         assert_eq!(s.band(), (1, 1));
-        assert!(s.diagonals.is_some());
+        assert!(s.rows.diagonals.is_some());
         check(n as usize, &e, 0.5, Some((1, 1)));
     }
 
@@ -699,7 +927,7 @@ mod tests {
             .filter(|&(r, c)| r < n && c < n && (r, c) != (2, 3))
             .collect();
         let s = Structure::analyse(n as usize, &e).expect("a band");
-        assert!(s.diagonals.is_none());
+        assert!(s.rows.diagonals.is_none());
         check(n as usize, &e, 0.5, None);
         let mut lin = LinSolve::new(n as usize);
         assert!(lin.select(LinearSolver::Banded, Some((0, &e))));
@@ -794,5 +1022,185 @@ mod tests {
         assert!(lin.select(LinearSolver::Banded, Some((0, &e))));
         lin.fx.fill(1.0);
         assert!(!lin.factor(1.0));
+    }
+
+    /// The sparse path against the dense LU on the same values: solutions for 1, 3 and 20
+    /// columns agree to `tol` relative to the largest of each (and the residual `W x - b` is
+    /// small), and the products and row sums are the dense ones. Returns the sparse solver.
+    fn check_sparse(n: usize, entries: &[(u32, u32)], vals: &[f64], hg: f64, tol: f64) -> LinSolve {
+        let mut seed = 11u64;
+        let mut lin = LinSolve::new(n);
+        assert!(lin.select(LinearSolver::Sparse, Some((0, entries))));
+        assert_eq!(lin.current, Path::Sparse(0));
+        lin.fx.copy_from_slice(vals);
+        assert!(lin.factor(hg));
+        let mut dense = LinSolve::new(n);
+        assert!(!dense.select(LinearSolver::Dense, Some((0, entries))));
+        for (&(r, c), &v) in entries.iter().zip(vals) {
+            dense.fx[r as usize * n + c as usize] += v;
+        }
+        assert!(dense.factor(hg));
+        for cols in [1, 3, 20] {
+            let b: Vec<f64> = (0..n * cols).map(|_| rnd(&mut seed)).collect();
+            let (mut x, mut y) = (b.clone(), b.clone());
+            assert!(lin.solve(&mut x, cols));
+            assert!(dense.solve(&mut y, cols));
+            for c in 0..cols {
+                let (xc, yc) = (&x[c * n..(c + 1) * n], &y[c * n..(c + 1) * n]);
+                let scale = yc.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                for (i, (a, b)) in xc.iter().zip(yc).enumerate() {
+                    assert!((a - b).abs() <= tol * scale, "n {n}, column {c} of {cols}, {i}: {a} vs {b}");
+                }
+                let wx = w_times(entries, vals, hg, xc);
+                for (i, (a, b)) in wx.iter().zip(&b[c * n..(c + 1) * n]).enumerate() {
+                    assert!((a - b).abs() <= 1e-11 * scale.max(1.0), "residual at {i}: {a} vs {b}");
+                }
+            }
+        }
+        let a = 0.7;
+        let x: Vec<f64> = (0..2 * n).map(|_| rnd(&mut seed)).collect();
+        let y0: Vec<f64> = (0..2 * n).map(|_| rnd(&mut seed)).collect();
+        let (mut y, mut want) = (y0.clone(), y0);
+        lin.mul_add(a, &x, &mut y);
+        dense.mul_add(a, &x, &mut want);
+        for (got, want) in y.iter().zip(&want) {
+            assert!((got - want).abs() <= 1e-14 * want.abs().max(1.0), "{got} vs {want}");
+        }
+        let (got, want) = (lin.row_abs_max(), dense.row_abs_max());
+        assert!((got - want).abs() <= 1e-14 * want, "{got} vs {want}");
+        lin
+    }
+
+    /// The sparse analysis of mode 0 of `lin`.
+    fn sparse_of(lin: &LinSolve) -> &SparseStructure {
+        let Some(Some(s)) = &lin.modes[0].sparse else { panic!("no sparse analysis") };
+        s
+    }
+
+    /// A hub (state 0) coupled both ways to every other state: an arrowhead.
+    fn arrowhead(n: u32) -> Vec<(u32, u32)> {
+        (1..n).flat_map(|i| [(0, i), (i, 0), (i, i)]).chain([(0, 0)]).collect()
+    }
+
+    /// The five-point coupling of a `side x side` grid with its diagonal.
+    fn grid(side: u32) -> Vec<(u32, u32)> {
+        let id = |x: u32, y: u32| y * side + x;
+        let mut e = Vec::new();
+        for y in 0..side {
+            for x in 0..side {
+                e.push((id(x, y), id(x, y)));
+                if x > 0 {
+                    e.push((id(x, y), id(x - 1, y)));
+                    e.push((id(x - 1, y), id(x, y)));
+                }
+                if y > 0 {
+                    e.push((id(x, y), id(x, y - 1)));
+                    e.push((id(x, y - 1), id(x, y)));
+                }
+            }
+        }
+        e
+    }
+
+    #[test]
+    fn sparse_random_patterns_match_the_dense_lu() {
+        let mut seed = 3u64;
+        let mut fell_back = 0;
+        for n in [5usize, 30, 120] {
+            // About three off-diagonal entries per row, unsymmetric, and half the diagonal.
+            let mut set = std::collections::BTreeSet::new();
+            for r in 0..n {
+                if r % 2 == 0 {
+                    set.insert((r as u32, r as u32));
+                }
+                for _ in 0..3 {
+                    let c = ((rnd(&mut seed) + 1.0) * 0.5 * n as f64) as usize % n;
+                    set.insert((r as u32, c as u32));
+                }
+            }
+            let e: Vec<(u32, u32)> = set.into_iter().collect();
+            let vals: Vec<f64> = e.iter().map(|_| 3.0 * rnd(&mut seed)).collect();
+            // Small `h gamma`: `W` near the identity, every static pivot accepted.
+            let lin = check_sparse(n, &e, &vals, 0.02, 1e-12);
+            assert_eq!(lin.sparse_fallbacks, 0);
+            // Large: pivots may fail and fall back to the dense LU; the solve is right either way.
+            let lin = check_sparse(n, &e, &vals, 2.0, 1e-9);
+            fell_back += lin.sparse_fallbacks;
+            let s = sparse_of(&lin);
+            assert!(s.sym.nnz() >= e.len());
+        }
+        // Both ways were taken at `h gamma = 2` (these seeds: the 5 states' static pivots pass,
+        // the 30's and the 120's do not).
+        assert_eq!(fell_back, 2);
+    }
+
+    #[test]
+    fn the_arrowhead_has_no_fill_with_the_hub_last() {
+        let n = 200u32;
+        let e = arrowhead(n);
+        let mut seed = 5u64;
+        // A thermal network: leaves exchange with the hub and leak, the hub gathers.
+        let vals: Vec<f64> = e
+            .iter()
+            .map(|&(r, c)| match (r, c) {
+                (0, 0) => -(n as f64 - 1.0),
+                (r, c) if r == c => -1.1 - rnd(&mut seed).abs(),
+                _ => 1.0,
+            })
+            .collect();
+        let lin = check_sparse(n as usize, &e, &vals, 0.3, 1e-12);
+        assert_eq!(lin.sparse_fallbacks, 0);
+        let s = sparse_of(&lin);
+        assert_eq!(s.sym.fill(), 0);
+        // Leaves by increasing number; the hub ties with the last leaf at degree 1 and goes first
+        // of the two (the lower number).
+        assert_eq!(s.sym.perm[0], n as usize - 2, "the hub is eliminated with the last leaf");
+        // Two multiply-adds per leaf.
+        assert_eq!(s.sym.flops(), 2.0 * (n - 1) as f64);
+        assert_eq!(LinearSolver::Auto.resolve(n as usize, &e), LinearSolver::Sparse);
+        assert_eq!(LinearSolver::Banded.resolve(n as usize, &e), LinearSolver::Dense);
+    }
+
+    #[test]
+    fn a_grid_laplacian_matches_the_dense_lu() {
+        let side = 20u32;
+        let e = grid(side);
+        let n = (side * side) as usize;
+        let vals: Vec<f64> = e.iter().map(|&(r, c)| if r == c { -4.0 } else { 1.0 }).collect();
+        let lin = check_sparse(n, &e, &vals, 5.0, 1e-12);
+        assert_eq!(lin.sparse_fallbacks, 0);
+        let s = sparse_of(&lin);
+        // Fill, but far below the dense count.
+        assert!(s.sym.fill() > 0);
+        assert!(s.sym.flops() < dense_cost(n) / 50.0, "{} flops", s.sym.flops());
+    }
+
+    #[test]
+    fn a_vanishing_static_pivot_falls_back_to_the_dense_lu() {
+        // f_x = I + S (S the cyclic shift) and h gamma = 1: W = -S, a permutation with a zero
+        // diagonal. Every static pivot is zero; the dense LU exchanges rows.
+        let n = 12u32;
+        let e: Vec<(u32, u32)> = (0..n).flat_map(|i| [(i, i), (i, (i + 1) % n)]).collect();
+        let vals = vec![1.0; e.len()];
+        let lin = check_sparse(n as usize, &e, &vals, 1.0, 1e-14);
+        assert_eq!(lin.sparse_fallbacks, 1);
+        // A tiny pivot under a large entry (|0.001| against 1): refused too, still solved.
+        let vals: Vec<f64> = e.iter().map(|&(r, c)| if r == c { 0.999 } else { 1.0 }).collect();
+        let mut lin = check_sparse(n as usize, &e, &vals, 1.0, 1e-11);
+        assert_eq!(lin.sparse_fallbacks, 1);
+        // The next attempt with a small step takes the static pivots again.
+        assert!(lin.factor(0.01));
+        assert!(!lin.sparse_in_dense);
+        assert_eq!(lin.sparse_fallbacks, 1);
+    }
+
+    #[test]
+    fn auto_keeps_the_band_for_a_chain_and_the_dense_lu_for_two_states() {
+        assert_eq!(LinearSolver::Auto.resolve(101, &scrambled_chain(101)), LinearSolver::Banded);
+        assert_eq!(LinearSolver::Auto.resolve(2, &[(0, 0), (0, 1), (1, 0), (1, 1)]), LinearSolver::Dense);
+        // A full pattern: neither structured path pays.
+        let full: Vec<(u32, u32)> = (0..30).flat_map(|r| (0..30).map(move |c| (r, c))).collect();
+        assert_eq!(LinearSolver::Auto.resolve(30, &full), LinearSolver::Dense);
+        assert_eq!(LinearSolver::Sparse.resolve(30, &full), LinearSolver::Sparse);
     }
 }

@@ -95,9 +95,10 @@ pub struct SimOptions {
     /// 4, land; the explicit pairs do not, which keeps their speed: landing costs the bouncing
     /// ball 36% more evaluations). See README, Accuracy.
     pub land_events: Option<bool>,
-    /// The factorisation of a Rosenbrock method's `W` (`sim::linsolve`): banded for models of
+    /// The factorisation of a Rosenbrock method's `W` (`sim::linsolve`): for models of
     /// [`SPARSE_MIN_STATES`](super::SPARSE_MIN_STATES) states or more whose Jacobian's pattern
-    /// gives a narrow band, dense otherwise. Explicit methods ignore it.
+    /// is known, the cheapest of the dense, the banded and the sparse LU by operation count;
+    /// dense otherwise. Explicit methods ignore it.
     pub linear_solver: super::LinearSolver,
     pub trajectory: TrajectoryRequest,
     /// Times at which every state and output is sampled with its derivatives, from the dense
