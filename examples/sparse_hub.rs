@@ -15,21 +15,9 @@ use hybc::sim::{FactorCosts, HybridSystem, LinearSolver, Method, SimOptions};
 use hybc::Model;
 use std::time::Instant;
 
-const D_NAMES: [&str; 10] = ["d[0]", "d[1]", "d[2]", "d[3]", "d[4]", "d[5]", "d[6]", "d[7]", "d[8]", "d[9]"];
 #[path = "../benches/support/chain.rs"]
 mod chain;
-
-fn best<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, T) {
-    let mut best = f64::INFINITY;
-    let mut out = None;
-    for _ in 0..reps {
-        let start = Instant::now();
-        let v = f();
-        best = best.min(start.elapsed().as_secs_f64());
-        out = Some(v);
-    }
-    (best * 1e3, out.expect("at least one repetition"))
-}
+use chain::{best, D_NAMES};
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();

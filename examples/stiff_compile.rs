@@ -14,18 +14,7 @@ use hybc::sim::{HybridSystem, Method, SimOptions, Simulator};
 use std::time::Instant;
 #[path = "../benches/support/chain.rs"]
 mod chain;
-
-fn best<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, T) {
-    let mut best = f64::INFINITY;
-    let mut out = None;
-    for _ in 0..reps {
-        let start = Instant::now();
-        let v = f();
-        best = best.min(start.elapsed().as_secs_f64());
-        out = Some(v);
-    }
-    (best * 1e3, out.expect("at least one repetition"))
-}
+use chain::best;
 
 fn main() {
     for n in [10usize, 100, 1000] {

@@ -4,6 +4,25 @@
 // Each includer (benches, examples, tests) uses only some of the generators.
 #![allow(dead_code)]
 
+/// The ten conductances of the diffusion chain (and the hub, the grid), the parameters the
+/// measurements differentiate.
+pub const D_NAMES: [&str; 10] =
+    ["d[0]", "d[1]", "d[2]", "d[3]", "d[4]", "d[5]", "d[6]", "d[7]", "d[8]", "d[9]"];
+
+/// The best wall time in ms of `reps` calls of `f` (at least one), and the last result: the
+/// examples' measurements.
+pub fn best<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, T) {
+    let mut best = f64::INFINITY;
+    let mut out = None;
+    for _ in 0..reps {
+        let start = std::time::Instant::now();
+        let v = f();
+        best = best.min(start.elapsed().as_secs_f64());
+        out = Some(v);
+    }
+    (best * 1e3, out.expect("at least one repetition"))
+}
+
 /// A chain of `n` states: `x0` decays, each later state relaxes towards its predecessor with a
 /// quadratic loss; one event resets the last state.
 pub fn chain_source(n: usize) -> String {

@@ -847,6 +847,22 @@ mod tests {
 
     /// Solves with the banded path and checks the residual against the dense product; the
     /// entries are shuffled (a scrambled chain: RCM must find the band again).
+    /// `y += a f_x x` over `blocks` blocks of `n` and the row sums of `lin` (structured) agree
+    /// with `dense`'s.
+    fn products_match_the_dense(lin: &LinSolve, dense: &LinSolve, n: usize, blocks: usize, seed: &mut u64) {
+        let a = 0.7;
+        let x: Vec<f64> = (0..blocks * n).map(|_| rnd(seed)).collect();
+        let y0: Vec<f64> = (0..blocks * n).map(|_| rnd(seed)).collect();
+        let (mut y, mut want) = (y0.clone(), y0);
+        lin.mul_add(a, &x, &mut y);
+        dense.mul_add(a, &x, &mut want);
+        for (got, want) in y.iter().zip(&want) {
+            assert!((got - want).abs() <= 1e-14 * want.abs().max(1.0), "{got} vs {want}");
+        }
+        let (got, want) = (lin.row_abs_max(), dense.row_abs_max());
+        assert!((got - want).abs() <= 1e-14 * want, "{got} vs {want}");
+    }
+
     fn check(n: usize, entries: &[(u32, u32)], inv_hg: f64, expect_band: Option<(usize, usize)>) {
         let hg = 1.0 / inv_hg;
         let mut seed = 7u64;
@@ -886,17 +902,7 @@ mod tests {
             }
         }
         // `y += a f_x x` and the row sums agree with the dense matrix's.
-        let a = 0.7;
-        let x: Vec<f64> = (0..3 * n).map(|_| rnd(&mut seed)).collect();
-        let y0: Vec<f64> = (0..3 * n).map(|_| rnd(&mut seed)).collect();
-        let (mut y, mut want) = (y0.clone(), y0);
-        lin.mul_add(a, &x, &mut y);
-        dense.mul_add(a, &x, &mut want);
-        for (got, want) in y.iter().zip(&want) {
-            assert!((got - want).abs() <= 1e-14 * want.abs().max(1.0), "{got} vs {want}");
-        }
-        let (got, want) = (lin.row_abs_max(), dense.row_abs_max());
-        assert!((got - want).abs() <= 1e-14 * want, "{got} vs {want}");
+        products_match_the_dense(&lin, &dense, n, 3, &mut seed);
     }
 
     /// A chain numbered in order: the model's own order is kept (no permutation) and the
@@ -1057,17 +1063,7 @@ mod tests {
                 }
             }
         }
-        let a = 0.7;
-        let x: Vec<f64> = (0..2 * n).map(|_| rnd(&mut seed)).collect();
-        let y0: Vec<f64> = (0..2 * n).map(|_| rnd(&mut seed)).collect();
-        let (mut y, mut want) = (y0.clone(), y0);
-        lin.mul_add(a, &x, &mut y);
-        dense.mul_add(a, &x, &mut want);
-        for (got, want) in y.iter().zip(&want) {
-            assert!((got - want).abs() <= 1e-14 * want.abs().max(1.0), "{got} vs {want}");
-        }
-        let (got, want) = (lin.row_abs_max(), dense.row_abs_max());
-        assert!((got - want).abs() <= 1e-14 * want, "{got} vs {want}");
+        products_match_the_dense(&lin, &dense, n, 2, &mut seed);
         lin
     }
 
