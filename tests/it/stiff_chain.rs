@@ -123,25 +123,7 @@ fn the_chain_with_its_event_is_the_same_banded_and_its_gradients_check() {
     for (a, b) in banded.events().iter().zip(dense.events()) {
         assert!((a.time - b.time).abs() <= 1e-9, "{} vs {}", a.time, b.time);
     }
-    let compiled = banded.compiled();
-    let opts = SimOptions {
-        t_end: 10.0,
-        rtol: 1e-8,
-        atol: 1e-10,
-        method: Method::Rodas5p,
-        linear_solver: LinearSolver::Banded,
-        ..SimOptions::default()
-    };
-    let p = compiled.params().values().to_vec();
-    let check = hybc::gradcheck::check(
-        compiled.native(),
-        &p,
-        &opts,
-        banded.result(),
-        &hybc::gradcheck::CheckOptions::for_rtol(opts.rtol),
-    )
-    .expect("checks");
-    assert!(check.passed(), "{check:#?}");
+    gradients_check(&banded, LinearSolver::Banded);
 }
 
 /// The Jacobian kernel of a chain of 1000 cells writes its 2998 structural nonzeros, not a
@@ -246,13 +228,19 @@ fn a_grid_is_the_same_sparse_banded_and_dense_and_its_gradients_check() {
     assert_eq!(sparse.events().len(), 1);
     assert_same("sparse vs dense", &sparse, &dense, 1e-10);
     assert_same("banded vs dense", &banded, &dense, 1e-10);
-    let compiled = sparse.compiled();
+    gradients_check(&sparse, LinearSolver::Sparse);
+}
+
+/// `run` (Rodas5P with `solver`, T = 10, rtol 1e-8, atol 1e-10) passes `hybc::gradcheck`: its
+/// gradients against central differences of re-runs with the same options.
+fn gradients_check(run: &hybc::Run, solver: LinearSolver) {
+    let compiled = run.compiled();
     let opts = SimOptions {
         t_end: 10.0,
         rtol: 1e-8,
         atol: 1e-10,
         method: Method::Rodas5p,
-        linear_solver: LinearSolver::Sparse,
+        linear_solver: solver,
         ..SimOptions::default()
     };
     let p = compiled.params().values().to_vec();
@@ -260,7 +248,7 @@ fn a_grid_is_the_same_sparse_banded_and_dense_and_its_gradients_check() {
         compiled.native(),
         &p,
         &opts,
-        sparse.result(),
+        run.result(),
         &hybc::gradcheck::CheckOptions::for_rtol(opts.rtol),
     )
     .expect("checks");
