@@ -47,22 +47,29 @@ fn main() {
     let model = Model::parse(&refill_source(10)).unwrap();
     let c = model.compile(&D_NAMES).unwrap();
     let p = c.params();
-    let run = |rtol: f64, method: Method, sens_error_control: bool, land: bool| {
+    // `land` None: each method's default (the Rosenbrock methods land, the explicit pairs not).
+    let run = |rtol: f64, method: Method, sens_error_control: bool, land: Option<bool>| {
         let opts = SimOptions {
             t_end: 10.0,
             rtol,
             atol: rtol / 100.0,
             method,
             sens_error_control,
-            land_events: Some(land),
+            land_events: land,
             ..SimOptions::default()
         };
         c.simulate(&p, &opts).unwrap().into_result()
     };
-    let reference = run(1e-12, Method::Dop853, true, true);
+    let reference = run(1e-12, Method::Dop853, true, Some(true));
     let (xr, sr) = (&reference.final_state.state, reference.final_state.dstate.as_ref().unwrap());
-    for method in [Method::Dopri5, Method::Dop853, Method::Rodas5p] {
-        for (sens, land) in [(false, false), (true, false), (true, true)] {
+    // The last row: what a run gets with no option set (`auto`, sensitivities in the error
+    // control, each method's own landing rule).
+    let cases = [Method::Dopri5, Method::Dop853, Method::Rodas5p]
+        .into_iter()
+        .flat_map(|m| [(m, false, Some(false)), (m, true, Some(false)), (m, true, Some(true))])
+        .chain([(Method::Auto, true, None)]);
+    for (method, sens, land) in cases {
+        {
             let r = run(1e-8, method, sens, land);
             let (x, s) = (&r.final_state.state, r.final_state.dstate.as_ref().unwrap());
             let ex = max_abs(&x.iter().zip(xr).map(|(a, b)| a - b).collect::<Vec<_>>()) / max_abs(xr);
@@ -81,7 +88,7 @@ fn main() {
                 .map(|(a, b)| (a - b).abs() / b.abs())
                 .fold(0.0, f64::max);
             println!(
-                "{method:?} sens in error control {sens}, landing {land}: {} steps ({} rejected), {}/{} events; final states \
+                "{method:?} sens in error control {sens}, landing {land:?}: {} steps ({} rejected), {}/{} events; final states \
                  {ex:.1e}, final sensitivities {es:.1e}, event times {et:.1e}, event-time gradients \
                  {eg:.1e}, worst sensitivity entry {worst:.1e}",
                 r.stats.steps,
@@ -89,6 +96,12 @@ fn main() {
                 r.events.len(),
                 reference.events.len()
             );
+            if method == Method::Auto {
+                println!(
+                    "  auto's segments: {:?}",
+                    r.methods.iter().map(|s| (s.method, s.from, s.to, s.steps)).collect::<Vec<_>>()
+                );
+            }
         }
     }
 }

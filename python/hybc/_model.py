@@ -111,7 +111,7 @@ class Model:
         ``sens_error_control``, ``quadrature_error_control`` (``True``: running costs under the
         step-size control, ``--quadrature-error-control``; by default they are out of it), ``land_events`` (``True``: every method
         retakes a step to land on each event, ``--land-events``; ``False``: none does; unset: the
-        Rosenbrock methods do, the explicit ones do not), ``h_max``; unset ones come from the
+        Rosenbrock methods do, the explicit ones where stability holds the step), ``h_max``; unset ones come from the
         model's ``simulate`` line, then the defaults of ``hybc run``. The same keywords, with the
         same checks, go with :meth:`sweep`, :meth:`sobol`, :meth:`fit`, :meth:`optimize` and
         ``hybc.jax``. The GIL is released while the model compiles and runs.

@@ -30,6 +30,7 @@ use super::result::MethodSegment;
 use super::rk::Rk;
 use super::rosenbrock::{Rosenbrock, RowDense};
 use super::stepper::{Interpolant, Rhs, Stepper};
+use super::tableau::{DOP853, DOPRI5};
 
 /// Positive stiffness tests in a row that switch to Rodas5P (Hairer's 15).
 pub const TO_STIFF: usize = 15;
@@ -43,9 +44,9 @@ pub const TO_EXPLICIT: usize = 15;
 /// `h |lambda|` beyond which the explicit pair's step is held by stability (Hairer's values).
 fn explicit_limit(method: Method) -> f64 {
     if method == Method::Dop853 {
-        6.1
+        DOP853.stability_limit
     } else {
-        3.25
+        DOPRI5.stability_limit
     }
 }
 
@@ -232,11 +233,11 @@ impl Stepper for Auto {
     }
 
     /// As the active method.
-    fn lands_on_events(&self) -> bool {
+    fn lands_on_events(&mut self, z: &[f64]) -> bool {
         if self.stiff {
-            self.row.lands_on_events()
+            self.row.lands_on_events(z)
         } else {
-            self.rk.lands_on_events()
+            self.rk.lands_on_events(z)
         }
     }
 

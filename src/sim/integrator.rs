@@ -829,8 +829,11 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     }
 
     /// Whether event instants inside a step are landed on ([`Self::land_on_event`]).
-    fn lands_on_events(&self) -> bool {
-        self.opts.land_events.unwrap_or_else(|| self.stepper.lands_on_events())
+    fn lands_on_events(&mut self) -> bool {
+        match self.opts.land_events {
+            Some(land) => land,
+            None => self.stepper.lands_on_events(self.z),
+        }
     }
 
     /// Fires the group selected at the current instant, then the events that cascade from it

@@ -455,7 +455,7 @@ impl Stepper for Rosenbrock {
     }
 
     /// By default: the dense output is of order 3 (Rodas4) or 4 (Rodas5P).
-    fn lands_on_events(&self) -> bool {
+    fn lands_on_events(&mut self, _z: &[f64]) -> bool {
         true
     }
 

@@ -170,10 +170,11 @@ pub trait Stepper {
     /// as by [`Self::attempt`]), while [`Self::interpolant`] stays the last attempt's, which the
     /// event was located on. Nothing of the controller changes: a restart follows.
     fn land<R: Rhs>(&mut self, t: f64, z: &[f64], h: f64, rhs: &mut R) -> f64;
-    /// Whether event instants are landed on ([`Self::land`]) unless the options say
-    /// (`SimOptions::land_events`): a method whose dense output is of lower order than its steps
-    /// gains most from it.
-    fn lands_on_events(&self) -> bool;
+    /// Whether the event instants inside the last attempt (from `z`) are landed on
+    /// ([`Self::land`]) unless the options say (`SimOptions::land_events`): where the dense
+    /// output is less accurate than a step end, a method whose dense output is of lower order
+    /// than its steps, or a step held by stability.
+    fn lands_on_events(&mut self, z: &[f64]) -> bool;
     /// The end state of the last attempt.
     fn end_state(&self) -> &[f64];
     /// The derivative at the end state of the last attempt.

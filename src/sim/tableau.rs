@@ -44,6 +44,9 @@ pub(crate) struct Tableau {
     pub dense: DenseKind,
     /// Dense-output correction weights, one row per correction vector, over `all_stages`.
     pub d: &'static [Terms],
+    /// `h |lambda|` beyond which the pair's step is held by stability on the negative real axis
+    /// (Hairer's stiffness-test values: 3.25 for DOPRI5, 6.1 for DOP853).
+    pub stability_limit: f64,
 }
 
 /// The PI controller's settings for one pair. Both use `beta = 0.2 / q` (Hairer's default for
@@ -164,6 +167,7 @@ pub(crate) static DOPRI5: Tableau = Tableau {
     e3: None,
     order: 5,
     control: Control { beta: 0.04, fac_min: 0.2, fac_max: 10.0 },
+    stability_limit: 3.25,
     dense: DenseKind::Dopri5,
     d: &Terms::rows::<1>(DP5_D),
 };
@@ -464,6 +468,7 @@ pub(crate) static DOP853: Tableau = Tableau {
     e3: Some(Terms::of(&DP8_E3)),
     order: 8,
     control: Control { beta: 0.025, fac_min: 0.2, fac_max: 10.0 },
+    stability_limit: 6.1,
     dense: DenseKind::Dop853,
     d: &Terms::rows::<4>(DP8_D),
 };

@@ -63,10 +63,16 @@ fn landing_on_events_makes_event_time_gradients_as_accurate_as_values() {
     // DOP853 at rtol 1e-8 (measured: 2.3e-6 from the dense output, 9.0e-8 landed; the final
     // states are within 1.4e-10, so a gradient is still some 100 times less accurate than a value
     // of this chain, no longer 1000).
-    let dense = event_gradient_error(&run(1e-8, Method::Dop853, None), &reference);
+    let dense = event_gradient_error(&run(1e-8, Method::Dop853, Some(false)), &reference);
     let landed = event_gradient_error(&run(1e-8, Method::Dop853, Some(true)), &reference);
     assert!(dense > 1e-6, "{dense:e}");
     assert!(landed < 4e-7, "{landed:e}");
+    // By default DOP853 lands where its step is held by stability, which this chain's steps
+    // are (measured: 1.3e-7), and so does the default method (`auto`, DOP853 throughout here).
+    for method in [Method::Dop853, Method::Auto] {
+        let default = event_gradient_error(&run(1e-8, method, None), &reference);
+        assert!(default < 4e-7, "{method:?}: {default:e}");
+    }
     // Rodas5P lands by default (measured: 3.5e-8 from the dense output, 5.3e-9 landed).
     let rodas = event_gradient_error(&run(1e-8, Method::Rodas5p, None), &reference);
     assert!(rodas < 2e-8, "{rodas:e}");
@@ -95,5 +101,27 @@ fn land_events_on_the_command_line_lands_the_explicit_default_within_its_toleran
     // Both within the model's tolerances (rtol 1e-10) of each other.
     for (a, b) in times(&plain).iter().zip(times(&landed)) {
         assert!((a - b).abs() <= 1e-9 * a.abs(), "{a} {b}");
+    }
+}
+
+#[test]
+fn the_explicit_pairs_land_by_default_only_where_stability_holds_the_step() {
+    // The other side: on models whose steps accuracy holds (the ball, the thermostat, the tilted
+    // floor), the explicit pairs do not land by default: exactly the evaluations of a run told
+    // not to land (landing costs an attempt per event: the ball's 133 would be 181).
+    for file in ["models/ball.hyb", "models/thermostat.hyb", "models/tilted_ball.hyb"] {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(file);
+        let model = Model::parse(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        let c = model.compile_all().unwrap();
+        for method in [Method::Dopri5, Method::Dop853] {
+            let calls = |land_events: Option<bool>| {
+                let opts = SimOptions { method, land_events, ..model.sim_options() };
+                let r = c.simulate(&c.params(), &opts).unwrap().into_result();
+                assert!(!r.events.is_empty());
+                r.stats.rhs_calls
+            };
+            assert_eq!(calls(None), calls(Some(false)), "{file} {method:?}");
+            assert!(calls(Some(true)) > calls(None), "{file} {method:?}");
+        }
     }
 }
