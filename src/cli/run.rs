@@ -75,8 +75,9 @@ pub(crate) struct SimFlags {
     #[arg(long, hide = true, overrides_with = "quadrature_error_control")]
     no_quadrature_error_control: bool,
     /// Land a step on every event instant, with every method (the Rosenbrock methods do by
-    /// default, the explicit pairs where stability holds the step): the pre-event state, its sensitivities and the event time from a step end under
-    /// the error control, not from the dense output; one more step attempt per event.
+    /// default, the explicit pairs where stability holds the step): the pre-event state, its
+    /// sensitivities and the event time from a step end under the error control, not from the
+    /// dense output; one more step attempt per event.
     #[arg(long)]
     land_events: bool,
 }

@@ -59,16 +59,7 @@ impl<'e> BlockNorm<'e> {
             // Out of the test, but its error is measured as a block of its own would be (the
             // states' values only: a cost's sensitivities follow its value).
             if let Some((r5, r3)) = r.filter(|_| self.next_end == self.block) {
-                let e = if with3 {
-                    let den = r5 * r5 + 0.01 * r3 * r3;
-                    if den == 0.0 {
-                        0.0
-                    } else {
-                        r5 * r5 / den.sqrt()
-                    }
-                } else {
-                    r5.abs()
-                };
+                let e = if with3 { hairer(r5 * r5, r3 * r3, 1.0) } else { r5.abs() };
                 if e > self.outside.0 {
                     self.outside = (e, i);
                 }
@@ -85,17 +76,7 @@ impl<'e> BlockNorm<'e> {
     fn close(&mut self, with3: bool) {
         if self.used > 0 {
             let n = self.used as f64;
-            let e = if with3 {
-                let den = self.sum5 + 0.01 * self.sum3;
-                // A NaN estimate stays NaN (the step is rejected); only a zero one is zero.
-                if den == 0.0 {
-                    0.0
-                } else {
-                    self.sum5 / (n * den).sqrt()
-                }
-            } else {
-                (self.sum5 / n).sqrt()
-            };
+            let e = if with3 { hairer(self.sum5, self.sum3, n) } else { (self.sum5 / n).sqrt() };
             // `max` would drop a NaN: a NaN block makes the whole norm NaN.
             self.worst = if e.is_nan() || self.worst.is_nan() { f64::NAN } else { self.worst.max(e) };
         }
@@ -116,6 +97,18 @@ impl<'e> BlockNorm<'e> {
     pub(crate) fn finish(mut self, with3: bool) -> f64 {
         self.close(with3);
         self.worst
+    }
+}
+
+/// DOP853's norm of `count` components from the sums of their squared 5th- and 3rd-order
+/// scaled errors (Hairer's `sum5 / sqrt(count (sum5 + 0.01 sum3))`). A NaN estimate stays NaN
+/// (the step is rejected); only a zero one is zero.
+fn hairer(sum5: f64, sum3: f64, count: f64) -> f64 {
+    let den = sum5 + 0.01 * sum3;
+    if den == 0.0 {
+        0.0
+    } else {
+        sum5 / (count * den).sqrt()
     }
 }
 

@@ -1388,9 +1388,6 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         }
     }
 
-    /// The run's result, ended by `stopped_by`: events, the final state with its sensitivities
-    /// and the outputs' (chained through the output Jacobians), warnings, statistics. The
-    /// trajectory is the recorder's to give.
     /// Keeps count of the accepted steps (from `t0`) on which a running cost out of the error
     /// test was not resolved: its own scaled error above 1, where a controlled state's step
     /// would have been rejected (docs/language.md, "Running costs and the step size").
@@ -1406,6 +1403,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         }
     }
 
+    /// The run's result, ended by `stopped_by`: events, the final state with its sensitivities
+    /// and the outputs' (chained through the output Jacobians), warnings, statistics. The
+    /// trajectory is the recorder's to give.
     pub fn finish(mut self, stopped_by: StopReason) -> SimResult {
         self.record_at_current_point();
         let mut samples = std::mem::take(&mut self.samples);

@@ -991,20 +991,7 @@ mod tests {
         // A 12 x 12 grid (five-point coupling, no diagonal entries): RCM gives a band of about
         // the side, far below dense.
         let side = 12u32;
-        let id = |x: u32, y: u32| y * side + x;
-        let mut e = Vec::new();
-        for y in 0..side {
-            for x in 0..side {
-                if x > 0 {
-                    e.push((id(x, y), id(x - 1, y)));
-                    e.push((id(x - 1, y), id(x, y)));
-                }
-                if y > 0 {
-                    e.push((id(x, y), id(x, y - 1)));
-                    e.push((id(x, y - 1), id(x, y)));
-                }
-            }
-        }
+        let e: Vec<(u32, u32)> = grid(side).into_iter().filter(|&(r, c)| r != c).collect();
         check((side * side) as usize, &e, 2.0, None);
     }
 

@@ -413,16 +413,7 @@ fn the_soft_ball_at_a_stiffness_of_1e6_completes_with_rodas5p_and_its_gradients_
     // At rest on the spring: y = -g / wc.
     let y = run.state("y").unwrap();
     assert!((y + 9.81e-6).abs() <= 1e-9, "y = {y}");
-    let p = compiled.params().values().to_vec();
-    let check = hybc::gradcheck::check(
-        compiled.native(),
-        &p,
-        &opts,
-        run.result(),
-        &hybc::gradcheck::CheckOptions::for_rtol(opts.rtol),
-    )
-    .expect("checks");
-    assert!(check.passed(), "{check:#?}");
+    crate::support::assert_gradients_check(&run, &opts);
 }
 
 /// The soft ball at a bandwidth of `wc = 1e6` (a spring of 1e12: contact eigenvalues of size
@@ -580,16 +571,7 @@ event faster when y1 <= 0.5 {
     // Mass is conserved (the flow's three rates sum to zero).
     let total: f64 = ["y1", "y2", "y3"].iter().map(|s| run.state(s).unwrap()).sum();
     assert!((total - 1.0).abs() <= 1e-9, "mass {total}");
-    let p = compiled.params().values().to_vec();
-    let check = hybc::gradcheck::check(
-        compiled.native(),
-        &p,
-        &opts,
-        run.result(),
-        &hybc::gradcheck::CheckOptions::for_rtol(opts.rtol),
-    )
-    .expect("checks");
-    assert!(check.passed(), "{check:#?}");
+    crate::support::assert_gradients_check(&run, &opts);
 }
 
 /// Every shipped model, every parameter differentiated, with each Rosenbrock method at the

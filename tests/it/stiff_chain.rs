@@ -234,7 +234,6 @@ fn a_grid_is_the_same_sparse_banded_and_dense_and_its_gradients_check() {
 /// `run` (Rodas5P with `solver`, T = 10, rtol 1e-8, atol 1e-10) passes `hybc::gradcheck`: its
 /// gradients against central differences of re-runs with the same options.
 fn gradients_check(run: &hybc::Run, solver: LinearSolver) {
-    let compiled = run.compiled();
     let opts = SimOptions {
         t_end: 10.0,
         rtol: 1e-8,
@@ -243,14 +242,5 @@ fn gradients_check(run: &hybc::Run, solver: LinearSolver) {
         linear_solver: solver,
         ..SimOptions::default()
     };
-    let p = compiled.params().values().to_vec();
-    let check = hybc::gradcheck::check(
-        compiled.native(),
-        &p,
-        &opts,
-        run.result(),
-        &hybc::gradcheck::CheckOptions::for_rtol(opts.rtol),
-    )
-    .expect("checks");
-    assert!(check.passed(), "{check:#?}");
+    crate::support::assert_gradients_check(run, &opts);
 }

@@ -29,3 +29,19 @@ pub fn proptest_config(cases: u32) -> Config {
 /// The generated chain models (workload W5 among them), shared with the benches.
 #[path = "../../../benches/support/chain.rs"]
 pub mod chain;
+
+/// `run`, made with `opts`, passes `hybc::gradcheck` at `opts.rtol`: every reported derivative
+/// against central differences of re-runs of its compiled model with the same options.
+pub fn assert_gradients_check(run: &hybc::Run, opts: &hybc::SimOptions) {
+    let compiled = run.compiled();
+    let p = compiled.params().values().to_vec();
+    let check = hybc::gradcheck::check(
+        compiled.native(),
+        &p,
+        opts,
+        run.result(),
+        &hybc::gradcheck::CheckOptions::for_rtol(opts.rtol),
+    )
+    .expect("checks");
+    assert!(check.passed(), "{check:#?}");
+}
