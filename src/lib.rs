@@ -51,7 +51,9 @@ pub mod status;
 pub mod sweep;
 pub mod syntax;
 
-pub use api::{Compiled, Error, Model, ModelError, ParamError, Params, Run, Simulator, MAX_MODEL_BYTES};
+pub use api::{
+    time_span, Compiled, Error, Model, ModelError, ParamError, Params, Run, Simulator, MAX_MODEL_BYTES,
+};
 pub use sim::{Method, SimOptions, StopReason, TrajectoryRequest};
 
 use diag::Diagnostic;

@@ -14,6 +14,7 @@ use hybc::{Method, SimOptions, TrajectoryRequest};
 /// keywords with the same checks); `None` keeps the model's value.
 #[derive(Clone, Debug, Default)]
 pub struct SimKeywords {
+    pub t_start: Option<f64>,
     pub t_end: Option<f64>,
     pub rtol: Option<f64>,
     pub atol: Option<f64>,
@@ -28,7 +29,7 @@ pub struct SimKeywords {
 }
 
 /// The keywords [`SimKeywords::from_kwargs`] takes, in the order an error lists them.
-const KEYWORDS: [&str; 11] = [
+const KEYWORDS: [&str; 12] = [
     "t_end",
     "rtol",
     "atol",
@@ -40,6 +41,7 @@ const KEYWORDS: [&str; 11] = [
     "quadrature_error_control",
     "land_events",
     "h_max",
+    "t_start",
 ];
 
 fn positive(name: &str, v: f64) -> PyResult<f64> {
@@ -74,6 +76,7 @@ impl SimKeywords {
                 })
             }
             match key.as_str() {
+                "t_start" => out.t_start = get(&key, &value)?,
                 "t_end" => out.t_end = get(&key, &value)?,
                 "rtol" => out.rtol = get(&key, &value)?,
                 "atol" => out.atol = get(&key, &value)?,
@@ -119,8 +122,11 @@ impl SimKeywords {
             None => base.h_max,
             Some(h) => positive("h_max", h)?,
         };
+        let (t_start, t_end) = hybc::time_span(self.t_start, self.t_end, &base, ("t_start", "t_end"))
+            .map_err(PyValueError::new_err)?;
         Ok(SimOptions {
-            t_end: positive("t_end", self.t_end.unwrap_or(base.t_end))?,
+            t_start,
+            t_end,
             rtol,
             atol: positive("atol", self.atol.unwrap_or(base.atol))?,
             method,

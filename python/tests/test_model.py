@@ -358,6 +358,21 @@ def test_simulation_keywords_are_one_set_with_one_check(ball):
     assert off.state["y"] == pytest.approx(on.state["y"], rel=1e-6)
 
 
+def test_t_start_is_the_clis_flag_and_times_stay_absolute():
+    # `hybc run tests/data/cli/run_t_start_late/model.hyb --t-start 1e6 --t-end 1000001 --grad all`:
+    # the dose at the absolute time 1e6 + 0.5, x(T) = (e^-0.25 + 1) e^-0.25, dx/dt_dose = k e^-0.25.
+    late = hybc.Model.from_file(REPO / "tests/data/cli/run_t_start_late/model.hyb")
+    run = late.simulate(grad=["t_dose"], t_start=1e6, t_end=1e6 + 1, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(run.event_times, [1e6 + 0.5], rtol=0, atol=1e-9)
+    assert run.state["x"] == pytest.approx((math.exp(-0.25) + 1) * math.exp(-0.25), rel=1e-8)
+    assert run.dstate["x"]["t_dose"] == pytest.approx(0.5 * math.exp(-0.25), rel=1e-7)
+    # The same checks and words as the CLI's (`--t-start 5` on the ball: after its end time).
+    with pytest.raises(ValueError, match=r"t_end: expected a time after t_start = 5, found 2.5 \(the model's end time\)"):
+        hybc.Model.from_file(MODELS / "ball.hyb").simulate(t_start=5)
+    with pytest.raises(ValueError, match="t_start: expected a finite number"):
+        late.simulate(t_start=float("nan"))
+
+
 def test_land_events_is_the_clis_flag(ball):
     # `hybc run models/ball.hyb --grad e --land-events`: the same events and bounce times to the
     # tolerances, one more step attempt per bounce (more right-hand-side evaluations, same steps).

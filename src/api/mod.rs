@@ -13,11 +13,13 @@
 mod compiled;
 mod error;
 mod model;
+mod options;
 mod params;
 mod run;
 
 pub use compiled::{Compiled, Simulator};
 pub use error::{Error, ModelError, ParamError};
 pub use model::{Model, MAX_MODEL_BYTES};
+pub use options::time_span;
 pub use params::Params;
 pub use run::Run;

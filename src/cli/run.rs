@@ -38,6 +38,10 @@ enum Format {
 /// The integrator flags `hybc run` and `hybc sweep` share.
 #[derive(Debug, clap::Args)]
 pub(crate) struct SimFlags {
+    /// Start time (default 0). Times are absolute: time events, input knots and every `t` in the
+    /// model keep their values, so a later start skips what comes before it.
+    #[arg(long, value_name = "T", allow_negative_numbers = true)]
+    t_start: Option<f64>,
     /// End time (default: the model's `simulate t_end`, else 10).
     #[arg(long, value_name = "T")]
     t_end: Option<f64>,
@@ -218,8 +222,10 @@ pub(crate) fn sim_options(model: &Model, args: &SimFlags) -> Result<SimOptions, 
     if rtol >= 1.0 {
         return Err(format!("--rtol: expected a number below 1, found {rtol}"));
     }
+    let (t_start, t_end) = crate::api::time_span(args.t_start, args.t_end, &base, ("--t-start", "--t-end"))?;
     Ok(SimOptions {
-        t_end: positive("--t-end", args.t_end.unwrap_or(base.t_end))?,
+        t_start,
+        t_end,
         rtol,
         atol: positive("--atol", args.atol.unwrap_or(base.atol))?,
         method: match args.method {

@@ -35,6 +35,7 @@ mod optimize_problems;
 mod periodic;
 mod plot;
 mod quadrature;
+mod relations;
 mod run_gradients;
 mod samples;
 mod sim_ball;

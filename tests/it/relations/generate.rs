@@ -1,0 +1,190 @@
+//! Random hybrid models drawn from the language's forms (`model.rs`): chains of integrators
+//! whose tops are `a + b t` per mode, events with affine, product and time guards in every
+//! direction, affine resets (bounces, kicks, assignments), mode switches, stops, and starts on or
+//! a hair from a guard (down to subnormal distances). Model `i` of seed `s` is a function of `(s,
+//! i)` alone, so a violation is reproduced from the two numbers.
+
+use rand_chacha::ChaCha8Rng;
+use rand_core::{Rng, SeedableRng};
+
+use super::model::{Coef, Dir, Event, GenModel, Lhs, Reset, Top};
+
+struct Draw {
+    rng: ChaCha8Rng,
+    params: Vec<f64>,
+}
+
+impl Draw {
+    fn unit(&mut self) -> f64 {
+        (self.rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.unit()
+    }
+
+    fn below(&mut self, n: usize) -> usize {
+        (self.rng.next_u64() % n as u64) as usize
+    }
+
+    fn chance(&mut self, p: f64) -> bool {
+        self.unit() < p
+    }
+
+    /// A value rounded to a few digits (readable models), of either sign.
+    fn value(&mut self, lo: f64, hi: f64) -> f64 {
+        let v = self.range(lo, hi);
+        let v = (v * 1000.0).round() / 1000.0;
+        if v == 0.0 {
+            0.25
+        } else {
+            v
+        }
+    }
+
+    /// A coefficient with value `v`: a new parameter half of the time, else the constant.
+    fn coef(&mut self, v: f64) -> Coef {
+        if self.chance(0.5) {
+            self.params.push(v);
+            Coef::p(1.0, self.params.len() - 1)
+        } else {
+            Coef::c(v)
+        }
+    }
+}
+
+/// Distances of a start from its guard, from ordinary to subnormal.
+const HAIRS: [f64; 8] = [1e-3, 1e-9, 1e-30, 1e-100, 1e-150, 1e-160, 1e-200, 1e-300];
+
+/// Model `index` of the stream `seed`.
+pub fn model(seed: u64, index: u64) -> GenModel {
+    let mut d = Draw {
+        rng: ChaCha8Rng::seed_from_u64(seed ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15)),
+        params: Vec::new(),
+    };
+    let n_chains = 1 + d.below(2);
+    let n_modes = if d.chance(0.4) { 2 } else { 1 };
+    let mut chains = Vec::new();
+    let mut init = Vec::new();
+    for _ in 0..n_chains {
+        let len = 1 + d.below(3);
+        let mut chain = Vec::new();
+        for _ in 0..len {
+            chain.push(init.len());
+            let v = d.value(-1.0, 1.0);
+            init.push(d.coef(v));
+        }
+        chains.push(chain);
+    }
+    let mut tops = Vec::new();
+    for _ in 0..n_modes {
+        let mut row = Vec::new();
+        for _ in 0..n_chains {
+            let v = d.value(-3.0, 3.0);
+            let a = d.coef(v);
+            let b = if d.chance(0.3) { d.value(-1.0, 1.0) } else { 0.0 };
+            row.push(Top { a, b });
+        }
+        tops.push(row);
+    }
+    let t_end = d.value(1.0, 3.0).abs().max(1.0);
+    let n_states = init.len();
+    let x0: Vec<f64> = init.iter().map(|c| c.value(&d.params)).collect();
+    let mut events = Vec::new();
+    let n_events = 1 + d.below(3);
+    for k in 0..n_events {
+        let kind = d.below(20);
+        let (lhs, l0) = if kind < 10 {
+            let i = d.below(n_states);
+            (Lhs::Lin(vec![(i, 1.0)]), x0[i])
+        } else if kind < 14 {
+            let (i, j) = (d.below(n_states), d.below(n_states));
+            let w = d.value(-2.0, 2.0);
+            if i == j {
+                (Lhs::Lin(vec![(i, 1.0)]), x0[i])
+            } else {
+                (Lhs::Lin(vec![(i, 1.0), (j, w)]), x0[i] + w * x0[j])
+            }
+        } else if kind < 17 {
+            let (i, j) = (d.below(n_states), d.below(n_states));
+            (Lhs::Prod(i, j), x0[i] * x0[j])
+        } else {
+            (Lhs::Time, 0.0)
+        };
+        let (rhs_value, dir) = if lhs == Lhs::Time {
+            (d.value(0.05, t_end - 0.05), Dir::Rising)
+        } else {
+            let rhs = l0 + d.value(-1.0, 1.0);
+            let dir = if d.chance(0.25) {
+                Dir::Crosses
+            } else if l0 > rhs {
+                Dir::Falling
+            } else {
+                Dir::Rising
+            };
+            (rhs, dir)
+        };
+        let rhs = d.coef(rhs_value);
+        let mut resets = Vec::new();
+        for _ in 0..d.below(3) {
+            let state = d.below(n_states);
+            if resets.iter().any(|r: &Reset| r.state == state) {
+                continue;
+            }
+            let (a, b) = match d.below(4) {
+                0 => {
+                    let e = d.value(0.5, 0.95);
+                    (d.coef(-e), Coef::c(0.0))
+                }
+                1 => {
+                    let kick = d.value(-1.0, 1.0);
+                    (Coef::c(1.0), d.coef(kick))
+                }
+                2 => {
+                    let v = d.value(-1.0, 1.0);
+                    (Coef::c(0.0), d.coef(v))
+                }
+                _ => {
+                    let a = d.value(-1.5, 1.5);
+                    let b = d.value(-0.5, 0.5);
+                    (Coef::c(a), d.coef(b))
+                }
+            };
+            resets.push(Reset { state, a, b });
+        }
+        let mode = if n_modes > 1 && d.chance(0.6) { Some(d.below(n_modes)) } else { None };
+        let to = if n_modes > 1 && d.chance(0.6) { Some(d.below(n_modes)) } else { None };
+        let stop = d.chance(0.1);
+        events.push(Event { name: format!("e{k}"), mode, lhs, dir, rhs, resets, to, stop });
+    }
+    // A start on or a hair from the first event's guard, for a single-state affine guard.
+    if d.chance(0.15) {
+        if let Lhs::Lin(terms) = &events[0].lhs {
+            if terms.len() == 1 {
+                let i = terms[0].0;
+                let c = events[0].rhs.value(&d.params);
+                let hair = if d.chance(0.2) { 0.0 } else { HAIRS[d.below(HAIRS.len())] };
+                // Before the guard on its pre-crossing side: above it for a falling guard.
+                let side = match events[0].dir {
+                    Dir::Falling => 1.0,
+                    Dir::Rising => -1.0,
+                    Dir::Crosses => {
+                        if d.chance(0.5) {
+                            1.0
+                        } else {
+                            -1.0
+                        }
+                    }
+                };
+                // The guard at 0 is x - c = side * hair exactly when c is 0; else the start is
+                // c + side * hair rounded, which the reference reads exactly as it is.
+                let at_zero = d.chance(0.5);
+                if at_zero {
+                    events[0].rhs = Coef::c(0.0);
+                }
+                init[i] = Coef::c(if at_zero { side * hair } else { c + side * hair });
+            }
+        }
+    }
+    GenModel { params: d.params, init, chains, tops, events, t_end }
+}

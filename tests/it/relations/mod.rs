@@ -1,0 +1,423 @@
+//! Relations that need no hand-written answer, checked on generated models under every stepper
+//! (docs/accuracy.md, "The relation harness"). Each generated model (`generate.rs`, data in
+//! `model.rs`) has an exact reference (`exact.rs`, double-double dual numbers): every run is
+//! compared with it, and every variant of the model a relation makes (shifted in time, `t` read
+//! from a clock state, a bystander state, events declared in another order, a mode split in two)
+//! is compared both with the reference and with the unvaried run.
+//!
+//! `cargo test --test it relations` runs the fast subset CI runs (a fixed seed). The full run:
+//! `HYBC_RELATIONS=full cargo test --release --test it relations -- --nocapture` (at least 1,000
+//! models, every relation, every stepper; `HYBC_RELATIONS_SEED`, `HYBC_RELATIONS_MODELS` and
+//! `HYBC_RELATIONS_SECONDS` change the seed, the count and the time budget; `HYBC_RELATIONS_FIRST`
+//! the first model's index, so that `HYBC_RELATIONS_FIRST=509 HYBC_RELATIONS_MODELS=1` reruns model
+//! 509 alone). Every violation is
+//! printed with its reproducer: the model text, the options, the expected and the got values.
+
+mod dd;
+mod exact;
+mod generate;
+mod model;
+
+use std::fmt::Write as _;
+use std::time::{Duration, Instant};
+
+use hybc::{Method, Model, SimOptions};
+
+use exact::{Outcome, Reference};
+use model::{GenModel, Variant};
+
+/// One way of running: a method, landing on events or the method's default, with or without
+/// gradients.
+#[derive(Clone, Copy, Debug)]
+pub struct Config {
+    pub method: Method,
+    pub land: bool,
+    pub grad: bool,
+}
+
+impl Config {
+    fn flags(&self) -> String {
+        let method = match self.method {
+            Method::Auto => "auto",
+            Method::Dopri5 => "dopri5",
+            Method::Dop853 => "dop853",
+            Method::Rodas5p => "rodas5p",
+            Method::Rodas4 => "rodas4",
+        };
+        format!(
+            "--method {method}{}{}",
+            if self.land { " --land-events" } else { "" },
+            if self.grad { " --grad all" } else { "" }
+        )
+    }
+}
+
+const METHODS: [Method; 5] = [Method::Auto, Method::Dopri5, Method::Dop853, Method::Rodas5p, Method::Rodas4];
+
+/// Every stepper, with and without `--land-events`, with gradients; and every stepper without
+/// gradients (whose values must not depend on whether gradients are asked for).
+pub fn configs() -> Vec<Config> {
+    let mut out = Vec::new();
+    for method in METHODS {
+        out.push(Config { method, land: false, grad: true });
+        out.push(Config { method, land: true, grad: true });
+        out.push(Config { method, land: false, grad: false });
+    }
+    out
+}
+
+/// The tolerances of the harness's runs.
+const RTOL: f64 = 1e-8;
+const ATOL: f64 = 1e-10;
+
+/// What a run gave, in the reference's terms.
+#[derive(Clone, Debug)]
+struct Got {
+    /// (event name, time, time gradient per parameter: NaN where none is reported).
+    events: Vec<(String, f64, Vec<f64>)>,
+    state: Vec<f64>,
+    /// `dstate[i][j]`: NaN where none is reported.
+    dstate: Vec<Vec<f64>>,
+    stopped: String,
+}
+
+fn run(g: &GenModel, v: &Variant, c: Config) -> Result<Got, String> {
+    let text = g.text(v);
+    let model = Model::parse(&text).map_err(|e| format!("does not parse: {e}"))?;
+    let names: Vec<String> = (0..g.params.len()).map(|j| format!("p{j}")).collect();
+    let grad: Vec<&str> = if c.grad { names.iter().map(String::as_str).collect() } else { Vec::new() };
+    let compiled = model.compile(&grad).map_err(|e| format!("does not compile: {e}"))?;
+    let opts = SimOptions {
+        t_start: v.shift,
+        t_end: g.t_end + v.shift,
+        rtol: RTOL,
+        atol: ATOL,
+        method: c.method,
+        land_events: if c.land { Some(true) } else { None },
+        ..SimOptions::default()
+    };
+    let r = compiled.simulate(&compiled.params(), &opts).map_err(|e| format!("does not run: {e}"))?;
+    let stopped = match r.stopped_by() {
+        hybc::StopReason::TEnd => "t_end".to_string(),
+        hybc::StopReason::Event { name, .. } => name.to_string(),
+        other => return Err(format!("stopped early: {other:?}")),
+    };
+    let stop = stopped != "t_end";
+    let n = g.init.len();
+    let mut got = Got { events: Vec::new(), state: Vec::new(), dstate: Vec::new(), stopped };
+    for e in r.events() {
+        if &*e.name == "split" {
+            continue;
+        }
+        let dt = match (&e.dtime, c.grad) {
+            (Some(d), true) => d.clone(),
+            _ => vec![f64::NAN; g.params.len()],
+        };
+        got.events.push((e.name.to_string(), e.time - v.shift, dt));
+    }
+    for i in 0..n {
+        let x = GenModel::state_name(i);
+        got.state.push(r.state(&x).unwrap_or(f64::NAN));
+        let row = names
+            .iter()
+            .map(|p| {
+                if !c.grad {
+                    return f64::NAN;
+                }
+                let d = if stop { r.dstate_total(&x, p) } else { r.dstate(&x, p) };
+                d.unwrap_or(f64::NAN)
+            })
+            .collect();
+        got.dstate.push(row);
+    }
+    Ok(got)
+}
+
+/// How far a value may be from its reference in units of the run's tolerance
+/// `rtol |reference| + atol`: the error a local error control at `rtol` lets through over a
+/// whole run (one step's error bound times the amplification of the flow and the events),
+/// measured on the generated models: `HYBC_RELATIONS=full` prints the largest ratio seen per
+/// quantity (docs/accuracy.md).
+pub const K_VALUE: f64 = 1e3;
+/// The same for gradients (sensitivities are error-controlled at the same tolerances).
+pub const K_GRAD: f64 = 1e3;
+
+#[derive(Default, Debug)]
+struct Worst {
+    value: f64,
+    time: f64,
+    grad: f64,
+    dtime: f64,
+}
+
+/// A discrepancy with what it was measured against.
+#[derive(Clone, Debug)]
+pub struct Violation {
+    pub model: u64,
+    pub what: String,
+    pub flags: String,
+    pub text: String,
+}
+
+impl std::fmt::Display for Violation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(f, "model {} ({}): {}", self.model, self.flags, self.what)?;
+        write!(f, "{}", self.text)
+    }
+}
+
+/// The ratio of an error to the tolerance of a value of size `scale`.
+fn ratio(got: f64, want: f64, scale: f64) -> f64 {
+    if got.is_nan() != want.is_nan() {
+        return f64::INFINITY;
+    }
+    if got.is_nan() {
+        return 0.0;
+    }
+    (got - want).abs() / (RTOL * scale.abs() + ATOL)
+}
+
+/// Compares a run with the reference; returns what disagrees.
+fn compare(want: &Reference, got: &Got, c: Config, g: &GenModel, worst: &mut Worst) -> Vec<String> {
+    let mut bad = Vec::new();
+    let names: Vec<&str> = want.events.iter().map(|(e, _)| g.events[*e].name.as_str()).collect();
+    let got_names: Vec<&str> = got.events.iter().map(|(n, _, _)| n.as_str()).collect();
+    if names != got_names {
+        bad.push(format!("events {got_names:?}, expected {names:?}"));
+        return bad;
+    }
+    let stopped = want.stopped.map_or("t_end".to_string(), |e| g.events[e].name.clone());
+    if stopped != got.stopped {
+        bad.push(format!("stopped by {}, expected {stopped}", got.stopped));
+    }
+    let span = g.t_end;
+    for (k, ((_, t), (name, gt, gdt))) in want.events.iter().zip(&got.events).enumerate() {
+        let r = ratio(*gt, t.v.f64(), span.max(t.v.f64().abs()));
+        worst.time = worst.time.max(r);
+        if r > K_VALUE {
+            bad.push(format!(
+                "{name} #{k} at t = {gt:.17e}, expected {:.17e} ({r:.1} tolerances)",
+                t.v.f64()
+            ));
+        }
+        if c.grad && want.gradients_judged() {
+            let dt = t.gradient();
+            let scale = dt.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+            for (j, (&w, &h)) in dt.iter().zip(gdt).enumerate() {
+                let r = ratio(h, w, scale.max(1.0));
+                worst.dtime = worst.dtime.max(r);
+                if r > K_GRAD {
+                    bad.push(format!("d{name}#{k}/dp{j} = {h:e}, expected {w:e} ({r:.1} tolerances)"));
+                }
+            }
+        }
+    }
+    for (i, x) in want.final_state.iter().enumerate() {
+        let (w, h) = (x.v.f64(), got.state[i]);
+        let r = ratio(h, w, w.abs().max(1.0));
+        worst.value = worst.value.max(r);
+        if r > K_VALUE {
+            bad.push(format!("x{i} = {h:.17e}, expected {w:.17e} ({r:.1} tolerances)"));
+        }
+        if c.grad && want.gradients_judged() {
+            let dx = x.gradient();
+            let scale = dx.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            for (j, (&w, &h)) in dx.iter().zip(&got.dstate[i]).enumerate() {
+                let r = ratio(h, w, scale.max(1.0));
+                worst.grad = worst.grad.max(r);
+                if r > K_GRAD {
+                    bad.push(format!("dx{i}/dp{j} = {h:e}, expected {w:e} ({r:.1} tolerances)"));
+                }
+            }
+        }
+    }
+    bad
+}
+
+/// The variants of a model each relation runs, with the shift of its reference.
+fn variants(g: &GenModel, index: u64) -> Vec<(&'static str, Variant)> {
+    let mut out = vec![
+        ("shift 1e6", Variant { shift: 1e6, ..Variant::default() }),
+        ("shift 1e-3", Variant { shift: 1e-3, ..Variant::default() }),
+        ("bystander 1e10", Variant { bystander: Some(1e10), ..Variant::default() }),
+        ("bystander 1e-10", Variant { bystander: Some(1e-10), ..Variant::default() }),
+    ];
+    if g.uses_time() {
+        out.push(("clock for t", Variant { clock: true, ..Variant::default() }));
+    }
+    if g.events.len() > 1 {
+        let mut order: Vec<usize> = (0..g.events.len()).collect();
+        order.rotate_left(1 + (index as usize % (g.events.len() - 1)));
+        out.push(("events reordered", Variant { order: Some(order), ..Variant::default() }));
+    }
+    out.push(("mode split", Variant { split: Some(g.t_end * 0.37), ..Variant::default() }));
+    out
+}
+
+/// The result of a harness run.
+#[derive(Default)]
+pub struct Summary {
+    pub models: usize,
+    /// Models whose gradients the reference does not judge (`Reference::gradients_judged`).
+    pub not_judged: usize,
+    /// The index of the last model drawn.
+    pub last_index: u64,
+    pub ambiguous: usize,
+    pub runs: usize,
+    pub violations: Vec<Violation>,
+    worst: Worst,
+}
+
+/// Checks models `first..` of `seed` until `count` clean models (or `budget`) are done.
+pub fn harness(seed: u64, first: u64, count: usize, budget: Duration, configs: &[Config]) -> Summary {
+    let started = Instant::now();
+    let mut s = Summary::default();
+    let mut index = first;
+    while s.models < count && started.elapsed() < budget {
+        let g = generate::model(seed, index);
+        index += 1;
+        let want = match exact::reference(&g, 0.0) {
+            Outcome::Clean(r) => r,
+            Outcome::Ambiguous(why) => {
+                if std::env::var_os("HYBC_RELATIONS_WHY").is_some() {
+                    println!("model {}: drawn again: {why}", index - 1);
+                }
+                s.ambiguous += 1;
+                continue;
+            }
+        };
+        s.models += 1;
+        s.last_index = index - 1;
+        s.not_judged += usize::from(!want.gradients_judged());
+        let mut report = |c: Config, variant: &str, what: String| {
+            let mut text = g.text(&Variant::default());
+            let _ = write!(text, "# seed {seed}, model {}, variant: {variant}\n", index - 1);
+            s.violations.push(Violation { model: index - 1, what, flags: c.flags(), text });
+        };
+        let mut base_runs = Vec::new();
+        for &c in configs {
+            s.runs += 1;
+            match run(&g, &Variant::default(), c) {
+                Ok(got) => {
+                    for what in compare(&want, &got, c, &g, &mut s.worst) {
+                        report(c, "none", what);
+                    }
+                    base_runs.push(Some(got));
+                }
+                Err(why) => {
+                    report(c, "none", why);
+                    base_runs.push(None);
+                }
+            }
+        }
+        // Each relation under one configuration, cycling through them from model to model.
+        for (k, (name, v)) in variants(&g, index).into_iter().enumerate() {
+            let c = configs[(index as usize + k) % configs.len()];
+            s.runs += 1;
+            match run(&g, &v, c) {
+                Ok(got) => {
+                    for what in compare(&want, &got, c, &g, &mut s.worst) {
+                        report(c, name, what);
+                    }
+                }
+                Err(why) => report(c, name, why),
+            }
+        }
+    }
+    s
+}
+
+fn env<T: std::str::FromStr>(name: &str, default: T) -> T {
+    std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
+}
+
+/// The seed CI checks.
+const CI_SEED: u64 = 20261128;
+/// How many clean models CI checks (about 7 s in the test build).
+const CI_MODELS: usize = 300;
+
+/// Violations the full run found at [`CI_SEED`] that are not fixed yet, by model index, each
+/// with its class (the reproducers: `HYBC_RELATIONS_FIRST=N HYBC_RELATIONS_MODELS=1 cargo test
+/// --release --test it relations -- --nocapture`). They belong to the event issue; the test
+/// fails on any violation not listed here and on any listed model that no longer violates, so
+/// the list stays true as they are fixed.
+const KNOWN: &[(u64, &str)] = &[
+    (105, PASS_THROUGH_REFIRES),
+    (226, PASS_THROUGH_REFIRES),
+    (395, FALSE_ZENO),
+    (509, PASS_THROUGH_REFIRES),
+    (600, JUMP_OFF_GUARD_CALLED_ZENO),
+    (712, JUMP_OFF_GUARD_CALLED_ZENO),
+    (765, JUMP_OFF_GUARD_CALLED_ZENO),
+    (785, PASS_THROUGH_REFIRES),
+    (845, JUMP_OFF_GUARD_CALLED_ZENO),
+    (864, JUMP_OFF_GUARD_CALLED_ZENO),
+    (873, JUMP_OFF_GUARD_CALLED_ZENO),
+];
+
+/// `x := -c x` on its own guard `x crosses 0` (or `x <= 0`): the reset leaves the guard within
+/// what locating the crossing leaves of zero, on the pre-crossing side by a few ulps, and the
+/// flow carries it across again: the event refires until `--max-events` (rule 6 says a
+/// pass-through).
+const PASS_THROUGH_REFIRES: &str = "a pass-through contact refires at one instant until max_events";
+/// A contact whose reset moves its guard clearly off zero (`x := x + k`, a product guard's sign
+/// flipped) is stopped as Zeno, "a bounce too small to resolve".
+const JUMP_OFF_GUARD_CALLED_ZENO: &str = "a contact reset clear of its guard is stopped as Zeno";
+/// Eight shrinking intervals whose extrapolated accumulation point (11.7) lies far beyond the
+/// last event (1.63) stop the run as Zeno.
+const FALSE_ZENO: &str = "Zeno reported with an accumulation point far beyond the events";
+
+#[test]
+fn generated_models_keep_every_relation_under_every_stepper() {
+    let full = std::env::var("HYBC_RELATIONS").is_ok_and(|v| v == "full");
+    let seed = env("HYBC_RELATIONS_SEED", CI_SEED);
+    let count = env("HYBC_RELATIONS_MODELS", if full { 1000 } else { CI_MODELS });
+    let budget = Duration::from_secs(env("HYBC_RELATIONS_SECONDS", if full { 1800 } else { 120 }));
+    let first = env("HYBC_RELATIONS_FIRST", 0u64);
+    let s = harness(seed, first, count, budget, &configs());
+    let known = |m: u64| if seed == CI_SEED { KNOWN.iter().find(|k| k.0 == m).map(|k| k.1) } else { None };
+    let unknown: Vec<&Violation> = s.violations.iter().filter(|v| known(v.model).is_none()).collect();
+    let mut violating: Vec<u64> = s.violations.iter().map(|v| v.model).collect();
+    violating.dedup();
+    println!(
+        "relations: seed {seed}, {} models ({} drawn again as ambiguous, {} with gradients not judged), \
+         {} runs, {} violations in {} models ({} of them known); worst in tolerances: values {:.1}, \
+         times {:.1}, gradients {:.1}, time gradients {:.1}",
+        s.models,
+        s.ambiguous,
+        s.not_judged,
+        s.runs,
+        s.violations.len(),
+        violating.len(),
+        violating.iter().filter(|&&m| known(m).is_some()).count(),
+        s.worst.value,
+        s.worst.time,
+        s.worst.grad,
+        s.worst.dtime
+    );
+    // Each violation's line, then the reproducers of the first few models.
+    for v in &s.violations {
+        println!(
+            "model {} ({}): {}{}",
+            v.model,
+            v.flags,
+            v.what,
+            known(v.model).map_or(String::new(), |k| format!(" [known: {k}]"))
+        );
+    }
+    let mut shown = Vec::new();
+    for v in &s.violations {
+        if !shown.contains(&v.model) && shown.len() < 8 {
+            shown.push(v.model);
+            println!("\n{v}");
+        }
+    }
+    assert!(s.models >= count.min(20), "only {} models in the budget", s.models);
+    assert!(unknown.is_empty(), "{} violations (printed above)", unknown.len());
+    if seed == CI_SEED && first == 0 {
+        let last = s.last_index;
+        let fixed: Vec<u64> =
+            KNOWN.iter().map(|k| k.0).filter(|&m| m <= last && !violating.contains(&m)).collect();
+        assert!(fixed.is_empty(), "known violations of models {fixed:?} are gone: take them off KNOWN");
+    }
+}
