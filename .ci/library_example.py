@@ -1,4 +1,4 @@
-"""The README's library example (examples/library, an outside crate built without hybc's default
+"""The library example of docs/cli.md (examples/library, an outside crate built without hybc's default
 features) must print the numbers `hybc run` prints for the same run: every event time, the energy
 and dE/de, equal as f64. Run from the repository root with the two commands' outputs as files."""
 import json

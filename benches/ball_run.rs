@@ -1,5 +1,5 @@
 //! One run of the compiled bouncing ball to T = 2.5 at rtol 1e-10 with gradients with respect to
-//! all three parameters (the README's headline figure), plus the same without gradients. Each is
+//! all three parameters (the headline figure of docs/performance.md), plus the same without gradients. Each is
 //! timed twice: through `sim::run` (a fresh `Simulator` per run: options checked and scratch
 //! buffers allocated every time) and through one `Simulator` reused for every run, which is what
 //! sweeps, fits and gradient checks do. Last, the reused run with gradients and 100 `--at` samples

@@ -1,4 +1,4 @@
-//! The ball energy fit of the README: free e, one target energy = 2 at T = 2.5 (rtol 1e-10), from
+//! The ball energy fit of docs/fit.md: free e, one target energy = 2 at T = 2.5 (rtol 1e-10), from
 //! the model's e = 0.8 (same bounce count as the solution) and from e = 0.9 (one bounce fewer, so
 //! the fit crosses a cusp). Only the iterations are timed: the model is compiled once outside the
 //! loop; its compile time is the separate `fit_ball_compile_grad_e`.

@@ -9,7 +9,7 @@
 //! Run: `cargo run --release --example sparse_hub [hub:N | grid:SIDE | chain:N ...]` (default
 //! hub:100 hub:300 hub:1000 grid:32). `SPARSE_REPS=k`: best of k (default 5; 1 for the dense LU
 //! from 300 states). `SPARSE_CASES=banded,sparse` runs only the paths whose name holds one of them. The figures
-//! are in README, Performance.
+//! are in docs/performance.md.
 
 use hybc::sim::{FactorCosts, HybridSystem, LinearSolver, Method, SimOptions};
 use hybc::Model;

@@ -5,7 +5,7 @@
 //! (`HybridSystem::prepare_jacobians`: second derivatives, a second JIT module); then one run to
 //! T = 10 with Dormand-Prince and with Rodas5P (steps, run time). Best of a few repetitions.
 //!
-//! Run: `cargo run --release --example stiff_compile`. The figures are in README, Performance.
+//! Run: `cargo run --release --example stiff_compile`. The figures are in docs/performance.md.
 
 use hybc::codegen::{CompileOptions, CompiledModel};
 use hybc::lower::{lower, system_info};

@@ -10,7 +10,7 @@
 //! each event's), and the worst relative error of a single final sensitivity entry (entries
 //! above 1e-6 of the largest).
 //!
-//! Run: `cargo run --release --example w5_accuracy`. The figures are in README, Accuracy.
+//! Run: `cargo run --release --example w5_accuracy`. The figures are in docs/accuracy.md.
 
 use hybc::sim::{Method, SimOptions};
 use hybc::Model;

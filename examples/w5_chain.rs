@@ -7,7 +7,7 @@
 //!
 //! Run: `cargo run --release --example w5_chain [N ...]` (default 10 30 100 300 1000); each size
 //! in its own process gives a clean peak memory: `for n in 10 100 1000; do ...; done`. The
-//! figures are in README, Performance. `W5_CASES=banded` runs only the cases whose name holds it;
+//! figures are in docs/performance.md. `W5_CASES=banded` runs only the cases whose name holds it;
 //! `W5_REPS=k` runs each case k times (for profiles).
 
 use hybc::sim::{LinearSolver, Method, SimOptions};

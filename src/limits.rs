@@ -1,7 +1,7 @@
 //! The caps on counts every interface takes (the CLI's flags, the Python keywords, `hybc.jax`):
 //! one definition, so a count that is refused in one place is refused everywhere with the same
 //! cap. A count costs memory or time in proportion; a cap turns a typo (`events=10**9`) into a
-//! clear error instead of gigabytes allocated or a run of years. README "Limits" gives the table.
+//! clear error instead of gigabytes allocated or a run of years. docs/cli.md, "Limits", gives the table.
 //! No IO: callers name the flag or keyword in the message.
 
 /// Events a run may record (`max_events`, `--max-events`): each record takes about 100 bytes plus

@@ -1,5 +1,5 @@
 //! A finished run with names attached: the library's result of `hybc run`, printed by the CLI as
-//! a table or as the JSON object whose field names are a documented contract (README).
+//! a table or as the JSON object whose field names are a documented contract (docs/cli.md).
 //! Knows `sim`'s results and shapes; no IO.
 
 use serde_json::{json, Map, Value};
@@ -77,7 +77,7 @@ impl RunReport {
             .flatten()
     }
 
-    /// The JSON object documented in the README, as one value (the library's and Python's
+    /// The JSON object documented in docs/cli.md, as one value (the library's and Python's
     /// `to_json`). `write_json` writes the same text without building it.
     pub fn to_json(&self) -> Value {
         let fields = self.json_fields();

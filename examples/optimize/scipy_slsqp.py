@@ -1,4 +1,4 @@
-"""scipy's SLSQP driving hybc's own gradients, for the comparison in README "Choices".
+"""scipy's SLSQP driving hybc's own gradients, for the comparison in docs/performance.md.
 
 Each evaluation is one `hybc run --format json --grad ...` (a process per run: the counts compare,
 the times do not). Needs scipy (not a dependency of hybc): `python3 -m pip install scipy`, then

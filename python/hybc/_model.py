@@ -273,7 +273,7 @@ class Model:
         **options: Any,
     ) -> dict[str, Any]:
         """Minimises ``minimize`` over the parameters ``free`` subject to the constraints
-        ``subject_to``, as ``hybc optimize`` does (see Optimisation in the README), and returns
+        ``subject_to``, as ``hybc optimize`` does (see docs/optimize.md), and returns
         its report, the dict of ``hybc optimize --format json`` (``optimum``, ``params``,
         ``objective_value``, ``constraints`` with their multipliers, ``converged``, ``reason``,
         ``kkt``, ``optima`` from several starts with their event sequences, ``set``,
@@ -524,7 +524,7 @@ def sweep_matrix(
 
 class Samples:
     """``n`` points drawn uniformly and reproducibly: the points of ``hybc sweep --samples n
-    --seed seed`` (ChaCha8, documented in the README's "Sweeps"), usable as sweep points.
+    --seed seed`` (ChaCha8, documented in docs/sweep.md), usable as sweep points.
 
     ``ranges``: ``{name: (lo, hi)}`` in draw order, ``{name: None}`` for the declared range;
     omitted, every parameter that declares a range (as ``hybc sweep --samples`` without

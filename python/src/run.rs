@@ -1,6 +1,6 @@
 //! One finished run as Python values: NumPy arrays and dicts keyed by name.
 //!
-//! The rules (documented in the README's Python section):
+//! The rules (documented in docs/python.md):
 //! - a derivative that does not exist (after a grazing event, ...) is NaN, and `warnings` says why;
 //! - after a `stop` event the final values are those at the stop and their derivatives are the
 //!   total ones that include the motion of the stopping time (as `hybc sweep` writes them);

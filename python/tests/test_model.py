@@ -262,7 +262,7 @@ def test_parameter_values_must_be_numbers(ball):
 
 
 def test_counts_have_the_cli_caps(ball):
-    # The caps are hybc::limits, the CLI's (README, Limits); 0 events would still fire one.
+    # The caps are hybc::limits, the CLI's (docs/cli.md, Limits); 0 events would still fire one.
     with pytest.raises(ValueError, match="max_events: at least 1, found 0"):
         ball.simulate(max_events=0)
     with pytest.raises(ValueError, match="max_events: at most 1000000, found 1000001"):

@@ -50,7 +50,7 @@ enum Command {
     Optimize(optimize::OptimizeArgs),
 }
 
-/// Exit codes, as documented in the README.
+/// Exit codes, as documented in docs/cli.md.
 pub const EXIT_MODEL_ERROR: u8 = 1;
 pub const EXIT_USAGE_ERROR: u8 = 2;
 /// The simulation stopped early (Zeno behaviour or a runtime fault); what it computed is printed.

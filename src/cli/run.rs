@@ -373,7 +373,7 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
                     value["passed"] = check.passed().into();
                     extra.push(("check_grad", value));
                 }
-                // Streamed: the text of 10^6 events is never held whole (README, Limits).
+                // Streamed: the text of 10^6 events is never held whole (docs/cli.md, Limits).
                 super::write_out(|out| {
                     report.write_json(out, &extra)?;
                     out.write_all(b"\n")

@@ -17,7 +17,7 @@ use crate::sim::SimOptions;
 use crate::sweep::{self, Axis, AxisSpec, Columns, Format, Grid, PointResult, Points, Samples};
 use crate::{Compiled, Model};
 
-/// Caps on the counts the flags accept (README, "Limits"), shared with the Python interface
+/// Caps on the counts the flags accept (docs/cli.md, "Limits"), shared with the Python interface
 /// (`crate::limits`). Rows are streamed, so the number of points costs time, not memory; the cap
 /// turns a typo (`--samples 10000000000000`) into a usage error rather than a run of years.
 pub(crate) use crate::limits::MAX_SWEEP_POINTS as MAX_POINTS;

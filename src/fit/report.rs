@@ -1,5 +1,5 @@
 //! A finished fit with names attached: the table `hybc fit` prints and its JSON object (field
-//! names are a contract, README "Fitting"). No IO.
+//! names are a contract, docs/fit.md). No IO.
 
 use std::fmt::Write as _;
 
@@ -156,7 +156,7 @@ impl FitReport {
         Some(DataSummary { observations: observed.len(), by_name, standard_errors })
     }
 
-    /// The JSON object documented in the README.
+    /// The JSON object documented in docs/fit.md.
     pub fn to_json(&self) -> Value {
         let r = &self.result;
         let params: Map<String, Value> =

@@ -95,7 +95,7 @@ impl CheckOptions {
     /// 1e-4, 1e-5 and 1e-6 at rtol 1e-6 to 1e-12), 1e-5 gave the smallest worst discrepancy at
     /// rtol 1e-6, 1e-8 and 1e-10 (1e-4 is dominated by truncation, 1e-6 by noise) and was within
     /// 10x of the best at 1e-12. The default tolerance sits well above the worst discrepancies
-    /// of the shipped models (README, Accuracy) and grows with `rtol`, because both the reported
+    /// of the shipped models (docs/accuracy.md) and grows with `rtol`, because both the reported
     /// derivatives and the differences are only as good as the integration.
     pub fn for_rtol(rtol: f64) -> CheckOptions {
         CheckOptions { rel_step: 1e-5, tol: (1e5 * rtol).clamp(1e-4, 1e-2) }

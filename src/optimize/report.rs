@@ -1,5 +1,5 @@
 //! A finished optimisation with names attached: the table `hybc optimize` prints, its JSON object
-//! (field names are a contract, README "Optimisation"), the progress line per run and the `--set`
+//! (field names are a contract, docs/optimize.md), the progress line per run and the `--set`
 //! list of the optimum. No IO.
 
 use std::fmt::Write as _;

@@ -1,4 +1,4 @@
-//! One row per sweep point, with a fixed column scheme (documented in the README, "Sweeps"),
+//! One row per sweep point, with a fixed column scheme (documented in docs/sweep.md),
 //! written as CSV or as JSON lines with the same names. Numbers are printed in Rust's shortest
 //! round-trip form, so a row reads back as exactly the `f64`s the run computed.
 //!

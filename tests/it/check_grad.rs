@@ -215,7 +215,7 @@ fn check_flags_are_validated() {
 fn default_check_passes_every_model_from_rtol_1e_6_to_1e_12() {
     // The default step and tolerance (`CheckOptions::for_rtol`) must hold at every tolerance a
     // user may pick, not only at the models' own, with the declared ranges as `hybc run` passes
-    // them; the worst discrepancies per model and tolerance are printed for the README
+    // them; the worst discrepancies per model and tolerance are printed for docs/accuracy.md
     // (`cargo test --release --test it check_grad -- --nocapture`).
     let rtols = [1e-6, 1e-8, 1e-10, 1e-12];
     let mut worst = [0.0_f64; 4];

@@ -9,7 +9,7 @@
 //! All runs use the models' tolerances, rtol 1e-10 (atol 1e-12). Stated tolerances: event times
 //! 1e-9 relative; gradients, final states and outputs 1e-8 relative with an absolute floor of
 //! 1e-9 (a derivative that is exactly zero is reported as ~1e-12, not 0). `cargo test --test it
-//! closed_forms -- --nocapture` prints the largest errors seen (README, Accuracy).
+//! closed_forms -- --nocapture` prints the largest errors seen (docs/accuracy.md).
 
 use crate::support::reference::{
     ball_reference, derivative, dosing_reference, mid_flight, thermostat_reference, tilted_reference,
@@ -259,7 +259,7 @@ type Sets<'a> = Vec<(&'a str, f64)>;
 #[test]
 fn nonlinear_models_match_central_differences_at_several_points() {
     // rtol 1e-12 and a check tolerance of 1e-5: at these tolerances the worst discrepancy of the
-    // shipped models is ~1e-6 (the truncation of the difference, README Accuracy).
+    // shipped models is ~1e-6 (the truncation of the difference, docs/accuracy.md).
     let cases: [(&str, f64, Vec<Sets>); 3] = [
         (
             "models/pendulum_wall.hyb",

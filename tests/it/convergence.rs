@@ -7,7 +7,7 @@
 //!
 //! The ball has no trend to show: its flights are quadratics in time, which every Runge-Kutta
 //! method of order >= 2 integrates exactly, so its errors sit at round-off at every tolerance; the
-//! test asserts exactly that. `--nocapture` prints the errors (README, Accuracy).
+//! test asserts exactly that. `--nocapture` prints the errors (docs/accuracy.md).
 
 use crate::support::reference::{ball_reference, derivative, thermostat_reference, Compiled, Reference};
 use hybc::sim::SimResult;

@@ -1,4 +1,4 @@
-//! Gradients are reported exactly when they exist (README, Choices: grazing from conditioning;
+//! Gradients are reported exactly when they exist (docs/design.md: grazing from conditioning;
 //! derivatives that do not exist). Each test against a closed form or an exact pattern of
 //! existing and missing derivatives.
 

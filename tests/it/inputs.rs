@@ -218,7 +218,7 @@ fn a_thousand_knots_cost_what_ten_do_per_evaluation_and_a_step_per_interval() {
         best
     };
     let (small, large) = (time_flow(10), time_flow(1000));
-    // For the README (`cargo test --test it inputs -- --nocapture`).
+    // For docs/performance.md (`cargo test --test it inputs -- --nocapture`).
     println!("20000 flows: {:.3} ms with 10 knots, {:.3} ms with 1000", small * 1e3, large * 1e3);
     assert!(large < 3.0 * small + 1e-3, "1000 knots: {large} s, 10 knots: {small} s for 20000 flows");
 

@@ -3,7 +3,7 @@
 //! finite and inside its range at the ends of the double range, duplicate settings are refused,
 //! final values that are not finite are reported as such (exit 3, `"NaN"`/`"inf"`/`"-inf"` in
 //! JSON) and a fit whose objective overflows fails with its reason (exit 4). The caps are in the
-//! README's "Limits" table.
+//! "Limits" table of docs/cli.md.
 
 use crate::support::cli::hybc;
 

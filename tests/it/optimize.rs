@@ -203,7 +203,7 @@ fn an_optimum_on_t_end_says_so_with_its_margin() {
 
 #[test]
 fn energies_in_the_jump_between_branches_stall_at_a_cusp() {
-    // Between g e_c^8 = 3.12 and g e_c^6 = 4.16 no e gives the energy (README, Fitting): the
+    // Between g e_c^8 = 3.12 and g e_c^6 = 4.16 no e gives the energy (docs/fit.md): the
     // optimiser ends at the jump, and says so (exit 4).
     let out = hybc(&[
         "optimize",

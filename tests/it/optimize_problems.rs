@@ -253,7 +253,7 @@ fn the_compass_gaits_fastest_periodic_gait_at_a_cost_of_transport_is_a_stable_ga
     let cot = &constraints[3];
     assert_eq!(cot["constraint"], "cot <= 0.1");
     assert!(number(&cot["multiplier"]) > 0.0, "more effort would buy speed");
-    // Faster than the passive gait (step 0.5354454154 m in 0.7343463912 s, README).
+    // Faster than the passive gait (step 0.5354454154 m in 0.7343463912 s, docs/periodic.md).
     let pace = number(&v["objective_value"]);
     assert!(pace < 0.7343463912 / 0.5354454154, "pace {pace}");
 

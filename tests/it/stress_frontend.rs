@@ -4,7 +4,7 @@
 //! states that each read one shared sum (a dense Jacobian), and a chain of `let`s nested past
 //! `MAX_EXPR_DEPTH`. Each gives its closed form, through the library and
 //! through the `hybc` command with generous time and peak-memory limits (the real figures are
-//! in the README's Limits section, with their commands).
+//! in docs/performance.md, "Large models", with their commands).
 
 use std::time::Duration;
 

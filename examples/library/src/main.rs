@@ -1,4 +1,4 @@
-// The library example of the README, verbatim: an outside crate that depends on hybc without its
+// The library example of docs/cli.md, verbatim: an outside crate that depends on hybc without its
 // default features (no CLI, no plots). `.ci/run` builds it and checks that it prints the numbers
 // `hybc run models/ball.hyb --set e=0.9 --grad e,h0 --format json` prints (run it from the
 // repository root).

@@ -1,6 +1,6 @@
 //! The `status` output of a JAX call: why a point's numbers are what they are, as a small integer
 //! (traced code cannot raise). The mapping is a contract shared with `hybc/jax.py` (`STATUS`) and
-//! the README; `python/tests/test_jax.py` reaches every code but `stuck` and `non_finite`
+//! docs/python.md; `python/tests/test_jax.py` reaches every code but `stuck` and `non_finite`
 //! (both decided by `hybc::status::RunStatus::of`; `non_finite` sweep rows: tests/it/limits.rs).
 
 use hybc::sim::{SimResult, SystemInfo};

@@ -3,7 +3,7 @@
 //! helpers that compare hybc with them: compile a model with every parameter differentiated, run it
 //! by parameter name, differentiate a reference computation by Richardson-extrapolated central
 //! differences, and compare with stated tolerances while recording the largest error seen (printed
-//! with `--nocapture` for the README's Accuracy section).
+//! with `--nocapture` for docs/accuracy.md).
 
 use hybc::codegen::{compile, CompileOptions, CompiledModel};
 use hybc::lower::{lower, system_info};
@@ -197,7 +197,7 @@ impl BallForm {
         let (_, speed) = touchdowns.next().expect("endless");
         let tau = t - latest;
         // `speed / e * e` rather than `speed`: the arithmetic of this reference's first version,
-        // kept so that the errors printed against it (README, Accuracy) stay the same bit for bit.
+        // kept so that the errors printed against it (docs/accuracy.md) stay the same bit for bit.
         (speed / e * e * tau - 0.5 * g * tau * tau, speed - g * tau)
     }
 
