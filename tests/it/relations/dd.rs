@@ -165,6 +165,8 @@ impl Sub<&Dual> for &Dual {
     }
 }
 
+// The product and quotient rules: sums inside a product are the derivative's, not a slip.
+#[allow(clippy::suspicious_arithmetic_impl)]
 impl Mul<&Dual> for &Dual {
     type Output = Dual;
     fn mul(self, b: &Dual) -> Dual {
@@ -172,6 +174,7 @@ impl Mul<&Dual> for &Dual {
     }
 }
 
+#[allow(clippy::suspicious_arithmetic_impl)]
 impl Div<&Dual> for &Dual {
     type Output = Dual;
     fn div(self, b: &Dual) -> Dual {

@@ -51,6 +51,10 @@ pub enum Outcome {
     Ambiguous(String),
 }
 
+/// An active event in a segment: its index, its guard's sign changes (time, sign after) and
+/// whether it is armed at the segment's start.
+type Candidate = (usize, Vec<(Dd, f64)>, bool);
+
 /// A polynomial in the time since the segment's start, lowest coefficient first.
 type Poly = Vec<Dual>;
 
@@ -312,7 +316,7 @@ fn run(g: &GenModel, t_start: f64) -> Result<Reference, String> {
         let xs = state_polys(g, &p, &x, &t0, mode);
         // Per active event: its guard's sign changes on (0, rest] and whether it is armed at 0+
         // (strictly on its pre-crossing side, or a contact leaving zero that way).
-        let mut cands: Vec<(usize, Vec<(Dd, f64)>, bool)> = Vec::new();
+        let mut cands: Vec<Candidate> = Vec::new();
         let mut earliest: Vec<(Dd, usize, bool)> = Vec::new();
         for (e, ev) in g.events.iter().enumerate() {
             if ev.mode.is_some_and(|em| em != mode) {
@@ -406,8 +410,7 @@ fn run(g: &GenModel, t_start: f64) -> Result<Reference, String> {
         sign_before.iter_mut().for_each(|s| *s = 0.0);
         for (c, changes, armed0) in &cands {
             let mut is_armed = *armed0;
-            for &(t, after) in changes.iter().filter(|(t, _)| *t < tau) {
-                let _ = t;
+            for &(_, after) in changes.iter().filter(|(t, _)| *t < tau) {
                 is_armed = pre_side(g.events[*c].dir, after);
             }
             armed[*c] = is_armed;

@@ -291,7 +291,7 @@ pub fn harness(seed: u64, first: u64, count: usize, budget: Duration, configs: &
         s.not_judged += usize::from(!want.gradients_judged());
         let mut report = |c: Config, variant: &str, what: String| {
             let mut text = g.text(&Variant::default());
-            let _ = write!(text, "# seed {seed}, model {}, variant: {variant}\n", index - 1);
+            let _ = writeln!(text, "# seed {seed}, model {}, variant: {variant}", index - 1);
             s.violations.push(Violation { model: index - 1, what, flags: c.flags(), text });
         };
         let mut base_runs = Vec::new();

@@ -277,8 +277,8 @@ impl GenModel {
                 // m0b: m0's flows and events; events that return to m0 go to m0a, identical.
                 emit_mode("m0b", 0, false, None, &mut out);
             }
-            for m in 1..n_modes {
-                emit_mode(&names[m], m, false, None, &mut out);
+            for (m, name) in names.iter().enumerate().skip(1) {
+                emit_mode(name, m, false, None, &mut out);
             }
         }
         let _ = writeln!(out, "simulate t_end = {}", num(self.t_end + v.shift));
