@@ -48,6 +48,8 @@ impl Reference {
 #[derive(Clone, Debug)]
 pub enum Outcome {
     Clean(Reference),
+    /// A guard no polynomial describes: the model is checked by the relations alone.
+    NotPolynomial,
     Ambiguous(String),
 }
 
@@ -235,6 +237,7 @@ fn guard_poly(g: &GenModel, e: usize, p: &[Dual], xs: &[Poly], t0: &Dual) -> (Po
             (prod, 2.0 * (xs[*i][0].v.f64() * xs[*j][0].v.f64()).abs())
         }
         Lhs::Time => (vec![t0.clone(), Dual::constant(1.0, m)], t0.v.f64().abs()),
+        Lhs::Sin(..) => unreachable!("the reference follows polynomial guards only"),
     };
     let mut poly = lhs;
     poly[0] = &poly[0] - &rhs;
@@ -278,6 +281,9 @@ const MAX_EVENTS: usize = 40;
 
 /// The reference run of `g` from `t_start`.
 pub fn reference(g: &GenModel, t_start: f64) -> Outcome {
+    if !g.polynomial() {
+        return Outcome::NotPolynomial;
+    }
     match run(g, t_start) {
         Ok(r) => Outcome::Clean(r),
         Err(why) => Outcome::Ambiguous(why),

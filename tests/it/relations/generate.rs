@@ -1,6 +1,6 @@
 //! Random hybrid models drawn from the language's forms (`model.rs`): chains of integrators
 //! whose tops are `a + b t` per mode, events with affine, product and time guards in every
-//! direction, affine resets (bounces, kicks, assignments), mode switches, stops, and starts on or
+//! direction, `sin` guards (for the relations alone), affine resets (bounces, kicks, assignments), mode switches, stops, and starts on or
 //! a hair from a guard (down to subnormal distances). Model `i` of seed `s` is a function of `(s,
 //! i)` alone, so a violation is reproduced from the two numbers.
 
@@ -105,16 +105,20 @@ pub fn model(seed: u64, index: u64) -> GenModel {
             } else {
                 (Lhs::Lin(vec![(i, 1.0), (j, w)]), x0[i] + w * x0[j])
             }
-        } else if kind < 17 {
+        } else if kind < 16 {
             let (i, j) = (d.below(n_states), d.below(n_states));
             (Lhs::Prod(i, j), x0[i] * x0[j])
+        } else if kind < 18 {
+            let i = d.below(n_states);
+            let w = d.value(1.0, 6.0);
+            (Lhs::Sin(i, w), (w * x0[i]).sin())
         } else {
             (Lhs::Time, 0.0)
         };
         let (rhs_value, dir) = if lhs == Lhs::Time {
             (d.value(0.05, t_end - 0.05), Dir::Rising)
         } else {
-            let rhs = l0 + d.value(-1.0, 1.0);
+            let rhs = if matches!(lhs, Lhs::Sin(..)) { d.value(-0.9, 0.9) } else { l0 + d.value(-1.0, 1.0) };
             let dir = if d.chance(0.25) {
                 Dir::Crosses
             } else if l0 > rhs {

@@ -55,6 +55,8 @@ pub enum Lhs {
     Prod(usize, usize),
     /// `t`: a time event.
     Time,
+    /// `sin(w x_i)`: a guard no polynomial describes, checked by the relations only.
+    Sin(usize, f64),
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -138,6 +140,11 @@ impl GenModel {
         format!("x{i}")
     }
 
+    /// Whether the exact reference can follow every guard (all polynomial along the flow).
+    pub fn polynomial(&self) -> bool {
+        !self.events.iter().any(|e| matches!(e.lhs, Lhs::Sin(..)))
+    }
+
     pub fn uses_time(&self) -> bool {
         self.tops.iter().flatten().any(|t| t.b != 0.0) || self.events.iter().any(|e| e.lhs == Lhs::Time)
     }
@@ -168,6 +175,7 @@ impl GenModel {
             }
             Lhs::Prod(i, j) => format!("{} * {}", Self::state_name(*i), Self::state_name(*j)),
             Lhs::Time => self.time_text(v),
+            Lhs::Sin(i, w) => format!("sin({} * {})", num(*w), Self::state_name(*i)),
         }
     }
 
