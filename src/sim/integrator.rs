@@ -13,18 +13,19 @@
 use std::sync::Arc;
 
 use super::breakpoints::Breakpoints;
-use super::events::{clear_side, moves_across, Crossing, Detector, Pending, Selection};
-use super::jump::{dot_nonzero, CrossingContext, Jump, JumpOutcome};
+use super::event::detect::{clear_side, moves_across, Crossing, Detector, Pending, Selection};
+use super::event::jump::{dot_nonzero, CrossingContext, Jump, JumpOutcome};
+use super::event::zeno;
+use super::method::rk::Rk;
+use super::method::stepper::{Interpolant, Rhs, Stepper};
 use super::options::SimOptions;
 use super::recorder::{Point, PointKind, Recorder};
 use super::result::{
     EndCusp, EventRecord, FinalState, MethodSegment, Samples, SimError, SimResult, SimStats, SimWarning,
     StopReason,
 };
-use super::rk::Rk;
-use super::stepper::{Interpolant, Rhs, Stepper};
+use super::samples;
 use super::system::{Direction, GuardShape, HybridSystem, SystemInfo};
-use super::{samples, zeno};
 
 const EPS: f64 = f64::EPSILON;
 /// Largest ratio of the first step after an event to Hairer's initial estimate at the

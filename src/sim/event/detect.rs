@@ -24,10 +24,10 @@
 //! and `16 eps (sum_i |g_x,i f_i| + |g_t|)` for its speed, so a large state the guard does not
 //! read changes nothing.
 
-use super::poly::{self, Poly};
 use super::roots::{extremum_time, hermite_root, illinois};
-use super::stepper::{Interpolant, Stepper};
-use super::system::{Direction, GuardShape, HybridSystem, SystemInfo};
+use crate::sim::method::poly::{self, Poly};
+use crate::sim::method::stepper::{Interpolant, Stepper};
+use crate::sim::system::{Direction, GuardShape, HybridSystem, SystemInfo};
 
 const EPS: f64 = f64::EPSILON;
 /// The two interior sample points of a step, in units of the step, for guards that are not

@@ -27,10 +27,10 @@
 //! component, sensitivities included, built with the step (it costs a few vector sums).
 
 use super::errnorm::{controlled, BlockNorm};
-use super::linsolve::{LinSolve, LinearSolver};
 use super::poly::CAP;
 use super::row_tableau::RowTableau;
 use super::stepper::{Interpolant, Rhs, Stepper};
+use crate::sim::linalg::linsolve::{LinSolve, LinearSolver};
 
 const SAFETY: f64 = 0.9;
 const FAC_MIN: f64 = 0.2;

@@ -207,7 +207,7 @@ pub trait Stepper {
     fn visit_interior<V: FnMut(f64, &[f64])>(&self, visit: V);
     /// The stretches of the run each method integrated, for a stepper that switches between
     /// methods (`auto::Auto`), up to the current point `t`; `None` for a single method.
-    fn segments(&self, _t: f64) -> Option<Vec<super::result::MethodSegment>> {
+    fn segments(&self, _t: f64) -> Option<Vec<crate::sim::result::MethodSegment>> {
         None
     }
 }

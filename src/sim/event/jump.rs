@@ -34,8 +34,8 @@
 //! on it: every product below skips exact zeros, so `0 * NaN` is never formed and a reset that
 //! removes the dependence (`v := 0` into a mode with no flow) gives derivatives that exist.
 
-use super::events::dot;
-use super::system::{GuardShape, HybridSystem};
+use super::detect::dot;
+use crate::sim::system::{GuardShape, HybridSystem};
 
 /// A time and the state at that time.
 pub(crate) type TimedState<'a> = (f64, &'a [f64]);
