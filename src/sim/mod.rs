@@ -12,7 +12,10 @@
 //! - `system.rs`: the `HybridSystem` contract and `SystemInfo`.
 //! - `options.rs`: what to ask (`SimOptions`).
 //! - `integrator.rs`: the state of a run and its `step`, a state machine over a stepper.
-//! - `breakpoints.rs`: times landed on exactly.
+//! - `mode_rhs.rs`: a mode's flow with its sensitivities as the stepper's right-hand side.
+//! - `switch_landing.rs`: `SwitchLanding`, a step retried to land just before a flow switch it
+//!   crossed (branch locking by cutting), owned by the integrator.
+//! - `breakpoints.rs`: times landed on exactly, and events on or near them.
 //! - `recorder.rs`: trajectories through an observer.
 //! - `samples.rs`: the values at `SimOptions::at`, taken as the run passes them and completed
 //!   once it is over.
@@ -27,11 +30,13 @@ mod event;
 mod integrator;
 mod linalg;
 mod method;
+mod mode_rhs;
 mod options;
 mod recorder;
 mod result;
 mod run;
 mod samples;
+mod switch_landing;
 pub mod system;
 
 pub use integrator::{Integrator, StepOutcome};

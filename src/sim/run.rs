@@ -108,6 +108,10 @@ impl<St: Stepper> ShapedWork<'_, St> {
             before: (vec![0.0; n], Vec::new()),
             instant_dte: vec![0.0; m],
             void: vec![false; n * m],
+            reset_onto: Vec::new(),
+            reset_onto_guard: Vec::new(),
+            onto_guard_dte: Vec::new(),
+            onto_guard_grad: (vec![0.0; n], vec![0.0; m]),
         }
     }
 }

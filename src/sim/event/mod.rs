@@ -6,6 +6,8 @@
 //! Code map:
 //! - `detect.rs`: `Detector`, sampling the mode's guards over a step, brackets, resolution,
 //!   selection of the earliest crossings, pending guards and bounces.
+//! - `guards.rs`: `Guards`, the context of a detection call (system, parameters, mode), built
+//!   by the integrator once per step instead of passed as five arguments to each call.
 //! - `roots.rs`: one-dimensional root finding (Illinois regula falsi, Hermite first estimates,
 //!   extrema).
 //! - `jump.rs`: `Jump`, the event-time gradient, its conditioning (grazing), the reset and the
@@ -13,6 +15,7 @@
 //! - `zeno.rs`: accumulating events, read off the run's event record.
 
 pub(super) mod detect;
+pub(super) mod guards;
 pub(super) mod jump;
 pub(super) mod roots;
 pub(super) mod zeno;

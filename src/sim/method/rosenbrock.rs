@@ -1,6 +1,6 @@
 //! Stage 5 (sim): the Rosenbrock (ROW) methods Rodas5P and Rodas4 as a [`Stepper`], for stiff
 //! flows. Linearly implicit: one LU factorisation of `W = I - h gamma f_x` per attempted step
-//! (dense, or banded or sparse for large models with a known Jacobian pattern: `linsolve.rs`), no Newton
+//! (dense, or banded or sparse for large models with a known Jacobian pattern: `linalg/linsolve.rs`), no Newton
 //! iteration; the stages (Hairer & Wanner's original form, not the transformed one: a clock is
 //! then exact to an ulp per step) and coefficients are in `row_tableau.rs`.
 //!

@@ -1,6 +1,6 @@
 //! Stage 5 (sim): the seam between the integrator and a time-stepping method. A [`Stepper`]
 //! attempts steps under its own error control, gives the dense interpolant of its last attempt and
-//! restarts after a jump; the integrator (`integrator.rs`) owns the state `(t, z, mode)` and does
+//! restarts after a jump; the integrator (`sim/integrator.rs`) owns the state `(t, z, mode)` and does
 //! everything hybrid: event detection, location, resets, saltation, Zeno, recording. So a new
 //! method (an implicit Rosenbrock method for stiff models, say) implements this trait and nothing
 //! of event handling changes.
