@@ -23,8 +23,8 @@
 //! Cargo features: `cli` (the `hybc` command: clap, indicatif; implies `plot`) and `plot` (SVG and
 //! PNG figures: plotters), both on by default. Without them the library needs neither.
 
-// All `unsafe` is in `codegen` (calling the JIT's code) and in `sim::rk`'s stage sums (a CPU
-// feature dispatch and checked-once block loads); each allows it where it stands.
+// All `unsafe` is in `codegen` (calling the JIT's code) and in `sim::method::sums`, the stage
+// sums (a CPU feature dispatch and checked-once block loads); each allows it where it stands.
 #![deny(unsafe_code)]
 
 mod api;

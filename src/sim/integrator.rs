@@ -12,19 +12,22 @@
 
 use std::sync::Arc;
 
-use super::breakpoints::Breakpoints;
-use super::events::{clear_side, moves_across, Crossing, Detector, Pending, Selection};
-use super::jump::{dot_nonzero, CrossingContext, Jump, JumpOutcome};
+use super::breakpoints::{near_breakpoints, on_breakpoint, Breakpoints};
+use super::event::detect::{clear_side, moves_across, Crossing, Detector, Pending, Selection};
+use super::event::guards::Guards;
+use super::event::jump::{dot_nonzero, CrossingContext, Jump, JumpOutcome};
+use super::event::zeno;
+use super::method::rk::Rk;
+use super::method::stepper::{Interpolant, Rhs, Stepper};
+use super::mode_rhs::rhs_for;
 use super::options::SimOptions;
 use super::recorder::{Point, PointKind, Recorder};
 use super::result::{
-    EndCusp, EventRecord, FinalState, MethodSegment, Samples, SimError, SimResult, SimStats, SimWarning,
-    StopReason,
+    EndCusp, EventRecord, FinalState, MethodSegment, SimError, SimResult, SimStats, SimWarning, StopReason,
 };
-use super::rk::Rk;
-use super::stepper::{Interpolant, Rhs, Stepper};
+use super::samples::{output_sens, OutputJac, Sampler};
+use super::switch_landing::SwitchLanding;
 use super::system::{Direction, GuardShape, HybridSystem, SystemInfo};
-use super::{samples, zeno};
 
 const EPS: f64 = f64::EPSILON;
 /// Largest ratio of the first step after an event to Hairer's initial estimate at the
@@ -43,15 +46,6 @@ const AFTER_RESET_GROWTH: f64 = 1000.0;
 /// Trial points, at 1, 2, 4, ... floating-point spacings past a flow switch's located time,
 /// for one where its guard is strictly past zero (there the flow is the new branch's).
 const SWITCH_SIDE_TRIES: usize = 40;
-/// Retries of one step landing before a flow switch it crossed (each lands earlier than the last).
-const SWITCH_RETRIES: u8 = 4;
-/// Events this close to a breakpoint, relative to `max(|t|, 1)`, are flagged: their derivatives
-/// hold only while they stay on their side of it (the resolution at which Zeno tells instants
-/// apart, `zeno::ACCUMULATION_RESOLUTION`).
-const NEAR_BREAKPOINT: f64 = 1e-9;
-/// A switch this many spacings of `t` past a step that landed before it (by the guard's value
-/// over its speed) is crossed at the step's end.
-const SWITCH_NEAR: f64 = 64.0;
 /// Rejections in a row with a non-finite trial state before the run gives up on shrinking.
 const MAX_NONFINITE_REJECTS: usize = 30;
 /// A step this short relative to `max(|t|, 1)` is taken even when a nonlinear guard is not
@@ -73,16 +67,23 @@ const LANDING_NUDGES: usize = 8;
 /// Rounds of cascading events at one instant before the run stops as stuck.
 pub(crate) const MAX_CASCADE_ROUNDS: usize = 100;
 
-/// A step retried to land just before a flow switch it crossed (see `retry_before_switch`).
+/// A step as planned: from `t0`, of size `h`, ending at `t1` (exactly the breakpoint it lands on
+/// when `lands`).
 #[derive(Clone, Copy, Debug)]
-struct SwitchLanding {
-    /// The last time before the switch, on the crossing attempt's interpolant: the step lands here.
-    t_pre: f64,
-    /// Retries of this step so far.
-    retries: u8,
-    /// The switch's position in the mode's events and its pre-crossing sign.
-    pos: usize,
-    sigma: f64,
+struct Plan {
+    t0: f64,
+    h: f64,
+    t1: f64,
+    lands: bool,
+}
+
+/// What an accepted attempt needs: its dense output for the events (`for_events`) or for samples
+/// (`sample_due`), and the growth its nonlinear guards allow the next step.
+#[derive(Clone, Copy, Debug)]
+struct Look {
+    for_events: bool,
+    sample_due: bool,
+    guard_factor: f64,
 }
 
 /// What one [`Integrator::step`] did.
@@ -111,7 +112,7 @@ pub(crate) struct Workspace<St: Stepper = Rk> {
     /// The events of the last group that fired: id, pre-crossing sign, crossing speed.
     pub(crate) fired: Vec<(usize, f64, f64)>,
     /// The output Jacobians `y_x`, `y_p`, `y_t` at the final state.
-    pub(crate) output_jac: (Vec<f64>, Vec<f64>, Vec<f64>),
+    pub(crate) output_jac: OutputJac,
     /// The states on either side of a flow switch.
     pub(crate) x_sides: (Vec<f64>, Vec<f64>),
     /// Outputs and an interpolated `z` for recorded points.
@@ -122,6 +123,16 @@ pub(crate) struct Workspace<St: Stepper = Rk> {
     pub(crate) instant_dte: Vec<f64>,
     /// Which sensitivities are known not to exist (NaN), for warning once about new ones.
     pub(crate) void: Vec<bool>,
+    /// Guards of the current round that its reset moved onto zero with no clear speed (their
+    /// positions), left for the next step to decide.
+    pub(crate) reset_onto: Vec<usize>,
+    /// Events of the next cascade round whose guard the last round reset onto zero to round-off
+    /// (firing because the flow carries them across): their time derivative does not exist.
+    pub(crate) reset_onto_guard: Vec<usize>,
+    /// Their `dt/dp` (NaN where a parameter moves the instant or the guard).
+    pub(crate) onto_guard_dte: Vec<f64>,
+    /// A guard's gradient `(g_x, g_p)` for an event reset onto its guard.
+    pub(crate) onto_guard_grad: (Vec<f64>, Vec<f64>),
 }
 
 /// Derivatives as a result reports them: `None` when none exists (every entry NaN, and there is
@@ -130,57 +141,11 @@ fn existing(d: &[f64]) -> Option<Vec<f64>> {
     (d.is_empty() || d.iter().any(|v| !v.is_nan())).then(|| d.to_vec())
 }
 
-/// The flow of `mode` with its sensitivities as one right-hand side over `z = [x, S]`, with the
-/// model's Jacobians for an implicit stepper.
-struct ModeRhs<'a, S: HybridSystem + ?Sized> {
-    sys: &'a S,
-    p: &'a [f64],
-    n: usize,
-    mode: usize,
-}
-
-fn rhs_for<'a, S: HybridSystem + ?Sized>(sys: &'a S, p: &'a [f64], n: usize, mode: usize) -> ModeRhs<'a, S> {
-    ModeRhs { sys, p, n, mode }
-}
-
-impl<S: HybridSystem + ?Sized> Rhs for ModeRhs<'_, S> {
-    #[inline(always)]
-    fn eval(&mut self, t: f64, z: &[f64], dz: &mut [f64]) {
-        let (x, s) = z.split_at(self.n);
-        let (dx, ds) = dz.split_at_mut(self.n);
-        self.sys.flow_sens(self.mode, t, x, s, self.p, dx, ds);
-    }
-
-    fn jacobian(&mut self, t: f64, z: &[f64], fx: &mut [f64], ft: &mut [f64]) {
-        let (x, s) = z.split_at(self.n);
-        let (ftx, fts) = ft.split_at_mut(self.n);
-        self.sys.flow_jac(self.mode, t, x, s, self.p, fx, ftx, fts);
-    }
-
-    fn jac_pattern(&self) -> Option<(usize, &[(u32, u32)])> {
-        self.sys.jac_pattern(self.mode).map(|p| (self.mode, p))
-    }
-
-    fn jacobian_values(&mut self, t: f64, z: &[f64], vals: &mut [f64], ft: &mut [f64]) {
-        let (x, s) = z.split_at(self.n);
-        let (ftx, fts) = ft.split_at_mut(self.n);
-        self.sys.flow_jac_values(self.mode, t, x, s, self.p, vals, ftx, fts);
-    }
-
-    fn sens_coupling(&mut self, t: f64, xv: &[f64], z: &[f64], out: &mut [f64]) {
-        self.sys.sens_dir(self.mode, t, xv, &z[self.n..], self.p, out);
-    }
-
-    fn prepare(&mut self) -> bool {
-        self.sys.prepare_jacobians().is_ok()
-    }
-}
-
 /// One run in progress. Made by `Simulator::integrator`; [`Self::step`] advances it,
 /// [`Self::finish`] turns it into the run's result.
 pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = Rk> {
-    /// The values at `SimOptions::at` taken so far (the next one due is `samples.len()`).
-    samples: Samples,
+    /// The values at `SimOptions::at` taken so far, and the recorder's dense-output samples.
+    sampler: Sampler<'a, S>,
     sys: &'a S,
     info: &'a SystemInfo,
     p: &'a [f64],
@@ -189,18 +154,9 @@ pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = R
     m: usize,
     t: f64,
     mode: usize,
-    z: &'a mut Vec<f64>,
-    stepper: &'a mut St,
-    det: &'a mut Detector,
-    jump: &'a mut Jump,
-    breakpoints: &'a mut Breakpoints,
-    fired: &'a mut Vec<(usize, f64, f64)>,
-    output_jac: &'a mut (Vec<f64>, Vec<f64>, Vec<f64>),
-    x_sides: &'a mut (Vec<f64>, Vec<f64>),
-    record_buf: &'a mut (Vec<f64>, Vec<f64>),
-    before: &'a mut (Vec<f64>, Vec<f64>),
-    instant_dte: &'a mut Vec<f64>,
-    void: &'a mut Vec<bool>,
+    /// The stepper, the detector, `z` and every scratch buffer: the `Simulator`'s, kept between
+    /// runs.
+    work: &'a mut Workspace<St>,
     recorder: &'a mut R,
     /// The step size the next attempt tries.
     h: f64,
@@ -223,16 +179,11 @@ pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = R
     stop_total: Option<(Vec<f64>, Vec<f64>)>,
     done: Option<StopReason>,
     /// A step that crossed a flow switch is retried landing just before it (the last time on
-    /// the old branch): the time to land on, and how often this step has been retried so.
-    land_before_switch: Option<SwitchLanding>,
+    /// the old branch).
+    landing: SwitchLanding,
     /// The first time past the flow switches crossed at the current instant where their new
     /// branches hold (see `cross_switch`).
     switch_post: Option<f64>,
-    /// Events of the next cascade round whose guard the last round reset onto zero to round-off
-    /// (firing because the flow carries them across): their time derivative does not exist.
-    reset_onto_guard: Vec<usize>,
-    /// Their `dt/dp` (NaN where a parameter moves the instant or the guard).
-    onto_guard_dte: Vec<f64>,
     /// The state and sensitivities just before an instant at `t_end` (for `SimResult::end_cusp`).
     before_end: Option<(Vec<f64>, usize)>,
 }
@@ -250,25 +201,11 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     ) -> Self {
         let info = sys.info();
         let (n, m) = (info.n_states(), info.n_grad());
-        let Workspace {
-            stepper,
-            det,
-            jump,
-            breakpoints,
-            z,
-            fired,
-            output_jac,
-            x_sides,
-            record_buf,
-            before,
-            instant_dte,
-            void,
-        } = work;
-        stepper.reset();
-        breakpoints.reset(opts.t_end);
-        sys.initial_state(p, &mut z[..n]);
-        sys.initial_sens(p, &mut z[n..]);
-        void.fill(false);
+        work.stepper.reset();
+        work.breakpoints.reset(opts.t_end);
+        sys.initial_state(p, &mut work.z[..n]);
+        sys.initial_sens(p, &mut work.z[n..]);
+        work.void.fill(false);
         let mut it = Integrator {
             sys,
             info,
@@ -278,18 +215,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             m,
             t: opts.t_start,
             mode: info.initial_mode,
-            z,
-            stepper,
-            det,
-            jump,
-            breakpoints,
-            fired,
-            output_jac,
-            x_sides,
-            record_buf,
-            before,
-            instant_dte,
-            void,
+            work,
             recorder,
             h: 0.0,
             attempts: 0,
@@ -303,14 +229,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             stats: SimStats::default(),
             stop_total: None,
             done: None,
-            land_before_switch: None,
+            landing: SwitchLanding::default(),
             switch_post: None,
-            reset_onto_guard: Vec::new(),
-            onto_guard_dte: Vec::new(),
             before_end: None,
-            samples: Samples::with_capacity((n, m, info.n_outputs()), opts.at.len()),
+            sampler: Sampler::new(sys, p, &opts.at),
         };
-        if it.z[..n].iter().any(|v| !v.is_finite()) {
+        if it.work.z[..n].iter().any(|v| !v.is_finite()) {
             it.done = Some(it.fault_nonfinite());
             return it;
         }
@@ -319,9 +243,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         it.add_time_events();
         it.h = it.restart();
         // A reused detector may remember bounces of an earlier run.
-        it.det.clear_bounces();
+        it.work.det.clear_bounces();
         it.record(PointKind::Start);
-        it.record_due_samples_at_current_point();
+        it.sampler.record_here(it.recorder, &mut it.work.record_buf.0, t0, it.mode, &it.work.z[..]);
         it.start_on_guards();
         it
     }
@@ -337,33 +261,39 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             }
             // A time event's guard is `slope t + c`: its value at t = 0 is `c`.
             let ne = evs.len();
-            let (gx, g) = &mut *self.before;
+            let (gx, g) = &mut self.work.before;
             g.resize(ne, 0.0);
             gx.resize(n, 0.0);
-            self.instant_dte.resize(self.m, 0.0);
-            self.sys.guards(mode, 0.0, &self.z[..n], self.p, &mut g[..ne]);
+            self.work.instant_dte.resize(self.m, 0.0);
+            self.sys.guards(mode, 0.0, &self.work.z[..n], self.p, &mut g[..ne]);
             let mut switches = Vec::new();
             for (pos, &ev) in evs.iter().enumerate() {
                 if self.info.events[ev].guard != GuardShape::Time {
                     continue;
                 }
-                let slope =
-                    self.sys.guard_grad(ev, 0.0, &self.z[..n], self.p, &mut gx[..n], self.instant_dte);
+                let slope = self.sys.guard_grad(
+                    ev,
+                    0.0,
+                    &self.work.z[..n],
+                    self.p,
+                    &mut gx[..n],
+                    &mut self.work.instant_dte,
+                );
                 let t_event = -g[pos] / slope;
                 if self.info.events[ev].implicit && t_event.is_finite() {
                     switches.push((pos, t_event, slope));
                 } else if t_event > self.opts.t_start && t_event < self.opts.t_end {
-                    self.breakpoints.add(t_event);
+                    self.work.breakpoints.add(t_event);
                 }
             }
             for (pos, t_est, slope) in switches {
                 let t_event = self.first_time_across(mode, pos, t_est, slope);
                 if t_event > self.opts.t_start && t_event < self.opts.t_end {
-                    self.breakpoints.add(t_event);
+                    self.work.breakpoints.add(t_event);
                 }
             }
         }
-        self.breakpoints.sort();
+        self.work.breakpoints.sort();
     }
 
     /// The first time, within a few spacings of `t` from `t_est`, where the time-event guard at
@@ -382,14 +312,14 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         };
         let mut t = t_est;
         for _ in 0..NUDGES {
-            if across(self.sys, t, self.z) {
+            if across(self.sys, t, &self.work.z) {
                 break;
             }
             t = t.next_up();
         }
         for _ in 0..NUDGES {
             let before = t.next_down();
-            if !across(self.sys, before, self.z) {
+            if !across(self.sys, before, &self.work.z) {
                 break;
             }
             t = before;
@@ -403,144 +333,62 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         if self.done.is_some() {
             return;
         }
-        self.det.group.clear();
+        self.work.det.group.clear();
         let (t, n) = (self.t, self.n);
         let evs = &self.info.modes[self.mode].events;
         let mut enabled = false;
         for (pos, &ev) in evs.iter().enumerate() {
             let einfo = &self.info.events[ev];
-            if einfo.implicit || self.det.g0[pos].is_nan() {
+            if einfo.implicit || self.work.det.g0[pos].is_nan() {
                 continue;
             }
-            let (noise, speed_noise) = self.det.noise0(self.sys, self.info, self.mode, pos, self.p);
-            if self.det.g0[pos].abs() > noise {
+            let (noise, speed_noise) = self.work.det.noise0(&self.guards(), pos);
+            if self.work.det.g0[pos].abs() > noise {
                 if einfo.direction != Direction::Either
-                    && clear_side(einfo.direction, self.det.g0[pos], noise) == Some(true)
+                    && clear_side(einfo.direction, self.work.det.g0[pos], noise) == Some(true)
                 {
-                    let (name, guard) = (einfo.name.clone(), self.det.g0[pos]);
+                    let (name, guard) = (einfo.name.clone(), self.work.det.g0[pos]);
                     self.warnings.push(SimWarning::StartsAcross { event: ev, name, time: t, guard });
                 }
                 continue;
             }
-            match moves_across(einfo.direction, self.det.dg0[pos], speed_noise) {
+            match moves_across(einfo.direction, self.work.det.dg0[pos], speed_noise) {
                 Some(sigma) => {
                     // As in every group, each condition is judged when its event's turn comes.
-                    enabled |= self.sys.condition(ev, t, &self.z[..n], self.p);
+                    enabled |= self.sys.condition(ev, t, &self.work.z[..n], self.p);
                     let c = Crossing { t, sigma, touch: false, t_pre: t, on_guard: true };
-                    self.det.group.push((ev, c));
+                    self.work.det.group.push((ev, c));
                 }
-                None if self.det.dg0[pos].abs() <= speed_noise => {
-                    self.det.pending[pos] = Pending::OnGuard;
+                None if self.work.det.dg0[pos].abs() <= speed_noise => {
+                    self.work.det.pending[pos] = Pending::OnGuard;
                 }
                 None => {}
             }
         }
         if !enabled {
-            self.det.group.clear();
+            self.work.det.group.clear();
         }
         self.immediate = enabled;
-    }
-
-    /// Branch locking by cutting: a step whose stages straddle a flow switch evaluated the flow
-    /// past it on the other branch, and its whole polynomial (the state at every time of the
-    /// step, events before the switch included) carries that error: a pulse narrower than a step
-    /// was lost whole. Such a step is retried landing exactly on the last time before the switch
-    /// (the first located on the interpolant), where every stage is on the branch of the step's
-    /// start; the next step then crosses the switch within its first floating-point spacings.
-    /// Returns whether to retry. A switch within a resolvable distance of the start is crossed as
-    /// before; the landing time must fall at each retry (at most [`SWITCH_RETRIES`]), so this
-    /// ends.
-    fn retry_before_switch(&mut self, t0: f64) -> bool {
-        let Some((pos, crossing)) =
-            self.det.earliest_switch(self.sys, self.info, self.mode, self.stepper.interpolant(), self.p)
-        else {
-            return false;
-        };
-        let t_pre = crossing.t_pre;
-        let resolvable = t_pre - t0 > 8.0 * EPS * t0.abs().max(f64::MIN_POSITIVE);
-        let retries = match self.land_before_switch {
-            Some(l) if l.t_pre > t0 => {
-                if t_pre >= l.t_pre || l.retries >= SWITCH_RETRIES {
-                    return false;
-                }
-                l.retries + 1
-            }
-            _ => 1,
-        };
-        if !resolvable {
-            return false;
-        }
-        self.det.forget_findings();
-        self.land_before_switch = Some(SwitchLanding { t_pre, retries, pos, sigma: crossing.sigma });
-        self.h = t_pre - t0;
-        true
-    }
-
-    /// After an attempt rejected by its error test in a mode with flow switches: whether it
-    /// crossed one, found as for an accepted step (the attempt's interpolant is only as good as
-    /// the attempt, but good enough to aim the retry at the switch), then as
-    /// `retry_before_switch`.
-    fn retry_after_rejected_switch<F: Rhs>(&mut self, t0: f64, t1: f64, rhs: &mut F) -> bool {
-        let evs = &self.info.modes[self.mode].events;
-        if !evs.iter().any(|&ev| self.info.events[ev].implicit) {
-            return false;
-        }
-        let n = self.n;
-        self.det.eval_end(self.sys, self.info, self.mode, t1, &*self.stepper, n, self.p);
-        if !self.det.mark_candidates(self.info, self.mode) {
-            return false;
-        }
-        self.stepper.build_interpolant(t0, self.z, rhs);
-        self.det.check_resolution(self.sys, self.info, self.mode, self.stepper.interpolant(), self.p);
-        self.det.scan(self.sys, self.info, self.mode, self.stepper.interpolant(), self.p, t1);
-        let retry = self.retry_before_switch(t0);
-        self.det.forget_findings();
-        retry
-    }
-
-    /// A step that landed just before the flow switch it was retried for, with the switch still
-    /// a few spacings of `t` ahead: the switch is crossed right there (`group` holds it), rather
-    /// than by a next step whose first stage would be on the old branch and the others on the
-    /// new (its error estimate would reject it again and again, creeping up on the switch).
-    fn switch_at_landing(&mut self, t1: f64) -> bool {
-        let Some(landing) = self.land_before_switch.filter(|l| l.t_pre == t1) else {
-            return false;
-        };
-        let (g, speed) = (self.det.g1[landing.pos], self.det.dg1[landing.pos]);
-        let spacing = t1.abs().next_up() - t1.abs();
-        let near =
-            g.is_finite() && landing.sigma * g >= 0.0 && g.abs() <= SWITCH_NEAR * spacing * speed.abs();
-        // With a breakpoint (a time event) before the predicted crossing, the next step lands on
-        // it and crosses the switch there, with the event, in time order.
-        let t_cross = t1 + g.abs() / speed.abs() + spacing;
-        if !near || self.breakpoints.next_after(t1) <= t_cross {
-            return false;
-        }
-        let ev = self.info.modes[self.mode].events[landing.pos];
-        // Not crossed yet (the guard is a few spacings short of zero): like a touch, it fires
-        // without its guard on the crossed side, which `fire_group` would otherwise take for a
-        // state moved back by an earlier reset and skip. Skipped, the switch was left to the next
-        // step, whose error estimate straddles the jump of the flow: with sensitivities at zero
-        // (scaled by atol) it shrank to an underflow (the soft ball's first contact, issue #25).
-        let crossing = Crossing { t: t1, sigma: landing.sigma, touch: true, t_pre: t1, on_guard: false };
-        self.det.group.clear();
-        self.det.group.push((ev, crossing));
-        true
     }
 
     /// At the end of the run's last step: events whose crossing is at `t_end` to round-off fire
     /// there (`Detector::on_guard_at_end`), when the first of them to fire has its condition.
     fn end_on_guards(&mut self) -> bool {
-        if !self.det.on_guard_at_end(self.sys, self.info, self.mode, self.p) {
+        if !self.work.det.on_guard_at_end(&self.guards()) {
             return false;
         }
-        let x = &self.stepper.end_state()[..self.n];
+        let x = &self.work.stepper.end_state()[..self.n];
         let t = self.opts.t_end;
-        let enabled = self.det.group.iter().any(|&(ev, _)| self.sys.condition(ev, t, x, self.p));
+        let enabled = self.work.det.group.iter().any(|&(ev, _)| self.sys.condition(ev, t, x, self.p));
         if !enabled {
-            self.det.group.clear();
+            self.work.det.group.clear();
         }
         enabled
+    }
+
+    /// The guards of the current mode, for the detector.
+    fn guards(&self) -> Guards<'a, S> {
+        Guards::new(self.sys, self.info, self.p, self.mode)
     }
 
     /// The current time.
@@ -555,12 +403,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
 
     /// The current state.
     pub fn state(&self) -> &[f64] {
-        &self.z[..self.n]
+        &self.work.z[..self.n]
     }
 
     /// The current sensitivities, column per parameter (`s[j * n + i] = dx_i/dp_j`).
     pub fn sensitivities(&self) -> &[f64] {
-        &self.z[self.n..]
+        &self.work.z[self.n..]
     }
 
     /// The events fired so far.
@@ -580,6 +428,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         outcome
     }
 
+    /// One turn of the state machine (ARCHITECTURE.md, "Inside `sim`"): a group prepared at the
+    /// current point fires first; otherwise a step is planned, attempted, examined and either
+    /// rejected, accepted or cut at the instant of the events selected in it.
     fn advance(&mut self) -> StepOutcome {
         if self.immediate {
             self.immediate = false;
@@ -587,12 +438,50 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             self.record(PointKind::BeforeEvents);
             return self.fire_instant(estimate);
         }
+        let plan = match self.plan() {
+            Ok(plan) => plan,
+            Err(stop) => return StepOutcome::Done(stop),
+        };
+        self.attempts += 1;
+        // The mode's guards, for every detection call of this step.
+        let cx = self.guards();
+        let mut rhs = rhs_for(self.sys, self.p, self.n, self.mode);
+        let err = self.work.stepper.attempt(plan.t0, &self.work.z, plan.h, &mut rhs);
+        if err > 1.0 || err.is_nan() {
+            return self.reject(&cx, plan, err, &mut rhs);
+        }
+        self.nonfinite_rejects = 0;
+        let look = match self.examine(&cx, plan, &mut rhs) {
+            Ok(look) => look,
+            Err(outcome) => return outcome,
+        };
+        self.note_cost_error(plan.t0);
+        let h_next = self.work.stepper.grow(err).min(plan.h * look.guard_factor);
+        self.stats.steps += 1;
+        let selection = match self.select_events(&cx, plan, look, &mut rhs) {
+            Ok(selection) => selection,
+            Err(outcome) => return outcome,
+        };
+        match selection {
+            Selection::Nothing if self.work.det.penetrated().is_some() => {
+                // Stop where the last bounce left the state (the step is not taken).
+                StepOutcome::Done(zeno::stop(&self.events))
+            }
+            Selection::Nothing => self.accept(plan, look, h_next),
+            Selection::NotFinite { pos, t } => self.stop_not_finite(pos, t, look),
+            Selection::Fire(t_fire) => self.cut_at_instant(t_fire, plan, look, h_next, &mut rhs),
+        }
+    }
+
+    /// The next step from the current point: its size, clipped to land on the next breakpoint
+    /// (or just before a flow switch it is retried for), or why the run cannot take one.
+    fn plan(&mut self) -> Result<Plan, StopReason> {
         let t_end = self.opts.t_end;
         if self.t >= t_end {
-            return StepOutcome::Done(StopReason::TEnd);
+            return Err(StopReason::TEnd);
         }
         if self.attempts >= self.opts.max_steps {
-            return StepOutcome::Done(StopReason::Fault {
+            return Err(StopReason::Fault {
                 error: SimError::TooManySteps {
                     t: self.t,
                     max_steps: self.opts.max_steps,
@@ -602,9 +491,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             });
         }
         let t0 = self.t;
-        let mut t_land = self.breakpoints.next_after(t0);
-        if let Some(landing) = self.land_before_switch.filter(|l| l.t_pre > t0) {
-            t_land = t_land.min(landing.t_pre);
+        let mut t_land = self.work.breakpoints.next_after(t0);
+        if let Some(t_pre) = self.landing.limit(t0) {
+            t_land = t_land.min(t_pre);
         }
         let mut h_try = self.h.min(self.opts.h_max);
         let lands = t0 + 1.01 * h_try >= t_land;
@@ -617,7 +506,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         // one, so this cannot stall; only the error control's own shrinking is an underflow.
         let h_resolvable = (h_try > 8.0 * EPS * t0.abs() || lands) && h_try > 0.0;
         if !h_resolvable {
-            return StepOutcome::Done(StopReason::Fault {
+            return Err(StopReason::Fault {
                 error: SimError::StepTooSmall {
                     t: t0,
                     h: h_try,
@@ -628,138 +517,176 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 },
             });
         }
-        self.attempts += 1;
-        let mut rhs = rhs_for(self.sys, self.p, self.n, self.mode);
-        let err = self.stepper.attempt(t0, self.z, h_try, &mut rhs);
-        if err > 1.0 || err.is_nan() {
-            self.stats.rejected += 1;
-            if err.is_finite() {
-                self.nonfinite_rejects = 0;
-            } else {
-                self.nonfinite_rejects += 1;
-                if self.nonfinite_rejects > MAX_NONFINITE_REJECTS {
-                    return StepOutcome::Done(self.fault_nonfinite());
-                }
-            }
-            self.h = self.stepper.shrink(err);
-            // A step that failed its error test because it crossed a flow switch: shrinking by
-            // the error alone would creep up on the switch in many rejected steps.
-            let t1 = if lands { t_land } else { t0 + h_try };
-            if err.is_finite() {
-                // Sets `h` to land before the switch when there is one.
-                self.retry_after_rejected_switch(t0, t1, &mut rhs);
-            }
-            return StepOutcome::Rejected;
-        }
-        self.nonfinite_rejects = 0;
         let t1 = if lands { t_land } else { t0 + h_try };
-        let n = self.n;
-        self.det.eval_end(self.sys, self.info, self.mode, t1, &*self.stepper, n, self.p);
-        let for_events = self.det.mark_candidates(self.info, self.mode);
-        let sample_due = self.sample_due(t1);
+        Ok(Plan { t0, h: h_try, t1, lands })
+    }
+
+    /// An attempt that failed its error test (`err`): a shorter step, aimed just before a flow
+    /// switch the attempt crossed; too many non-finite attempts in a row stop the run.
+    fn reject<F: Rhs>(&mut self, cx: &Guards<'a, S>, plan: Plan, err: f64, rhs: &mut F) -> StepOutcome {
+        self.stats.rejected += 1;
+        if err.is_finite() {
+            self.nonfinite_rejects = 0;
+        } else {
+            self.nonfinite_rejects += 1;
+            if self.nonfinite_rejects > MAX_NONFINITE_REJECTS {
+                return StepOutcome::Done(self.fault_nonfinite());
+            }
+        }
+        self.h = self.work.stepper.shrink(err);
+        // A step that failed its error test because it crossed a flow switch: shrinking by
+        // the error alone would creep up on the switch in many rejected steps.
+        if err.is_finite() {
+            let (stepper, z) = (&mut self.work.stepper, &self.work.z[..]);
+            let span = (plan.t0, plan.t1);
+            if let Some(h) = self.landing.retry_rejected(&mut self.work.det, cx, stepper, z, span, rhs) {
+                self.h = h;
+            }
+        }
+        StepOutcome::Rejected
+    }
+
+    /// An attempt that passed its error test: its guards at the end, whether it needs its dense
+    /// output (for events or samples), and how its nonlinear guards limit the next step; a step
+    /// that does not resolve one is rejected (`Err`).
+    fn examine<F: Rhs>(&mut self, cx: &Guards<'a, S>, plan: Plan, rhs: &mut F) -> Result<Look, StepOutcome> {
+        let (t0, t1, h_try) = (plan.t0, plan.t1, plan.h);
+        self.work.det.eval_end(cx, t1, &self.work.stepper);
+        let for_events = self.work.det.mark_candidates(cx);
+        let sample_due = self.sampler.wanted(&*self.recorder, t1);
         if for_events || sample_due {
-            self.stepper.build_interpolant(t0, self.z, &mut rhs);
+            self.work.stepper.build_interpolant(t0, &self.work.z, rhs);
         }
         let mut guard_factor = f64::INFINITY;
         if for_events {
-            let control =
-                self.det.check_resolution(self.sys, self.info, self.mode, self.stepper.interpolant(), self.p);
+            let control = self.work.det.check_resolution(cx, self.work.stepper.interpolant());
             if !control.resolved && h_try > GUARD_RESOLUTION_FLOOR * t0.abs().max(1.0) {
                 // A guard not resolved by the step: shorter, as for an error estimate.
                 self.stats.rejected += 1;
                 self.h = h_try * control.factor.min(0.9);
-                return StepOutcome::Rejected;
+                return Err(StepOutcome::Rejected);
             }
             if control.factor.is_finite() {
                 guard_factor = control.factor.min(GUARD_GROWTH);
             }
         }
-        self.note_cost_error(t0);
-        let h_next = self.stepper.grow(err).min(h_try * guard_factor);
-        self.stats.steps += 1;
-        let mut selection = if for_events {
-            self.det.scan(self.sys, self.info, self.mode, self.stepper.interpolant(), self.p, t1);
-            if let Some(pos) = self.det.stuck() {
-                return StepOutcome::Done(self.stuck_on_guard(self.info.modes[self.mode].events[pos]));
+        Ok(Look { for_events, sample_due, guard_factor })
+    }
+
+    /// The events the accepted step ends with: the earliest crossings inside it, or a flow switch
+    /// crossed where the step landed just before it, or events on their guard at `t_end`. A
+    /// contact found stuck stops the run and a flow switch crossed inside the step retries it
+    /// (`Err`).
+    fn select_events<F: Rhs>(
+        &mut self,
+        cx: &Guards<'a, S>,
+        plan: Plan,
+        look: Look,
+        rhs: &mut F,
+    ) -> Result<Selection, StepOutcome> {
+        let (t0, t1) = (plan.t0, plan.t1);
+        let mut selection = if look.for_events {
+            self.work.det.scan(cx, self.work.stepper.interpolant(), t1);
+            if let Some(pos) = self.work.det.stuck() {
+                return Err(StepOutcome::Done(self.stuck_on_guard(cx.events()[pos])));
             }
-            if self.retry_before_switch(t0) {
+            if let Some(h) = self.landing.retry(&mut self.work.det, cx, self.work.stepper.interpolant(), t0) {
+                self.h = h;
                 self.stats.rejected += 1;
-                return StepOutcome::Rejected;
+                return Err(StepOutcome::Rejected);
             }
-            self.det.select(self.sys, self.info, self.mode, self.stepper.interpolant(), self.p)
+            self.work.det.select(cx, self.work.stepper.interpolant())
         } else {
             Selection::Nothing
         };
-        if matches!(selection, Selection::Nothing) && lands && self.switch_at_landing(t1) {
-            if !(for_events || sample_due) {
-                self.stepper.build_interpolant(t0, self.z, &mut rhs);
+        let nothing = matches!(selection, Selection::Nothing) && plan.lands;
+        if nothing && self.landing.cross_at_landing(&mut self.work.det, cx, &mut self.work.breakpoints, t1) {
+            if !(look.for_events || look.sample_due) {
+                self.work.stepper.build_interpolant(t0, &self.work.z, rhs);
             }
             selection = Selection::Fire(t1);
         }
-        if matches!(selection, Selection::Nothing) && lands && t1 >= self.opts.t_end && self.end_on_guards() {
-            if !(for_events || sample_due) {
-                self.stepper.build_interpolant(t0, self.z, &mut rhs);
+        if matches!(selection, Selection::Nothing)
+            && plan.lands
+            && t1 >= self.opts.t_end
+            && self.end_on_guards()
+        {
+            if !(look.for_events || look.sample_due) {
+                self.work.stepper.build_interpolant(t0, &self.work.z, rhs);
             }
             selection = Selection::Fire(t1);
         }
-        match selection {
-            Selection::Nothing if self.det.penetrated().is_some() => {
-                // Stop where the last bounce left the state (the step is not taken).
-                StepOutcome::Done(zeno::stop(&self.events))
-            }
-            Selection::Nothing => {
-                if sample_due {
-                    self.record_samples(t1, false);
-                }
-                let singular_at_start = self.stepper.masked() && self.start_derivative_not_finite();
-                self.stepper.accept(self.z);
-                self.t = t1;
-                self.land_before_switch = None;
-                if self.stepper.masked() {
-                    self.note_new_voids(if singular_at_start { t0 } else { t1 });
-                }
-                self.det.advance();
-                self.record(PointKind::Step);
-                self.h = h_next;
-                StepOutcome::Accepted
-            }
-            Selection::NotFinite { pos, t } => {
-                if sample_due || self.sample_due(t) {
-                    self.record_samples(t, true);
-                }
-                self.stepper.interpolant().eval(t, self.z);
-                self.t = t;
-                let event = self.info.events[self.info.modes[self.mode].events[pos]].name.clone();
-                let error = SimError::GuardNotFinite { event, t, mode: self.mode, state: self.fault_state() };
-                StepOutcome::Done(StopReason::Fault { error })
-            }
-            Selection::Fire(t_fire) => {
-                if sample_due || self.sample_due(t_fire) {
-                    self.record_samples(t_fire, true);
-                }
-                let singular_at_start = self.stepper.masked() && self.start_derivative_not_finite();
-                let t_fire = if t_fire == t1 {
-                    // On the step's end: the step's own end state. The dense output reproduces
-                    // it only to round-off, and a guard found across there by the end values (an
-                    // event at `t_end`, `x = 0.3 t` reaching 0.3) could be read back on its
-                    // pre-crossing side and skipped as moved back by an earlier reset.
-                    self.z.copy_from_slice(self.stepper.end_state());
-                    t_fire
-                } else if let Some(t_landed) = self.land_on_event(t0, t_fire, &mut rhs) {
-                    t_landed
-                } else {
-                    self.stepper.interpolant().eval(t_fire, self.z);
-                    t_fire
-                };
-                self.t = t_fire;
-                self.land_before_switch = None;
-                if self.stepper.masked() {
-                    self.note_new_voids(if singular_at_start { t0 } else { t_fire });
-                }
-                self.record(PointKind::BeforeEvents);
-                self.fire_instant(h_next)
-            }
+        Ok(selection)
+    }
+
+    /// Nothing fired in the step: the state moves to its end.
+    fn accept(&mut self, plan: Plan, look: Look, h_next: f64) -> StepOutcome {
+        let (t0, t1) = (plan.t0, plan.t1);
+        if look.sample_due {
+            self.sample_step(t1, false);
         }
+        let singular_at_start = self.work.stepper.masked() && self.start_derivative_not_finite();
+        self.work.stepper.accept(&mut self.work.z);
+        self.t = t1;
+        self.landing.clear();
+        if self.work.stepper.masked() {
+            self.note_new_voids(if singular_at_start { t0 } else { t1 });
+        }
+        self.work.det.advance();
+        self.record(PointKind::Step);
+        self.h = h_next;
+        StepOutcome::Accepted
+    }
+
+    /// The guard at `pos` stops being finite at `t` inside the step, before any crossing: the
+    /// run stops there.
+    fn stop_not_finite(&mut self, pos: usize, t: f64, look: Look) -> StepOutcome {
+        if look.sample_due || self.sampler.wanted(&*self.recorder, t) {
+            self.sample_step(t, true);
+        }
+        self.work.stepper.interpolant().eval(t, &mut self.work.z);
+        self.t = t;
+        let event = self.info.events[self.info.modes[self.mode].events[pos]].name.clone();
+        let error = SimError::GuardNotFinite { event, t, mode: self.mode, state: self.fault_state() };
+        StepOutcome::Done(StopReason::Fault { error })
+    }
+
+    /// The step is cut at the instant `t_fire` of the events selected in it: the state there
+    /// (the step's end, the step landed on the instant, or the dense output), then the instant
+    /// fires.
+    fn cut_at_instant<F: Rhs>(
+        &mut self,
+        t_fire: f64,
+        plan: Plan,
+        look: Look,
+        h_next: f64,
+        rhs: &mut F,
+    ) -> StepOutcome {
+        let (t0, t1) = (plan.t0, plan.t1);
+        if look.sample_due || self.sampler.wanted(&*self.recorder, t_fire) {
+            self.sample_step(t_fire, true);
+        }
+        let singular_at_start = self.work.stepper.masked() && self.start_derivative_not_finite();
+        let t_fire = if t_fire == t1 {
+            // On the step's end: the step's own end state. The dense output reproduces
+            // it only to round-off, and a guard found across there by the end values (an
+            // event at `t_end`, `x = 0.3 t` reaching 0.3) could be read back on its
+            // pre-crossing side and skipped as moved back by an earlier reset.
+            self.work.z.copy_from_slice(self.work.stepper.end_state());
+            t_fire
+        } else if let Some(t_landed) = self.land_on_event(t0, t_fire, rhs) {
+            t_landed
+        } else {
+            self.work.stepper.interpolant().eval(t_fire, &mut self.work.z);
+            t_fire
+        };
+        self.t = t_fire;
+        self.landing.clear();
+        if self.work.stepper.masked() {
+            self.note_new_voids(if singular_at_start { t0 } else { t_fire });
+        }
+        self.record(PointKind::BeforeEvents);
+        self.fire_instant(h_next)
     }
 
     /// Retakes the step from `(t0, z)` landing on the event instant `t_fire` located inside it
@@ -783,41 +710,40 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         }
         let evs = &self.info.modes[self.mode].events;
         let plain = |&(ev, c): &(usize, Crossing)| !(c.touch || c.on_guard || self.info.events[ev].implicit);
-        if !self.det.group.iter().all(plain) {
+        if !self.work.det.group.iter().all(plain) {
             return None;
         }
         let h = t_fire - t0;
-        let err = self.stepper.land(t0, self.z, h, rhs);
+        let err = self.work.stepper.land(t0, &self.work.z, h, rhs);
         // A NaN error (nothing finite) fails too.
         if err.is_nan() || err > 1.0 {
             return None;
         }
-        let n = self.n;
-        self.z.copy_from_slice(self.stepper.end_state());
-        let f = self.stepper.end_derivative();
+        let (n, cx) = (self.n, self.guards());
+        self.work.z.copy_from_slice(self.work.stepper.end_state());
+        let f = self.work.stepper.end_derivative();
         let mut dt = f64::NEG_INFINITY;
-        for gi in 0..self.det.group.len() {
-            let (ev, _) = self.det.group[gi];
+        for gi in 0..self.work.det.group.len() {
+            let (ev, _) = self.work.det.group[gi];
             let pos = evs.iter().position(|&e| e == ev)?;
-            let (g, speed) =
-                self.det.guard_and_speed(self.sys, self.mode, pos, ev, t_fire, &self.z[..n], &f[..n], self.p);
+            let (g, speed) = self.work.det.guard_and_speed(&cx, pos, t_fire, &self.work.z[..n], &f[..n]);
             dt = dt.max(-g / speed);
         }
         if !(dt.is_finite() && dt.abs() <= LANDING_CORRECTION * h) {
             return None;
         }
-        let end = self.stepper.end_state();
+        let end = self.work.stepper.end_state();
         let mut t = t_fire + dt;
         for _ in 0..LANDING_NUDGES {
             let dt = t - t_fire;
-            for ((z, &e), &d) in self.z.iter_mut().zip(end).zip(f) {
+            for ((z, &e), &d) in self.work.z.iter_mut().zip(end).zip(f) {
                 *z = e + dt * d;
             }
             let mut crossed = true;
-            for gi in 0..self.det.group.len() {
-                let (ev, c) = self.det.group[gi];
+            for gi in 0..self.work.det.group.len() {
+                let (ev, c) = self.work.det.group[gi];
                 let pos = evs.iter().position(|&e| e == ev)?;
-                let g = self.det.guard_now(self.sys, self.mode, pos, t, &self.z[..n], self.p);
+                let g = self.work.det.guard_now(&cx, pos, t, &self.work.z[..n]);
                 crossed &= c.sigma * g <= 0.0;
             }
             if crossed {
@@ -832,7 +758,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     fn lands_on_events(&mut self) -> bool {
         match self.opts.land_events {
             Some(land) => land,
-            None => self.stepper.lands_on_events(self.z),
+            None => self.work.stepper.lands_on_events(&self.work.z),
         }
     }
 
@@ -847,35 +773,34 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         self.step_mode = self.mode;
         self.instant = None;
         self.switch_post = None;
-        self.fired.clear();
-        self.before.0.clear();
-        self.before.0.extend_from_slice(&self.z[..n]);
+        self.work.fired.clear();
+        self.work.before.0.clear();
+        self.work.before.0.extend_from_slice(&self.work.z[..n]);
         if on_breakpoint(self.t, self.opts.t_end) {
             // An instant at t_end: the other side of the cusp is the run without it.
-            self.before_end = Some((self.z.to_vec(), first));
+            self.before_end = Some((self.work.z.to_vec(), first));
         }
         let mut rounds = 0;
         let mut estimate;
-        let mut reset_onto: Vec<usize> = Vec::new();
         loop {
-            let round_start = self.fired.len();
+            let round_start = self.work.fired.len();
             if let Some(stop) = self.fire_group(rounds > 0) {
                 return StepOutcome::Done(stop);
             }
-            if self.z[..n].iter().any(|v| !v.is_finite()) {
+            if self.work.z[..n].iter().any(|v| !v.is_finite()) {
                 return StepOutcome::Done(self.fault_nonfinite());
             }
             if rounds == 0 {
                 self.restart_past_switches();
             }
             estimate = self.restart();
-            reset_onto.clear();
-            if !self.cascade(round_start, &mut reset_onto) {
+            self.work.reset_onto.clear();
+            if !self.cascade(round_start) {
                 break;
             }
             rounds += 1;
             if rounds > MAX_CASCADE_ROUNDS {
-                let ev = self.det.group.first().map_or(0, |&(ev, _)| ev);
+                let ev = self.work.det.group.first().map_or(0, |&(ev, _)| ev);
                 return StepOutcome::Done(StopReason::Stuck {
                     time: self.t,
                     event: ev,
@@ -883,12 +808,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                     rounds: MAX_CASCADE_ROUNDS,
                 });
             }
-            self.before.0.clear();
-            self.before.0.extend_from_slice(&self.z[..n]);
+            self.work.before.0.clear();
+            self.work.before.0.extend_from_slice(&self.work.z[..n]);
         }
         self.record(PointKind::AfterEvents);
-        self.record_at_current_point();
-        for (void, s) in self.void.iter_mut().zip(&self.z[self.n..]) {
+        self.sampler.take_here(&mut self.work.output_jac, self.t, self.mode, &self.work.z[..]);
+        for (void, s) in self.work.void.iter_mut().zip(&self.work.z[self.n..]) {
             *void |= s.is_nan();
         }
         if self.events.len() >= self.opts.max_events {
@@ -897,7 +822,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         if let Some(stop) = zeno::accumulating(&self.events) {
             return StepOutcome::Done(stop);
         }
-        if let Some(stop) = self.after_instant(&reset_onto) {
+        if let Some(stop) = self.after_instant() {
             return StepOutcome::Done(stop);
         }
         let growth = if self.mode == mode_before { AFTER_RESET_GROWTH } else { AFTER_SWITCH_GROWTH };
@@ -906,7 +831,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         // the earliest of them rather than over all of them again (each would be bracketed and
         // scanned only for the earliest to fire).
         if let Some(t_next) =
-            self.det.next_crossing.take().filter(|&t| t > self.t && self.mode == mode_before)
+            self.work.det.next_crossing.take().filter(|&t| t > self.t && self.mode == mode_before)
         {
             // At least a resolvable step: a crossing a few spacings of `t` ahead is then inside it.
             let floor = 16.0 * EPS * self.t.abs();
@@ -919,46 +844,47 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// after it; the round's events are `fired[round_start..]`): the events whose guard the round moved from strictly its pre-crossing side to
     /// its crossed side, or onto zero with the flow carrying it across, fill the next group (the
     /// next round at this instant). Guards moved onto zero with no clear speed go to
-    /// `reset_onto`, for the next step to decide. Returns whether there is a next round.
-    fn cascade(&mut self, round_start: usize, reset_onto: &mut Vec<usize>) -> bool {
+    /// `work.reset_onto`, for the next step to decide. Returns whether there is a next round.
+    fn cascade(&mut self, round_start: usize) -> bool {
         let (t, n) = (self.t, self.n);
         let evs = &self.info.modes[self.mode].events;
         let ne = evs.len();
-        self.det.group.clear();
+        self.work.det.group.clear();
         // The events that just fired were at their crossing before the round, never strictly on
         // their pre-crossing side: when they are all the mode has, nothing can cascade.
-        let fired_now = &self.fired[round_start..];
+        let fired_now = &self.work.fired[round_start..];
         if evs.iter().all(|ev| fired_now.iter().any(|f| f.0 == *ev)) {
             return false;
         }
         let mut enabled = false;
-        self.reset_onto_guard.clear();
-        let (x_before, g_before) = &mut *self.before;
+        self.work.reset_onto_guard.clear();
+        let cx = self.guards();
+        let (x_before, g_before) = &mut self.work.before;
         g_before.resize(ne, 0.0);
         self.sys.guards(self.mode, t, x_before, self.p, &mut g_before[..ne]);
         for (pos, &ev) in evs.iter().enumerate() {
             let einfo = &self.info.events[ev];
             // A guard the round did not move cannot have been moved across.
-            if einfo.implicit || g_before[pos] == self.det.g0[pos] {
+            if einfo.implicit || g_before[pos] == self.work.det.g0[pos] {
                 continue;
             }
             let dir = einfo.direction;
-            let (noise, speed_noise) = self.det.noise0(self.sys, self.info, self.mode, pos, self.p);
+            let (noise, speed_noise) = self.work.det.noise0(&cx, pos);
             if clear_side(dir, g_before[pos], noise) != Some(false) {
                 continue;
             }
-            let after = self.det.g0[pos];
+            let after = self.work.det.g0[pos];
             let sigma = match clear_side(dir, after, noise) {
                 Some(true) => g_before[pos].signum(),
                 Some(false) => continue,
-                None => match moves_across(dir, self.det.dg0[pos], speed_noise) {
+                None => match moves_across(dir, self.work.det.dg0[pos], speed_noise) {
                     Some(sigma) => {
-                        self.reset_onto_guard.push(ev);
+                        self.work.reset_onto_guard.push(ev);
                         sigma
                     }
                     None => {
-                        if self.det.dg0[pos].abs() <= speed_noise {
-                            reset_onto.push(pos);
+                        if self.work.det.dg0[pos].abs() <= speed_noise {
+                            self.work.reset_onto.push(pos);
                         }
                         continue;
                     }
@@ -967,11 +893,11 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             // Every moved guard joins the round, its condition judged when its turn comes (an
             // earlier event of the round may make it true); the round happens when the first
             // event to fire, which sees the state as the last round left it, has its condition.
-            enabled |= self.sys.condition(ev, t, &self.z[..n], self.p);
-            self.det.group.push((ev, Crossing { t, sigma, touch: false, t_pre: t, on_guard: true }));
+            enabled |= self.sys.condition(ev, t, &self.work.z[..n], self.p);
+            self.work.det.group.push((ev, Crossing { t, sigma, touch: false, t_pre: t, on_guard: true }));
         }
         if !enabled {
-            self.det.group.clear();
+            self.work.det.group.clear();
         }
         enabled
     }
@@ -979,30 +905,30 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// The rules after an instant: a contact that fired and is left on its guard is stuck when
     /// the flow carries it across (or pending when the speed is round-off), a reset that reversed
     /// a guard's speed is a bounce watched for penetration, guards reset onto zero are pending.
-    fn after_instant(&mut self, reset_onto: &[usize]) -> Option<StopReason> {
-        self.det.clear_bounces();
-        for &pos in reset_onto {
-            self.det.pending[pos] = Pending::OnGuard;
+    fn after_instant(&mut self) -> Option<StopReason> {
+        self.work.det.clear_bounces();
+        for &pos in &self.work.reset_onto {
+            self.work.det.pending[pos] = Pending::OnGuard;
         }
         let evs = &self.info.modes[self.mode].events;
-        for &(ev, sigma, speed_before) in self.fired.iter() {
+        for &(ev, sigma, speed_before) in self.work.fired.iter() {
             let Some(pos) = evs.iter().position(|&e| e == ev) else { continue };
             let einfo = &self.info.events[ev];
             // Within round-off, or within what locating the crossing to adjacent floats leaves
             // (the speed before the event times a few spacings of `t`).
             let located = 4.0 * speed_before.abs() * (self.t.abs().next_up() - self.t.abs());
-            let (noise, speed_noise) = self.det.noise0(self.sys, self.info, self.mode, pos, self.p);
-            let on_guard = self.det.g0[pos].abs() <= noise + located;
+            let (noise, speed_noise) = self.work.det.noise0(&self.guards(), pos);
+            let on_guard = self.work.det.g0[pos].abs() <= noise + located;
             // Only a speed the reset left within round-off can be stuck: the first step decides
             // (`Pending::Contact`). A clear speed that keeps the crossing's direction is a
             // pass-through (a gear shift that changes the rate driving its own guard), one that
             // turns around is a bounce. Stopping on the first (round 2's rule) stopped every
             // gear shift, thermostat and dose that changes its own clearance.
-            if einfo.contact && on_guard && self.det.dg0[pos].abs() <= speed_noise {
-                self.det.pending[pos] = Pending::Contact;
+            if einfo.contact && on_guard && self.work.det.dg0[pos].abs() <= speed_noise {
+                self.work.det.pending[pos] = Pending::Contact;
                 continue;
             }
-            self.det.note_bounce(pos, sigma, speed_before);
+            self.work.det.note_bounce(pos, sigma, speed_before);
         }
         None
     }
@@ -1013,25 +939,22 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     }
 
     fn fault_state(&self) -> Vec<f64> {
-        self.z[..self.n].to_vec()
+        self.work.z[..self.n].to_vec()
     }
 
     /// New start point (beginning, after events): derivative, guards and Hairer's step estimate
     /// for the new state.
     fn restart(&mut self) -> f64 {
         let mut rhs = rhs_for(self.sys, self.p, self.n, self.mode);
-        self.stepper.restart(self.t, self.z, &mut rhs);
+        self.work.stepper.restart(self.t, &self.work.z, &mut rhs);
         let n = self.n;
-        self.det.eval_start(
-            self.sys,
-            self.info,
-            self.mode,
+        self.work.det.eval_start(
+            &self.guards(),
             self.t,
-            &self.z[..n],
-            &self.stepper.start_derivative()[..n],
-            self.p,
+            &self.work.z[..n],
+            &self.work.stepper.start_derivative()[..n],
         );
-        self.stepper.initial_step(self.t, self.z, self.opts.h_max, &mut rhs)
+        self.work.stepper.initial_step(self.t, &self.work.z, self.opts.h_max, &mut rhs)
     }
 
     /// The first step after an event: the controller's proposal from before the event, which
@@ -1059,18 +982,19 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// events take the instant's `dt/dp`). Returns a stop reason for a stop event.
     fn fire_group(&mut self, cascade: bool) -> Option<StopReason> {
         let (n, t) = (self.n, self.t);
-        let group_len = self.det.group.len();
-        let declared_before = self.fired.len();
+        let group_len = self.work.det.group.len();
+        let declared_before = self.work.fired.len();
         for gi in 0..group_len {
-            let (ev, crossing): (usize, Crossing) = self.det.group[gi];
+            let (ev, crossing): (usize, Crossing) = self.work.det.group[gi];
             let Some(pos) = self.info.modes[self.mode].events.iter().position(|&e| e == ev) else {
                 // An earlier event of the group switched to a mode without this event.
                 continue;
             };
             let context = self.crossing_context(pos, crossing, self.mode == self.step_mode);
-            let (x, s) = self.z.split_at_mut(n);
+            let cx = self.guards();
+            let (x, s) = self.work.z.split_at_mut(n);
             if !(crossing.touch || crossing.on_guard) {
-                let g = self.det.guard_now(self.sys, self.mode, pos, t, x, self.p);
+                let g = self.work.det.guard_now(&cx, pos, t, x);
                 if crossing.sigma * g > 0.0 {
                     // An earlier reset moved the state back before this guard.
                     continue;
@@ -1083,24 +1007,27 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             let info: &'a SystemInfo = self.info;
             let einfo = &info.events[ev];
             if einfo.implicit {
-                self.cross_switch(ev, pos, crossing, self.fired.len() > declared_before || cascade);
+                self.cross_switch(ev, pos, crossing, self.work.fired.len() > declared_before || cascade);
                 continue;
             }
             let mode_before = self.mode;
             let mode_after = einfo.target_mode.unwrap_or(mode_before);
-            let onto_guard = cascade && self.reset_onto_guard.contains(&ev);
+            let onto_guard = cascade && self.work.reset_onto_guard.contains(&ev);
             if onto_guard {
                 // Put on its guard by a reset, to round-off: a parameter change lands the state
                 // before the guard (the event fires later, by the flow) or across it (now), with
                 // different derivatives on the two sides. None exists where the parameter moves
                 // the instant or this guard; where it moves neither, 0.
-                let (mut gx, mut gp) = (vec![0.0; n], vec![0.0; self.m]);
-                self.sys.guard_grad(ev, t, x, self.p, &mut gx, &mut gp);
-                self.onto_guard_dte.clear();
+                let (gx, gp) = &mut self.work.onto_guard_grad;
+                // Zeroed as the fresh buffers they replace were.
+                gx.fill(0.0);
+                gp.fill(0.0);
+                self.sys.guard_grad(ev, t, x, self.p, gx, gp);
+                self.work.onto_guard_dte.clear();
                 for j in 0..self.m {
-                    let moved = dot_nonzero(&gx, &s[j * n..(j + 1) * n]) + gp[j];
-                    let still = moved == 0.0 && self.instant_dte.get(j).is_none_or(|&d| d == 0.0);
-                    self.onto_guard_dte.push(if still { 0.0 } else { f64::NAN });
+                    let moved = dot_nonzero(gx, &s[j * n..(j + 1) * n]) + gp[j];
+                    let still = moved == 0.0 && self.work.instant_dte.get(j).is_none_or(|&d| d == 0.0);
+                    self.work.onto_guard_dte.push(if still { 0.0 } else { f64::NAN });
                 }
                 self.warnings.push(SimWarning::ResetOntoGuard {
                     event: ev,
@@ -1109,11 +1036,11 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 });
             }
             let given = match self.instant {
-                Some(speed) if onto_guard => Some((&self.onto_guard_dte[..], speed)),
-                Some(speed) if cascade => Some((&self.instant_dte[..], speed)),
+                Some(speed) if onto_guard => Some((&self.work.onto_guard_dte[..], speed)),
+                Some(speed) if cascade => Some((&self.work.instant_dte[..], speed)),
                 _ => None,
             };
-            let out = self.jump.apply(
+            let out = self.work.jump.apply(
                 self.sys,
                 ev,
                 mode_before,
@@ -1128,8 +1055,8 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             );
             if self.instant.is_none() && !cascade {
                 self.instant = Some(out.denominator);
-                self.instant_dte.clear();
-                self.instant_dte.extend_from_slice(&self.jump.dte);
+                self.work.instant_dte.clear();
+                self.work.instant_dte.extend_from_slice(&self.work.jump.dte);
             }
             self.note_conditioning(ev, t, out);
             self.events.push(EventRecord {
@@ -1139,17 +1066,17 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 time: t,
                 mode_before,
                 mode_after,
-                dtime: existing(&self.jump.dte),
+                dtime: existing(&self.work.jump.dte),
                 grazing: out.grazing,
                 denominator: out.denominator,
                 margin: out.margin,
                 resolution: out.resolution,
             });
             self.stats.events += 1;
-            self.fired.push((ev, crossing.sigma, out.denominator));
+            self.work.fired.push((ev, crossing.sigma, out.denominator));
             self.mode = mode_after;
             if einfo.is_stop {
-                self.stop_total = Some((self.jump.total.clone(), self.jump.dte.clone()));
+                self.stop_total = Some((self.work.jump.total.clone(), self.work.jump.dte.clone()));
                 return Some(StopReason::Event { event: ev, name: einfo.name.clone() });
             }
         }
@@ -1177,16 +1104,17 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         }
         if after_an_event || crossing.on_guard {
             // The flow before the switch is not known: no sensitivity survives it.
-            if self.z[n..].iter().any(|v| !v.is_nan()) {
-                self.z[n..].fill(f64::NAN);
+            if self.work.z[n..].iter().any(|v| !v.is_nan()) {
+                self.work.z[n..].fill(f64::NAN);
                 let name = self.info.events[ev].name.clone();
                 self.warnings.push(SimWarning::SwitchAtEvent { name, time: t });
             }
             return;
         }
         let context = self.crossing_context(pos, crossing, true);
-        let dense = self.stepper.interpolant();
-        let (x_pre, x_post) = &mut *self.x_sides;
+        let dense = self.work.stepper.interpolant();
+        let cx = self.guards();
+        let (x_pre, x_post) = &mut self.work.x_sides;
         dense.eval(crossing.t_pre, x_pre);
         let mut t_post = t;
         let mut gap = 0.0;
@@ -1199,7 +1127,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let reach = (dense.t0() + 2.0 * dense.h()).max(t + 64.0 * ulp);
         for _ in 0..SWITCH_SIDE_TRIES {
             dense.eval(t_post, x_post);
-            let g = self.det.guard_now(self.sys, self.mode, pos, t_post, x_post, self.p);
+            let g = self.work.det.guard_now(&cx, pos, t_post, x_post);
             if crossing.sigma * g < 0.0 || t_post >= reach {
                 break;
             }
@@ -1210,9 +1138,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         if kink {
             return;
         }
-        let (x, s) = self.z.split_at_mut(n);
+        let (x, s) = self.work.z.split_at_mut(n);
         let sides = ((crossing.t_pre, &x_pre[..]), (t_post, &x_post[..]));
-        let out = self.jump.apply_switch(self.sys, ev, self.mode, t, x, sides, s, self.p, context);
+        let out = self.work.jump.apply_switch(self.sys, ev, self.mode, t, x, sides, s, self.p, context);
         self.note_conditioning(ev, t, out);
     }
 
@@ -1224,13 +1152,13 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// instant, whose reset the interpolant does not know.
     fn restart_past_switches(&mut self) {
         let Some(t_post) = self.switch_post.take() else { return };
-        if !self.fired.is_empty() || t_post <= self.t || t_post >= self.opts.t_end {
+        if !self.work.fired.is_empty() || t_post <= self.t || t_post >= self.opts.t_end {
             return;
         }
         let n = self.n;
-        let x_post = &mut self.x_sides.1;
-        self.stepper.interpolant().eval(t_post, x_post);
-        self.z[..n].copy_from_slice(&x_post[..n]);
+        let x_post = &mut self.work.x_sides.1;
+        self.work.stepper.interpolant().eval(t_post, x_post);
+        self.work.z[..n].copy_from_slice(&x_post[..n]);
         self.t = t_post;
     }
 
@@ -1238,8 +1166,8 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// sensitivities themselves are: the flow's derivative is singular right there.
     fn start_derivative_not_finite(&self) -> bool {
         let n = self.n;
-        let k0 = &self.stepper.start_derivative()[n..];
-        k0.iter().zip(&self.z[n..]).any(|(d, s)| !d.is_finite() && s.is_finite())
+        let k0 = &self.work.stepper.start_derivative()[n..];
+        k0.iter().zip(&self.work.z[n..]).any(|(d, s)| !d.is_finite() && s.is_finite())
     }
 
     /// Sensitivities that are not finite at a finite state, and not yet known to be missing:
@@ -1249,7 +1177,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let n = self.n;
         let mut first: Option<usize> = None;
         let mut count = 0;
-        for (k, (void, s)) in self.void.iter_mut().zip(&mut self.z[n..]).enumerate() {
+        for (k, (void, s)) in self.work.void.iter_mut().zip(&mut self.work.z[n..]).enumerate() {
             if !s.is_finite() {
                 *s = f64::NAN;
                 if !*void {
@@ -1275,7 +1203,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// step the crossing was found in (none for a crossing at a step's start, or after a mode
     /// switch in the group), and the run's tolerances.
     fn crossing_context(&self, pos: usize, crossing: Crossing, same_mode: bool) -> CrossingContext {
-        let step = if same_mode && !crossing.on_guard { self.det.step_speeds(pos) } else { None };
+        let step = if same_mode && !crossing.on_guard { self.work.det.step_speeds(pos) } else { None };
         let flow_jumps = self.info.events[self.info.modes[self.mode].events[pos]].implicit;
         CrossingContext {
             step,
@@ -1297,74 +1225,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         }
     }
 
-    /// Whether the recorder wants a sample from the dense output of the step ending at `t_seg_end`.
-    fn sample_due(&self, t_seg_end: f64) -> bool {
-        self.recorder.next_sample().is_some_and(|ts| ts <= t_seg_end) || self.at_due(t_seg_end, false)
-    }
-
-    /// Whether the next time of `SimOptions::at` is at most `t` (before `t` when `strict`).
-    fn at_due(&self, t: f64, strict: bool) -> bool {
-        self.opts.at.get(self.samples.len()).is_some_and(|&ts| ts < t || (!strict && ts == t))
-    }
-
-    /// The recorder's samples up to `t_seg_end`, and those of `SimOptions::at` up to it (before
-    /// it when `before_instant`: a sample at an event instant is taken after the events), from
-    /// the dense output of the step just attempted.
-    fn record_samples(&mut self, t_seg_end: f64, before_instant: bool) {
-        let n = self.n;
-        while let Some(ts) = self.recorder.next_sample().filter(|&ts| ts <= t_seg_end) {
-            let (outputs, z) = &mut *self.record_buf;
-            self.stepper.interpolant().eval(ts, z);
-            self.sys.outputs(ts, &z[..n], self.p, outputs);
-            let point =
-                Point { kind: PointKind::Sample, t: ts, mode: self.mode, x: &z[..n], s: &z[n..], outputs };
-            self.recorder.record(&point);
-        }
-        while self.at_due(t_seg_end, before_instant) {
-            let ts = self.opts.at[self.samples.len()];
-            let (z, _, _) = self.samples.push(ts, self.mode);
-            self.stepper.interpolant().eval(ts, z);
-            self.fill_sample_outputs();
-        }
-    }
-
-    /// The samples of `SimOptions::at` due at the current point (after an instant's events, or
-    /// where the run stops).
-    fn record_at_current_point(&mut self) {
-        while self.at_due(self.t, false) {
-            let ts = self.opts.at[self.samples.len()];
-            let (z, _, _) = self.samples.push(ts, self.mode);
-            z.copy_from_slice(&self.z[..]);
-            self.fill_sample_outputs();
-        }
-    }
-
-    /// Fills the outputs of the sample just pushed, and their derivatives `y_x S + y_p` at that
-    /// fixed time, from its state and sensitivities.
-    fn fill_sample_outputs(&mut self) {
-        let (n, m, k) = (self.n, self.m, self.info.n_outputs());
-        let row = self.samples.len() - 1;
-        let (z, outputs, doutputs) = self.samples.row_mut(row);
-        let (x, s) = z.split_at(n);
-        let ts = self.opts.at[row];
-        self.sys.outputs(ts, x, self.p, outputs);
-        if m > 0 {
-            let (yx, yp, yt) = &mut *self.output_jac;
-            self.sys.output_jac(ts, x, self.p, yx, yp, yt);
-            output_sens_into((n, m, k), &*self.output_jac, s, None, doutputs);
-        }
-    }
-
-    /// Samples due at the current point itself (the start of the run).
-    fn record_due_samples_at_current_point(&mut self) {
-        let n = self.n;
-        while let Some(ts) = self.recorder.next_sample().filter(|&ts| ts <= self.t) {
-            let outputs = &mut self.record_buf.0;
-            self.sys.outputs(ts, &self.z[..n], self.p, outputs);
-            let (x, s) = self.z.split_at(n);
-            let point = Point { kind: PointKind::Sample, t: ts, mode: self.mode, x, s, outputs };
-            self.recorder.record(&point);
-        }
+    /// The samples the recorder and `SimOptions::at` want up to `t_seg_end` (before it when
+    /// `before_instant`) from the dense output of the step just attempted.
+    fn sample_step(&mut self, t_seg_end: f64, before_instant: bool) {
+        let dense = self.work.stepper.interpolant();
+        self.sampler.record_dense(self.recorder, &mut self.work.record_buf, dense, self.mode, t_seg_end);
+        self.sampler.take_dense(&mut self.work.output_jac, dense, self.mode, t_seg_end, before_instant);
     }
 
     /// Records the current point as `kind`, if the recorder wants it.
@@ -1373,9 +1239,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             return;
         }
         let n = self.n;
-        let outputs = &mut self.record_buf.0;
-        self.sys.outputs(self.t, &self.z[..n], self.p, outputs);
-        let (x, s) = self.z.split_at(n);
+        let outputs = &mut self.work.record_buf.0;
+        self.sys.outputs(self.t, &self.work.z[..n], self.p, outputs);
+        let (x, s) = self.work.z.split_at(n);
         self.recorder.record(&Point { kind, t: self.t, mode: self.mode, x, s, outputs });
     }
 
@@ -1392,7 +1258,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// test was not resolved: its own scaled error above 1, where a controlled state's step
     /// would have been rejected (docs/language.md, "Running costs and the step size").
     fn note_cost_error(&mut self, t0: f64) {
-        let (e, state) = self.stepper.outside_error();
+        let (e, state) = self.work.stepper.outside_error();
         if e > 1.0 {
             let u =
                 self.unresolved_cost.get_or_insert(UnresolvedCost { steps: 0, worst: 0.0, time: t0, state });
@@ -1407,31 +1273,29 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// and the outputs' (chained through the output Jacobians), warnings, statistics. The
     /// trajectory is the recorder's to give.
     pub fn finish(mut self, stopped_by: StopReason) -> SimResult {
-        self.record_at_current_point();
-        let mut samples = std::mem::take(&mut self.samples);
-        samples::complete(&mut samples, &self.opts.at, &self.events);
+        self.sampler.take_here(&mut self.work.output_jac, self.t, self.mode, &self.work.z[..]);
+        let samples = self.sampler.finish(&self.events);
         let (n, m, k) = (self.n, self.m, self.info.n_outputs());
         let t = self.t;
-        let x = &self.z[..n];
-        let s = &self.z[n..];
+        let x = &self.work.z[..n];
+        let s = &self.work.z[n..];
         let mut outputs = vec![0.0; k];
         self.sys.outputs(t, x, self.p, &mut outputs);
-        let (yx, yp, yt) = &mut *self.output_jac;
+        let (yx, yp, yt) = &mut self.work.output_jac;
         self.sys.output_jac(t, x, self.p, yx, yp, yt);
-        let chain = |jac: &(Vec<f64>, Vec<f64>, Vec<f64>), sens: &[f64], dte: Option<&[f64]>| {
-            output_sens((n, m, k), jac, sens, dte)
-        };
-        let (dstate, doutputs) = (existing(s), existing(&chain(&*self.output_jac, s, None)));
+        let chain =
+            |jac: &OutputJac, sens: &[f64], dte: Option<&[f64]>| output_sens((n, m, k), jac, sens, dte);
+        let (dstate, doutputs) = (existing(s), existing(&chain(&self.work.output_jac, s, None)));
         let (dstate_total, doutputs_total) = match self.stop_total {
             Some((total, dte)) => {
-                let dy = chain(&*self.output_jac, &total, Some(&dte));
+                let dy = chain(&self.work.output_jac, &total, Some(&dte));
                 (existing(&total), existing(&dy))
             }
             None => (None, None),
         };
         let mut stats = self.stats;
-        stats.rhs_calls = self.stepper.rhs_calls();
-        let methods = self.stepper.segments(t).unwrap_or_else(|| {
+        stats.rhs_calls = self.work.stepper.rhs_calls();
+        let methods = self.work.stepper.segments(t).unwrap_or_else(|| {
             let method = self.opts.method.resolve(self.opts.rtol);
             let (steps, rejected) = (stats.steps, stats.rejected);
             vec![MethodSegment { from: self.opts.t_start, to: t, method, steps, rejected }]
@@ -1447,9 +1311,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 let (xb, sb) = z.split_at(n);
                 let mut outputs = vec![0.0; k];
                 self.sys.outputs(t, xb, self.p, &mut outputs);
-                let (yx, yp, yt) = &mut *self.output_jac;
+                let (yx, yp, yt) = &mut self.work.output_jac;
                 self.sys.output_jac(t, xb, self.p, yx, yp, yt);
-                let doutputs = existing(&chain(&*self.output_jac, sb, None));
+                let doutputs = existing(&chain(&self.work.output_jac, sb, None));
                 let events = self.events[first..].iter().map(|e| e.event).collect();
                 Some(EndCusp { events, state: xb.to_vec(), dstate: existing(sb), outputs, doutputs })
             }
@@ -1474,86 +1338,6 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             end_cusp,
             samples,
             methods,
-        }
-    }
-}
-
-/// Whether `t` is on the breakpoint `at` to round-off (16 spacings of `t`, as the guards'
-/// round-off of rule 11: an event at `t_end` is located a few spacings before it when round-off
-/// in the state puts the guard across early): there the event is on the breakpoint itself, a cusp.
-fn on_breakpoint(t: f64, at: f64) -> bool {
-    (at - t).abs() <= 16.0 * (at.abs().next_up() - at.abs())
-}
-
-/// `y_x S_j + y_p_j` (`+ y_t dt_j` for totals), column per parameter, for `k` outputs of `n`
-/// states and `m` parameters, from the output Jacobians `(y_x, y_p, y_t)`.
-fn output_sens(
-    shape: (usize, usize, usize),
-    jac: &(Vec<f64>, Vec<f64>, Vec<f64>),
-    sens: &[f64],
-    dte: Option<&[f64]>,
-) -> Vec<f64> {
-    let mut out = vec![0.0; shape.2 * shape.1];
-    output_sens_into(shape, jac, sens, dte, &mut out);
-    out
-}
-
-/// [`output_sens`] into `out` (k * m).
-fn output_sens_into(
-    (n, m, k): (usize, usize, usize),
-    (yx, yp, yt): &(Vec<f64>, Vec<f64>, Vec<f64>),
-    sens: &[f64],
-    dte: Option<&[f64]>,
-    out: &mut [f64],
-) {
-    for j in 0..m {
-        for i in 0..k {
-            let row = &yx[i * n..(i + 1) * n];
-            let mut v = yp[j * k + i];
-            v += dot_nonzero(row, &sens[j * n..(j + 1) * n]);
-            if let Some(d) = dte {
-                if yt[i] != 0.0 {
-                    v += yt[i] * d[j];
-                }
-            }
-            out[j * k + i] = v;
-        }
-    }
-}
-
-/// Events within the resolution at which instants are told apart (`1e-9 max(|t|, 1)`, as for
-/// Zeno) before `t_end`, or of a time event they are not a time event with: their derivatives
-/// hold only while they stay on their side (`SimWarning::NearBreakpoint`). Time events fire on
-/// their breakpoint by construction and are not warned about themselves.
-fn near_breakpoints(info: &SystemInfo, events: &[EventRecord], t_end: f64, warnings: &mut Vec<SimWarning>) {
-    let near = |a: f64, b: f64| (a - b).abs() <= NEAR_BREAKPOINT * a.abs().max(b.abs()).max(1.0);
-    let is_time = |e: &EventRecord| info.events[e.event].guard == GuardShape::Time;
-    // Only the events near the end or near a time event matter: scan the neighbours in time.
-    for (k, e) in events.iter().enumerate() {
-        if is_time(e) {
-            continue;
-        }
-        let mut breakpoint: Option<(Arc<str>, f64)> = None;
-        if near(e.time, t_end) {
-            breakpoint = Some(("t_end".into(), t_end));
-        }
-        let neighbours = events[k.saturating_sub(8)..(k + 9).min(events.len())].iter();
-        // Not one at the very same instant: a cascade from the time event's reset moves with
-        // the instant (rule 7), and a group fires in declaration order either way.
-        for other in neighbours.filter(|o| is_time(o) && o.time != e.time && near(o.time, e.time)) {
-            if breakpoint.is_none() {
-                breakpoint = Some((format!("the time event `{}`", other.name).into(), other.time));
-            }
-        }
-        if let Some((name, at)) = breakpoint {
-            let margin = if on_breakpoint(e.time, at) { 0.0 } else { (at - e.time).abs() };
-            warnings.push(SimWarning::NearBreakpoint {
-                event: e.event,
-                name: e.name.clone(),
-                time: e.time,
-                breakpoint: name,
-                margin,
-            });
         }
     }
 }

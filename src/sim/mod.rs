@@ -1,49 +1,53 @@
 //! Stage 5: the event-locating integrator with forward sensitivities. Depends only on the
 //! [`HybridSystem`] trait, never on Cranelift.
 //!
-//! Code map: `options` (what to ask); `stepper` (the seam any method implements), `tableau`,
-//! `sums`, `rk` and `dense` (the explicit Runge-Kutta pairs and their interpolants); `row_tableau`
-//! and `rosenbrock` (the Rosenbrock methods for stiff flows, with their interpolant);
-//! `integrator` (the state of a run and its `step`), `breakpoints` (times landed on exactly),
-//! `events` (detection), `poly` (a guard along a dense output), `roots` (root finding), `jump`
-//! (event-time gradients and saltation), `zeno` (accumulating events), `recorder` (trajectories
-//! through an observer); `run` (a run from start to end, the reusable `Simulator`), `result`
-//! (what a run reports).
+//! Code map (three wings and the run's core):
+//! - `method/` (how one step is taken: the `Stepper` seam, the explicit pairs and Rosenbrock
+//!   methods, their interpolants, `Auto`, the error norm, the polynomials of a dense output);
+//!   code map in `method/mod.rs`.
+//! - `event/` (detection along a step, root finding, jumps and saltation, Zeno); code map in
+//!   `event/mod.rs`.
+//! - `linalg/` (the Rosenbrock step's linear solves: dense, banded, sparse LU); code map in
+//!   `linalg/mod.rs`.
+//! - `system.rs`: the `HybridSystem` contract and `SystemInfo`.
+//! - `options.rs`: what to ask (`SimOptions`).
+//! - `integrator.rs`: the state of a run and its `step`, a state machine over a stepper.
+//! - `mode_rhs.rs`: a mode's flow with its sensitivities as the stepper's right-hand side.
+//! - `switch_landing.rs`: `SwitchLanding`, a step retried to land just before a flow switch it
+//!   crossed (branch locking by cutting), owned by the integrator.
+//! - `breakpoints.rs`: times landed on exactly, and events on or near them.
+//! - `recorder.rs`: trajectories through an observer.
+//! - `samples.rs`: the values at `SimOptions::at`, taken as the run passes them and completed
+//!   once it is over.
+//! - `run.rs`: a run from start to end, the reusable `Simulator`.
+//! - `result.rs`: what a run reports.
+//!
+//! Imports between the wings go one way: `event/` uses `method/`'s `Interpolant` and `Stepper`
+//! traits and its polynomials, `method/` uses `linalg/`, and `linalg/` uses neither.
 
-mod auto;
 mod breakpoints;
-mod dense;
-mod errnorm;
-mod events;
+mod event;
 mod integrator;
-mod jump;
-mod linsolve;
+mod linalg;
+mod method;
+mod mode_rhs;
 mod options;
-mod poly;
 mod recorder;
 mod result;
-mod rk;
-mod roots;
-mod rosenbrock;
-mod row_tableau;
 mod run;
 mod samples;
-mod sparse_lu;
-mod stepper;
-mod sums;
+mod switch_landing;
 pub mod system;
-mod tableau;
-mod zeno;
 
-pub use auto::{Auto, AutoDense};
-pub use dense::Dense;
 pub use integrator::{Integrator, StepOutcome};
-pub use linsolve::{FactorCosts, LinearSolver, SPARSE_COST, SPARSE_MIN_STATES};
+pub use linalg::linsolve::{FactorCosts, LinearSolver, SPARSE_COST, SPARSE_MIN_STATES};
+pub use method::auto::{Auto, AutoDense};
+pub use method::dense::Dense;
+pub use method::rk::Rk;
+pub use method::rosenbrock::{Rosenbrock, RowDense};
+pub use method::stepper::{Interpolant, Rhs, Stepper};
 pub use options::*;
 pub use recorder::{NoRecorder, Point, PointKind, Recorder, RowSchedule, TrajectoryRecorder};
 pub use result::*;
-pub use rk::Rk;
-pub use rosenbrock::{Rosenbrock, RowDense};
 pub use run::{run, Driver, Simulator, SystemRef, MAX_SAMPLED_ROWS, MIN_RTOL};
-pub use stepper::{Interpolant, Rhs, Stepper};
 pub use system::*;

@@ -2,20 +2,20 @@
 //! once and keeps the scratch buffers between runs; [`run`] is one run with a fresh one. Each run
 //! is a loop over `Integrator::step` with the trajectory recorder the options ask for.
 
-use super::auto::Auto;
 use super::breakpoints::Breakpoints;
-use super::events::Detector;
+use super::event::detect::Detector;
+use super::event::jump::Jump;
 use super::integrator::{Integrator, StepOutcome, Workspace};
-use super::jump::Jump;
+use super::method::auto::Auto;
+use super::method::rk::Rk;
+use super::method::rosenbrock::Rosenbrock;
+use super::method::row_tableau::{RODAS4, RODAS5P};
+use super::method::stepper::Stepper;
+use super::method::tableau::{DOP853, DOPRI5};
 use super::options::{Method, SimOptions, TrajectoryRequest};
 use super::recorder::{Recorder, TrajectoryRecorder};
 use super::result::{SimError, SimResult, StopReason};
-use super::rk::Rk;
-use super::rosenbrock::Rosenbrock;
-use super::row_tableau::{RODAS4, RODAS5P};
-use super::stepper::Stepper;
 use super::system::{HybridSystem, SystemInfo};
-use super::tableau::{DOP853, DOPRI5};
 
 /// The smallest relative tolerance accepted: ten times the spacing of floating-point numbers
 /// near 1. Below it the error estimates are round-off and no step can meet the tolerance (a run
@@ -108,6 +108,10 @@ impl<St: Stepper> ShapedWork<'_, St> {
             before: (vec![0.0; n], Vec::new()),
             instant_dte: vec![0.0; m],
             void: vec![false; n * m],
+            reset_onto: Vec::new(),
+            reset_onto_guard: Vec::new(),
+            onto_guard_dte: Vec::new(),
+            onto_guard_grad: (vec![0.0; n], vec![0.0; m]),
         }
     }
 }

@@ -61,7 +61,7 @@ pub struct EventInfo {
     /// Whether the guard reads no state (`sin(w t^2) crosses 0`, a flow switch of
     /// `if sin(w t) > 0.9`): its value at any time is known exactly, without the dense output,
     /// so a step that does not resolve it can be sampled more densely instead
-    /// (`events::Detector::scan`). `false` is always safe.
+    /// (`event::detect::Detector::scan`). `false` is always safe.
     pub time_only: bool,
 }
 

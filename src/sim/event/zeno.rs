@@ -1,7 +1,7 @@
 //! Stage 5 (sim): Zeno behaviour, events that accumulate: when a run counts as Zeno and where the
 //! events accumulate. Reads the run's event record only; knows nothing of steps or guards.
 
-use super::result::{EventRecord, StopReason};
+use crate::sim::result::{EventRecord, StopReason};
 
 /// Intervals between the last events that must each shrink before a run counts as
 /// accumulating without a bounce too small to resolve.

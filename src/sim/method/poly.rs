@@ -1,6 +1,6 @@
 //! Stage 5 (sim): small polynomials on the unit interval, held on the stack: the polynomial
 //! through samples, its derivative, and all its real roots in `(0, 1)`. The event detector
-//! (`events.rs`) uses them for an affine guard along a step's dense output, which is a
+//! (`event/detect.rs`) uses them for an affine guard along a step's dense output, which is a
 //! polynomial of the interpolant's degree. Nothing here allocates: a step may examine thousands
 //! of guards.
 

@@ -3,7 +3,7 @@
 //! of stepping, interpolation or root finding.
 //!
 //! With `g` the guard, `f-` the old mode's flow at the pre-event state and `f+` the new mode's flow
-//! at the post-event state (layouts as in `system.rs`, `S` column per parameter):
+//! at the post-event state (layouts as in `sim/system.rs`, `S` column per parameter):
 //! - crossing speed `d = g_x f- + g_t`, event-time gradient `dt_e/dp = -(g_x S- + g_p) / d`
 //!   (implicit function theorem on `g(t_e, x(t_e; p), p) = 0`);
 //! - saltation `S+ = R_x S- + R_p + (R_x f- + R_t - f+) dt_e/dp`;
@@ -34,8 +34,8 @@
 //! on it: every product below skips exact zeros, so `0 * NaN` is never formed and a reset that
 //! removes the dependence (`v := 0` into a mode with no flow) gives derivatives that exist.
 
-use super::events::dot;
-use super::system::{GuardShape, HybridSystem};
+use super::detect::dot;
+use crate::sim::system::{GuardShape, HybridSystem};
 
 /// A time and the state at that time.
 pub(crate) type TimedState<'a> = (f64, &'a [f64]);

@@ -1,6 +1,6 @@
 //! Stage 5 (sim): the seam between the integrator and a time-stepping method. A [`Stepper`]
 //! attempts steps under its own error control, gives the dense interpolant of its last attempt and
-//! restarts after a jump; the integrator (`integrator.rs`) owns the state `(t, z, mode)` and does
+//! restarts after a jump; the integrator (`sim/integrator.rs`) owns the state `(t, z, mode)` and does
 //! everything hybrid: event detection, location, resets, saltation, Zeno, recording. So a new
 //! method (an implicit Rosenbrock method for stiff models, say) implements this trait and nothing
 //! of event handling changes.
@@ -207,7 +207,7 @@ pub trait Stepper {
     fn visit_interior<V: FnMut(f64, &[f64])>(&self, visit: V);
     /// The stretches of the run each method integrated, for a stepper that switches between
     /// methods (`auto::Auto`), up to the current point `t`; `None` for a single method.
-    fn segments(&self, _t: f64) -> Option<Vec<super::result::MethodSegment>> {
+    fn segments(&self, _t: f64) -> Option<Vec<crate::sim::result::MethodSegment>> {
         None
     }
 }

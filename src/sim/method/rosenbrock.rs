@@ -1,6 +1,6 @@
 //! Stage 5 (sim): the Rosenbrock (ROW) methods Rodas5P and Rodas4 as a [`Stepper`], for stiff
 //! flows. Linearly implicit: one LU factorisation of `W = I - h gamma f_x` per attempted step
-//! (dense, or banded or sparse for large models with a known Jacobian pattern: `linsolve.rs`), no Newton
+//! (dense, or banded or sparse for large models with a known Jacobian pattern: `linalg/linsolve.rs`), no Newton
 //! iteration; the stages (Hairer & Wanner's original form, not the transformed one: a clock is
 //! then exact to an ulp per step) and coefficients are in `row_tableau.rs`.
 //!
@@ -27,10 +27,10 @@
 //! component, sensitivities included, built with the step (it costs a few vector sums).
 
 use super::errnorm::{controlled, BlockNorm};
-use super::linsolve::{LinSolve, LinearSolver};
 use super::poly::CAP;
 use super::row_tableau::RowTableau;
 use super::stepper::{Interpolant, Rhs, Stepper};
+use crate::sim::linalg::linsolve::{LinSolve, LinearSolver};
 
 const SAFETY: f64 = 0.9;
 const FAC_MIN: f64 = 0.2;

@@ -24,10 +24,11 @@
 //! and `16 eps (sum_i |g_x,i f_i| + |g_t|)` for its speed, so a large state the guard does not
 //! read changes nothing.
 
-use super::poly::{self, Poly};
+use super::guards::Guards;
 use super::roots::{extremum_time, hermite_root, illinois};
-use super::stepper::{Interpolant, Stepper};
-use super::system::{Direction, GuardShape, HybridSystem, SystemInfo};
+use crate::sim::method::poly::{self, Poly};
+use crate::sim::method::stepper::{Interpolant, Stepper};
+use crate::sim::system::{Direction, GuardShape, HybridSystem, SystemInfo};
 
 const EPS: f64 = f64::EPSILON;
 /// The two interior sample points of a step, in units of the step, for guards that are not
@@ -301,21 +302,12 @@ impl Detector {
 
     /// Guard values and speeds at a step's start `(t, x)` with flow `f` (after a restart), into
     /// `g0`, `dg0`; their round-off bounds are computed when asked for (`noise0`).
-    #[allow(clippy::too_many_arguments)]
-    pub fn eval_start<S: HybridSystem + ?Sized>(
-        &mut self,
-        sys: &S,
-        info: &SystemInfo,
-        mode: usize,
-        t: f64,
-        x: &[f64],
-        f: &[f64],
-        p: &[f64],
-    ) {
-        let evs = &info.modes[mode].events;
+    pub fn eval_start<S: HybridSystem + ?Sized>(&mut self, cx: &Guards<S>, t: f64, x: &[f64], f: &[f64]) {
+        let (sys, mode, p) = (cx.sys, cx.mode, cx.p);
+        let evs = cx.events();
         let ne = evs.len();
         self.span = (t, t);
-        sys.guards(mode, t, x, p, &mut self.g0[..ne]);
+        cx.eval(t, x, &mut self.g0);
         self.at[0].0 = t;
         self.at[0].1.copy_from_slice(x);
         self.at[0].2.copy_from_slice(f);
@@ -337,35 +329,20 @@ impl Detector {
     /// The round-off bounds of the value and the speed of the guard at `pos` at the step's start
     /// (`16 eps (sum_i |g_x,i x_i| + |g_t t|)` and `16 eps (sum_i |g_x,i f_i| + |g_t|)`), computed
     /// on first use.
-    pub fn noise0<S: HybridSystem + ?Sized>(
-        &mut self,
-        sys: &S,
-        info: &SystemInfo,
-        mode: usize,
-        pos: usize,
-        p: &[f64],
-    ) -> (f64, f64) {
-        self.noise_at(0, sys, info, mode, pos, p)
+    pub fn noise0<S: HybridSystem + ?Sized>(&mut self, cx: &Guards<S>, pos: usize) -> (f64, f64) {
+        self.noise_at(cx, 0, pos)
     }
 
     /// The round-off bounds at the step's start (`end` 0) or end (1), computed on first use.
-    fn noise_at<S: HybridSystem + ?Sized>(
-        &mut self,
-        end: usize,
-        sys: &S,
-        info: &SystemInfo,
-        mode: usize,
-        pos: usize,
-        p: &[f64],
-    ) -> (f64, f64) {
+    fn noise_at<S: HybridSystem + ?Sized>(&mut self, cx: &Guards<S>, end: usize, pos: usize) -> (f64, f64) {
         let (noise, speed_noise) = match end {
             0 => (&mut self.noise0, &mut self.speed_noise0),
             _ => (&mut self.noise1, &mut self.speed_noise1),
         };
         if noise[pos].is_nan() {
-            let ev = info.modes[mode].events[pos];
+            let ev = cx.events()[pos];
             let (t, x, f) = (self.at[end].0, &self.at[end].1, &self.at[end].2);
-            let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
+            let gt = cx.grad(ev, t, x, &mut self.gx, &mut self.gp);
             noise[pos] = round_off(&self.gx, x, gt, t);
             speed_noise[pos] = round_off(&self.gx, f, gt, 1.0);
         }
@@ -377,31 +354,25 @@ impl Detector {
     /// yet across, with the flow moving it across. Their crossing is at the end to round-off, so
     /// they fire there, whatever side of zero round-off put them on: an event at `t_end` fires.
     /// Fills `group` (conditions are judged by the group) and says whether there is any.
-    pub fn on_guard_at_end<S: HybridSystem + ?Sized>(
-        &mut self,
-        sys: &S,
-        info: &SystemInfo,
-        mode: usize,
-        p: &[f64],
-    ) -> bool {
+    pub fn on_guard_at_end<S: HybridSystem + ?Sized>(&mut self, cx: &Guards<S>) -> bool {
         self.group.clear();
         let t = self.span.1;
-        for (pos, &ev) in info.modes[mode].events.iter().enumerate() {
-            let einfo = &info.events[ev];
+        for (pos, &ev) in cx.events().iter().enumerate() {
+            let einfo = &cx.info.events[ev];
             let (g, speed) = (self.g1[pos], self.dg1[pos]);
             // On zero or across already (the scan found it), or moving away: nothing to decide.
             if einfo.implicit || !g.is_finite() || g * speed >= 0.0 {
                 continue;
             }
-            let (_, speed_noise) = self.noise_at(1, sys, info, mode, pos, p);
-            let noise = self.carried_round_off(sys, ev, p);
+            let (_, speed_noise) = self.noise_at(cx, 1, pos);
+            let noise = self.carried_round_off(cx, ev);
             let located = 4.0 * speed.abs() * (t.abs().next_up() - t.abs());
             if g.abs() > noise + located {
                 continue;
             }
             // Rule 1 still holds: at the step's start the guard was strictly on the side it is
             // leaving, beyond round-off (not on zero after an event that just fired on it).
-            let (noise0, _) = self.noise0(sys, info, mode, pos, p);
+            let (noise0, _) = self.noise0(cx, pos);
             let g0 = self.g0[pos];
             if !(g0 * g > 0.0 && g0.abs() > noise0) {
                 continue;
@@ -418,9 +389,9 @@ impl Detector {
     /// value at the start plus the step's increment, rounded at the scale of the larger: a ball
     /// dropped from 1 m (Rodas5P, five steps) reaches the floor at `t_end = sqrt(2 / g)` with
     /// `y = 1.3e-15`, six spacings of its drop height, where `16 eps |y|` is nothing.
-    fn carried_round_off<S: HybridSystem + ?Sized>(&mut self, sys: &S, ev: usize, p: &[f64]) -> f64 {
+    fn carried_round_off<S: HybridSystem + ?Sized>(&mut self, cx: &Guards<S>, ev: usize) -> f64 {
         let (t, x1) = (self.at[1].0, &self.at[1].1);
-        let gt = sys.guard_grad(ev, t, x1, p, &mut self.gx, &mut self.gp);
+        let gt = cx.grad(ev, t, x1, &mut self.gx, &mut self.gp);
         let x0 = &self.at[0].1;
         let terms: f64 =
             self.gx.iter().zip(x0.iter().zip(x1)).map(|(g, (a, b))| g.abs() * a.abs().max(b.abs())).sum();
@@ -430,27 +401,18 @@ impl Detector {
     /// Guard values and speeds at the end of the stepper's last attempt, which ends at `t`, with
     /// the round-off bounds of the guards whose closeness to zero this step judges; for affine
     /// guards also the sign changes of their speed over the step's stages.
-    #[allow(clippy::too_many_arguments)]
-    pub fn eval_end<S: HybridSystem + ?Sized, St: Stepper>(
-        &mut self,
-        sys: &S,
-        info: &SystemInfo,
-        mode: usize,
-        t: f64,
-        stepper: &St,
-        n: usize,
-        p: &[f64],
-    ) {
+    pub fn eval_end<S: HybridSystem + ?Sized, St: Stepper>(&mut self, cx: &Guards<S>, t: f64, stepper: &St) {
+        let (sys, info, mode, p, n) = (cx.sys, cx.info, cx.mode, cx.p, cx.n);
         let (x, f) = (&stepper.end_state()[..n], &stepper.end_derivative()[..n]);
-        let evs = &info.modes[mode].events;
+        let evs = cx.events();
         let ne = evs.len();
         self.span.1 = t;
-        sys.guards(mode, t, x, p, &mut self.g1[..ne]);
+        cx.eval(t, x, &mut self.g1);
         self.at[1].0 = t;
         self.at[1].1.copy_from_slice(x);
         self.at[1].2.copy_from_slice(f);
         if ne <= FEW_GUARDS {
-            self.eval_end_each(sys, info, mode, t, stepper, n, p);
+            self.eval_end_each(cx, t, stepper);
             return;
         }
         sys.guard_speeds(mode, t, x, f, p, &mut self.dg1[..ne]);
@@ -500,23 +462,14 @@ impl Detector {
     /// [`Self::eval_end`] for a mode with few guards, guard by guard: one gradient evaluation per
     /// guard gives its speed, its round-off bounds and (affine) its speeds at the stages as dot
     /// products, cheaper there than the speeds kernel called once per stage.
-    #[allow(clippy::too_many_arguments)]
-    fn eval_end_each<S: HybridSystem + ?Sized, St: Stepper>(
-        &mut self,
-        sys: &S,
-        info: &SystemInfo,
-        mode: usize,
-        t: f64,
-        stepper: &St,
-        n: usize,
-        p: &[f64],
-    ) {
+    fn eval_end_each<S: HybridSystem + ?Sized, St: Stepper>(&mut self, cx: &Guards<S>, t: f64, stepper: &St) {
+        let n = cx.n;
         let (x, f) = (&stepper.end_state()[..n], &stepper.end_derivative()[..n]);
-        for (pos, &ev) in info.modes[mode].events.iter().enumerate() {
-            let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
+        for (pos, &ev) in cx.events().iter().enumerate() {
+            let gt = cx.grad(ev, t, x, &mut self.gx, &mut self.gp);
             let speed = dot(&self.gx, f) + gt;
             self.dg1[pos] = speed;
-            let shape = info.events[ev].guard;
+            let shape = cx.info.events[ev].guard;
             if shape == GuardShape::Nonlinear
                 || self.pending[pos] != Pending::None
                 || self.bounced[pos].is_some()
@@ -602,10 +555,10 @@ impl Detector {
     /// Marks the guards whose step needs a closer look (`candidates`): a guard that changes sign,
     /// may hide a crossing behind an extremum, is not affine, is pending or is not finite. Returns
     /// whether there is any (then the step needs its dense output for the events).
-    pub fn mark_candidates(&mut self, info: &SystemInfo, mode: usize) -> bool {
+    pub fn mark_candidates<S: HybridSystem + ?Sized>(&mut self, cx: &Guards<S>) -> bool {
         self.candidates.clear();
-        for (pos, &ev) in info.modes[mode].events.iter().enumerate() {
-            let einfo = &info.events[ev];
+        for (pos, &ev) in cx.events().iter().enumerate() {
+            let einfo = &cx.info.events[ev];
             let (g0, g1) = (self.g0[pos], self.g1[pos]);
             let look = einfo.guard == GuardShape::Nonlinear
                 || !g1.is_finite()
@@ -627,14 +580,12 @@ impl Detector {
     /// resolved one (the guards take part in step-size control).
     pub fn check_resolution<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
-        sys: &S,
-        info: &SystemInfo,
-        mode: usize,
+        cx: &Guards<S>,
         dense: &I,
-        p: &[f64],
     ) -> GuardControl {
+        let (sys, info, mode, p) = (cx.sys, cx.info, cx.mode, cx.p);
         let mut control = GuardControl { resolved: true, factor: f64::INFINITY };
-        let evs = &info.modes[mode].events;
+        let evs = cx.events();
         if !evs.iter().any(|&ev| info.events[ev].guard == GuardShape::Nonlinear) {
             return control;
         }
@@ -706,103 +657,79 @@ impl Detector {
 
     /// The guard of event `ev` (at `pos` in `mode`) and its speed `g_x f + g_t` at an explicit
     /// state `x` with flow `f`.
-    #[allow(clippy::too_many_arguments)]
     pub fn guard_and_speed<S: HybridSystem + ?Sized>(
         &mut self,
-        sys: &S,
-        mode: usize,
+        cx: &Guards<S>,
         pos: usize,
-        ev: usize,
         t: f64,
         x: &[f64],
         f: &[f64],
-        p: &[f64],
     ) -> (f64, f64) {
-        let g = self.guard_now(sys, mode, pos, t, x, p);
-        let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
+        let g = self.guard_now(cx, pos, t, x);
+        let gt = cx.grad(cx.events()[pos], t, x, &mut self.gx, &mut self.gp);
         (g, dot(&self.gx, f) + gt)
     }
 
-    /// One guard of `mode` at an explicit state.
+    /// One guard of the mode at an explicit state.
     pub fn guard_now<S: HybridSystem + ?Sized>(
         &mut self,
-        sys: &S,
-        mode: usize,
+        cx: &Guards<S>,
         pos: usize,
         t: f64,
         x: &[f64],
-        p: &[f64],
     ) -> f64 {
-        let ne = sys.info().modes[mode].events.len();
-        sys.guards(mode, t, x, p, &mut self.gtmp[..ne]);
+        cx.eval(t, x, &mut self.gtmp);
         self.gtmp[pos]
     }
 
-    /// Every guard of `mode` at `t` on the interpolant, into `gtmp`.
+    /// Every guard of the mode at `t` on the interpolant, into `gtmp`.
     fn guards_on_dense<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
-        sys: &S,
-        mode: usize,
-        ne: usize,
+        cx: &Guards<S>,
         t: f64,
         dense: &I,
-        p: &[f64],
     ) {
         dense.eval(t, &mut self.x);
-        sys.guards(mode, t, &self.x, p, &mut self.gtmp[..ne]);
+        cx.eval(t, &self.x, &mut self.gtmp);
     }
 
-    #[allow(clippy::too_many_arguments)]
     fn guard_on_dense<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
-        sys: &S,
-        mode: usize,
-        ne: usize,
+        cx: &Guards<S>,
         pos: usize,
         t: f64,
         dense: &I,
-        p: &[f64],
     ) -> f64 {
-        self.guards_on_dense(sys, mode, ne, t, dense, p);
+        self.guards_on_dense(cx, t, dense);
         self.gtmp[pos]
     }
 
     /// Guard speed along the interpolant, `g_x P'(t) + g_t`.
     fn speed_on_dense<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
-        sys: &S,
+        cx: &Guards<S>,
         ev: usize,
         t: f64,
         dense: &I,
-        p: &[f64],
     ) -> f64 {
         dense.eval(t, &mut self.x);
         dense.eval_deriv(t, &mut self.dx);
-        let gt = sys.guard_grad(ev, t, &self.x, p, &mut self.gx, &mut self.gp);
+        let gt = cx.grad(ev, t, &self.x, &mut self.gx, &mut self.gp);
         dot(&self.gx, &self.dx) + gt
     }
 
     /// The round-off bound of the guard value at `(t, self.x)`: called right after
     /// [`Self::guard_on_dense`] at `t`, whose interpolated state is still in `self.x`.
-    fn noise_at_x<S: HybridSystem + ?Sized>(&mut self, sys: &S, ev: usize, t: f64, p: &[f64]) -> f64 {
-        let gt = sys.guard_grad(ev, t, &self.x, p, &mut self.gx, &mut self.gp);
+    fn noise_at_x<S: HybridSystem + ?Sized>(&mut self, cx: &Guards<S>, ev: usize, t: f64) -> f64 {
+        let gt = cx.grad(ev, t, &self.x, &mut self.gx, &mut self.gp);
         round_off(&self.gx, &self.x, gt, t)
     }
 
     /// Scans every guard of `mode` over the step of `dense` (the stepper's last attempt) into
     /// `found`. The step ends at `t1` exactly (a breakpoint it landed on; `t0 + h` may round
     /// elsewhere).
-    pub fn scan<S: HybridSystem + ?Sized, I: Interpolant>(
-        &mut self,
-        sys: &S,
-        info: &SystemInfo,
-        mode: usize,
-        dense: &I,
-        p: &[f64],
-        t1: f64,
-    ) {
-        let evs = &info.modes[mode].events;
-        let ne = evs.len();
+    pub fn scan<S: HybridSystem + ?Sized, I: Interpolant>(&mut self, cx: &Guards<S>, dense: &I, t1: f64) {
+        let (info, evs) = (cx.info, cx.events());
         let t0 = dense.t0();
         for c in 0..self.candidates.len() {
             let pos = self.candidates[c];
@@ -820,9 +747,9 @@ impl Detector {
                     }
                     self.samples.push(Sample { t: t1, g: g1, dg: dg1, extremum: false });
                     if self.unresolved[pos] && einfo.time_only {
-                        self.refine_time_guard(sys, ev, mode, ne, pos, dense, p);
+                        self.refine_time_guard(cx, pos, dense);
                     }
-                    self.add_extrema_between_samples(sys, ev, mode, ne, pos, dense, p);
+                    self.add_extrema_between_samples(cx, pos, dense);
                 }
                 GuardShape::Affine if self.speed_changes[pos] >= 2 || self.may_come_near(pos) => {
                     // Along the dense output an affine guard is a polynomial of the interpolant's
@@ -832,7 +759,7 @@ impl Detector {
                     // stages' own low-order states, not samples of the solution: they showed
                     // sign changes where there were none and missed two that were there (a
                     // state polynomial in `t`, integrated exactly in long steps).
-                    self.extrema_on_dense(sys, ev, pos, self.x.len(), dense, p);
+                    self.extrema_on_dense(cx, pos, self.x.len(), dense);
                     self.samples.push(Sample { t: t1, g: g1, dg: dg1, extremum: false });
                     self.samples.sort_by(|a, b| a.t.total_cmp(&b.t));
                 }
@@ -840,17 +767,16 @@ impl Detector {
                     // At most one extremum, where the end speeds differ: searched only when it
                     // can hide a crossing.
                     if extremum_may_cross(dir, g0, g1, dg0, dg1) {
-                        let te =
-                            extremum_time(t0, dg0, t1, dg1, |t| self.speed_on_dense(sys, ev, t, dense, p));
+                        let te = extremum_time(t0, dg0, t1, dg1, |t| self.speed_on_dense(cx, ev, t, dense));
                         if te > t0 && te < t1 {
-                            let ge = self.guard_on_dense(sys, mode, ne, pos, te, dense, p);
+                            let ge = self.guard_on_dense(cx, pos, te, dense);
                             self.samples.push(Sample { t: te, g: ge, dg: 0.0, extremum: true });
                         }
                     }
                     self.samples.push(Sample { t: t1, g: g1, dg: dg1, extremum: false });
                 }
             }
-            self.found[pos] = self.scan_samples(sys, dir, ev, mode, ne, pos, dense, p);
+            self.found[pos] = self.scan_samples(cx, dir, pos, dense);
         }
     }
 
@@ -862,17 +788,13 @@ impl Detector {
     /// midpoint to within [`RESOLUTION`] of its variation, as `check_resolution` asks of a step,
     /// up to [`MAX_TIME_SAMPLES`]. A chirp at `t0 = 1e6` had two crossings `2e-4` apart inside
     /// one such step of `6e-4`, between samples that did not show them.
-    #[allow(clippy::too_many_arguments)]
     fn refine_time_guard<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
-        sys: &S,
-        ev: usize,
-        mode: usize,
-        ne: usize,
+        cx: &Guards<S>,
         pos: usize,
         dense: &I,
-        p: &[f64],
     ) {
+        let ev = cx.events()[pos];
         let noise = self.noise0[pos].max(self.noise1[pos]);
         let mut k = 0;
         while k + 1 < self.samples.len() && self.samples.len() < MAX_TIME_SAMPLES {
@@ -886,8 +808,8 @@ impl Detector {
                 k += 1;
                 continue;
             }
-            let g = self.guard_on_dense(sys, mode, ne, pos, mid, dense, p);
-            let dg = self.speed_on_dense(sys, ev, mid, dense, p);
+            let g = self.guard_on_dense(cx, pos, mid, dense);
+            let dg = self.speed_on_dense(cx, ev, mid, dense);
             self.samples.insert(k + 1, Sample { t: mid, g, dg, extremum: false });
             if !(g.is_finite() && dg.is_finite()) {
                 // Left to the scan, which finds where the guard stops being finite.
@@ -906,24 +828,20 @@ impl Detector {
     }
 
     /// For a nonlinear guard: the extrema between consecutive samples whose speeds differ in sign.
-    #[allow(clippy::too_many_arguments)]
     fn add_extrema_between_samples<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
-        sys: &S,
-        ev: usize,
-        mode: usize,
-        ne: usize,
+        cx: &Guards<S>,
         pos: usize,
         dense: &I,
-        p: &[f64],
     ) {
+        let ev = cx.events()[pos];
         let count = self.samples.len();
         for k in 0..count - 1 {
             let (a, b) = (self.samples[k], self.samples[k + 1]);
             if a.dg * b.dg < 0.0 {
-                let te = extremum_time(a.t, a.dg, b.t, b.dg, |t| self.speed_on_dense(sys, ev, t, dense, p));
+                let te = extremum_time(a.t, a.dg, b.t, b.dg, |t| self.speed_on_dense(cx, ev, t, dense));
                 if te > a.t && te < b.t {
-                    let ge = self.guard_on_dense(sys, mode, ne, pos, te, dense, p);
+                    let ge = self.guard_on_dense(cx, pos, te, dense);
                     self.samples.push(Sample { t: te, g: ge, dg: 0.0, extremum: true });
                 }
             }
@@ -933,18 +851,14 @@ impl Detector {
 
     /// The first crossing, touch, pending decision or non-finite guard in the samples of one
     /// guard, in time order.
-    #[allow(clippy::too_many_arguments)]
     fn scan_samples<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
-        sys: &S,
+        cx: &Guards<S>,
         dir: Direction,
-        ev: usize,
-        mode: usize,
-        ne: usize,
         pos: usize,
         dense: &I,
-        p: &[f64],
     ) -> Finding {
+        let ev = cx.events()[pos];
         if self.pending[pos] != Pending::None {
             // The first sample beyond round-off decides a guard that started on zero.
             let decided = self.samples[1..]
@@ -970,7 +884,7 @@ impl Detector {
         for k in 0..self.samples.len() - 1 {
             let (a, b) = (self.samples[k], self.samples[k + 1]);
             if b.g.is_nan() || b.g.is_infinite() {
-                return self.before_not_finite(sys, dir, mode, ne, pos, a, b, dense, p);
+                return self.before_not_finite(cx, dir, pos, (a, b), dense);
             }
             if let Some(sigma) = crossing_sign(dir, a.g, b.g) {
                 // A `crosses` guard that bounced (its reset turned it around on zero) leaves
@@ -987,8 +901,8 @@ impl Detector {
             }
             // Moving towards zero and stopping within round-off of it: a touch.
             if b.extremum && allows(dir, a.g.signum()) && a.g != 0.0 && a.dg * a.g < 0.0 {
-                self.guard_on_dense(sys, mode, ne, pos, b.t, dense, p);
-                if b.g.abs() <= self.noise_at_x(sys, ev, b.t, p) {
+                self.guard_on_dense(cx, pos, b.t, dense);
+                if b.g.abs() <= self.noise_at_x(cx, ev, b.t) {
                     let c =
                         Crossing { t: b.t, sigma: a.g.signum(), touch: true, t_pre: b.t, on_guard: false };
                     return Finding::Located(c);
@@ -1000,18 +914,13 @@ impl Detector {
 
     /// The guard is finite at `a` and not at `b`: the crossing before the boundary, if any,
     /// else where the guard stops being finite.
-    #[allow(clippy::too_many_arguments)]
     fn before_not_finite<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
-        sys: &S,
+        cx: &Guards<S>,
         dir: Direction,
-        mode: usize,
-        ne: usize,
         pos: usize,
-        a: Sample,
-        b: Sample,
+        (a, b): (Sample, Sample),
         dense: &I,
-        p: &[f64],
     ) -> Finding {
         let (mut lo, mut glo, mut hi) = (a.t, a.g, b.t);
         for _ in 0..NAN_BISECTIONS {
@@ -1019,7 +928,7 @@ impl Detector {
             if !(mid > lo && mid < hi) {
                 break;
             }
-            let g = self.guard_on_dense(sys, mode, ne, pos, mid, dense, p);
+            let g = self.guard_on_dense(cx, pos, mid, dense);
             if let Some(sigma) = crossing_sign(dir, a.g, g) {
                 return Finding::Bracket { a: a.t, ga: a.g, da: a.dg, b: mid, gb: g, db: f64::NAN, sigma };
             }
@@ -1043,14 +952,10 @@ impl Detector {
     /// (position and time) when it comes first. Leaves `found` empty again.
     pub fn select<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
-        sys: &S,
-        info: &SystemInfo,
-        mode: usize,
+        cx: &Guards<S>,
         dense: &I,
-        p: &[f64],
     ) -> Selection {
-        let evs = &info.modes[mode].events;
-        let ne = evs.len();
+        let (sys, info, p, evs) = (cx.sys, cx.info, cx.p, cx.events());
         self.located.clear();
         self.located_off.clear();
         self.group.clear();
@@ -1061,7 +966,7 @@ impl Detector {
             return match finding {
                 Finding::Bracket { .. } | Finding::Located(_) => {
                     self.found[pos] = finding;
-                    let crossing = self.locate(sys, mode, ne, pos, dense, p);
+                    let crossing = self.locate(cx, pos, dense);
                     self.found[pos] = Finding::Nothing;
                     let ev = evs[pos];
                     let holds = !info.events[ev].has_condition || {
@@ -1105,7 +1010,7 @@ impl Detector {
             let Some(best) = best else { break };
             self.estimates[best] = f64::NAN;
             let pos = self.candidates[best];
-            let crossing = self.locate(sys, mode, ne, pos, dense, p);
+            let crossing = self.locate(cx, pos, dense);
             let ev = evs[pos];
             let holds = !info.events[ev].has_condition || {
                 dense.eval(crossing.t, &mut self.x);
@@ -1125,7 +1030,7 @@ impl Detector {
                     && matches!(self.found[self.candidates[c]], Finding::Bracket { .. })
             });
             if others {
-                self.guards_on_dense(sys, mode, ne, crossing.t, dense, p);
+                self.guards_on_dense(cx, crossing.t, dense);
             }
             for c in 0..self.candidates.len() {
                 if self.estimates[c].is_nan() {
@@ -1182,20 +1087,16 @@ impl Detector {
     /// Locates the crossing of the guard at `pos` found by the scan.
     fn locate<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
-        sys: &S,
-        mode: usize,
-        ne: usize,
+        cx: &Guards<S>,
         pos: usize,
         dense: &I,
-        p: &[f64],
     ) -> Crossing {
         match self.found[pos] {
             Finding::Located(c) => c,
             Finding::Bracket { a, ga, da, b, gb, db, sigma } => {
                 let first = hermite_root(a, ga, da, b, gb, db);
-                let (t_pre, t) = illinois(a, ga, b, gb, sigma, first, |t| {
-                    self.guard_on_dense(sys, mode, ne, pos, t, dense, p)
-                });
+                let (t_pre, t) =
+                    illinois(a, ga, b, gb, sigma, first, |t| self.guard_on_dense(cx, pos, t, dense));
                 Crossing { t, sigma, touch: false, t_pre, on_guard: false }
             }
             Finding::Nothing | Finding::NotFinite { .. } | Finding::Stuck => {
@@ -1223,21 +1124,19 @@ impl Detector {
     /// combination: a mode with 10,000 guards evaluates none of the others. The roots of its
     /// derivative in the step (`Poly::roots_01`) are its extrema, where the guard is evaluated on
     /// the dense output itself.
-    #[allow(clippy::too_many_arguments)]
     fn extrema_on_dense<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
-        sys: &S,
-        ev: usize,
+        cx: &Guards<S>,
         pos: usize,
         n: usize,
         dense: &I,
-        p: &[f64],
     ) {
+        let ev = cx.events()[pos];
         let (t0, h) = (dense.t0(), dense.h());
         // The start of the step on the interpolant, once: the gradient's argument (constant for
         // an affine guard) and the base of every extremum's value below.
         dense.eval(t0, &mut self.dx[..n]);
-        let gt = sys.guard_grad(ev, t0, &self.dx, p, &mut self.gx, &mut self.gp);
+        let gt = cx.grad(ev, t0, &self.dx, &mut self.gx, &mut self.gp);
         let mut coef = [0.0; poly::CAP];
         let len = dense.linear_form(&self.gx, &mut coef);
         let mut guard = Poly::from_coefficients(&coef, len);
@@ -1265,14 +1164,10 @@ impl Detector {
     /// `dense` (its position and crossing; the located crossings are kept for `select`).
     pub fn earliest_switch<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
-        sys: &S,
-        info: &SystemInfo,
-        mode: usize,
+        cx: &Guards<S>,
         dense: &I,
-        p: &[f64],
     ) -> Option<(usize, Crossing)> {
-        let evs = &info.modes[mode].events;
-        let ne = evs.len();
+        let (info, evs) = (cx.info, cx.events());
         let mut earliest: Option<(usize, Crossing)> = None;
         for c in 0..self.candidates.len() {
             let pos = self.candidates[c];
@@ -1281,7 +1176,7 @@ impl Detector {
             {
                 continue;
             }
-            let crossing = self.locate(sys, mode, ne, pos, dense, p);
+            let crossing = self.locate(cx, pos, dense);
             self.found[pos] = Finding::Located(crossing);
             if earliest.is_none_or(|(_, c)| crossing.t_pre < c.t_pre) {
                 earliest = Some((pos, crossing));

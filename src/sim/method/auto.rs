@@ -24,13 +24,13 @@
 //! run that stays explicit; if they cannot be had, the run stays explicit.
 
 use super::dense::Dense;
-use super::options::Method;
 use super::poly::CAP;
-use super::result::MethodSegment;
 use super::rk::Rk;
 use super::rosenbrock::{Rosenbrock, RowDense};
 use super::stepper::{Interpolant, Rhs, Stepper};
 use super::tableau::{DOP853, DOPRI5};
+use crate::sim::options::Method;
+use crate::sim::result::MethodSegment;
 
 /// Positive stiffness tests in a row that switch to Rodas5P (Hairer's 15).
 pub const TO_STIFF: usize = 15;
