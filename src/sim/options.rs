@@ -94,7 +94,7 @@ pub struct SimOptions {
     /// (`Stepper::lands_on_events`: the Rosenbrock methods, whose dense output is of order 3 to
     /// 4, land; the explicit pairs only on a step held by stability, where their dense output is
     /// poor for the fast components, which keeps their speed elsewhere: landing costs the
-    /// bouncing ball 36% more evaluations). See README, Accuracy.
+    /// bouncing ball 36% more evaluations). See docs/accuracy.md.
     pub land_events: Option<bool>,
     /// The factorisation of a Rosenbrock method's `W` (`sim::linsolve`): for models of
     /// [`SPARSE_MIN_STATES`](super::SPARSE_MIN_STATES) states or more whose Jacobian's pattern

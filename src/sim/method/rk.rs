@@ -353,7 +353,7 @@ impl Stepper for Rk {
     /// Only where the step was held by stability: Hairer's estimate `h |lambda|` of the attempt
     /// above half the pair's stability limit (the bound `auto` switches back below). There the
     /// dense output is poor for the fast components (a chain's event-time gradients 25 times
-    /// less accurate than landed, README Accuracy); elsewhere Dormand-Prince's and DOP853's
+    /// less accurate than landed, docs/accuracy.md); elsewhere Dormand-Prince's and DOP853's
     /// dense outputs are of order 4 and 7, and landing would cost an attempt per event for
     /// nothing (the ball 36% more evaluations).
     fn lands_on_events(&mut self, z: &[f64]) -> bool {
