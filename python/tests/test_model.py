@@ -365,7 +365,7 @@ def test_t_start_is_the_clis_flag_and_times_stay_absolute():
     run = late.simulate(grad=["t_dose"], t_start=1e6, t_end=1e6 + 1, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(run.event_times, [1e6 + 0.5], rtol=0, atol=1e-9)
     assert run.state["x"] == pytest.approx((math.exp(-0.25) + 1) * math.exp(-0.25), rel=1e-8)
-    assert run.dstate["x"]["t_dose"] == pytest.approx(0.5 * math.exp(-0.25), rel=1e-7)
+    assert run.dstate["x"][0] == pytest.approx(0.5 * math.exp(-0.25), rel=1e-7)
     # The same checks and words as the CLI's (`--t-start 5` on the ball: after its end time).
     with pytest.raises(ValueError, match=r"t_end: expected a time after t_start = 5, found 2.5 \(the model's end time\)"):
         hybc.Model.from_file(MODELS / "ball.hyb").simulate(t_start=5)
