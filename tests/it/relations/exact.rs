@@ -17,7 +17,7 @@
 //! drawn again: such edges have tests of their own, with their rule.
 
 use super::dd::{Dd, Dual};
-use super::model::{Dir, GenModel, Lhs};
+use super::model::{Coef, Dir, GenModel, Lhs};
 
 /// The reference run of a model.
 #[derive(Clone, Debug)]
@@ -56,6 +56,14 @@ pub enum Outcome {
 /// An active event in a segment: its index, its guard's sign changes (time, sign after) and
 /// whether it is armed at the segment's start.
 type Candidate = (usize, Vec<(Dd, f64)>, bool);
+
+/// A coefficient `k p_j` (or the constant `k`) as a dual number over the parameters `p`.
+fn coef(c: &Coef, p: &[Dual]) -> Dual {
+    match c.p {
+        None => Dual::constant(c.k, p.len()),
+        Some(j) => p[j].scale(Dd::new(c.k)),
+    }
+}
 
 /// A polynomial in the time since the segment's start, lowest coefficient first.
 type Poly = Vec<Dual>;
@@ -191,15 +199,11 @@ fn critical_points(p: &[Dd], span: Dd) -> Vec<Dd> {
 /// integrated, each state below it the integral of the one above.
 fn state_polys(g: &GenModel, p: &[Dual], x: &[Dual], t0: &Dual, mode: usize) -> Vec<Poly> {
     let m = p.len();
-    let coef = |c: &super::model::Coef| match c.p {
-        None => Dual::constant(c.k, m),
-        Some(j) => p[j].scale(Dd::new(c.k)),
-    };
     let mut out: Vec<Poly> = vec![Vec::new(); x.len()];
     for (c, chain) in g.chains.iter().enumerate() {
         let top = g.tops[mode][c];
         // der(top) = a + b (t0 + tau).
-        let a = &coef(&top.a) + &t0.scale(Dd::new(top.b));
+        let a = &coef(&top.a, p) + &t0.scale(Dd::new(top.b));
         let mut rate: Poly = vec![a, Dual::constant(top.b, m)];
         for &i in chain.iter().rev() {
             let mut poly = vec![x[i].clone()];
@@ -218,10 +222,7 @@ fn state_polys(g: &GenModel, p: &[Dual], x: &[Dual], t0: &Dual, mode: usize) -> 
 fn guard_poly(g: &GenModel, e: usize, p: &[Dual], xs: &[Poly], t0: &Dual) -> (Poly, f64) {
     let m = p.len();
     let ev = &g.events[e];
-    let rhs = match ev.rhs.p {
-        None => Dual::constant(ev.rhs.k, m),
-        Some(j) => p[j].scale(Dd::new(ev.rhs.k)),
-    };
+    let rhs = coef(&ev.rhs, p);
     let (lhs, round) = match &ev.lhs {
         Lhs::Lin(terms) => {
             let mut acc: Poly = vec![Dual::constant(0.0, m)];
@@ -293,14 +294,7 @@ pub fn reference(g: &GenModel, t_start: f64) -> Outcome {
 fn run(g: &GenModel, t_start: f64) -> Result<Reference, String> {
     let m = g.params.len();
     let p: Vec<Dual> = g.params.iter().enumerate().map(|(j, &v)| Dual::param(v, j, m)).collect();
-    let mut x: Vec<Dual> = g
-        .init
-        .iter()
-        .map(|c| match c.p {
-            None => Dual::constant(c.k, m),
-            Some(j) => p[j].scale(Dd::new(c.k)),
-        })
-        .collect();
+    let mut x: Vec<Dual> = g.init.iter().map(|c| coef(c, &p)).collect();
     let span = g.t_end;
     let t_end = Dd::new(t_start) + Dd::new(g.t_end);
     let mut t0 = Dual::constant(t_start, m);
@@ -445,11 +439,7 @@ fn run(g: &GenModel, t_start: f64) -> Result<Reference, String> {
         let ev = &g.events[e];
         let mut x_plus = x_minus.clone();
         for r in &ev.resets {
-            let coef = |c: &super::model::Coef| match c.p {
-                None => Dual::constant(c.k, m),
-                Some(j) => p[j].scale(Dd::new(c.k)),
-            };
-            x_plus[r.state] = &(&coef(&r.a) * &x_minus[r.state]) + &coef(&r.b);
+            x_plus[r.state] = &(&coef(&r.a, &p) * &x_minus[r.state]) + &coef(&r.b, &p);
         }
         if let Some(to) = ev.to {
             mode = to;

@@ -88,9 +88,16 @@ fn run(g: &GenModel, v: &Variant, c: Config) -> Result<Got, String> {
     run_at(g, v, c, RTOL, ATOL)
 }
 
-fn run_at(g: &GenModel, v: &Variant, c: Config, rtol: f64, atol: f64) -> Result<Got, String> {
-    let text = g.text(v);
-    let model = Model::parse(&text).map_err(|e| format!("does not parse: {e}"))?;
+/// Model `g` in variant `v`, compiled with gradients for every parameter when `c` asks, run
+/// under `c` at the given tolerances; with the options it ran with.
+fn simulate(
+    g: &GenModel,
+    v: &Variant,
+    c: Config,
+    rtol: f64,
+    atol: f64,
+) -> Result<(hybc::Run, SimOptions), String> {
+    let model = Model::parse(&g.text(v)).map_err(|e| format!("does not parse: {e}"))?;
     let names: Vec<String> = (0..g.params.len()).map(|j| format!("p{j}")).collect();
     let grad: Vec<&str> = if c.grad { names.iter().map(String::as_str).collect() } else { Vec::new() };
     let compiled = model.compile(&grad).map_err(|e| format!("does not compile: {e}"))?;
@@ -103,7 +110,13 @@ fn run_at(g: &GenModel, v: &Variant, c: Config, rtol: f64, atol: f64) -> Result<
         land_events: if c.land { Some(true) } else { None },
         ..SimOptions::default()
     };
-    let r = compiled.simulate(&compiled.params(), &opts).map_err(|e| format!("does not run: {e}"))?;
+    let run = compiled.simulate(&compiled.params(), &opts).map_err(|e| format!("does not run: {e}"))?;
+    Ok((run, opts))
+}
+
+fn run_at(g: &GenModel, v: &Variant, c: Config, rtol: f64, atol: f64) -> Result<Got, String> {
+    let (r, _) = simulate(g, v, c, rtol, atol)?;
+    let names: Vec<String> = (0..g.params.len()).map(|j| format!("p{j}")).collect();
     let stopped = match r.stopped_by() {
         hybc::StopReason::TEnd => "t_end".to_string(),
         hybc::StopReason::Event { name, .. } => name.to_string(),
@@ -146,19 +159,8 @@ fn run_at(g: &GenModel, v: &Variant, c: Config, rtol: f64, atol: f64) -> Result<
 /// estimates and its tolerance for the run's `rtol`), and its events do not change with the step
 /// size. `Err` names the first failing parameter and its worst comparison.
 fn gradient_check(g: &GenModel, c: Config) -> Result<(), String> {
-    let model = Model::parse(&g.text(&Variant::default())).map_err(|e| format!("does not parse: {e}"))?;
-    let names: Vec<String> = (0..g.params.len()).map(|j| format!("p{j}")).collect();
-    let grad: Vec<&str> = names.iter().map(String::as_str).collect();
-    let compiled = model.compile(&grad).map_err(|e| format!("does not compile: {e}"))?;
-    let opts = SimOptions {
-        t_end: g.t_end,
-        rtol: RTOL,
-        atol: ATOL,
-        method: c.method,
-        land_events: if c.land { Some(true) } else { None },
-        ..SimOptions::default()
-    };
-    let run = compiled.simulate(&compiled.params(), &opts).map_err(|e| format!("does not run: {e}"))?;
+    let (run, opts) = simulate(g, &Variant::default(), Config { grad: true, ..c }, RTOL, ATOL)?;
+    let compiled = run.compiled();
     let p = compiled.params().values().to_vec();
     let check = hybc::gradcheck::check(
         compiled.native(),
