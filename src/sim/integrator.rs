@@ -864,20 +864,33 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         self.sys.guards(self.mode, t, x_before, self.p, &mut g_before[..ne]);
         for (pos, &ev) in evs.iter().enumerate() {
             let einfo = &self.info.events[ev];
-            // A guard the round did not move cannot have been moved across.
-            if einfo.implicit || g_before[pos] == self.work.det.g0[pos] {
+            // A guard the round did not move cannot have been moved across. An event of the
+            // round was at its crossing before it: what its reset does to its own guard is
+            // rule 6 (`after_instant`), not a cascade, on either side of a `crosses` guard too.
+            if einfo.implicit || g_before[pos] == self.work.det.g0[pos] || fired_now.iter().any(|f| f.0 == ev)
+            {
                 continue;
             }
             let dir = einfo.direction;
             let (noise, speed_noise) = self.work.det.noise0(&cx, pos);
-            if clear_side(dir, g_before[pos], noise) != Some(false) {
+            // Strictly on a pre-crossing side before the round: for `crosses`, either side, the
+            // crossed side then being the other one (rule 7 of docs/language.md).
+            let before = g_before[pos];
+            let either = dir == Direction::Either;
+            let pre_crossing = match clear_side(dir, before, noise) {
+                Some(crossed) => !crossed || either,
+                None => false,
+            };
+            if !pre_crossing {
                 continue;
             }
             let after = self.work.det.g0[pos];
             let sigma = match clear_side(dir, after, noise) {
-                Some(true) => g_before[pos].signum(),
-                Some(false) => continue,
-                None => match moves_across(dir, self.work.det.dg0[pos], speed_noise) {
+                Some(true) if !either || after.signum() != before.signum() => before.signum(),
+                Some(_) => continue,
+                None => match moves_across(dir, self.work.det.dg0[pos], speed_noise)
+                    .filter(|&sigma| !either || sigma == before.signum())
+                {
                     Some(sigma) => {
                         self.work.reset_onto_guard.push(ev);
                         sigma

@@ -155,6 +155,27 @@ fn a_reset_that_moves_the_state_across_another_guard_fires_it_at_the_same_instan
 }
 
 #[test]
+fn a_reset_that_moves_a_crosses_guard_to_its_other_side_cascades_from_either_side() {
+    // `flip` at x = 0.5 sets y to `y1`; `b` is `y crosses 0` (with or without an enabling
+    // condition that holds): from y = 1 to y1 = -1 it has crossed and fires at the instant (as
+    // `y <= 0` does); to y1 = 2 it stays on its side and does not. From y = -1 to 1, the other
+    // side, the same. Found by the relation harness (tests/it/relations): a `crosses` guard never
+    // cascaded, since either side counted as "crossed" before the reset too.
+    for (y0, y1, fires) in [(1.0, -1.0, true), (1.0, 2.0, false), (-1.0, 1.0, true), (-1.0, -2.0, false)] {
+        for guard in ["y crosses 0", "y crosses 0 if x > 0.2"] {
+            let text = format!(
+                "model c\nstate x = 0\nstate y = {y0}\nder(x) = 1\nder(y) = 0\nevent flip when x >= 0.5 {{\n    y := {y1}\n}}\n\
+                 event b when {guard} {{\n    x := x + 10\n}}\n"
+            );
+            let r = run(&text, &[], |o| o.t_end = 1.0);
+            let want: &[f64] = if fires { &[0.5, 0.5] } else { &[0.5] };
+            assert_eq!(times(&r), want, "{y0} -> {y1}, {guard}");
+            assert_relative_eq!(r.state("x").unwrap(), if fires { 11.0 } else { 1.0 }, max_relative = 1e-12);
+        }
+    }
+}
+
+#[test]
 fn a_large_state_the_guard_does_not_read_invents_no_event() {
     // y = (t - 0.5)^2 + 1e-6 never reaches zero; `big` = 1e10 is read by nothing. A round-off
     // bound from the whole state's norm (16 eps 1e10 = 3.6e-5) would count the minimum as a touch.

@@ -17,7 +17,7 @@
 //! drawn again: such edges have tests of their own, with their rule.
 
 use super::dd::{Dd, Dual};
-use super::model::{Coef, Dir, GenModel, Lhs};
+use super::model::{Coef, Dir, GenModel, Lhs, Switch};
 
 /// The reference run of a model.
 #[derive(Clone, Debug)]
@@ -32,6 +32,9 @@ pub struct Reference {
     pub final_state: Vec<Dual>,
     pub final_mode: usize,
     pub stopped: Option<usize>,
+    /// A time event fired on `t_end` itself: the final values are a cusp (rule 8), their
+    /// derivatives one-sided.
+    pub end_cusp: bool,
 }
 
 impl Reference {
@@ -41,7 +44,7 @@ impl Reference {
     /// docs/language.md does not yet say what is reported (hybc gives the firing side's
     /// derivative without a word; listed for the event issue).
     pub fn gradients_judged(&self) -> bool {
-        self.event_grad.iter().all(|&g| g)
+        self.event_grad.iter().all(|&g| g) && !self.end_cusp
     }
 }
 
@@ -53,9 +56,17 @@ pub enum Outcome {
     Ambiguous(String),
 }
 
-/// An active event in a segment: its index, its guard's sign changes (time, sign after) and
-/// whether it is armed at the segment's start.
-type Candidate = (usize, Vec<(Dd, f64)>, bool);
+/// What ends a segment: an event, or a flow switch on a chain's top (not reported, but an
+/// instant of the reference: the flow changes there).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Cause {
+    Event(usize),
+    Switch(usize),
+}
+
+/// A candidate end of a segment: its time since the segment's start, its cause, whether its time
+/// has a gradient, and the sign its guard takes after it.
+type Next = (Dd, Cause, bool, f64);
 
 /// A coefficient `k p_j` (or the constant `k`) as a dual number over the parameters `p`.
 fn coef(c: &Coef, p: &[Dual]) -> Dual {
@@ -195,16 +206,19 @@ fn critical_points(p: &[Dd], span: Dd) -> Vec<Dd> {
     out
 }
 
-/// The polynomials of every state from `x` at `t0` in `mode`: a chain's top gets `a + b t`
-/// integrated, each state below it the integral of the one above.
-fn state_polys(g: &GenModel, p: &[Dual], x: &[Dual], t0: &Dual, mode: usize) -> Vec<Poly> {
+/// The polynomials of every state from `x` at `t0` in `mode`: a chain's top gets its rate
+/// integrated (`a + b t`, or a switch's `then` where `branch` says it holds), each state below it
+/// the integral of the one above.
+fn state_polys(g: &GenModel, p: &[Dual], x: &[Dual], t0: &Dual, mode: usize, branch: &[bool]) -> Vec<Poly> {
     let m = p.len();
     let mut out: Vec<Poly> = vec![Vec::new(); x.len()];
     for (c, chain) in g.chains.iter().enumerate() {
         let top = g.tops[mode][c];
-        // der(top) = a + b (t0 + tau).
-        let a = &coef(&top.a, p) + &t0.scale(Dd::new(top.b));
-        let mut rate: Poly = vec![a, Dual::constant(top.b, m)];
+        let mut rate: Poly = match g.switches[c] {
+            Some(s) if branch[c] => vec![coef(&s.then, p)],
+            // der(top) = a + b (t0 + tau).
+            _ => vec![&coef(&top.a, p) + &t0.scale(Dd::new(top.b)), Dual::constant(top.b, m)],
+        };
         for &i in chain.iter().rev() {
             let mut poly = vec![x[i].clone()];
             for (k, c) in rate.iter().enumerate() {
@@ -215,6 +229,41 @@ fn state_polys(g: &GenModel, p: &[Dual], x: &[Dual], t0: &Dual, mode: usize) -> 
         }
     }
     out
+}
+
+/// A switch's comparison `x_state - at` along the polynomials.
+fn switch_poly(s: &Switch, p: &[Dual], xs: &[Poly]) -> Poly {
+    let mut poly = xs[s.state].clone();
+    poly[0] = &poly[0] - &coef(&s.at, p);
+    poly
+}
+
+/// A state held still: constant polynomials, to read a guard at one instant.
+fn held(x: &[Dual]) -> Vec<Poly> {
+    x.iter().map(|xi| vec![xi.clone()]).collect()
+}
+
+/// The margin of an enabling condition or a switch on the state `x` (positive: it holds), and
+/// the scale that margin is judged against.
+fn level_margin(at: &Coef, above: bool, p: &[Dual], x: Dd) -> (Dd, f64) {
+    let at = coef(at, p).v;
+    let d = if above { x - at } else { at - x };
+    (d, x.abs().f64() + at.abs().f64())
+}
+
+/// Whether event `e`'s enabling condition holds on the state `x`; `Err` where it is too close to
+/// its boundary for a run's accuracy to decide.
+fn condition_holds(g: &GenModel, e: usize, p: &[Dual], x: &[Dual]) -> Result<bool, String> {
+    let Some(c) = g.events[e].cond else { return Ok(true) };
+    let (margin, scale) = level_margin(&c.at, c.above, p, x[c.state].v);
+    if margin.abs().f64() <= COND_TOUCH * scale.max(1.0) {
+        return Err(format!(
+            "event {}'s condition is at its boundary ({:e})",
+            g.events[e].name,
+            margin.f64()
+        ));
+    }
+    Ok(margin.signum() > 0.0)
 }
 
 /// The guard `lhs - rhs` of event `e` along the polynomials, and the per-component round-off
@@ -279,6 +328,11 @@ const TOUCH: f64 = 1e-7;
 const SLOW: f64 = 1e-4;
 /// Generated models with more events are drawn again (they stay well within `--max-events`).
 const MAX_EVENTS: usize = 40;
+/// An enabling condition within this fraction of its sides' size from its boundary is decided by
+/// the run's error, not by the model.
+const COND_TOUCH: f64 = 1e-6;
+/// Rounds of cascades at one instant the reference follows (rule 7).
+const MAX_ROUNDS: usize = 5;
 
 /// The reference run of `g` from `t_start`.
 pub fn reference(g: &GenModel, t_start: f64) -> Outcome {
@@ -291,18 +345,66 @@ pub fn reference(g: &GenModel, t_start: f64) -> Outcome {
     }
 }
 
+/// Whether `e` is active in `mode`.
+fn active(g: &GenModel, e: usize, mode: usize) -> bool {
+    g.events[e].mode.is_none_or(|em| em == mode)
+}
+
+/// Event `e`'s guard on the state `x` held at `t`, and the scale it is judged against.
+fn guard_at(g: &GenModel, e: usize, p: &[Dual], x: &[Dual], t: &Dual) -> (Dd, f64) {
+    let (gp, round) = guard_poly(g, e, p, &held(x), t);
+    let rhs = coef(&g.events[e].rhs, p).v.f64().abs();
+    (gp[0].v, (round + rhs).max(1e-300))
+}
+
+/// Applies event `e`'s resets and mode switch to `x`; returns whether it stops the run.
+fn apply(g: &GenModel, e: usize, p: &[Dual], x: &mut [Dual], mode: &mut usize) -> bool {
+    let ev = &g.events[e];
+    let before = x.to_vec();
+    for r in &ev.resets {
+        x[r.state] = &(&coef(&r.a, p) * &before[r.state]) + &coef(&r.b, p);
+    }
+    if let Some(to) = ev.to {
+        *mode = to;
+    }
+    ev.stop
+}
+
+/// Each switch's branch on the state `x`; `Err` where a state is at a switch's level.
+fn branches(g: &GenModel, p: &[Dual], x: &[Dual]) -> Result<Vec<bool>, String> {
+    g.switches
+        .iter()
+        .map(|s| match s {
+            None => Ok(false),
+            Some(s) => {
+                let (margin, scale) = level_margin(&s.at, true, p, x[s.state].v);
+                if margin.abs().f64() <= COND_TOUCH * scale.max(1.0) {
+                    return Err(format!("a state is at a flow switch's level ({:e})", margin.f64()));
+                }
+                Ok(margin.signum() > 0.0)
+            }
+        })
+        .collect()
+}
+
 fn run(g: &GenModel, t_start: f64) -> Result<Reference, String> {
     let m = g.params.len();
     let p: Vec<Dual> = g.params.iter().enumerate().map(|(j, &v)| Dual::param(v, j, m)).collect();
     let mut x: Vec<Dual> = g.init.iter().map(|c| coef(c, &p)).collect();
     let span = g.t_end;
     let t_end = Dd::new(t_start) + Dd::new(g.t_end);
+    // Rule 8: an event on `t_end` to 16 spacings of `t` fires there.
+    let end_f = t_end.f64();
+    let on_end = Dd::new(16.0 * (end_f.next_up() - end_f));
+    let sep = Dd::new(SEPARATION * span.max(1.0));
     let mut t0 = Dual::constant(t_start, m);
     let mut mode = 0usize;
-    let mut armed: Vec<bool> = vec![false; g.events.len()];
-    // Each event's guard sign just before the last instant's resets (0: not active then).
-    let mut sign_before: Vec<f64> = vec![0.0; g.events.len()];
-    let mut fired_last: Option<usize> = None;
+    let mut branch = branches(g, &p, &x)?;
+    // The events fired at the last instant, the switch crossed there (with its sign after), and
+    // which events were active in the segment before it.
+    let mut fired_now: Vec<usize> = Vec::new();
+    let mut switched: Option<(usize, f64)> = None;
+    let mut was_active: Vec<bool> = (0..g.events.len()).map(|e| active(g, e, mode)).collect();
     let mut first_segment = true;
     let mut out = Reference {
         events: Vec::new(),
@@ -310,16 +412,38 @@ fn run(g: &GenModel, t_start: f64) -> Result<Reference, String> {
         final_state: Vec::new(),
         final_mode: 0,
         stopped: None,
+        end_cusp: false,
     };
     loop {
         let rest = t_end - t0.v;
-        let xs = state_polys(g, &p, &x, &t0, mode);
-        // Per active event: its guard's sign changes on (0, rest] and whether it is armed at 0+
-        // (strictly on its pre-crossing side, or a contact leaving zero that way).
-        let mut cands: Vec<Candidate> = Vec::new();
-        let mut earliest: Vec<(Dd, usize, bool)> = Vec::new();
+        let xs = state_polys(g, &p, &x, &t0, mode, &branch);
+        let mut next: Vec<Next> = Vec::new();
+        for (c, s) in g.switches.iter().enumerate() {
+            let Some(s) = s else { continue };
+            let gv = values(&switch_poly(s, &p, &xs));
+            let scale = magnitude(&gv, rest).max(1e-300);
+            let touch = TOUCH * scale;
+            let start_zero = match switched {
+                Some((sc, after)) if sc == c => {
+                    // Just crossed: the new branch must carry the state on, not back (sliding).
+                    if sign_after_zero(&gv, touch) != after {
+                        return Err("a flow switch's new branch turns the state back (sliding)".into());
+                    }
+                    true
+                }
+                _ => false,
+            };
+            let changes = sign_changes(&gv, rest, touch, start_zero)?;
+            if let Some(&(tau, after)) = changes.first() {
+                let speed = eval(&derivative(&gv), tau).f64().abs() * rest.f64().abs().max(1e-300);
+                if speed < SLOW * scale {
+                    return Err(format!("a flow switch is crossed slowly ({:e})", speed / scale));
+                }
+                next.push((tau, Cause::Switch(c), true, after));
+            }
+        }
         for (e, ev) in g.events.iter().enumerate() {
-            if ev.mode.is_some_and(|em| em != mode) {
+            if !active(g, e, mode) {
                 continue;
             }
             let (gp, round) = guard_poly(g, e, &p, &xs, &t0);
@@ -336,8 +460,8 @@ fn run(g: &GenModel, t_start: f64) -> Result<Reference, String> {
                     if s == 0.0 {
                         return Err("a guard starts on zero with no speed".into());
                     }
-                    if fires(ev.dir, s) {
-                        earliest.push((Dd::ZERO, e, false));
+                    if fires(ev.dir, s) && condition_holds(g, e, &p, &x)? {
+                        next.push((Dd::ZERO, Cause::Event(e), false, s));
                     }
                     (true, pre_side(ev.dir, s))
                 } else if g0.abs() <= 1e3 * round_off {
@@ -350,7 +474,7 @@ fn run(g: &GenModel, t_start: f64) -> Result<Reference, String> {
                     (false, true)
                 }
             } else if g0.abs() <= touch {
-                if fired_last != Some(e) {
+                if !fired_now.contains(&e) {
                     return Err(format!("an instant leaves event {} on its guard ({g0:e})", ev.name));
                 }
                 let s = sign_after_zero(&gv, touch);
@@ -359,17 +483,22 @@ fn run(g: &GenModel, t_start: f64) -> Result<Reference, String> {
                 }
                 // Rule 6: a bounce re-arms; a pass-through waits for the pre-crossing side.
                 (true, pre_side(ev.dir, s))
+            } else if !was_active[e] && !pre_side(ev.dir, g0.signum()) {
+                return Err(format!("event {} becomes active on its crossed side", ev.name));
             } else {
-                let before = sign_before[e];
-                if before == 0.0 && !pre_side(ev.dir, g0.signum()) {
-                    return Err(format!("event {} becomes active on its crossed side", ev.name));
-                }
-                if fired_last != Some(e) && before != 0.0 && before != g0.signum() {
-                    return Err(format!("an instant moves event {} across its guard (a cascade)", ev.name));
-                }
-                (false, if before == 0.0 { true } else { armed[e] || pre_side(ev.dir, g0.signum()) })
+                (false, pre_side(ev.dir, g0.signum()))
             };
-            let changes = sign_changes(&gv, rest, touch, start_zero)?;
+            let changes = if ev.lhs == Lhs::Time {
+                // `t - at`, of slope 1: its root exactly, so that one on `t_end` is seen there.
+                let root = -gv[0];
+                if start_zero || root <= Dd::ZERO || root > rest + sep {
+                    Vec::new()
+                } else {
+                    vec![(root, 1.0)]
+                }
+            } else {
+                sign_changes(&gv, rest, touch, start_zero)?
+            };
             let mut is_armed = armed0;
             for &(tau, after) in &changes {
                 if is_armed && fires(ev.dir, after) {
@@ -378,50 +507,45 @@ fn run(g: &GenModel, t_start: f64) -> Result<Reference, String> {
                     if speed < SLOW * scale {
                         return Err(format!("event {} crosses slowly ({:e})", ev.name, speed / scale));
                     }
-                    earliest.push((tau, e, true));
-                    break;
+                    // The enabling condition, on the state at the crossing.
+                    let at: Vec<Dual> = xs.iter().map(|poly| eval_dual(poly, &Dual::of_dd(tau, m))).collect();
+                    if condition_holds(g, e, &p, &at)? {
+                        next.push((tau, Cause::Event(e), true, after));
+                        break;
+                    }
                 }
                 is_armed = pre_side(ev.dir, after);
             }
-            cands.push((e, changes, armed0));
         }
-        earliest.sort_by(|a, b| a.0.partial_cmp(&b.0).expect("finite"));
-        let sep = Dd::new(SEPARATION * span.max(1.0));
-        if let Some(&(tau, e, _)) = earliest.first() {
-            if (tau - rest).abs() < sep {
-                return Err(format!("event {} is within {SEPARATION:e} of t_end", g.events[e].name));
+        next.sort_by(|a, b| a.0.partial_cmp(&b.0).expect("finite"));
+        let is_time_event = |c: Cause| matches!(c, Cause::Event(e) if g.events[e].lhs == Lhs::Time);
+        let at_end = next.first().is_some_and(|f| (f.0 - rest).abs() <= on_end);
+        if let Some(&(tau, cause, _, _)) = next.first() {
+            if at_end && !is_time_event(cause) {
+                return Err("a state event or a switch on t_end".into());
+            }
+            if !at_end && (tau - rest).abs() < sep {
+                return Err(format!("an instant within {SEPARATION:e} of t_end ({:?})", cause));
             }
         }
-        let Some(&(tau, e, grad)) = earliest.first().filter(|f| f.0 <= rest) else {
+        let Some(&(tau, cause, grad, after)) = next.first().filter(|f| f.0 <= rest || at_end) else {
             // No event: the end.
             let tau = &Dual::of_dd(t_end, m) - &t0;
             out.final_state = xs.iter().map(|poly| eval_dual(poly, &tau)).collect();
             out.final_mode = mode;
             return Ok(out);
         };
-        if earliest.get(1).is_some_and(|f| (f.0 - tau).abs() < sep) {
-            return Err("two events within a tolerance of each other".into());
+        if next.get(1).is_some_and(|f| (f.0 - tau).abs() < sep) {
+            return Err("two instants within a tolerance of each other".into());
         }
         if tau > Dd::ZERO && tau < sep && !first_segment {
-            return Err("an event right after an instant".into());
-        }
-        // Every guard's state at the instant: armed as its sign changes before it left it, and
-        // its sign there (just before the resets).
-        sign_before.iter_mut().for_each(|s| *s = 0.0);
-        for (c, changes, armed0) in &cands {
-            let mut is_armed = *armed0;
-            for &(_, after) in changes.iter().filter(|(t, _)| *t < tau) {
-                is_armed = pre_side(g.events[*c].dir, after);
-            }
-            armed[*c] = is_armed;
-            let (gp, _) = guard_poly(g, *c, &p, &xs, &t0);
-            sign_before[*c] = eval(&values(&gp), tau).signum();
-            if sign_before[*c] == 0.0 {
-                sign_before[*c] = 1.0;
-            }
+            return Err("an instant right after an instant".into());
         }
         // The dual time of the crossing: one Newton step at the converged root.
-        let (gp, _) = guard_poly(g, e, &p, &xs, &t0);
+        let gp = match cause {
+            Cause::Event(e) => guard_poly(g, e, &p, &xs, &t0).0,
+            Cause::Switch(c) => switch_poly(g.switches[c].as_ref().expect("a switch"), &p, &xs),
+        };
         let tau_dual = if tau == Dd::ZERO {
             Dual::constant(0.0, m)
         } else {
@@ -431,29 +555,87 @@ fn run(g: &GenModel, t_start: f64) -> Result<Reference, String> {
         };
         let t_e = &t0 + &tau_dual;
         let x_minus: Vec<Dual> = xs.iter().map(|poly| eval_dual(poly, &tau_dual)).collect();
+        first_segment = false;
+        was_active = (0..g.events.len()).map(|e| active(g, e, mode)).collect();
+        let e = match cause {
+            Cause::Switch(c) => {
+                // The state flows on; only the chain's top changes its rate.
+                branch[c] = after > 0.0;
+                switched = Some((c, after));
+                fired_now.clear();
+                x = x_minus;
+                t0 = t_e;
+                continue;
+            }
+            Cause::Event(e) => e,
+        };
+        // The instant: the event, then the cascades its resets set off (rule 7), a round at a
+        // time, each event judged on the state the round before it left.
+        let mut x_now = x_minus.clone();
+        let mut fired = vec![e];
         out.events.push((e, t_e.clone()));
         out.event_grad.push(grad);
+        let mut stopped = apply(g, e, &p, &mut x_now, &mut mode).then_some(e);
+        let mut before_round = x_minus;
+        let mut active_before = was_active.clone();
+        for round in 0.. {
+            if stopped.is_some() {
+                break;
+            }
+            let mut cascading = Vec::new();
+            // The event of the round before was at its crossing (rule 6 judges its own guard);
+            // an event of an earlier round may cascade again (rule 7's ping-pong).
+            for c in (0..g.events.len()).filter(|&c| active(g, c, mode) && fired.last() != Some(&c)) {
+                let (ga, scale) = guard_at(g, c, &p, &x_now, &t_e);
+                if ga.abs().f64() <= TOUCH * scale {
+                    return Err(format!("an instant puts event {}'s guard on zero", g.events[c].name));
+                }
+                if !active_before[c] {
+                    // Newly active: the next segment's start judges it.
+                    continue;
+                }
+                let (gb, _) = guard_at(g, c, &p, &before_round, &t_e);
+                if gb.abs().f64() <= TOUCH * scale {
+                    return Err(format!("event {}'s guard is on zero at an instant", g.events[c].name));
+                }
+                let dir = g.events[c].dir;
+                let across = gb.signum() != ga.signum();
+                if across
+                    && pre_side(dir, gb.signum())
+                    && fires(dir, ga.signum())
+                    && condition_holds(g, c, &p, &x_now)?
+                {
+                    cascading.push(c);
+                }
+            }
+            let Some(&c) = cascading.first() else { break };
+            if cascading.len() > 1 {
+                return Err("several events cascade in one round".into());
+            }
+            if round >= MAX_ROUNDS {
+                return Err("a long cascade".into());
+            }
+            out.events.push((c, t_e.clone()));
+            out.event_grad.push(grad);
+            before_round = x_now.clone();
+            active_before = (0..g.events.len()).map(|e| active(g, e, mode)).collect();
+            stopped = apply(g, c, &p, &mut x_now, &mut mode).then_some(c);
+            fired.push(c);
+        }
         if out.events.len() > MAX_EVENTS {
             return Err("too many events".into());
         }
-        let ev = &g.events[e];
-        let mut x_plus = x_minus.clone();
-        for r in &ev.resets {
-            x_plus[r.state] = &(&coef(&r.a, &p) * &x_minus[r.state]) + &coef(&r.b, &p);
-        }
-        if let Some(to) = ev.to {
-            mode = to;
-        }
-        x = x_plus;
-        t0 = t_e;
-        armed[e] = false;
-        fired_last = Some(e);
-        first_segment = false;
-        if ev.stop {
-            out.final_state = x;
+        if stopped.is_some() || at_end {
+            out.final_state = x_now;
             out.final_mode = mode;
-            out.stopped = Some(e);
+            out.stopped = stopped;
+            out.end_cusp = at_end;
             return Ok(out);
         }
+        branch = branches(g, &p, &x_now)?;
+        x = x_now;
+        t0 = t_e;
+        fired_now = fired;
+        switched = None;
     }
 }

@@ -1,13 +1,15 @@
 //! Random hybrid models drawn from the language's forms (`model.rs`): chains of integrators
-//! whose tops are `a + b t` per mode, events with affine, product and time guards in every
-//! direction, `sin` guards (for the relations alone), affine resets (bounces, kicks, assignments), mode switches, stops, and starts on or
-//! a hair from a guard (down to subnormal distances). Model `i` of seed `s` is a function of `(s,
+//! whose tops are `a + b t` per mode, flow switches (`if` on a state) on a top, damped tops (for
+//! the relations alone), events with affine, product and time guards in every direction, `sin`
+//! guards (for the relations alone), enabling conditions, affine resets (bounces, kicks,
+//! assignments, which also make cascades), mode switches, stops, a time event near or on
+//! `t_end`, and starts on or a hair from a guard (down to subnormal distances). Model `i` of seed `s` is a function of `(s,
 //! i)` alone, so a violation is reproduced from the two numbers.
 
 use rand_chacha::ChaCha8Rng;
 use rand_core::{Rng, SeedableRng};
 
-use super::model::{Coef, Dir, Event, GenModel, Lhs, Reset, Top};
+use super::model::{Coef, Cond, Dir, Event, GenModel, Lhs, Reset, Switch, Top};
 
 struct Draw {
     rng: ChaCha8Rng,
@@ -56,6 +58,14 @@ impl Draw {
 /// Distances of a start from its guard, from ordinary to subnormal.
 const HAIRS: [f64; 8] = [1e-3, 1e-9, 1e-30, 1e-100, 1e-150, 1e-160, 1e-200, 1e-300];
 
+/// Rates of a damped top (`- k x`): from slow to stiff for an explicit method at the harness's
+/// tolerances.
+const DAMPING: [f64; 4] = [0.5, 3.0, 50.0, 1000.0];
+
+/// Where the end is put near a time event, as a fraction of the span: on it, and before or after
+/// it by more than the reference's separation.
+const NEAR_END: [f64; 5] = [0.0, 1e-4, -1e-4, 1e-3, -1e-3];
+
 /// Model `index` of the stream `seed`.
 pub fn model(seed: u64, index: u64) -> GenModel {
     let mut d = Draw {
@@ -87,9 +97,32 @@ pub fn model(seed: u64, index: u64) -> GenModel {
         }
         tops.push(row);
     }
-    let t_end = d.value(1.0, 3.0).abs().max(1.0);
+    let mut t_end = d.value(1.0, 3.0).abs().max(1.0);
     let n_states = init.len();
     let x0: Vec<f64> = init.iter().map(|c| c.value(&d.params)).collect();
+    // A switch on a chain's top, on a state's level a little away from its start.
+    let mut switches = Vec::new();
+    let mut damping = Vec::new();
+    for chain in &chains {
+        let damped = d.chance(0.1);
+        damping.push(if damped { DAMPING[d.below(DAMPING.len())] } else { 0.0 });
+        // A damped chain has no exact reference to tell a sliding switch (one whose branches
+        // push its own top back at the level from both sides): its switch reads another state.
+        let top = *chain.last().expect("a chain has a state");
+        let switch = if d.chance(0.2) && !(damped && n_states == 1) {
+            let mut state = d.below(n_states);
+            if damped && state == top {
+                state = (state + 1) % n_states;
+            }
+            let at = x0[state] + d.value(-1.0, 1.0);
+            let at = d.coef(at);
+            let v = d.value(-3.0, 3.0);
+            Some(Switch { state, at, then: d.coef(v) })
+        } else {
+            None
+        };
+        switches.push(switch);
+    }
     let mut events = Vec::new();
     let n_events = 1 + d.below(3);
     for k in 0..n_events {
@@ -129,6 +162,13 @@ pub fn model(seed: u64, index: u64) -> GenModel {
             (rhs, dir)
         };
         let rhs = d.coef(rhs_value);
+        let cond = if d.chance(0.2) {
+            let state = d.below(n_states);
+            let at = x0[state] + d.value(-1.0, 1.0);
+            Some(Cond { state, above: d.chance(0.5), at: d.coef(at) })
+        } else {
+            None
+        };
         let mut resets = Vec::new();
         for _ in 0..d.below(3) {
             let state = d.below(n_states);
@@ -159,7 +199,7 @@ pub fn model(seed: u64, index: u64) -> GenModel {
         let mode = if n_modes > 1 && d.chance(0.6) { Some(d.below(n_modes)) } else { None };
         let to = if n_modes > 1 && d.chance(0.6) { Some(d.below(n_modes)) } else { None };
         let stop = d.chance(0.1);
-        events.push(Event { name: format!("e{k}"), mode, lhs, dir, rhs, resets, to, stop });
+        events.push(Event { name: format!("e{k}"), mode, lhs, dir, rhs, cond, resets, to, stop });
     }
     // A start on or a hair from the first event's guard, for a single-state affine guard.
     if d.chance(0.15) {
@@ -190,5 +230,13 @@ pub fn model(seed: u64, index: u64) -> GenModel {
             }
         }
     }
-    GenModel { params: d.params, init, chains, tops, events, t_end }
+    // The end near or on a time event: before it, after it, or at its very time (a cusp of the
+    // final values, rule 8 of docs/language.md).
+    if let Some(e) = events.iter().find(|e| e.lhs == Lhs::Time) {
+        if d.chance(0.3) {
+            let at = e.rhs.value(&d.params);
+            t_end = at + NEAR_END[d.below(NEAR_END.len())] * t_end;
+        }
+    }
+    GenModel { params: d.params, init, chains, tops, switches, damping, events, t_end }
 }

@@ -108,6 +108,10 @@ fn simulate(
         atol,
         method: c.method,
         land_events: if c.land { Some(true) } else { None },
+        // A generated state nothing reads is a running cost, outside the error test by default
+        // (with a warning where its error exceeds the tolerance): the harness judges every state
+        // against the tolerance, so every state is under the test.
+        quadrature_error_control: true,
         ..SimOptions::default()
     };
     let run = compiled.simulate(&compiled.params(), &opts).map_err(|e| format!("does not run: {e}"))?;
@@ -224,6 +228,7 @@ fn tight_reference(g: &GenModel) -> Result<Reference, String> {
         final_state,
         final_mode: 0,
         stopped: (got.stopped != "t_end").then(|| index(&got.stopped)),
+        end_cusp: false,
     })
 }
 
@@ -244,6 +249,15 @@ struct Worst {
     dtime: f64,
 }
 
+impl Worst {
+    fn merge(&mut self, o: &Worst) {
+        self.value = self.value.max(o.value);
+        self.time = self.time.max(o.time);
+        self.grad = self.grad.max(o.grad);
+        self.dtime = self.dtime.max(o.dtime);
+    }
+}
+
 /// A discrepancy with what it was measured against.
 #[derive(Clone, Debug)]
 pub struct Violation {
@@ -260,24 +274,34 @@ impl std::fmt::Display for Violation {
     }
 }
 
-/// The ratio of an error to the tolerance of a value of size `scale`.
-fn ratio(got: f64, want: f64, scale: f64) -> f64 {
+/// The ratio of an error to the tolerance `tol` (rtol, atol) of a value of size `scale`.
+fn ratio(got: f64, want: f64, scale: f64, tol: (f64, f64)) -> f64 {
     if got.is_nan() != want.is_nan() {
         return f64::INFINITY;
     }
     if got.is_nan() {
         return 0.0;
     }
-    (got - want).abs() / (RTOL * scale.abs() + ATOL)
+    (got - want).abs() / (tol.0 * scale.abs() + tol.1)
 }
 
-/// Compares a run with the reference; returns what disagrees.
-fn compare(want: &Reference, got: &Got, c: Config, g: &GenModel, worst: &mut Worst) -> Vec<String> {
+/// Compares a run with the reference, in units of the run's tolerance `tol`; returns what
+/// disagrees.
+fn compare(
+    want: &Reference,
+    got: &Got,
+    c: Config,
+    g: &GenModel,
+    tol: (f64, f64),
+    worst: &mut Worst,
+) -> Vec<String> {
     let mut bad = Vec::new();
     let names: Vec<&str> = want.events.iter().map(|(e, _)| g.events[*e].name.as_str()).collect();
     let got_names: Vec<&str> = got.events.iter().map(|(n, _, _)| n.as_str()).collect();
     if names != got_names {
-        bad.push(format!("events {got_names:?}, expected {names:?}"));
+        let times: Vec<f64> = got.events.iter().map(|e| e.1).collect();
+        let want_times: Vec<f64> = want.events.iter().map(|(_, t)| t.v.f64()).collect();
+        bad.push(format!("events {got_names:?} at {times:?}, expected {names:?} at {want_times:?}"));
         return bad;
     }
     let stopped = want.stopped.map_or("t_end".to_string(), |e| g.events[e].name.clone());
@@ -286,7 +310,7 @@ fn compare(want: &Reference, got: &Got, c: Config, g: &GenModel, worst: &mut Wor
     }
     let span = g.t_end;
     for (k, ((_, t), (name, gt, gdt))) in want.events.iter().zip(&got.events).enumerate() {
-        let r = ratio(*gt, t.v.f64(), span.max(t.v.f64().abs()));
+        let r = ratio(*gt, t.v.f64(), span.max(t.v.f64().abs()), tol);
         worst.time = worst.time.max(r);
         if r > K_VALUE {
             bad.push(format!(
@@ -298,7 +322,7 @@ fn compare(want: &Reference, got: &Got, c: Config, g: &GenModel, worst: &mut Wor
             let dt = t.gradient();
             let scale = dt.iter().fold(0.0f64, |a, x| a.max(x.abs()));
             for (j, (&w, &h)) in dt.iter().zip(gdt).enumerate() {
-                let r = ratio(h, w, scale.max(1.0));
+                let r = ratio(h, w, scale.max(1.0), tol);
                 worst.dtime = worst.dtime.max(r);
                 if r > K_GRAD {
                     bad.push(format!("d{name}#{k}/dp{j} = {h:e}, expected {w:e} ({r:.1} tolerances)"));
@@ -308,7 +332,7 @@ fn compare(want: &Reference, got: &Got, c: Config, g: &GenModel, worst: &mut Wor
     }
     for (i, x) in want.final_state.iter().enumerate() {
         let (w, h) = (x.v.f64(), got.state[i]);
-        let r = ratio(h, w, w.abs().max(1.0));
+        let r = ratio(h, w, w.abs().max(1.0), tol);
         worst.value = worst.value.max(r);
         if r > K_VALUE {
             bad.push(format!("x{i} = {h:.17e}, expected {w:.17e} ({r:.1} tolerances)"));
@@ -317,7 +341,7 @@ fn compare(want: &Reference, got: &Got, c: Config, g: &GenModel, worst: &mut Wor
             let dx = x.gradient();
             let scale = dx.iter().fold(0.0f64, |a, v| a.max(v.abs()));
             for (j, (&w, &h)) in dx.iter().zip(&got.dstate[i]).enumerate() {
-                let r = ratio(h, w, scale.max(1.0));
+                let r = ratio(h, w, scale.max(1.0), tol);
                 worst.grad = worst.grad.max(r);
                 if r > K_GRAD {
                     bad.push(format!("dx{i}/dp{j} = {h:e}, expected {w:e} ({r:.1} tolerances)"));
@@ -326,6 +350,85 @@ fn compare(want: &Reference, got: &Got, c: Config, g: &GenModel, worst: &mut Wor
         }
     }
     bad
+}
+
+/// The tolerances of the convergence relation, each 100 times tighter than the one before; the
+/// middle one is the harness's.
+const LADDER: [(f64, f64); 3] = [(1e-6, 1e-8), (RTOL, ATOL), (1e-10, 1e-12)];
+
+/// The largest error of a run's final values against the reference, relative to each value's
+/// size (at least 1).
+fn final_error(want: &Reference, got: &Got) -> f64 {
+    want.final_state
+        .iter()
+        .zip(&got.state)
+        .map(|(w, &h)| (h - w.v.f64()).abs() / w.v.f64().abs().max(1.0))
+        .fold(0.0, f64::max)
+}
+
+/// The convergence relation under `c`: at every tolerance of [`LADDER`] the run agrees with the
+/// reference within [`K_VALUE`] of that tolerance (the same events, values and gradients), and the
+/// error shrinks with the tolerance: where the loosest run's error is more than the tightest
+/// tolerance allows, the tightest run's is at most a tenth of it (a hundredth of the tolerance
+/// would be proportionality; a tenth leaves room for the error control's own slack).
+fn convergence(g: &GenModel, want: &Reference, c: Config, worst: &mut Worst) -> Vec<String> {
+    let mut bad = Vec::new();
+    let mut errors = Vec::new();
+    for tol in [LADDER[0], LADDER[2]] {
+        match run_at(g, &Variant::default(), c, tol.0, tol.1) {
+            Ok(got) => {
+                for what in compare(want, &got, c, g, tol, worst) {
+                    bad.push(format!("at rtol {:e}: {what}", tol.0));
+                }
+                errors.push(final_error(want, &got));
+            }
+            Err(why) => bad.push(format!("at rtol {:e}: {why}", tol.0)),
+        }
+    }
+    if let [loose, tight] = errors[..] {
+        let allowed = K_VALUE * (LADDER[2].0 + LADDER[2].1);
+        if loose > allowed && tight > loose / 10.0 {
+            bad.push(format!(
+                "the error does not shrink with the tolerance: {loose:e} at rtol {:e}, {tight:e} at rtol {:e}",
+                LADDER[0].0, LADDER[2].0
+            ));
+        }
+    }
+    bad
+}
+
+/// Where a run reports that a derivative does not exist, one-sided differences of the final value
+/// must disagree: a cusp. With `D(h) = (f(p+h) - f(p))/h - (f(p) - f(p-h))/h`, a cusp keeps `D`
+/// as `h` shrinks (the jump of the derivative), a smooth value has `D(h)` of order `h`: the cusp
+/// is confirmed when `D(h/4)` is more than half of `D(h)` and clear of the runs' noise (runs at
+/// [`TIGHT`], `h = 1e-4 max(|p|, 1)`). Returns `Ok(None)` when nothing is reported missing.
+fn missing_derivative_confirmed(g: &GenModel, c: Config, got: &Got) -> Result<Option<String>, String> {
+    let Some((i, j)) = got
+        .dstate
+        .iter()
+        .enumerate()
+        .find_map(|(i, row)| row.iter().position(|d| d.is_nan()).map(|j| (i, j)))
+    else {
+        return Ok(None);
+    };
+    let at = |dp: f64| -> Result<f64, String> {
+        let mut moved = g.clone();
+        moved.params[j] += dp;
+        let r = run_at(&moved, &Variant::default(), Config { grad: false, ..c }, TIGHT.0, TIGHT.1)?;
+        Ok(r.state[i])
+    };
+    let f0 = at(0.0)?;
+    let jump = |h: f64| -> Result<f64, String> { Ok((at(h)? - f0) / h - (f0 - at(-h)?) / h) };
+    let h = 1e-4 * g.params[j].abs().max(1.0);
+    let (d1, d4) = (jump(h)?, jump(h / 4.0)?);
+    let noise = 1e3 * TIGHT.0 * f0.abs().max(1.0) / (h / 4.0);
+    if d4.abs() > 0.5 * d1.abs() && d4.abs() > noise {
+        Ok(Some(format!("dx{i}/dp{j}: confirmed, the one-sided derivatives differ by {d4:e}")))
+    } else {
+        Err(format!(
+            "dx{i}/dp{j} is reported not to exist, but one-sided differences agree (D(h) = {d1:e}, D(h/4) = {d4:e}, h = {h:e})"
+        ))
+    }
 }
 
 /// The variants of a model each relation runs, with the shift of its reference.
@@ -361,6 +464,8 @@ pub struct Summary {
     pub ambiguous: usize,
     pub runs: usize,
     pub violations: Vec<Violation>,
+    /// Derivatives reported not to exist that one-sided differences confirm as cusps.
+    pub cusps_confirmed: usize,
     worst: Worst,
 }
 
@@ -396,6 +501,10 @@ pub fn harness(seed: u64, first: u64, count: usize, budget: Duration, configs: &
             }
         };
         s.models += 1;
+        // The worst ratios of the models that keep every relation (a violation's is not a
+        // measure of the tolerance).
+        let mut worst = Worst::default();
+        let violations_before = s.violations.len();
         s.last_index = index - 1;
         s.not_judged += usize::from(!want.gradients_judged());
         let mut report = |c: Config, variant: &str, what: String| {
@@ -408,7 +517,7 @@ pub fn harness(seed: u64, first: u64, count: usize, budget: Duration, configs: &
             s.runs += 1;
             match run(&g, &Variant::default(), c) {
                 Ok(got) => {
-                    for what in compare(&want, &got, c, &g, &mut s.worst) {
+                    for what in compare(&want, &got, c, &g, (RTOL, ATOL), &mut worst) {
                         report(c, "none", what);
                     }
                     base_runs.push(Some(got));
@@ -418,6 +527,21 @@ pub fn harness(seed: u64, first: u64, count: usize, budget: Duration, configs: &
                     base_runs.push(None);
                 }
             }
+        }
+        // Every derivative reported not to exist is a cusp (the first such of each run).
+        for (k, got) in base_runs.iter().enumerate() {
+            let Some(got) = got.as_ref().filter(|_| configs[k].grad) else { continue };
+            match missing_derivative_confirmed(&g, configs[k], got) {
+                Ok(None) => {}
+                Ok(Some(_)) => s.cusps_confirmed += 1,
+                Err(why) => report(configs[k], "one-sided differences", why),
+            }
+        }
+        // Convergence, under one configuration.
+        let c = configs[(index as usize + 1) % configs.len()];
+        s.runs += 2;
+        for what in convergence(&g, &want, c, &mut worst) {
+            report(c, "convergence", what);
         }
         // The gradients against differences of the run itself, under one configuration.
         let c = configs[index as usize % configs.len()];
@@ -433,12 +557,15 @@ pub fn harness(seed: u64, first: u64, count: usize, budget: Duration, configs: &
             s.runs += 1;
             match run(&g, &v, c) {
                 Ok(got) => {
-                    for what in compare(&want, &got, c, &g, &mut s.worst) {
+                    for what in compare(&want, &got, c, &g, (RTOL, ATOL), &mut worst) {
                         report(c, name, what);
                     }
                 }
                 Err(why) => report(c, name, why),
             }
+        }
+        if s.violations.len() == violations_before {
+            s.worst.merge(&worst);
         }
     }
     s
@@ -450,49 +577,63 @@ fn env<T: std::str::FromStr>(name: &str, default: T) -> T {
 
 /// The seed CI checks.
 const CI_SEED: u64 = 20261128;
-/// How many clean models CI checks (about 7 s in the test build).
+/// How many clean models CI checks (59 s in the test build on the 2-core VM, with another build
+/// sharing it).
 const CI_MODELS: usize = 300;
 
 /// Violations the full run found at [`CI_SEED`] that are not fixed yet, by model index, each
-/// with its class (the reproducers: `HYBC_RELATIONS_FIRST=N HYBC_RELATIONS_MODELS=1 cargo test
-/// --release --test it relations -- --nocapture`). They belong to the event issue; the test
-/// fails on any violation not listed here and on any listed model that no longer violates, so
-/// the list stays true as they are fixed.
+/// with its class, named by its symptom where the cause is not yet pinned down (the reproducers:
+/// `HYBC_RELATIONS=full HYBC_RELATIONS_FIRST=N HYBC_RELATIONS_MODELS=1 cargo test --release
+/// --test it relations -- --nocapture`). They belong to the event issue; the test fails on any
+/// violation not listed here and on any listed model that no longer violates, so the list stays
+/// true as they are fixed.
 const KNOWN: &[(u64, &str)] = &[
-    (56, CHECK_FAILS_A_RIGHT_GRADIENT),
-    (105, PASS_THROUGH_REFIRES),
-    (226, PASS_THROUGH_REFIRES),
-    (395, FALSE_ZENO),
-    (269, MISSED_CROSSINGS),
-    (323, JUMP_OFF_GUARD_CALLED_ZENO),
-    (509, PASS_THROUGH_REFIRES),
-    (678, JUMP_OFF_GUARD_CALLED_ZENO),
-    (700, JUMP_OFF_GUARD_CALLED_ZENO),
-    (712, JUMP_OFF_GUARD_CALLED_ZENO),
-    (765, JUMP_OFF_GUARD_CALLED_ZENO),
-    (785, PASS_THROUGH_REFIRES),
-    (845, JUMP_OFF_GUARD_CALLED_ZENO),
-    (864, JUMP_OFF_GUARD_CALLED_ZENO),
+    (180, SWITCH_TAKEN_SHORT),
+    (226, STEPS_EXHAUSTED),
+    (260, SHIFTED_EVENT_TIME),
+    (576, STOPPED_AS_ZENO),
+    (619, STOPPED_AS_ZENO),
+    (653, CHECK_RERUN_STOPS),
+    (736, STOPPED_AS_ZENO),
+    (749, CHECK_FAILS_A_RIGHT_GRADIENT),
+    (753, STEPS_EXHAUSTED),
+    (779, STEPS_EXHAUSTED),
+    (849, STEPS_EXHAUSTED),
+    (863, STOPPED_AS_ZENO),
+    (893, CONDITION_FALSE_HIDES_A_LATER_CROSSING),
+    (899, STOPPED_AS_ZENO),
+    (901, STOPPED_AS_ZENO),
+    (952, STOPPED_AS_ZENO),
+    (1003, STEPS_EXHAUSTED),
+    (1090, STOPPED_AS_ZENO),
 ];
 
-/// `x := -c x` on its own guard `x crosses 0` (or `x <= 0`): the reset leaves the guard within
-/// what locating the crossing leaves of zero, on the pre-crossing side by a few ulps, and the
-/// flow carries it across again: the event refires until `--max-events` (rule 6 says a
-/// pass-through).
-const PASS_THROUGH_REFIRES: &str = "a pass-through contact refires at one instant until max_events";
-/// A contact whose reset moves its guard clearly off zero (`x := x + k`, a product guard's sign
-/// flipped) is stopped as Zeno, "a bounce too small to resolve".
-const JUMP_OFF_GUARD_CALLED_ZENO: &str = "a contact reset clear of its guard is stopped as Zeno";
-/// A `sin` guard's crossings missed: DOP853 in the mode-split variant (a time event at 0.37 of the
-/// span changes its steps) finds 32 of the 35 crossings of `sin(5.233 x1) crosses -0.824` that a
-/// run at rtol 1e-12 finds, without a warning.
-const MISSED_CROSSINGS: &str = "crossings of a non-polynomial guard missed";
-/// `hybc::gradcheck` calls a derivative wrong that agrees with the exact reference (Rodas4:
-/// reported -0.00541, central difference -0.01685, no cusp noted).
+/// A contact stopped as Zeno ("a bounce too small to resolve") after one or two events, where
+/// the reference runs on: resets that move the guard clearly off zero (`x := x + k`, a product
+/// guard's sign flipped) and bounces, at the start and later.
+const STOPPED_AS_ZENO: &str = "a contact stopped as Zeno where the run goes on";
+/// More than `--max-steps` steps where the reference runs through (damped and stiff tops, a
+/// contact at the start): the run stops with a fault.
+const STEPS_EXHAUSTED: &str = "a run exhausts max_steps where the reference runs through";
+/// With `--grad all`, DOP853 and auto take a flow switch's other branch before the state reaches
+/// its level (x0 stays below 0.90 of a level at 1.322; the sensitivity to the other branch's
+/// value is non-zero from then on): every event after it is late by 3e-4. Without gradients the
+/// same run is right.
+const SWITCH_TAKEN_SHORT: &str = "a flow switch's branch taken before its state reaches the level";
+/// `x crosses 0.25 if y > 0` with `x = (t - 1)^2`: the crossing at 0.5 (condition false) and the
+/// one at 1.5 (condition true) fall in one step; the first is dropped and the second is never
+/// looked for, so the event never fires (`tests` of the event issue: two crossings of one guard
+/// in one step, the first disabled).
+const CONDITION_FALSE_HIDES_A_LATER_CROSSING: &str =
+    "a crossing whose condition is false hides a later crossing of the same guard in the step";
+/// Under `--t-start 1e6` (every time shifted), DOP853 locates the third crossing of a `crosses`
+/// guard 0.029 early, where unshifted it is exact.
+const SHIFTED_EVENT_TIME: &str = "a crossing located far off under a large time shift";
+/// `hybc::gradcheck` calls a derivative wrong that agrees with the exact reference (reported 0,
+/// central difference 1.7e-5 with a resolution of 1.1e-5).
 const CHECK_FAILS_A_RIGHT_GRADIENT: &str = "the gradient check fails a derivative the reference confirms";
-/// Eight shrinking intervals whose extrapolated accumulation point (11.7) lies far beyond the
-/// last event (1.63) stop the run as Zeno.
-const FALSE_ZENO: &str = "Zeno reported with an accumulation point far beyond the events";
+/// The gradient check's re-run at a small `h_max` stops as Zeno where the run it checks went on.
+const CHECK_RERUN_STOPS: &str = "the gradient check's re-run stops as Zeno";
 
 #[test]
 fn generated_models_keep_every_relation_under_every_stepper() {
@@ -508,13 +649,14 @@ fn generated_models_keep_every_relation_under_every_stepper() {
     violating.dedup();
     println!(
         "relations: seed {seed}, {} models ({} against a tight run, {} drawn again as ambiguous, {} with \
-         gradients not judged), \
-         {} runs, {} violations in {} models ({} of them known); worst in tolerances: values {:.1}, \
+         gradients not judged, {} derivatives reported missing and confirmed as cusps), \
+         {} runs, {} violations in {} models ({} of them known); worst in tolerances where every relation holds: values {:.1}, \
          times {:.1}, gradients {:.1}, time gradients {:.1}",
         s.models,
         s.relations_only,
         s.ambiguous,
         s.not_judged,
+        s.cusps_confirmed,
         s.runs,
         s.violations.len(),
         violating.len(),

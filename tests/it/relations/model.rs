@@ -1,6 +1,8 @@
 //! A generated hybrid model as data: chains of integrators (`der(x1) = x2`, ..., `der(xk) = A +
-//! B t`, so every state is a polynomial of `t` and the flow's Jacobian is not zero), events with
-//! affine, product and time guards, affine resets, modes and stops. One description gives both
+//! B t`, so every state is a polynomial of `t` and the flow's Jacobian is not zero), a chain's top
+//! switched by an `if` on a state (a flow switch) or damped (`- k xk`: no longer polynomial),
+//! events with affine, product and time guards, enabling conditions, affine resets, modes and
+//! stops. One description gives both
 //! the `.hyb` text (in each variant a relation needs: shifted in time, `t` read from a clock
 //! state, a bystander state, events in another order, a mode split in two) and the exact
 //! reference (`exact.rs`).
@@ -84,6 +86,22 @@ pub struct Reset {
     pub b: Coef,
 }
 
+/// An enabling condition `if x_state > at` (or `<` when not `above`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cond {
+    pub state: usize,
+    pub above: bool,
+    pub at: Coef,
+}
+
+/// A flow switch on a chain's top: `der(top) = if x_state > at then then else <the mode's top>`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Switch {
+    pub state: usize,
+    pub at: Coef,
+    pub then: Coef,
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct Event {
     pub name: String,
@@ -92,6 +110,7 @@ pub struct Event {
     pub lhs: Lhs,
     pub dir: Dir,
     pub rhs: Coef,
+    pub cond: Option<Cond>,
     pub resets: Vec<Reset>,
     pub to: Option<usize>,
     pub stop: bool,
@@ -114,6 +133,10 @@ pub struct GenModel {
     pub chains: Vec<Vec<usize>>,
     /// `tops[mode][chain]`.
     pub tops: Vec<Vec<Top>>,
+    /// Per chain, a flow switch on its top in every mode.
+    pub switches: Vec<Option<Switch>>,
+    /// Per chain, `k` in `der(top) = ... - k top` (0: none); a damped chain is not polynomial.
+    pub damping: Vec<f64>,
     pub events: Vec<Event>,
     pub t_end: f64,
 }
@@ -142,7 +165,7 @@ impl GenModel {
 
     /// Whether the exact reference can follow every guard (all polynomial along the flow).
     pub fn polynomial(&self) -> bool {
-        !self.events.iter().any(|e| matches!(e.lhs, Lhs::Sin(..)))
+        !self.events.iter().any(|e| matches!(e.lhs, Lhs::Sin(..))) && self.damping.iter().all(|&k| k == 0.0)
     }
 
     pub fn uses_time(&self) -> bool {
@@ -188,6 +211,15 @@ impl GenModel {
             e.dir.op(),
             e.rhs.text()
         );
+        if let Some(c) = e.cond {
+            let _ = write!(
+                out,
+                " if {} {} {}",
+                Self::state_name(c.state),
+                if c.above { ">" } else { "<" },
+                c.at.text()
+            );
+        }
         if let Some(to) = e.to {
             let _ = write!(out, " -> {}", modes[to]);
         }
@@ -209,17 +241,23 @@ impl GenModel {
             }
             let top = self.tops[mode][c];
             let x = Self::state_name(*chain.last().expect("a chain has a state"));
-            if top.b == 0.0 {
-                let _ = writeln!(out, "{indent}der({x}) = {}", top.a.text());
+            let mut rate = if top.b == 0.0 {
+                top.a.text()
             } else {
-                let _ = writeln!(
-                    out,
-                    "{indent}der({x}) = {} + {} * {}",
-                    top.a.text(),
-                    num(top.b),
-                    self.time_text(v)
+                format!("{} + {} * {}", top.a.text(), num(top.b), self.time_text(v))
+            };
+            if let Some(s) = self.switches[c] {
+                rate = format!(
+                    "(if {} > {} then {} else ({rate}))",
+                    Self::state_name(s.state),
+                    s.at.text(),
+                    s.then.text()
                 );
             }
+            if self.damping[c] != 0.0 {
+                rate = format!("{rate} - {} * {x}", num(self.damping[c]));
+            }
+            let _ = writeln!(out, "{indent}der({x}) = {rate}");
         }
         if v.clock {
             let _ = writeln!(out, "{indent}der(clock) = 1");
