@@ -287,7 +287,7 @@ fn guard_poly(g: &GenModel, e: usize, p: &[Dual], xs: &[Poly], t0: &Dual) -> (Po
             (prod, 2.0 * (xs[*i][0].v.f64() * xs[*j][0].v.f64()).abs())
         }
         Lhs::Time => (vec![t0.clone(), Dual::constant(1.0, m)], t0.v.f64().abs()),
-        Lhs::Sin(..) => unreachable!("the reference follows polynomial guards only"),
+        Lhs::Sin(..) | Lhs::Abs(..) => unreachable!("the reference follows polynomial guards only"),
     };
     let mut poly = lhs;
     poly[0] = &poly[0] - &rhs;

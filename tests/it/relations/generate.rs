@@ -1,7 +1,7 @@
 //! Random hybrid models drawn from the language's forms (`model.rs`): chains of integrators
 //! whose tops are `a + b t` per mode, flow switches (`if` on a state) on a top, damped tops (for
-//! the relations alone), events with affine, product and time guards in every direction, `sin`
-//! guards (for the relations alone), enabling conditions, affine resets (bounces, kicks,
+//! the relations alone), events with affine, product and time guards in every direction, `sin` and
+//! `abs` guards (for the relations alone), enabling conditions, affine resets (bounces, kicks,
 //! assignments, which also make cascades), mode switches, stops, a time event near or on
 //! `t_end`, and starts on or a hair from a guard (down to subnormal distances). Model `i` of seed `s` is a function of `(s,
 //! i)` alone, so a violation is reproduced from the two numbers.
@@ -144,14 +144,24 @@ pub fn model(seed: u64, index: u64) -> GenModel {
         } else if kind < 18 {
             let i = d.below(n_states);
             let w = d.value(1.0, 6.0);
-            (Lhs::Sin(i, w), (w * x0[i]).sin())
+            // Half of these draws read `abs` instead of `sin` (the same draws, so that the rest
+            // of the stream is unchanged): a guard with a kink where its argument is zero.
+            if kind == 16 {
+                (Lhs::Sin(i, w), (w * x0[i]).sin())
+            } else {
+                (Lhs::Abs(i, w), (w * x0[i]).abs())
+            }
         } else {
             (Lhs::Time, 0.0)
         };
         let (rhs_value, dir) = if lhs == Lhs::Time {
             (d.value(0.05, t_end - 0.05), Dir::Rising)
         } else {
-            let rhs = if matches!(lhs, Lhs::Sin(..)) { d.value(-0.9, 0.9) } else { l0 + d.value(-1.0, 1.0) };
+            let rhs = match lhs {
+                Lhs::Sin(..) => d.value(-0.9, 0.9),
+                Lhs::Abs(..) => d.value(-0.9, 0.9).abs(),
+                _ => l0 + d.value(-1.0, 1.0),
+            };
             let dir = if d.chance(0.25) {
                 Dir::Crosses
             } else if l0 > rhs {

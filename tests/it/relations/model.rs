@@ -59,6 +59,8 @@ pub enum Lhs {
     Time,
     /// `sin(w x_i)`: a guard no polynomial describes, checked by the relations only.
     Sin(usize, f64),
+    /// `abs(w x_i)`: a kink where `x_i` is zero, checked by the relations only.
+    Abs(usize, f64),
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -165,7 +167,8 @@ impl GenModel {
 
     /// Whether the exact reference can follow every guard (all polynomial along the flow).
     pub fn polynomial(&self) -> bool {
-        !self.events.iter().any(|e| matches!(e.lhs, Lhs::Sin(..))) && self.damping.iter().all(|&k| k == 0.0)
+        !self.events.iter().any(|e| matches!(e.lhs, Lhs::Sin(..) | Lhs::Abs(..)))
+            && self.damping.iter().all(|&k| k == 0.0)
     }
 
     pub fn uses_time(&self) -> bool {
@@ -199,6 +202,7 @@ impl GenModel {
             Lhs::Prod(i, j) => format!("{} * {}", Self::state_name(*i), Self::state_name(*j)),
             Lhs::Time => self.time_text(v),
             Lhs::Sin(i, w) => format!("sin({} * {})", num(*w), Self::state_name(*i)),
+            Lhs::Abs(i, w) => format!("abs({} * {})", num(*w), Self::state_name(*i)),
         }
     }
 
