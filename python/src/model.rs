@@ -154,9 +154,8 @@ impl Model {
         sim: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Run> {
         let keywords = SimKeywords::from_kwargs(sim)?;
-        let mut opts = keywords.options(&self.model)?;
+        let mut opts = keywords.options_at(&self.model, at)?;
         opts.trajectory = trajectory_request(trajectory)?;
-        opts.at = crate::options::sample_times(at)?;
         let values = self.param_values(params)?;
         let compiled = self.compiled(py, &grad.unwrap_or_default())?;
         let t_end = opts.t_end;

@@ -5,6 +5,7 @@ mod check;
 mod derive;
 mod fit;
 mod optimize;
+mod options;
 mod periodic;
 mod run;
 mod samples;
@@ -126,35 +127,6 @@ pub(crate) struct ModelArg {
 pub(crate) fn usage_error(message: &str) -> ExitCode {
     eprintln!("error: {message}");
     ExitCode::from(EXIT_USAGE_ERROR)
-}
-
-/// Parses a comma-separated list of parameter names, or `all`, for the flag `flag`. A vector
-/// parameter's name stands for all its elements, in order; `u[3]` for one.
-pub(crate) fn parse_param_list(
-    model: &crate::Model,
-    list: &str,
-    flag: &str,
-) -> Result<Vec<ParamIdx>, String> {
-    if list.trim() == "all" {
-        return Ok((0..model.checked().params.len()).map(|i| ParamIdx(i as u32)).collect());
-    }
-    let mut out: Vec<ParamIdx> = Vec::new();
-    // A set, not a scan of `out`: a vector of 10^5 elements would make the check quadratic.
-    let mut seen = std::collections::HashSet::new();
-    for name in list.split(',').map(str::trim).filter(|n| !n.is_empty()) {
-        let indices: Vec<ParamIdx> = match model.vector(name) {
-            Some(v) => v.elements().collect(),
-            None => vec![model.param_index(name).map_err(|e| format!("{flag}: {e}"))?],
-        };
-        for p in indices {
-            if !seen.insert(p) {
-                let element = &model.checked().params[p.0 as usize].name;
-                return Err(format!("{flag}: `{element}` is named twice"));
-            }
-            out.push(p);
-        }
-    }
-    Ok(out)
 }
 
 /// Writes `text` to stdout. A closed pipe (`hybc run ... | head`) is not an error worth a panic:

@@ -8,10 +8,8 @@ use std::time::Instant;
 
 use clap::ValueEnum;
 
-use super::run::{at_most, parameter_values, positive, sim_options, SimFlags};
-use super::{
-    compile_model, load_model, parse_param_list, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED,
-};
+use super::options::{at_most, parameter_values, parse_param_list, positive, sim_options, SimFlags};
+use super::{compile_model, load_model, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
 use crate::fit::Bounds;
 use crate::optimize::report::OptimizeReport;
 use crate::optimize::request::{self, Failure, Request};

@@ -8,82 +8,19 @@ use std::time::Instant;
 
 use clap::ValueEnum;
 
+use super::options::{parameter_values, parse_param_list, positive, SimFlags};
 use super::trajectory::{self, StreamingTrajectory};
-use super::{compile_model, error_chain, load_model, parse_param_list, usage_error, ModelArg};
+use super::{compile_model, error_chain, load_model, usage_error, ModelArg};
 use super::{EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
 use crate::gradcheck::{self, CheckOptions};
 use crate::report::RunReport;
-use crate::sim::{Method, SimOptions, Simulator, TrajectoryRequest};
-use crate::{Compiled, Model, Params};
-
-#[derive(Debug, Clone, Copy, ValueEnum)]
-enum MethodArg {
-    /// DOP853 when rtol < 1e-7, else Dormand-Prince 5(4); switches to Rodas5P while the flow is
-    /// stiff (and back), each stretch reported.
-    Auto,
-    Dopri5,
-    Dop853,
-    /// Rosenbrock Rodas5P (stiff flows; compiles the flow's Jacobians on first use).
-    Rodas5p,
-    /// Rosenbrock Rodas4 (stiff flows).
-    Rodas4,
-}
+use crate::sim::{SimOptions, Simulator, TrajectoryRequest};
+use crate::{Compiled, Model, Params, Spelling};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum Format {
     Table,
     Json,
-}
-
-/// The integrator flags `hybc run` and `hybc sweep` share.
-#[derive(Debug, clap::Args)]
-pub(crate) struct SimFlags {
-    /// Start time (default 0). Times are absolute: time events, input knots and every `t` in the
-    /// model keep their values, so a later start skips what comes before it.
-    #[arg(long, value_name = "T", allow_negative_numbers = true)]
-    t_start: Option<f64>,
-    /// End time (default: the model's `simulate t_end`, else 10).
-    #[arg(long, value_name = "T")]
-    t_end: Option<f64>,
-    /// Relative tolerance (default: the model's, else 1e-8).
-    #[arg(long)]
-    rtol: Option<f64>,
-    /// Absolute tolerance (default: the model's, else 1e-10).
-    #[arg(long)]
-    atol: Option<f64>,
-    /// Integration method.
-    #[arg(long, value_enum, default_value = "auto")]
-    method: MethodArg,
-    /// Stop (as Zeno behaviour) after this many events.
-    #[arg(long, default_value_t = 10_000)]
-    max_events: usize,
-    /// Stop with a fault after this many attempted steps (accepted and rejected).
-    #[arg(long, default_value_t = SimOptions::default().max_steps)]
-    max_steps: usize,
-    /// A crossing is grazing (no time gradient) when |g''| delta / d^2 reaches this, with d the
-    /// crossing speed, g'' the guard's curvature and delta its accuracy at the tolerances; near-grazing
-    /// (gradient kept, with a warning) when it reaches its square.
-    #[arg(long, default_value_t = SimOptions::default().graze_tol)]
-    graze_tol: f64,
-    /// Leave the sensitivities out of the step-size error control (faster, gradients less
-    /// accurate).
-    #[arg(long)]
-    no_sens_error_control: bool,
-    /// Put running costs (states that nothing but outputs reads, such as `der(effort) = u^2`)
-    /// under the step-size error control. By default they take no part in it (as CVODES'
-    /// quadratures), and a run warns when one's own error exceeded the tolerance on a step.
-    #[arg(long, overrides_with = "no_quadrature_error_control")]
-    quadrature_error_control: bool,
-    /// Leave running costs out of the step-size error control: the default, accepted so that
-    /// scripts written for earlier builds (where control was the default) keep working.
-    #[arg(long, hide = true, overrides_with = "quadrature_error_control")]
-    no_quadrature_error_control: bool,
-    /// Land a step on every event instant, with every method (the Rosenbrock methods do by
-    /// default, the explicit pairs where stability holds the step): the pre-event state, its
-    /// sensitivities and the event time from a step end under the error control, not from the
-    /// dense output; one more step attempt per event.
-    #[arg(long)]
-    land_events: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -149,105 +86,8 @@ pub fn run(args: &RunArgs) -> ExitCode {
     }
 }
 
-/// Parameter values: the defaults with every `--set P=VALUE` applied and range-checked; a
-/// parameter set twice is a usage error (the second value would silently win). A vector
-/// parameter takes all its values at once, `--set u=0,0.5,1` (exactly as many as it has
-/// elements), or one element, `--set u[3]=1`.
-pub(crate) fn parameter_values(model: &Model, sets: &[String]) -> Result<Params, String> {
-    let mut params = model.params();
-    let mut seen = std::collections::HashSet::new();
-    let number = |name: &str, text: &str| {
-        crate::number::parse_number(text.trim()).map_err(|e| match e {
-            crate::number::NumberError::TooSmall { .. } => format!("--set {name}: {e}"),
-            _ => format!("--set: `{}` is not a finite number", text.trim()),
-        })
-    };
-    for s in sets {
-        let Some((name, value)) = s.split_once('=') else {
-            return Err(format!("--set: expected P=VALUE, found `{s}`"));
-        };
-        let name = name.trim();
-        if let Some(v) = model.vector(name) {
-            let values: Vec<f64> =
-                value.split(',').map(|text| number(name, text)).collect::<Result<_, _>>()?;
-            if values.len() != v.len as usize {
-                return Err(format!(
-                    "--set {name}: expected {} comma-separated values, one per element of `{name}`, found {}",
-                    v.len,
-                    values.len()
-                ));
-            }
-            if let Some(p) = v.elements().find(|p| !seen.insert(*p)) {
-                let element = &model.checked().params[p.0 as usize].name;
-                return Err(format!(
-                    "--set: `{element}` is set twice (`--set {name}=...` sets every element)"
-                ));
-            }
-            params.set_vector(name, &values).map_err(|e| format!("--set: {e}"))?;
-            continue;
-        }
-        let idx = model.param_index(name).map_err(|e| format!("--set: {e}"))?;
-        if !seen.insert(idx) {
-            let whole = name.split_once('[').map(|(v, _)| format!(" (`--set {v}=...` sets every element)"));
-            return Err(format!("--set: `{name}` is set twice{}", whole.unwrap_or_default()));
-        }
-        let value = number(name, value)?;
-        params.set(name, value).map_err(|e| format!("--set: {e}"))?;
-    }
-    Ok(params)
-}
-
-pub(crate) use crate::limits::MAX_EVENTS;
 /// The most rows `--trajectory` with `--plot` keeps in memory for the figure.
 const MAX_PLOTTED_ROWS: f64 = crate::sim::MAX_SAMPLED_ROWS;
-
-/// `value` if it is at most `cap`, else a usage error naming the flag.
-pub(crate) fn at_most(flag: &str, value: usize, cap: usize) -> Result<usize, String> {
-    crate::limits::count(flag, value, 0, cap).map_err(|e| e.to_string())
-}
-
-pub(crate) fn positive(name: &str, v: f64) -> Result<f64, String> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        Err(format!("{name}: expected a positive number, found {v}"))
-    }
-}
-
-/// Simulation options: the flags over the model's `simulate` line over the run defaults
-/// (`Model::sim_options`); no trajectory.
-pub(crate) fn sim_options(model: &Model, args: &SimFlags) -> Result<SimOptions, String> {
-    let base = model.sim_options();
-    let rtol = positive("--rtol", args.rtol.unwrap_or(base.rtol))?;
-    if rtol >= 1.0 {
-        return Err(format!("--rtol: expected a number below 1, found {rtol}"));
-    }
-    let (t_start, t_end) = crate::api::time_span(args.t_start, args.t_end, &base, ("--t-start", "--t-end"))?;
-    Ok(SimOptions {
-        t_start,
-        t_end,
-        rtol,
-        atol: positive("--atol", args.atol.unwrap_or(base.atol))?,
-        method: match args.method {
-            MethodArg::Auto => Method::Auto,
-            MethodArg::Dopri5 => Method::Dopri5,
-            MethodArg::Dop853 => Method::Dop853,
-            MethodArg::Rodas5p => Method::Rodas5p,
-            MethodArg::Rodas4 => Method::Rodas4,
-        },
-        max_steps: crate::limits::count("--max-steps", args.max_steps, 1, crate::limits::MAX_STEPS)
-            .map_err(|e| e.to_string())?,
-        // 0 would still fire the first event (the cap is checked after each instant), so it is
-        // refused rather than reported as 1.
-        max_events: crate::limits::count("--max-events", args.max_events, 1, MAX_EVENTS)
-            .map_err(|e| e.to_string())?,
-        graze_tol: positive("--graze-tol", args.graze_tol)?,
-        sens_error_control: !args.no_sens_error_control,
-        quadrature_error_control: args.quadrature_error_control,
-        land_events: if args.land_events { Some(true) } else { base.land_events },
-        ..base
-    })
-}
 
 /// The trajectory `--trajectory`/`--sample` ask for, its number of rows checked.
 fn trajectory_request(args: &RunArgs, opts: &SimOptions) -> Result<TrajectoryRequest, String> {
@@ -300,11 +140,10 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         None => Vec::new(),
     };
     let params = parameter_values(model, &args.set)?;
-    let mut opts = sim_options(model, &args.sim)?;
+    let mut overrides = args.sim.overrides();
+    overrides.at = args.at.as_deref().map(super::samples::parse_at).transpose()?;
+    let mut opts = overrides.apply(&model.sim_options(), Spelling::Flag).map_err(|e| e.message)?;
     opts.trajectory = trajectory_request(args, &opts)?;
-    if let Some(at) = &args.at {
-        opts.at = super::samples::parse_at(at)?;
-    }
     plot_trajectory(args, &mut opts)?;
     let check_opts = check_options(&opts, args)?;
 

@@ -10,7 +10,7 @@ use std::process::ExitCode;
 use clap::ValueEnum;
 use serde_json::{json, Map, Value};
 
-use super::run::{at_most, parameter_values, sim_options, SimFlags};
+use super::options::{at_most, parameter_values, sim_options, SimFlags};
 use super::sweep::progress_bar;
 use super::{compile_model, load_model, usage_error, ModelArg, EXIT_SIM_STOPPED};
 use crate::limits::{MAX_BOOTSTRAP, MAX_SOBOL_BASE_POINTS, MAX_SOBOL_VALUES, MAX_SWEEP_POINTS, MAX_THREADS};

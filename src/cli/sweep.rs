@@ -9,8 +9,8 @@ use std::process::ExitCode;
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::run::{at_most, parameter_values, sim_options, SimFlags};
-use super::{compile_model, load_model, parse_param_list, usage_error, ModelArg, EXIT_SIM_STOPPED};
+use super::options::{at_most, parameter_values, parse_param_list, sim_options, SimFlags};
+use super::{compile_model, load_model, usage_error, ModelArg, EXIT_SIM_STOPPED};
 use crate::plot::{self, Shown, SweepFigure};
 use crate::sema::ParamIdx;
 use crate::sim::SimOptions;
