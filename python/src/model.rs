@@ -296,11 +296,5 @@ impl Model {
 
 /// The errors `compile` would give for the gradient names, without compiling.
 fn check_grad_names(model: &hybc::Model, grad: &[String]) -> PyResult<()> {
-    for (i, name) in grad.iter().enumerate() {
-        model.param_index(name).map_err(|e| errors::to_py(e.into()))?;
-        if grad[..i].contains(name) {
-            return Err(ParameterError::new_err(format!("parameter `{name}` is named twice")));
-        }
-    }
-    Ok(())
+    model.param_list(grad).map(drop).map_err(|e| errors::to_py(e.into()))
 }

@@ -110,8 +110,7 @@ pub(crate) fn error_chain(e: &dyn std::error::Error) -> String {
 
 /// Compiles `model` with gradients for `grad`, or prints why not and returns exit code 1.
 pub(crate) fn compile_model(model: &crate::Model, grad: &[ParamIdx]) -> Result<crate::Compiled, ExitCode> {
-    let names: Vec<&str> = grad.iter().map(|p| model.checked().params[p.0 as usize].name.as_str()).collect();
-    model.compile(&names).map_err(|e| {
+    model.compile_params(grad).map_err(|e| {
         eprintln!("error: {}", error_chain(&e));
         ExitCode::from(EXIT_MODEL_ERROR)
     })

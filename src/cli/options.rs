@@ -8,7 +8,7 @@ use clap::ValueEnum;
 
 use crate::sema::ParamIdx;
 use crate::sim::{Method, SimOptions};
-use crate::{Model, Params, SimOverrides, Spelling};
+use crate::{Model, ParamError, Params, SimOverrides, Spelling};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub(crate) enum MethodArg {
@@ -188,29 +188,18 @@ pub(crate) fn parameter_values(model: &Model, sets: &[String]) -> Result<Params,
     Ok(params)
 }
 
-/// Parses a comma-separated list of parameter names, or `all`, for the flag `flag`. A vector
-/// parameter's name stands for all its elements, in order; `u[3]` for one.
+/// Parses a comma-separated list of parameter names, or `all`, for the flag `flag`
+/// ([`Model::param_list`]: a vector parameter's name stands for all its elements, in order;
+/// `u[3]` for one).
 pub(crate) fn parse_param_list(model: &Model, list: &str, flag: &str) -> Result<Vec<ParamIdx>, String> {
     if list.trim() == "all" {
         return Ok((0..model.checked().params.len()).map(|i| ParamIdx(i as u32)).collect());
     }
-    let mut out: Vec<ParamIdx> = Vec::new();
-    // A set, not a scan of `out`: a vector of 10^5 elements would make the check quadratic.
-    let mut seen = std::collections::HashSet::new();
-    for name in list.split(',').map(str::trim).filter(|n| !n.is_empty()) {
-        let indices: Vec<ParamIdx> = match model.vector(name) {
-            Some(v) => v.elements().collect(),
-            None => vec![model.param_index(name).map_err(|e| format!("{flag}: {e}"))?],
-        };
-        for p in indices {
-            if !seen.insert(p) {
-                let element = &model.checked().params[p.0 as usize].name;
-                return Err(format!("{flag}: `{element}` is named twice"));
-            }
-            out.push(p);
-        }
-    }
-    Ok(out)
+    let names: Vec<&str> = list.split(',').map(str::trim).filter(|n| !n.is_empty()).collect();
+    model.param_list(&names).map_err(|e| match e {
+        ParamError::Duplicate { name } => format!("{flag}: `{name}` is named twice"),
+        e => format!("{flag}: {e}"),
+    })
 }
 
 /// `value` if it is at most `cap`, else a usage error naming the flag.

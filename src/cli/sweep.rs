@@ -355,7 +355,7 @@ fn plot_sweep(
         figure.add_tangents(info, param, &at_points, &at_results)
     } else {
         let with_param = model
-            .compile(&[info.param_names[param].as_str()])
+            .compile_params(&[ParamIdx(param as u32)])
             .map_err(|e| format!("--plot: {}", super::error_chain(&e)))?;
         let at_results = sweep::run_points(with_param.native(), &at_points, opts, threads, &|| ())
             .map_err(|e| format!("--threads: {e}"))?;
