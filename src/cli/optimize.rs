@@ -4,7 +4,6 @@
 //! a plot.
 
 use std::process::ExitCode;
-use std::time::Instant;
 
 use clap::ValueEnum;
 
@@ -197,16 +196,9 @@ fn plot(
         trajectory: TrajectoryRequest::Sample((sim.t_end - sim.t_start) / 1000.0),
         ..sim.clone()
     };
-    let started = Instant::now();
-    let result = crate::sim::run(compiled.native(), params, &opts).map_err(|e| format!("--plot: {e}"))?;
-    let report = crate::report::RunReport {
-        model: compiled.model().name().to_string(),
-        t_end: opts.t_end,
-        info: compiled.info().clone(),
-        params: params.to_vec(),
-        result,
-        compile_seconds: compiled.compile_seconds(),
-        run_seconds: started.elapsed().as_secs_f64(),
-    };
-    crate::plot::plot_run(&report, path).map_err(|e| format!("--plot: {e}"))
+    let run = compiled
+        .simulator(&opts)
+        .and_then(|mut s| s.run_values(params))
+        .map_err(|e| format!("--plot: {e}"))?;
+    crate::plot::plot_run(&run.into_report(), path).map_err(|e| format!("--plot: {e}"))
 }

@@ -4,7 +4,6 @@
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::time::Instant;
 
 use clap::ValueEnum;
 
@@ -14,7 +13,7 @@ use super::{compile_model, error_chain, load_model, usage_error, ModelArg};
 use super::{EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
 use crate::gradcheck::{self, CheckOptions};
 use crate::report::RunReport;
-use crate::sim::{SimOptions, Simulator, TrajectoryRequest};
+use crate::sim::{SimOptions, TrajectoryRequest};
 use crate::{Compiled, Model, Params, Spelling};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -112,26 +111,16 @@ fn run_streaming(
 ) -> Result<RunReport, String> {
     let cannot_write = |e: std::io::Error| format!("--trajectory: cannot write `{}`: {e}", path.display());
     let file = std::fs::File::create(path).map_err(cannot_write)?;
-    let system = compiled.native();
     let p = params.values();
     let mut recorder =
-        StreamingTrajectory::new(system, p, opts.trajectory, opts.t_start, std::io::BufWriter::new(file))
+        StreamingTrajectory::new(compiled, p, opts.trajectory, opts.t_start, std::io::BufWriter::new(file))
             .map_err(cannot_write)?;
+    // The recorder takes the rows; the run keeps none.
     let run_opts = SimOptions { trajectory: TrajectoryRequest::None, ..opts.clone() };
-    let mut simulator = Simulator::new(system, &run_opts).map_err(|e| error_chain(&e))?;
-    let started = Instant::now();
-    let result = simulator.run_with(p, &mut recorder).map_err(|e| error_chain(&e))?;
-    let run_seconds = started.elapsed().as_secs_f64();
+    let mut simulator = compiled.simulator(&run_opts).map_err(|e| error_chain(&e))?;
+    let run = simulator.run_with(params, &mut recorder).map_err(|e| error_chain(&e))?;
     recorder.finish().map_err(cannot_write)?;
-    Ok(RunReport {
-        model: compiled.model().name().to_string(),
-        t_end: opts.t_end,
-        info: compiled.info().clone(),
-        params: p.to_vec(),
-        result,
-        compile_seconds: compiled.compile_seconds(),
-        run_seconds,
-    })
+    Ok(run.into_report())
 }
 
 fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
@@ -158,7 +147,7 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
             let report = compiled.simulate(&params, &opts).map_err(|e| error_chain(&e))?.into_report();
             if let Some(path) = trajectory {
                 let rows = report.result.trajectory.as_deref().unwrap_or_default();
-                trajectory::write_kept(path, compiled.native(), &report.params, rows)
+                trajectory::write_kept(path, &compiled, &report.params, rows)
                     .map_err(|e| format!("--trajectory: cannot write `{}`: {e}", path.display()))?;
             }
             report
@@ -184,7 +173,7 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
     let check = match check_opts {
         Some(check_opts) => {
             let ranges: Vec<_> = model.checked().params.iter().map(|p| p.range).collect();
-            let (sys, p, result) = (compiled.native(), &report.params, &report.result);
+            let (sys, p, result) = (&compiled, &report.params, &report.result);
             Some(
                 gradcheck::check_within(sys, p, &ranges, &opts, result, &check_opts)
                     .map_err(|e| e.to_string())?,

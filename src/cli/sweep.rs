@@ -256,7 +256,7 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
         Err(code) => return Ok(code),
     };
     let info = compiled.info();
-    let columns = Columns::new(info, opts.t_end, args.events, grad.len());
+    let columns = Columns::new(info, args.events, grad.len());
     let format = match args.format {
         FormatArg::Csv => Format::Csv,
         FormatArg::Jsonl => Format::Jsonl,
@@ -264,7 +264,7 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
     let bar = progress_bar(points.len());
     let keep = args.plot.is_some();
     let streamed = sweep::stream_rows(
-        compiled.native(),
+        &compiled,
         &points,
         &opts,
         &columns,
@@ -357,7 +357,7 @@ fn plot_sweep(
         let with_param = model
             .compile_params(&[ParamIdx(param as u32)])
             .map_err(|e| format!("--plot: {}", super::error_chain(&e)))?;
-        let at_results = sweep::run_points(with_param.native(), &at_points, opts, threads, &|| ())
+        let at_results = sweep::run_points(&with_param, &at_points, opts, threads, &|| ())
             .map_err(|e| format!("--threads: {e}"))?;
         figure.add_tangents(with_param.info(), param, &at_points, &at_results)
     };
