@@ -6,6 +6,7 @@ mod derive;
 mod fit;
 mod optimize;
 mod options;
+mod output;
 mod periodic;
 mod run;
 mod samples;
@@ -131,17 +132,21 @@ pub(crate) fn usage_error(message: &str) -> ExitCode {
 /// Writes `text` to stdout. A closed pipe (`hybc run ... | head`) is not an error worth a panic:
 /// the reader has what it wanted.
 pub(crate) fn print_out(text: &str) {
-    use std::io::Write as _;
-    write_out(|out| out.write_all(text.as_bytes()));
+    print_to(output::Stream::Stdout, text);
+}
+
+/// Writes `text` to `stream`, as [`print_out`] does to stdout.
+pub(crate) fn print_to(stream: output::Stream, text: &str) {
+    output::write_to(stream, |out| std::io::Write::write_all(out, text.as_bytes()));
 }
 
 /// A `fmt::Write` over an `io::Write`, keeping the IO error that `fmt::Error` cannot carry.
-pub(crate) struct FmtIo<'w, W: std::io::Write> {
+pub(crate) struct FmtIo<'w, W: std::io::Write + ?Sized> {
     inner: &'w mut W,
     error: Option<std::io::Error>,
 }
 
-impl<'w, W: std::io::Write> FmtIo<'w, W> {
+impl<'w, W: std::io::Write + ?Sized> FmtIo<'w, W> {
     pub(crate) fn new(inner: &'w mut W) -> Self {
         FmtIo { inner, error: None }
     }
@@ -156,21 +161,11 @@ impl<'w, W: std::io::Write> FmtIo<'w, W> {
     }
 }
 
-impl<W: std::io::Write> std::fmt::Write for FmtIo<'_, W> {
+impl<W: std::io::Write + ?Sized> std::fmt::Write for FmtIo<'_, W> {
     fn write_str(&mut self, s: &str) -> std::fmt::Result {
         self.inner.write_all(s.as_bytes()).map_err(|e| {
             self.error = Some(e);
             std::fmt::Error
         })
     }
-}
-
-/// Lets `write` stream to a buffered stdout, and ignores a closed pipe as `print_out` does (the
-/// first failed write ends the output).
-pub(crate) fn write_out(
-    write: impl FnOnce(&mut std::io::BufWriter<std::io::StdoutLock>) -> std::io::Result<()>,
-) {
-    use std::io::Write as _;
-    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
-    let _ = write(&mut out).and_then(|()| out.flush());
 }

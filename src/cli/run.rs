@@ -1,7 +1,6 @@
 //! `hybc run FILE`: compile a model, simulate it with sensitivities and report events, final state,
 //! outputs and their gradients.
 
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -9,7 +8,7 @@ use clap::ValueEnum;
 
 use super::options::{parameter_values, parse_param_list, positive, SimFlags};
 use super::trajectory::{self, StreamingTrajectory};
-use super::{compile_model, error_chain, load_model, usage_error, ModelArg};
+use super::{compile_model, error_chain, load_model, output, usage_error, ModelArg};
 use super::{EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
 use crate::gradcheck::{self, CheckOptions};
 use crate::report::RunReport;
@@ -40,7 +39,8 @@ pub struct RunArgs {
     /// Output format.
     #[arg(long, value_enum, default_value = "table")]
     format: Format,
-    /// Write the trajectory to this CSV file (every step, or a uniform grid with --sample).
+    /// Write the trajectory to this CSV file (every step, or a uniform grid with --sample); `-`:
+    /// standard output, the report then to stderr.
     #[arg(long, value_name = "FILE.csv")]
     trajectory: Option<PathBuf>,
     /// Sample the trajectory every DT using the dense output.
@@ -52,7 +52,8 @@ pub struct RunArgs {
     /// instant gets the values after its events.
     #[arg(long, value_name = "LO:HI:N|T1,T2,...")]
     at: Option<String>,
-    /// Write the --at samples, with their derivatives, to this CSV file.
+    /// Write the --at samples, with their derivatives, to this CSV file; `-`: standard output, the
+    /// report then to stderr.
     #[arg(long, value_name = "FILE.csv", requires = "at")]
     samples_out: Option<PathBuf>,
     /// Plot states and outputs against time, with event lines and mode bands, into this file.
@@ -110,16 +111,15 @@ fn run_streaming(
     path: &Path,
 ) -> Result<RunReport, String> {
     let cannot_write = |e: std::io::Error| format!("--trajectory: cannot write `{}`: {e}", path.display());
-    let file = std::fs::File::create(path).map_err(cannot_write)?;
+    let out = output::create(path).map_err(cannot_write)?;
     let p = params.values();
     let mut recorder =
-        StreamingTrajectory::new(compiled, p, opts.trajectory, opts.t_start, std::io::BufWriter::new(file))
-            .map_err(cannot_write)?;
+        StreamingTrajectory::new(compiled, p, opts.trajectory, opts.t_start, out).map_err(cannot_write)?;
     // The recorder takes the rows; the run keeps none.
     let run_opts = SimOptions { trajectory: TrajectoryRequest::None, ..opts.clone() };
     let mut simulator = compiled.simulator(&run_opts).map_err(|e| error_chain(&e))?;
     let run = simulator.run_with(params, &mut recorder).map_err(|e| error_chain(&e))?;
-    recorder.finish().map_err(cannot_write)?;
+    output::closed_pipe_is_done(path, recorder.finish()).map_err(cannot_write)?;
     Ok(run.into_report())
 }
 
@@ -135,6 +135,11 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
     opts.trajectory = trajectory_request(args, &opts)?;
     plot_trajectory(args, &mut opts)?;
     let check_opts = check_options(&opts, args)?;
+    // A file written to standard output (`-`) leaves it to that file: the report goes to stderr.
+    let report_to = output::report_stream(&[
+        ("--trajectory", args.trajectory.as_deref()),
+        ("--samples-out", args.samples_out.as_deref()),
+    ])?;
 
     let compiled = match compile_model(model, &grad) {
         Ok(c) => c,
@@ -185,13 +190,13 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         match args.format {
             Format::Table => {
                 // Streamed as the JSON is: 10^6 event lines are about 90 MB of text.
-                super::write_out(|out| {
+                output::write_to(report_to, |out| {
                     let mut out = super::FmtIo::new(out);
                     let written = report.write_table(&mut out);
                     out.result(written)
                 });
                 if let Some(check) = &check {
-                    super::print_out(&format!("\n{}", check.to_table()));
+                    super::print_to(report_to, &format!("\n{}", check.to_table()));
                 }
             }
             Format::Json => {
@@ -202,8 +207,8 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
                     extra.push(("check_grad", value));
                 }
                 // Streamed: the text of 10^6 events is never held whole (docs/cli.md, Limits).
-                super::write_out(|out| {
-                    report.write_json(out, &extra)?;
+                output::write_to(report_to, |mut out| {
+                    report.write_json(&mut out, &extra)?;
                     out.write_all(b"\n")
                 });
             }

@@ -67,7 +67,7 @@ pub struct SweepArgs {
     /// Output format.
     #[arg(long, value_enum, default_value = "csv")]
     format: FormatArg,
-    /// Write the rows to this file instead of stdout.
+    /// Write the rows to this file instead of stdout (`-`: stdout).
     #[arg(long, short = 'o', value_name = "FILE")]
     output: Option<PathBuf>,
     /// Events shown per row (their names, times and time gradients).
@@ -243,7 +243,9 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
         }
     }
     // Open the output before the work, so that a bad path fails at once.
-    let mut out: Box<dyn Write> = match &args.output {
+    // `--output -` is standard output, as no --output is.
+    let output = args.output.as_deref().filter(|path| !super::output::is_stdout(path));
+    let mut out: Box<dyn Write> = match output {
         Some(path) => Box::new(std::io::BufWriter::new(
             std::fs::File::create(path)
                 .map_err(|e| format!("--output: cannot write `{}`: {e}", path.display()))?,
@@ -278,9 +280,9 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
     let streamed = match streamed {
         Ok(streamed) => streamed,
         // A closed stdout pipe (`hybc sweep ... | head`) means the reader has what it wanted.
-        Err(sweep::SweepError::Write(_)) if args.output.is_none() => return Ok(ExitCode::SUCCESS),
+        Err(sweep::SweepError::Write(_)) if output.is_none() => return Ok(ExitCode::SUCCESS),
         Err(sweep::SweepError::Write(e)) => {
-            let path = args.output.as_deref().unwrap_or(std::path::Path::new("-"));
+            let path = output.unwrap_or(std::path::Path::new(super::output::STDOUT));
             return Err(format!("--output: cannot write `{}`: {e}", path.display()));
         }
         Err(e @ sweep::SweepError::WorkerPanicked { .. }) => return Err(format!("internal error: {e}")),
