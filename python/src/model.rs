@@ -154,9 +154,8 @@ impl Model {
         sim: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Run> {
         let keywords = SimKeywords::from_kwargs(sim)?;
-        let mut opts = keywords.options(&self.model)?;
+        let mut opts = keywords.options_at(&self.model, at)?;
         opts.trajectory = trajectory_request(trajectory)?;
-        opts.at = crate::options::sample_times(at)?;
         let values = self.param_values(params)?;
         let compiled = self.compiled(py, &grad.unwrap_or_default())?;
         let t_end = opts.t_end;
@@ -297,11 +296,5 @@ impl Model {
 
 /// The errors `compile` would give for the gradient names, without compiling.
 fn check_grad_names(model: &hybc::Model, grad: &[String]) -> PyResult<()> {
-    for (i, name) in grad.iter().enumerate() {
-        model.param_index(name).map_err(|e| errors::to_py(e.into()))?;
-        if grad[..i].contains(name) {
-            return Err(ParameterError::new_err(format!("parameter `{name}` is named twice")));
-        }
-    }
-    Ok(())
+    model.param_list(grad).map(drop).map_err(|e| errors::to_py(e.into()))
 }

@@ -91,10 +91,7 @@ fn free_boxes(
     bounds: Option<HashMap<String, (f64, f64)>>,
 ) -> PyResult<Vec<hybc::fit::Bounds>> {
     let inner = model.inner();
-    let free_idx = free
-        .iter()
-        .map(|name| inner.param_index(name).map_err(|e| errors::to_py(e.into())))
-        .collect::<PyResult<Vec<_>>>()?;
+    let free_idx = inner.param_list(free).map_err(|e| errors::to_py(e.into()))?;
     hybc::limits::count(
         "free (parameters, vector elements counted)",
         free_idx.len(),

@@ -15,7 +15,7 @@ use crate::sim::{self, HybridSystem as _, SimOptions, SystemInfo};
 #[derive(Clone, Debug)]
 pub struct Compiled {
     model: Model,
-    native: Arc<CompiledModel>,
+    pub(super) native: Arc<CompiledModel>,
     compile_seconds: f64,
 }
 
@@ -33,7 +33,9 @@ impl Compiled {
         &self.model
     }
 
-    /// The native code, which implements [`sim::HybridSystem`].
+    /// The native code, which implements [`sim::HybridSystem`], for tests and measurements that
+    /// reach the kernels. A front end hands the `Compiled` itself to an analysis: it is a
+    /// `HybridSystem` too (`system.rs`).
     pub fn native(&self) -> &CompiledModel {
         &self.native
     }
@@ -103,8 +105,23 @@ impl Simulator {
     pub fn run_values(&mut self, p: &[f64]) -> Result<Run, Error> {
         let started = Instant::now();
         let result = self.sim.run(p)?;
+        Ok(self.finished(p, result, started))
+    }
+
+    /// Runs at `params` with `recorder` observing the run as it goes (the start, every step,
+    /// both sides of every event): a front end writes a long trajectory as it is recorded rather
+    /// than keeping it. The run's `trajectory` is then `None`, whatever the options ask.
+    pub fn run_with<R: sim::Recorder>(&mut self, params: &Params, recorder: &mut R) -> Result<Run, Error> {
+        self.compiled.check_params(params)?;
+        let p = params.values();
+        let started = Instant::now();
+        let result = self.sim.run_with(p, recorder)?;
+        Ok(self.finished(p, result, started))
+    }
+
+    fn finished(&self, p: &[f64], result: sim::SimResult, started: Instant) -> Run {
         let run_seconds = started.elapsed().as_secs_f64();
-        Ok(Run::new(self.compiled.clone(), p.to_vec(), self.sim.options().t_end, result, run_seconds))
+        Run::new(self.compiled.clone(), p.to_vec(), self.sim.options().t_end, result, run_seconds)
     }
 
     /// The raw result at `p`, without names attached (for loops that read a few numbers).

@@ -16,10 +16,11 @@ mod model;
 mod options;
 mod params;
 mod run;
+mod system;
 
 pub use compiled::{Compiled, Simulator};
 pub use error::{Error, ModelError, ParamError};
 pub use model::{Model, MAX_MODEL_BYTES};
-pub use options::time_span;
+pub use options::{method_named, time_span, OptionError, SimOverrides, Spelling};
 pub use params::Params;
 pub use run::Run;

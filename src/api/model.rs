@@ -155,31 +155,51 @@ impl Model {
         ParamError::Unknown { model: self.name().to_string(), name: name.to_string(), hint, known }
     }
 
+    /// The parameters `names` stand for, in order: a parameter's name one (`u[3]`, an element of
+    /// a vector), a vector's name every element. Names are expanded here once, so that what is
+    /// compiled, differentiated or solved for is a list of indices from then on. Refuses an
+    /// unknown name (naming the closest) and a parameter named twice, directly or through its
+    /// vector.
+    pub fn param_list<S: AsRef<str>>(&self, names: &[S]) -> Result<Vec<ParamIdx>, ParamError> {
+        let checked = &self.inner.checked;
+        let mut out: Vec<ParamIdx> = Vec::with_capacity(names.len());
+        // A set, not a scan of `out`: `--grad u` on a long vector names thousands.
+        let mut seen = std::collections::HashSet::new();
+        for name in names {
+            let name = name.as_ref();
+            let first = out.len();
+            match checked.vector(name) {
+                Some(v) => out.extend(v.elements()),
+                None => out.push(checked.param_index(name).ok_or_else(|| self.unknown_param(name))?),
+            }
+            if let Some(p) = out[first..].iter().find(|p| !seen.insert(**p)) {
+                return Err(ParamError::Duplicate { name: checked.params[p.0 as usize].name.clone() });
+            }
+        }
+        Ok(out)
+    }
+
     /// Compiles the model to native code with gradients with respect to `grad` (parameter
-    /// names, in the order of the sensitivity columns; empty for no gradients).
+    /// names as [`Self::param_list`] reads them, in the order of the sensitivity columns; empty
+    /// for no gradients).
     pub fn compile<S: AsRef<str>>(&self, grad: &[S]) -> Result<Compiled, Error> {
         self.compile_with(grad, &CompileOptions::default())
     }
 
     /// [`Self::compile`] with explicit code-generation options.
     pub fn compile_with<S: AsRef<str>>(&self, grad: &[S], opts: &CompileOptions) -> Result<Compiled, Error> {
-        let mut indices: Vec<ParamIdx> = Vec::with_capacity(grad.len());
-        // A set, not a scan of `indices`: `--grad u` on a long vector names thousands.
-        let mut seen = std::collections::HashSet::new();
-        for name in grad {
-            let idx = self.param_index(name.as_ref())?;
-            if !seen.insert(idx) {
-                return Err(ParamError::Duplicate { name: name.as_ref().to_string() }.into());
-            }
-            indices.push(idx);
-        }
-        Compiled::new(self.clone(), &indices, opts)
+        Compiled::new(self.clone(), &self.param_list(grad)?, opts)
+    }
+
+    /// [`Self::compile`] with the gradient parameters as a [`Self::param_list`] gave them.
+    pub(crate) fn compile_params(&self, grad: &[ParamIdx]) -> Result<Compiled, Error> {
+        Compiled::new(self.clone(), grad, &CompileOptions::default())
     }
 
     /// [`Self::compile`] with gradients with respect to every parameter.
     pub fn compile_all(&self) -> Result<Compiled, Error> {
-        let names: Vec<&str> = self.param_names().collect();
-        self.compile(&names)
+        let all: Vec<ParamIdx> = (0..self.inner.checked.params.len()).map(|i| ParamIdx(i as u32)).collect();
+        self.compile_params(&all)
     }
 
     /// Whether `other` is this very model (the same parse, or a clone of it).

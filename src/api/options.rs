@@ -1,8 +1,173 @@
-//! Checks of simulation options that every front end shares, so that `hybc run`'s flags and
-//! Python's keywords accept the same values with the same words. A front end passes the names it
-//! spells an option with (`--t-start` or `t_start`); the rule lives here once.
+//! The simulation options every front end takes, checked once. A front end only fills a
+//! [`SimOverrides`] (the command line from its flags, Python from its keywords) and names how it
+//! spells an option ([`Spelling`]); [`SimOverrides::apply`] lays it over the model's options with
+//! the one set of checks, so `hybc run --rtol=-1` and `simulate(rtol=-1)` are refused with the
+//! same words, each naming the option as its user wrote it.
 
-use crate::sim::SimOptions;
+use crate::limits;
+use crate::sim::{LinearSolver, Method, SimOptions, MAX_SAMPLED_ROWS};
+
+/// How a front end spells an option in its messages: `--t-start` on the command line, `t_start`
+/// in Python (the library's own name, a [`SimOptions`] field).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Spelling {
+    /// A command-line flag: `--` and the name with dashes.
+    Flag,
+    /// A keyword argument: the name as it is.
+    Keyword,
+}
+
+impl Spelling {
+    /// `option` (a [`SimOverrides::OPTIONS`] name) as this front end writes it.
+    pub fn of(self, option: &str) -> String {
+        match self {
+            Spelling::Flag => format!("--{}", option.replace('_', "-")),
+            Spelling::Keyword => option.to_string(),
+        }
+    }
+}
+
+/// A simulation option refused, with the message that names it in the front end's spelling.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{message}")]
+pub struct OptionError {
+    /// The option's library name (one of [`SimOverrides::OPTIONS`]).
+    pub option: &'static str,
+    /// The whole message: `--rtol: expected a positive number, found -1`.
+    pub message: String,
+}
+
+/// Every simulation option a front end can set; `None` keeps the model's value (its `simulate`
+/// line over [`SimOptions::default`]). Only [`Self::apply`] checks the values.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SimOverrides {
+    pub t_start: Option<f64>,
+    pub t_end: Option<f64>,
+    pub rtol: Option<f64>,
+    pub atol: Option<f64>,
+    pub method: Option<Method>,
+    pub max_events: Option<usize>,
+    pub max_steps: Option<usize>,
+    pub graze_tol: Option<f64>,
+    pub h_max: Option<f64>,
+    pub sens_error_control: Option<bool>,
+    pub quadrature_error_control: Option<bool>,
+    pub land_events: Option<bool>,
+    /// Library only (tests and measurements): no front end exposes it.
+    pub linear_solver: Option<LinearSolver>,
+    /// The sample times (`hybc run --at`, `simulate(at=...)`); their order and range are checked
+    /// by the run, against its span.
+    pub at: Option<Vec<f64>>,
+}
+
+impl SimOverrides {
+    /// The options' names, as [`SimOptions`] spells them, in the order a front end lists them
+    /// (Python's message for an unknown keyword). A test holds each front end to this list.
+    pub const OPTIONS: [&'static str; 14] = [
+        "t_end",
+        "rtol",
+        "atol",
+        "max_events",
+        "max_steps",
+        "method",
+        "graze_tol",
+        "sens_error_control",
+        "quadrature_error_control",
+        "land_events",
+        "h_max",
+        "t_start",
+        "linear_solver",
+        "at",
+    ];
+
+    /// `base` (usually [`Model::sim_options`](super::Model::sim_options)) with these values laid
+    /// over it, each checked: tolerances, `graze_tol` and `h_max` positive (`rtol` below 1), the
+    /// span by [`time_span`], the counts by [`limits::count`], at most
+    /// [`MAX_SAMPLED_ROWS`] sample times. The first refusal is returned, named in `spelling`.
+    pub fn apply(&self, base: &SimOptions, spelling: Spelling) -> Result<SimOptions, OptionError> {
+        let refuse = |option: &'static str| move |message: String| OptionError { option, message };
+        let positive =
+            |option: &'static str, v: f64| positive(&spelling.of(option), v).map_err(refuse(option));
+        let count = |option: &'static str, v: usize, max: usize| {
+            limits::count(&spelling.of(option), v, 1, max).map_err(|e| refuse(option)(e.to_string()))
+        };
+        let rtol = positive("rtol", self.rtol.unwrap_or(base.rtol))?;
+        if rtol >= 1.0 {
+            return Err(refuse("rtol")(format!(
+                "{}: expected a number below 1, found {rtol}",
+                spelling.of("rtol")
+            )));
+        }
+        let names = (spelling.of("t_start"), spelling.of("t_end"));
+        let (t_start, t_end) = time_span(self.t_start, self.t_end, base, (&names.0, &names.1))
+            // A span is refused by its end unless the start itself is not finite.
+            .map_err(|message| {
+                let option = if message.starts_with(&names.0) { "t_start" } else { "t_end" };
+                OptionError { option, message }
+            })?;
+        let atol = positive("atol", self.atol.unwrap_or(base.atol))?;
+        // 0 events would still fire the first event (the cap is checked after each instant), so it
+        // is refused rather than reported as 1.
+        let max_steps = count("max_steps", self.max_steps.unwrap_or(base.max_steps), limits::MAX_STEPS)?;
+        let max_events = count("max_events", self.max_events.unwrap_or(base.max_events), limits::MAX_EVENTS)?;
+        let graze_tol = positive("graze_tol", self.graze_tol.unwrap_or(base.graze_tol))?;
+        let h_max = match self.h_max {
+            None => base.h_max,
+            Some(h) => positive("h_max", h)?,
+        };
+        let at = match &self.at {
+            None => base.at.clone(),
+            Some(times) if times.len() as f64 > MAX_SAMPLED_ROWS => {
+                let message =
+                    format!("{}: {} times, at most {MAX_SAMPLED_ROWS:.0}", spelling.of("at"), times.len());
+                return Err(refuse("at")(message));
+            }
+            Some(times) => times.clone(),
+        };
+        Ok(SimOptions {
+            t_start,
+            t_end,
+            rtol,
+            atol,
+            method: self.method.unwrap_or(base.method),
+            max_events,
+            max_steps,
+            graze_tol,
+            sens_error_control: self.sens_error_control.unwrap_or(base.sens_error_control),
+            quadrature_error_control: self.quadrature_error_control.unwrap_or(base.quadrature_error_control),
+            h_max,
+            land_events: self.land_events.or(base.land_events),
+            linear_solver: self.linear_solver.unwrap_or(base.linear_solver),
+            trajectory: base.trajectory,
+            at,
+        })
+    }
+}
+
+/// The method named `name` (`auto`, `dopri5`, `dop853`, `rodas5p`, `rodas4`: the command line's
+/// and JSON's spelling), for a front end that reads it as text.
+pub fn method_named(name: &str, spelling: Spelling) -> Result<Method, OptionError> {
+    Method::ALL.into_iter().find(|m| m.name() == name).ok_or_else(|| {
+        let names: Vec<String> = Method::ALL.iter().map(|m| format!("{:?}", m.name())).collect();
+        let (last, first) = names.split_last().expect("there are methods");
+        OptionError {
+            option: "method",
+            message: format!(
+                "{}: expected {} or {last}, found {name:?}",
+                spelling.of("method"),
+                first.join(", ")
+            ),
+        }
+    })
+}
+
+fn positive(name: &str, v: f64) -> Result<f64, String> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("{name}: expected a positive number, found {v}"))
+    }
+}
 
 /// The start and end of a run: `t_start` (default: `base.t_start`) any finite time, `t_end`
 /// (default: `base.t_end`) a finite time after it. Times are absolute: time events, input knots
@@ -57,5 +222,91 @@ mod tests {
         assert!(time_span(None, Some(f64::INFINITY), &base, NAMES)
             .unwrap_err()
             .starts_with("--t-end: expected a finite"));
+    }
+
+    #[test]
+    fn no_overrides_leave_the_base_as_it_is() {
+        let base = SimOptions { t_end: 2.5, rtol: 1e-6, land_events: Some(false), ..SimOptions::default() };
+        assert_eq!(SimOverrides::default().apply(&base, Spelling::Flag), Ok(base));
+    }
+
+    #[test]
+    fn every_value_is_checked_once_and_named_in_the_front_ends_spelling() {
+        let base = SimOptions::default();
+        let refused = |overrides: SimOverrides| {
+            let flag = overrides.apply(&base, Spelling::Flag).unwrap_err();
+            let keyword = overrides.apply(&base, Spelling::Keyword).unwrap_err();
+            // The same words, only the options' names spelled differently.
+            let respelled = SimOverrides::OPTIONS
+                .iter()
+                .fold(flag.message.clone(), |m, o| m.replace(&Spelling::Flag.of(o), o));
+            assert_eq!((keyword.option, keyword.message), (flag.option, respelled));
+            (flag.option, flag.message)
+        };
+        let cases = [
+            (
+                SimOverrides { rtol: Some(-1.0), ..Default::default() },
+                "rtol",
+                "--rtol: expected a positive number, found -1",
+            ),
+            (
+                SimOverrides { rtol: Some(1.0), ..Default::default() },
+                "rtol",
+                "--rtol: expected a number below 1, found 1",
+            ),
+            (
+                SimOverrides { atol: Some(0.0), ..Default::default() },
+                "atol",
+                "--atol: expected a positive number, found 0",
+            ),
+            (
+                SimOverrides { graze_tol: Some(f64::NAN), ..Default::default() },
+                "graze_tol",
+                "--graze-tol: expected a positive number, found NaN",
+            ),
+            (
+                SimOverrides { h_max: Some(-2.0), ..Default::default() },
+                "h_max",
+                "--h-max: expected a positive number, found -2",
+            ),
+            (
+                SimOverrides { max_events: Some(0), ..Default::default() },
+                "max_events",
+                "--max-events: at least 1, found 0",
+            ),
+            (
+                SimOverrides { max_steps: Some(0), ..Default::default() },
+                "max_steps",
+                "--max-steps: at least 1, found 0",
+            ),
+            (
+                SimOverrides { t_start: Some(f64::INFINITY), ..Default::default() },
+                "t_start",
+                "--t-start: expected a finite number, found inf",
+            ),
+            (
+                SimOverrides { t_start: Some(3.0), t_end: Some(1.0), ..Default::default() },
+                "t_end",
+                "--t-end: expected a time after --t-start = 3, found 1",
+            ),
+            (
+                SimOverrides { at: Some(vec![0.0; 1_000_001]), ..Default::default() },
+                "at",
+                "--at: 1000001 times, at most 1000000",
+            ),
+        ];
+        for (overrides, option, message) in cases {
+            assert_eq!(refused(overrides), (option, message.to_string()));
+        }
+    }
+
+    #[test]
+    fn a_method_is_named_as_the_command_line_spells_it() {
+        assert_eq!(method_named("rodas5p", Spelling::Keyword), Ok(Method::Rodas5p));
+        let e = method_named("euler", Spelling::Keyword).unwrap_err();
+        assert_eq!(
+            e.message,
+            r#"method: expected "auto", "dopri5", "dop853", "rodas5p" or "rodas4", found "euler""#
+        );
     }
 }

@@ -127,19 +127,12 @@ impl Run {
 
     /// The run as the report `hybc run` prints (table or JSON).
     pub fn report(&self) -> RunReport {
-        RunReport {
-            model: self.compiled.model().name().to_string(),
-            t_end: self.t_end,
-            info: self.info().clone(),
-            params: self.params.clone(),
-            result: self.result.clone(),
-            compile_seconds: self.compiled.compile_seconds(),
-            run_seconds: self.run_seconds,
-        }
+        self.clone().into_report()
     }
 
     /// The report, taking this run's result rather than copying it (a run at the
-    /// `--max-events` cap holds 10^6 event records).
+    /// `--max-events` cap holds 10^6 event records). The one place a `RunReport` is made: every
+    /// report of a run, the CLI's and Python's, comes from a `Run`.
     pub fn into_report(self) -> RunReport {
         RunReport {
             model: self.compiled.model().name().to_string(),

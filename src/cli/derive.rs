@@ -2,7 +2,8 @@
 
 use std::process::ExitCode;
 
-use super::{load_model, parse_param_list, usage_error, ModelArg};
+use super::options::parse_param_list;
+use super::{load_model, usage_error, ModelArg};
 use crate::lower::{derive_report, lower};
 
 #[derive(Debug, clap::Args)]

@@ -4,10 +4,8 @@
 use clap::ValueEnum;
 use std::process::ExitCode;
 
-use super::run::{parameter_values, positive, sim_options, SimFlags};
-use super::{
-    compile_model, load_model, parse_param_list, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED,
-};
+use super::options::{at_most, parameter_values, parse_param_list, positive, sim_options, SimFlags};
+use super::{compile_model, load_model, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
 use crate::fit::request::{self, Failure, Request};
 use crate::fit::FitOptions;
 use crate::Model;
@@ -77,7 +75,7 @@ fn fit_options(args: &FitArgs) -> Result<FitOptions, String> {
         return Err("--max-iter: expected at least 1".to_string());
     }
     // Every trial is kept for the report (a few hundred bytes each).
-    super::run::at_most("--max-iter", args.max_iter, MAX_ITER)?;
+    at_most("--max-iter", args.max_iter, MAX_ITER)?;
     Ok(FitOptions {
         max_iter: args.max_iter,
         xtol: positive("--xtol", args.xtol)?,

@@ -5,6 +5,8 @@ mod check;
 mod derive;
 mod fit;
 mod optimize;
+mod options;
+mod output;
 mod periodic;
 mod run;
 mod samples;
@@ -109,8 +111,7 @@ pub(crate) fn error_chain(e: &dyn std::error::Error) -> String {
 
 /// Compiles `model` with gradients for `grad`, or prints why not and returns exit code 1.
 pub(crate) fn compile_model(model: &crate::Model, grad: &[ParamIdx]) -> Result<crate::Compiled, ExitCode> {
-    let names: Vec<&str> = grad.iter().map(|p| model.checked().params[p.0 as usize].name.as_str()).collect();
-    model.compile(&names).map_err(|e| {
+    model.compile_params(grad).map_err(|e| {
         eprintln!("error: {}", error_chain(&e));
         ExitCode::from(EXIT_MODEL_ERROR)
     })
@@ -128,49 +129,24 @@ pub(crate) fn usage_error(message: &str) -> ExitCode {
     ExitCode::from(EXIT_USAGE_ERROR)
 }
 
-/// Parses a comma-separated list of parameter names, or `all`, for the flag `flag`. A vector
-/// parameter's name stands for all its elements, in order; `u[3]` for one.
-pub(crate) fn parse_param_list(
-    model: &crate::Model,
-    list: &str,
-    flag: &str,
-) -> Result<Vec<ParamIdx>, String> {
-    if list.trim() == "all" {
-        return Ok((0..model.checked().params.len()).map(|i| ParamIdx(i as u32)).collect());
-    }
-    let mut out: Vec<ParamIdx> = Vec::new();
-    // A set, not a scan of `out`: a vector of 10^5 elements would make the check quadratic.
-    let mut seen = std::collections::HashSet::new();
-    for name in list.split(',').map(str::trim).filter(|n| !n.is_empty()) {
-        let indices: Vec<ParamIdx> = match model.vector(name) {
-            Some(v) => v.elements().collect(),
-            None => vec![model.param_index(name).map_err(|e| format!("{flag}: {e}"))?],
-        };
-        for p in indices {
-            if !seen.insert(p) {
-                let element = &model.checked().params[p.0 as usize].name;
-                return Err(format!("{flag}: `{element}` is named twice"));
-            }
-            out.push(p);
-        }
-    }
-    Ok(out)
-}
-
 /// Writes `text` to stdout. A closed pipe (`hybc run ... | head`) is not an error worth a panic:
 /// the reader has what it wanted.
 pub(crate) fn print_out(text: &str) {
-    use std::io::Write as _;
-    write_out(|out| out.write_all(text.as_bytes()));
+    print_to(output::Stream::Stdout, text);
+}
+
+/// Writes `text` to `stream`, as [`print_out`] does to stdout.
+pub(crate) fn print_to(stream: output::Stream, text: &str) {
+    output::write_to(stream, |out| std::io::Write::write_all(out, text.as_bytes()));
 }
 
 /// A `fmt::Write` over an `io::Write`, keeping the IO error that `fmt::Error` cannot carry.
-pub(crate) struct FmtIo<'w, W: std::io::Write> {
+pub(crate) struct FmtIo<'w, W: std::io::Write + ?Sized> {
     inner: &'w mut W,
     error: Option<std::io::Error>,
 }
 
-impl<'w, W: std::io::Write> FmtIo<'w, W> {
+impl<'w, W: std::io::Write + ?Sized> FmtIo<'w, W> {
     pub(crate) fn new(inner: &'w mut W) -> Self {
         FmtIo { inner, error: None }
     }
@@ -185,21 +161,11 @@ impl<'w, W: std::io::Write> FmtIo<'w, W> {
     }
 }
 
-impl<W: std::io::Write> std::fmt::Write for FmtIo<'_, W> {
+impl<W: std::io::Write + ?Sized> std::fmt::Write for FmtIo<'_, W> {
     fn write_str(&mut self, s: &str) -> std::fmt::Result {
         self.inner.write_all(s.as_bytes()).map_err(|e| {
             self.error = Some(e);
             std::fmt::Error
         })
     }
-}
-
-/// Lets `write` stream to a buffered stdout, and ignores a closed pipe as `print_out` does (the
-/// first failed write ends the output).
-pub(crate) fn write_out(
-    write: impl FnOnce(&mut std::io::BufWriter<std::io::StdoutLock>) -> std::io::Result<()>,
-) {
-    use std::io::Write as _;
-    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
-    let _ = write(&mut out).and_then(|()| out.flush());
 }

@@ -4,14 +4,11 @@
 //! a plot.
 
 use std::process::ExitCode;
-use std::time::Instant;
 
 use clap::ValueEnum;
 
-use super::run::{at_most, parameter_values, positive, sim_options, SimFlags};
-use super::{
-    compile_model, load_model, parse_param_list, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED,
-};
+use super::options::{at_most, parameter_values, parse_param_list, positive, sim_options, SimFlags};
+use super::{compile_model, load_model, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
 use crate::fit::Bounds;
 use crate::optimize::report::OptimizeReport;
 use crate::optimize::request::{self, Failure, Request};
@@ -199,16 +196,9 @@ fn plot(
         trajectory: TrajectoryRequest::Sample((sim.t_end - sim.t_start) / 1000.0),
         ..sim.clone()
     };
-    let started = Instant::now();
-    let result = crate::sim::run(compiled.native(), params, &opts).map_err(|e| format!("--plot: {e}"))?;
-    let report = crate::report::RunReport {
-        model: compiled.model().name().to_string(),
-        t_end: opts.t_end,
-        info: compiled.info().clone(),
-        params: params.to_vec(),
-        result,
-        compile_seconds: compiled.compile_seconds(),
-        run_seconds: started.elapsed().as_secs_f64(),
-    };
-    crate::plot::plot_run(&report, path).map_err(|e| format!("--plot: {e}"))
+    let run = compiled
+        .simulator(&opts)
+        .and_then(|mut s| s.run_values(params))
+        .map_err(|e| format!("--plot: {e}"))?;
+    crate::plot::plot_run(&run.into_report(), path).map_err(|e| format!("--plot: {e}"))
 }

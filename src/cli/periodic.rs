@@ -7,8 +7,8 @@ use std::process::ExitCode;
 use clap::ValueEnum;
 use serde_json::json;
 
-use super::run::{parameter_values, positive, sim_options, SimFlags};
-use super::{load_model, parse_param_list, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
+use super::options::{at_most, parameter_values, parse_param_list, positive, sim_options, SimFlags};
+use super::{load_model, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
 use crate::periodic::{self, PeriodicError, PeriodicProblem, PeriodicResult, TRIVIAL_MULTIPLIER};
 use crate::report::num;
 use crate::Model;
@@ -84,7 +84,7 @@ pub fn run(args: &PeriodicArgs) -> ExitCode {
 
 fn solve(model: &Model, args: &PeriodicArgs) -> Result<ExitCode, String> {
     let free = parse_param_list(model, &args.free, "--free")?;
-    super::run::at_most("--max-iter", args.max_iter, crate::limits::MAX_FIT_ITER)?;
+    at_most("--max-iter", args.max_iter, crate::limits::MAX_FIT_ITER)?;
     let (section, firing) = section_firing(&args.section)?;
     let problem = PeriodicProblem {
         model: model.checked(),

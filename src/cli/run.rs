@@ -1,89 +1,24 @@
 //! `hybc run FILE`: compile a model, simulate it with sensitivities and report events, final state,
 //! outputs and their gradients.
 
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::time::Instant;
 
 use clap::ValueEnum;
 
+use super::options::{parameter_values, parse_param_list, positive, SimFlags};
 use super::trajectory::{self, StreamingTrajectory};
-use super::{compile_model, error_chain, load_model, parse_param_list, usage_error, ModelArg};
+use super::{compile_model, error_chain, load_model, output, usage_error, ModelArg};
 use super::{EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
 use crate::gradcheck::{self, CheckOptions};
 use crate::report::RunReport;
-use crate::sim::{Method, SimOptions, Simulator, TrajectoryRequest};
-use crate::{Compiled, Model, Params};
-
-#[derive(Debug, Clone, Copy, ValueEnum)]
-enum MethodArg {
-    /// DOP853 when rtol < 1e-7, else Dormand-Prince 5(4); switches to Rodas5P while the flow is
-    /// stiff (and back), each stretch reported.
-    Auto,
-    Dopri5,
-    Dop853,
-    /// Rosenbrock Rodas5P (stiff flows; compiles the flow's Jacobians on first use).
-    Rodas5p,
-    /// Rosenbrock Rodas4 (stiff flows).
-    Rodas4,
-}
+use crate::sim::{SimOptions, TrajectoryRequest};
+use crate::{Compiled, Model, Params, Spelling};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum Format {
     Table,
     Json,
-}
-
-/// The integrator flags `hybc run` and `hybc sweep` share.
-#[derive(Debug, clap::Args)]
-pub(crate) struct SimFlags {
-    /// Start time (default 0). Times are absolute: time events, input knots and every `t` in the
-    /// model keep their values, so a later start skips what comes before it.
-    #[arg(long, value_name = "T", allow_negative_numbers = true)]
-    t_start: Option<f64>,
-    /// End time (default: the model's `simulate t_end`, else 10).
-    #[arg(long, value_name = "T")]
-    t_end: Option<f64>,
-    /// Relative tolerance (default: the model's, else 1e-8).
-    #[arg(long)]
-    rtol: Option<f64>,
-    /// Absolute tolerance (default: the model's, else 1e-10).
-    #[arg(long)]
-    atol: Option<f64>,
-    /// Integration method.
-    #[arg(long, value_enum, default_value = "auto")]
-    method: MethodArg,
-    /// Stop (as Zeno behaviour) after this many events.
-    #[arg(long, default_value_t = 10_000)]
-    max_events: usize,
-    /// Stop with a fault after this many attempted steps (accepted and rejected).
-    #[arg(long, default_value_t = SimOptions::default().max_steps)]
-    max_steps: usize,
-    /// A crossing is grazing (no time gradient) when |g''| delta / d^2 reaches this, with d the
-    /// crossing speed, g'' the guard's curvature and delta its accuracy at the tolerances; near-grazing
-    /// (gradient kept, with a warning) when it reaches its square.
-    #[arg(long, default_value_t = SimOptions::default().graze_tol)]
-    graze_tol: f64,
-    /// Leave the sensitivities out of the step-size error control (faster, gradients less
-    /// accurate).
-    #[arg(long)]
-    no_sens_error_control: bool,
-    /// Put running costs (states that nothing but outputs reads, such as `der(effort) = u^2`)
-    /// under the step-size error control. By default they take no part in it (as CVODES'
-    /// quadratures), and a run warns when one's own error exceeded the tolerance on a step.
-    #[arg(long, overrides_with = "no_quadrature_error_control")]
-    quadrature_error_control: bool,
-    /// Leave running costs out of the step-size error control: the default, accepted so that
-    /// scripts written for earlier builds (where control was the default) keep working.
-    #[arg(long, hide = true, overrides_with = "quadrature_error_control")]
-    no_quadrature_error_control: bool,
-    /// Land a step on every event instant, with every method (the Rosenbrock methods do by
-    /// default, the explicit pairs where stability holds the step): the pre-event state, its
-    /// sensitivities and the event time from a step end under the error control, not from the
-    /// dense output; one more step attempt per event.
-    #[arg(long)]
-    land_events: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -104,7 +39,8 @@ pub struct RunArgs {
     /// Output format.
     #[arg(long, value_enum, default_value = "table")]
     format: Format,
-    /// Write the trajectory to this CSV file (every step, or a uniform grid with --sample).
+    /// Write the trajectory to this CSV file (every step, or a uniform grid with --sample); `-`:
+    /// standard output, the report then to stderr.
     #[arg(long, value_name = "FILE.csv")]
     trajectory: Option<PathBuf>,
     /// Sample the trajectory every DT using the dense output.
@@ -116,7 +52,8 @@ pub struct RunArgs {
     /// instant gets the values after its events.
     #[arg(long, value_name = "LO:HI:N|T1,T2,...")]
     at: Option<String>,
-    /// Write the --at samples, with their derivatives, to this CSV file.
+    /// Write the --at samples, with their derivatives, to this CSV file; `-`: standard output, the
+    /// report then to stderr.
     #[arg(long, value_name = "FILE.csv", requires = "at")]
     samples_out: Option<PathBuf>,
     /// Plot states and outputs against time, with event lines and mode bands, into this file.
@@ -149,105 +86,8 @@ pub fn run(args: &RunArgs) -> ExitCode {
     }
 }
 
-/// Parameter values: the defaults with every `--set P=VALUE` applied and range-checked; a
-/// parameter set twice is a usage error (the second value would silently win). A vector
-/// parameter takes all its values at once, `--set u=0,0.5,1` (exactly as many as it has
-/// elements), or one element, `--set u[3]=1`.
-pub(crate) fn parameter_values(model: &Model, sets: &[String]) -> Result<Params, String> {
-    let mut params = model.params();
-    let mut seen = std::collections::HashSet::new();
-    let number = |name: &str, text: &str| {
-        crate::number::parse_number(text.trim()).map_err(|e| match e {
-            crate::number::NumberError::TooSmall { .. } => format!("--set {name}: {e}"),
-            _ => format!("--set: `{}` is not a finite number", text.trim()),
-        })
-    };
-    for s in sets {
-        let Some((name, value)) = s.split_once('=') else {
-            return Err(format!("--set: expected P=VALUE, found `{s}`"));
-        };
-        let name = name.trim();
-        if let Some(v) = model.vector(name) {
-            let values: Vec<f64> =
-                value.split(',').map(|text| number(name, text)).collect::<Result<_, _>>()?;
-            if values.len() != v.len as usize {
-                return Err(format!(
-                    "--set {name}: expected {} comma-separated values, one per element of `{name}`, found {}",
-                    v.len,
-                    values.len()
-                ));
-            }
-            if let Some(p) = v.elements().find(|p| !seen.insert(*p)) {
-                let element = &model.checked().params[p.0 as usize].name;
-                return Err(format!(
-                    "--set: `{element}` is set twice (`--set {name}=...` sets every element)"
-                ));
-            }
-            params.set_vector(name, &values).map_err(|e| format!("--set: {e}"))?;
-            continue;
-        }
-        let idx = model.param_index(name).map_err(|e| format!("--set: {e}"))?;
-        if !seen.insert(idx) {
-            let whole = name.split_once('[').map(|(v, _)| format!(" (`--set {v}=...` sets every element)"));
-            return Err(format!("--set: `{name}` is set twice{}", whole.unwrap_or_default()));
-        }
-        let value = number(name, value)?;
-        params.set(name, value).map_err(|e| format!("--set: {e}"))?;
-    }
-    Ok(params)
-}
-
-pub(crate) use crate::limits::MAX_EVENTS;
 /// The most rows `--trajectory` with `--plot` keeps in memory for the figure.
 const MAX_PLOTTED_ROWS: f64 = crate::sim::MAX_SAMPLED_ROWS;
-
-/// `value` if it is at most `cap`, else a usage error naming the flag.
-pub(crate) fn at_most(flag: &str, value: usize, cap: usize) -> Result<usize, String> {
-    crate::limits::count(flag, value, 0, cap).map_err(|e| e.to_string())
-}
-
-pub(crate) fn positive(name: &str, v: f64) -> Result<f64, String> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        Err(format!("{name}: expected a positive number, found {v}"))
-    }
-}
-
-/// Simulation options: the flags over the model's `simulate` line over the run defaults
-/// (`Model::sim_options`); no trajectory.
-pub(crate) fn sim_options(model: &Model, args: &SimFlags) -> Result<SimOptions, String> {
-    let base = model.sim_options();
-    let rtol = positive("--rtol", args.rtol.unwrap_or(base.rtol))?;
-    if rtol >= 1.0 {
-        return Err(format!("--rtol: expected a number below 1, found {rtol}"));
-    }
-    let (t_start, t_end) = crate::api::time_span(args.t_start, args.t_end, &base, ("--t-start", "--t-end"))?;
-    Ok(SimOptions {
-        t_start,
-        t_end,
-        rtol,
-        atol: positive("--atol", args.atol.unwrap_or(base.atol))?,
-        method: match args.method {
-            MethodArg::Auto => Method::Auto,
-            MethodArg::Dopri5 => Method::Dopri5,
-            MethodArg::Dop853 => Method::Dop853,
-            MethodArg::Rodas5p => Method::Rodas5p,
-            MethodArg::Rodas4 => Method::Rodas4,
-        },
-        max_steps: crate::limits::count("--max-steps", args.max_steps, 1, crate::limits::MAX_STEPS)
-            .map_err(|e| e.to_string())?,
-        // 0 would still fire the first event (the cap is checked after each instant), so it is
-        // refused rather than reported as 1.
-        max_events: crate::limits::count("--max-events", args.max_events, 1, MAX_EVENTS)
-            .map_err(|e| e.to_string())?,
-        graze_tol: positive("--graze-tol", args.graze_tol)?,
-        sens_error_control: !args.no_sens_error_control,
-        quadrature_error_control: args.quadrature_error_control,
-        land_events: if args.land_events { Some(true) } else { base.land_events },
-        ..base
-    })
-}
 
 /// The trajectory `--trajectory`/`--sample` ask for, its number of rows checked.
 fn trajectory_request(args: &RunArgs, opts: &SimOptions) -> Result<TrajectoryRequest, String> {
@@ -271,27 +111,16 @@ fn run_streaming(
     path: &Path,
 ) -> Result<RunReport, String> {
     let cannot_write = |e: std::io::Error| format!("--trajectory: cannot write `{}`: {e}", path.display());
-    let file = std::fs::File::create(path).map_err(cannot_write)?;
-    let system = compiled.native();
+    let out = output::create(path).map_err(cannot_write)?;
     let p = params.values();
     let mut recorder =
-        StreamingTrajectory::new(system, p, opts.trajectory, opts.t_start, std::io::BufWriter::new(file))
-            .map_err(cannot_write)?;
+        StreamingTrajectory::new(compiled, p, opts.trajectory, opts.t_start, out).map_err(cannot_write)?;
+    // The recorder takes the rows; the run keeps none.
     let run_opts = SimOptions { trajectory: TrajectoryRequest::None, ..opts.clone() };
-    let mut simulator = Simulator::new(system, &run_opts).map_err(|e| error_chain(&e))?;
-    let started = Instant::now();
-    let result = simulator.run_with(p, &mut recorder).map_err(|e| error_chain(&e))?;
-    let run_seconds = started.elapsed().as_secs_f64();
-    recorder.finish().map_err(cannot_write)?;
-    Ok(RunReport {
-        model: compiled.model().name().to_string(),
-        t_end: opts.t_end,
-        info: compiled.info().clone(),
-        params: p.to_vec(),
-        result,
-        compile_seconds: compiled.compile_seconds(),
-        run_seconds,
-    })
+    let mut simulator = compiled.simulator(&run_opts).map_err(|e| error_chain(&e))?;
+    let run = simulator.run_with(params, &mut recorder).map_err(|e| error_chain(&e))?;
+    output::closed_pipe_is_done(path, recorder.finish()).map_err(cannot_write)?;
+    Ok(run.into_report())
 }
 
 fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
@@ -300,13 +129,17 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         None => Vec::new(),
     };
     let params = parameter_values(model, &args.set)?;
-    let mut opts = sim_options(model, &args.sim)?;
+    let mut overrides = args.sim.overrides();
+    overrides.at = args.at.as_deref().map(super::samples::parse_at).transpose()?;
+    let mut opts = overrides.apply(&model.sim_options(), Spelling::Flag).map_err(|e| e.message)?;
     opts.trajectory = trajectory_request(args, &opts)?;
-    if let Some(at) = &args.at {
-        opts.at = super::samples::parse_at(at)?;
-    }
     plot_trajectory(args, &mut opts)?;
     let check_opts = check_options(&opts, args)?;
+    // A file written to standard output (`-`) leaves it to that file: the report goes to stderr.
+    let report_to = output::report_stream(&[
+        ("--trajectory", args.trajectory.as_deref()),
+        ("--samples-out", args.samples_out.as_deref()),
+    ])?;
 
     let compiled = match compile_model(model, &grad) {
         Ok(c) => c,
@@ -319,7 +152,7 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
             let report = compiled.simulate(&params, &opts).map_err(|e| error_chain(&e))?.into_report();
             if let Some(path) = trajectory {
                 let rows = report.result.trajectory.as_deref().unwrap_or_default();
-                trajectory::write_kept(path, compiled.native(), &report.params, rows)
+                trajectory::write_kept(path, &compiled, &report.params, rows)
                     .map_err(|e| format!("--trajectory: cannot write `{}`: {e}", path.display()))?;
             }
             report
@@ -345,7 +178,7 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
     let check = match check_opts {
         Some(check_opts) => {
             let ranges: Vec<_> = model.checked().params.iter().map(|p| p.range).collect();
-            let (sys, p, result) = (compiled.native(), &report.params, &report.result);
+            let (sys, p, result) = (&compiled, &report.params, &report.result);
             Some(
                 gradcheck::check_within(sys, p, &ranges, &opts, result, &check_opts)
                     .map_err(|e| e.to_string())?,
@@ -357,13 +190,13 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         match args.format {
             Format::Table => {
                 // Streamed as the JSON is: 10^6 event lines are about 90 MB of text.
-                super::write_out(|out| {
+                output::write_to(report_to, |out| {
                     let mut out = super::FmtIo::new(out);
                     let written = report.write_table(&mut out);
                     out.result(written)
                 });
                 if let Some(check) = &check {
-                    super::print_out(&format!("\n{}", check.to_table()));
+                    super::print_to(report_to, &format!("\n{}", check.to_table()));
                 }
             }
             Format::Json => {
@@ -374,8 +207,8 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
                     extra.push(("check_grad", value));
                 }
                 // Streamed: the text of 10^6 events is never held whole (docs/cli.md, Limits).
-                super::write_out(|out| {
-                    report.write_json(out, &extra)?;
+                output::write_to(report_to, |mut out| {
+                    report.write_json(&mut out, &extra)?;
                     out.write_all(b"\n")
                 });
             }

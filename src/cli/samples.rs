@@ -49,14 +49,14 @@ pub(crate) fn parse_at(text: &str) -> Result<Vec<f64>, String> {
     }
 }
 
-/// Writes the report's samples to `path` as CSV.
+/// Writes the report's samples to `path` as CSV (`-`: standard output).
 pub(crate) fn write_csv(path: &Path, report: &RunReport) -> Result<(), String> {
     let fail = |e: io::Error| format!("--samples-out: cannot write `{}`: {e}", path.display());
-    let file = std::fs::File::create(path).map_err(fail)?;
-    write_rows(&mut io::BufWriter::new(file), report).map_err(fail)
+    let mut out = super::output::create(path).map_err(fail)?;
+    super::output::closed_pipe_is_done(path, write_rows(&mut out, report)).map_err(fail)
 }
 
-fn write_rows(out: &mut impl Write, report: &RunReport) -> io::Result<()> {
+fn write_rows(out: &mut dyn Write, report: &RunReport) -> io::Result<()> {
     let info = &report.info;
     let grad: Vec<&str> = info.grad_params.iter().map(|&j| info.param_names[j].as_str()).collect();
     let names: Vec<&String> = info.output_names.iter().chain(&info.state_names).collect();

@@ -10,7 +10,7 @@ use std::process::ExitCode;
 use clap::ValueEnum;
 use serde_json::{json, Map, Value};
 
-use super::run::{at_most, parameter_values, sim_options, SimFlags};
+use super::options::{at_most, parameter_values, sim_options, SimFlags};
 use super::sweep::progress_bar;
 use super::{compile_model, load_model, usage_error, ModelArg, EXIT_SIM_STOPPED};
 use crate::limits::{MAX_BOOTSTRAP, MAX_SOBOL_BASE_POINTS, MAX_SOBOL_VALUES, MAX_SWEEP_POINTS, MAX_THREADS};
@@ -72,7 +72,8 @@ pub struct SobolArgs {
     #[arg(long, value_enum, default_value = "table")]
     format: FormatArg,
     /// Also write the design's rows (the varied parameters, in SALib's row order: A, AB_1..AB_D,
-    /// [BA_1..BA_D], B per base point) to this CSV file, to check the indices with SALib.
+    /// [BA_1..BA_D], B per base point) to this CSV file, to check the indices with SALib; `-`:
+    /// standard output, the indices then to stderr.
     #[arg(long, value_name = "FILE.csv")]
     design_out: Option<PathBuf>,
     /// Draw the indices as bars with their intervals, a panel per output, into this file.
@@ -156,13 +157,15 @@ fn sobol_model(model: &Model, args: &SobolArgs) -> Result<ExitCode, String> {
     if let Some(path) = &args.plot {
         crate::plot::ImageFormat::from_path(path).map_err(|e| format!("--plot: {e}"))?;
     }
+    // The design written to standard output (`-`) leaves it to the design: the report goes to
+    // stderr.
+    let report_to = super::output::report_stream(&[("--design-out", args.design_out.as_deref())])?;
     if let Some(path) = &args.design_out {
         write_design(&design, model, path)?;
     }
 
     let bar = progress_bar(rows);
-    let evaluated =
-        sobol::evaluate(compiled.native(), &design, &outputs, &opts, args.threads, &|| bar.inc(1));
+    let evaluated = sobol::evaluate(&compiled, &design, &outputs, &opts, args.threads, &|| bar.inc(1));
     bar.finish_and_clear();
     let evaluated = evaluated.map_err(|e| format!("--threads: {}", super::error_chain(&e)))?;
     let how = Analysis {
@@ -184,7 +187,7 @@ fn sobol_model(model: &Model, args: &SobolArgs) -> Result<ExitCode, String> {
         FormatArg::Table => table(&head, &results),
         FormatArg::Json => json_report(&head, &results) + "\n",
     };
-    super::print_out(&text);
+    super::print_to(report_to, &text);
     if let Some(path) = &args.plot {
         let conf = |v: &[f64], e: Option<&[f64]>| -> Vec<(f64, f64)> {
             v.iter().enumerate().map(|(i, v)| (*v, e.map_or(f64::NAN, |e| Z_95 * e[i]))).collect()
@@ -217,11 +220,16 @@ fn sobol_model(model: &Model, args: &SobolArgs) -> Result<ExitCode, String> {
 /// The design's rows as SALib's `X`: the varied parameters in flag order, one row per run.
 fn write_design(design: &Design, model: &Model, path: &std::path::Path) -> Result<(), String> {
     let fail = |e: std::io::Error| format!("--design-out: cannot write `{}`: {e}", path.display());
-    let file = std::fs::File::create(path).map_err(fail)?;
-    let mut w = std::io::BufWriter::new(file);
+    let mut w = super::output::create(path).map_err(fail)?;
+    let written = write_design_rows(design, model, &mut w);
+    super::output::closed_pipe_is_done(path, written).map_err(fail)
+}
+
+/// The rows of [`write_design`], to `w`.
+fn write_design_rows(design: &Design, model: &Model, w: &mut dyn Write) -> std::io::Result<()> {
     let names: Vec<&str> =
         design.varied().iter().map(|(p, _)| model.checked().params[*p].name.as_str()).collect();
-    writeln!(w, "{}", names.join(",")).map_err(fail)?;
+    writeln!(w, "{}", names.join(","))?;
     let mut p = vec![0.0; design.width()];
     let mut line = String::new();
     for r in 0..design.rows().unwrap_or(0) {
@@ -234,9 +242,9 @@ fn write_design(design: &Design, model: &Model, path: &std::path::Path) -> Resul
             line.push_str(&p[*param].to_string());
         }
         line.push('\n');
-        w.write_all(line.as_bytes()).map_err(fail)?;
+        w.write_all(line.as_bytes())?;
     }
-    w.flush().map_err(fail)
+    w.flush()
 }
 
 /// What every report starts with.

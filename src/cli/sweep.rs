@@ -9,8 +9,8 @@ use std::process::ExitCode;
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::run::{at_most, parameter_values, sim_options, SimFlags};
-use super::{compile_model, load_model, parse_param_list, usage_error, ModelArg, EXIT_SIM_STOPPED};
+use super::options::{at_most, parameter_values, parse_param_list, sim_options, SimFlags};
+use super::{compile_model, load_model, usage_error, ModelArg, EXIT_SIM_STOPPED};
 use crate::plot::{self, Shown, SweepFigure};
 use crate::sema::ParamIdx;
 use crate::sim::SimOptions;
@@ -67,7 +67,7 @@ pub struct SweepArgs {
     /// Output format.
     #[arg(long, value_enum, default_value = "csv")]
     format: FormatArg,
-    /// Write the rows to this file instead of stdout.
+    /// Write the rows to this file instead of stdout (`-`: stdout).
     #[arg(long, short = 'o', value_name = "FILE")]
     output: Option<PathBuf>,
     /// Events shown per row (their names, times and time gradients).
@@ -243,7 +243,9 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
         }
     }
     // Open the output before the work, so that a bad path fails at once.
-    let mut out: Box<dyn Write> = match &args.output {
+    // `--output -` is standard output, as no --output is.
+    let output = args.output.as_deref().filter(|path| !super::output::is_stdout(path));
+    let mut out: Box<dyn Write> = match output {
         Some(path) => Box::new(std::io::BufWriter::new(
             std::fs::File::create(path)
                 .map_err(|e| format!("--output: cannot write `{}`: {e}", path.display()))?,
@@ -256,7 +258,7 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
         Err(code) => return Ok(code),
     };
     let info = compiled.info();
-    let columns = Columns::new(info, opts.t_end, args.events, grad.len());
+    let columns = Columns::new(info, args.events, grad.len());
     let format = match args.format {
         FormatArg::Csv => Format::Csv,
         FormatArg::Jsonl => Format::Jsonl,
@@ -264,7 +266,7 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
     let bar = progress_bar(points.len());
     let keep = args.plot.is_some();
     let streamed = sweep::stream_rows(
-        compiled.native(),
+        &compiled,
         &points,
         &opts,
         &columns,
@@ -278,9 +280,9 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
     let streamed = match streamed {
         Ok(streamed) => streamed,
         // A closed stdout pipe (`hybc sweep ... | head`) means the reader has what it wanted.
-        Err(sweep::SweepError::Write(_)) if args.output.is_none() => return Ok(ExitCode::SUCCESS),
+        Err(sweep::SweepError::Write(_)) if output.is_none() => return Ok(ExitCode::SUCCESS),
         Err(sweep::SweepError::Write(e)) => {
-            let path = args.output.as_deref().unwrap_or(std::path::Path::new("-"));
+            let path = output.unwrap_or(std::path::Path::new(super::output::STDOUT));
             return Err(format!("--output: cannot write `{}`: {e}", path.display()));
         }
         Err(e @ sweep::SweepError::WorkerPanicked { .. }) => return Err(format!("internal error: {e}")),
@@ -355,9 +357,9 @@ fn plot_sweep(
         figure.add_tangents(info, param, &at_points, &at_results)
     } else {
         let with_param = model
-            .compile(&[info.param_names[param].as_str()])
+            .compile_params(&[ParamIdx(param as u32)])
             .map_err(|e| format!("--plot: {}", super::error_chain(&e)))?;
-        let at_results = sweep::run_points(with_param.native(), &at_points, opts, threads, &|| ())
+        let at_results = sweep::run_points(&with_param, &at_points, opts, threads, &|| ())
             .map_err(|e| format!("--threads: {e}"))?;
         figure.add_tangents(with_param.info(), param, &at_points, &at_results)
     };

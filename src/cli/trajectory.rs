@@ -1,4 +1,5 @@
-//! `hybc run --trajectory FILE.csv [--sample DT]`: the trajectory as CSV rows. Rows are written as
+//! `hybc run --trajectory FILE.csv [--sample DT]`: the trajectory as CSV rows (`-`: to standard
+//! output). Rows are written as
 //! the run records them (a [`Recorder`] that writes instead of keeping), so a long trajectory costs
 //! disk, not memory; only with `--plot`, which draws from the same rows, are they kept. The number
 //! of sampled rows is checked against [`MAX_TRAJECTORY_ROWS`] before the run.
@@ -157,18 +158,21 @@ impl<S: HybridSystem + ?Sized, W: Write> Recorder for StreamingTrajectory<'_, S,
     }
 }
 
-/// Writes the rows a run kept (`--trajectory` with `--plot`).
+/// Writes the rows a run kept (`--trajectory` with `--plot`) to `path` (`-`: standard output).
 pub(crate) fn write_kept<S: HybridSystem + ?Sized>(
     path: &Path,
     system: &S,
     params: &[f64],
     rows: &[crate::sim::TrajectoryRow],
 ) -> io::Result<()> {
-    let mut out = io::BufWriter::new(std::fs::File::create(path)?);
+    let mut out = super::output::create(path)?;
     let mut csv = TrajectoryCsv::new(system, params);
-    csv.write_header(&mut out)?;
-    for row in rows {
-        csv.write_row(&mut out, row.t, row.mode, &row.x, &row.s, &row.outputs)?;
-    }
-    out.flush()
+    let written = (|| {
+        csv.write_header(&mut out)?;
+        for row in rows {
+            csv.write_row(&mut out, row.t, row.mode, &row.x, &row.s, &row.outputs)?;
+        }
+        out.flush()
+    })();
+    super::output::closed_pipe_is_done(path, written)
 }

@@ -8,8 +8,7 @@ use std::fmt;
 use nalgebra::DMatrix;
 
 use super::target::{Observable, Target};
-use crate::report::RunReport;
-use crate::sim::{HybridSystem, SimOptions, SimResult, Simulator, StopReason, SystemInfo};
+use crate::sim::{HybridSystem, SimResult, Simulator, StopReason, SystemInfo};
 
 /// The residuals of one run and their Jacobian with respect to the free parameters.
 #[derive(Clone, Debug)]
@@ -91,7 +90,6 @@ pub fn evaluate<S: HybridSystem + ?Sized>(
     let sys: &S = simulator.handle();
     let info = sys.info();
     let result = simulator.run(p).map_err(|e| Rejection::RunStopped { message: e.to_string() })?;
-    let opts = simulator.options();
     let f = &result.final_state;
     // At a stop event the final time moves with the parameters: only the total derivatives
     // describe how the final values change.
@@ -99,7 +97,7 @@ pub fn evaluate<S: HybridSystem + ?Sized>(
         StopReason::TEnd => Finals { dstate: &f.dstate, doutputs: &f.doutputs },
         StopReason::Event { .. } => Finals { dstate: &f.dstate_total, doutputs: &f.doutputs_total },
         _ => {
-            return Err(Rejection::RunStopped { message: failure(&result, info, p, opts) });
+            return Err(Rejection::RunStopped { message: failure(&result, info) });
         }
     };
     let mut values = Vec::with_capacity(targets.len());
@@ -205,15 +203,7 @@ fn read(
 }
 
 /// The run report's own wording for a run that stopped early (names, time, mode and state).
-fn failure(result: &SimResult, info: &SystemInfo, p: &[f64], opts: &SimOptions) -> String {
-    let report = RunReport {
-        model: String::new(),
-        t_end: opts.t_end,
-        info: info.clone(),
-        params: p.to_vec(),
-        result: result.clone(),
-        compile_seconds: 0.0,
-        run_seconds: 0.0,
-    };
-    report.failure().unwrap_or_else(|| "the run stopped early".to_string())
+fn failure(result: &SimResult, info: &SystemInfo) -> String {
+    let described = result.stopped_by.describe(info, &result.events, &result.final_state);
+    described.unwrap_or_else(|| "the run stopped early".to_string())
 }

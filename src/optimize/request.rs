@@ -52,11 +52,7 @@ pub fn bounds(
         if !(lo.is_finite() && hi.is_finite() && lo < hi) {
             return Err(format!("`{name}`: expected finite LO < HI, found [{lo}, {hi}]"));
         }
-        let indices: Vec<ParamIdx> = match model.vector(name) {
-            Some(v) => v.elements().collect(),
-            None => vec![model.param_index(name).map_err(|e| e.to_string())?],
-        };
-        for p in indices {
+        for p in model.param_list(&[name]).map_err(|e| e.to_string())? {
             let k = free.iter().position(|f| *f == p).ok_or_else(|| {
                 format!(
                     "`{}` is not a free parameter (name it in the free parameters)",

@@ -26,6 +26,21 @@ pub enum Method {
 }
 
 impl Method {
+    /// Every method, in the order the command line lists them.
+    pub const ALL: [Method; 5] =
+        [Method::Auto, Method::Dopri5, Method::Dop853, Method::Rodas5p, Method::Rodas4];
+
+    /// The method's name as the command line, Python and JSON spell it (`dopri5`, `rodas5p`, ..).
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Auto => "auto",
+            Method::Dopri5 => "dopri5",
+            Method::Dop853 => "dop853",
+            Method::Rodas5p => "rodas5p",
+            Method::Rodas4 => "rodas4",
+        }
+    }
+
     /// The explicit pair `Auto` starts with at tolerance `rtol` (a named method stands for
     /// itself).
     pub fn resolve(self, rtol: f64) -> Method {
@@ -128,6 +143,18 @@ impl Default for SimOptions {
             linear_solver: super::LinearSolver::Auto,
             trajectory: TrajectoryRequest::None,
             at: Vec::new(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Method;
+
+    #[test]
+    fn a_methods_name_is_its_json_spelling() {
+        for m in Method::ALL {
+            assert_eq!(serde_json::to_value(m).unwrap(), m.name());
         }
     }
 }

@@ -30,7 +30,7 @@ use std::io::{self, Write};
 use serde_json::{Map, Value};
 
 use super::PointResult;
-use crate::report::{non_finite_name, RunReport};
+use crate::report::non_finite_name;
 use crate::sim::{non_finite_finals, SimResult, StopReason, SystemInfo};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -53,7 +53,6 @@ pub enum Cell {
 #[derive(Clone, Debug)]
 pub struct Columns<'a> {
     info: &'a SystemInfo,
-    t_end: f64,
     /// Events shown per row.
     events: usize,
     /// The first `shown_grad` sensitivity columns of the run are shown (a plot may have asked for
@@ -64,11 +63,10 @@ pub struct Columns<'a> {
 }
 
 impl<'a> Columns<'a> {
-    /// Columns for runs of a model with shape `info` to `t_end`, showing `events` events and the
-    /// gradients with respect to the first `shown_grad` of `info.grad_params`.
-    pub fn new(info: &'a SystemInfo, t_end: f64, events: usize, shown_grad: usize) -> Self {
-        let mut c =
-            Columns { info, t_end, events, shown_grad: shown_grad.min(info.n_grad()), header: Vec::new() };
+    /// Columns for runs of a model with shape `info`, showing `events` events and the gradients
+    /// with respect to the first `shown_grad` of `info.grad_params`.
+    pub fn new(info: &'a SystemInfo, events: usize, shown_grad: usize) -> Self {
+        let mut c = Columns { info, events, shown_grad: shown_grad.min(info.n_grad()), header: Vec::new() };
         c.header = c.build_header();
         c
     }
@@ -108,7 +106,7 @@ impl<'a> Columns<'a> {
     pub fn cells(&self, params: &[f64], result: &PointResult) -> Vec<Cell> {
         let mut row: Vec<Cell> = params.iter().map(|&v| Cell::Num(v)).collect();
         match result {
-            Ok(r) => self.result_cells(params, r, &mut row),
+            Ok(r) => self.result_cells(r, &mut row),
             Err(e) => {
                 row.push(Cell::Text("error".into()));
                 row.resize(self.header.len() - 1, Cell::Empty);
@@ -127,7 +125,7 @@ impl<'a> Columns<'a> {
         non_finite_finals(self.info, &r.final_state)
     }
 
-    fn result_cells(&self, params: &[f64], r: &SimResult, row: &mut Vec<Cell>) {
+    fn result_cells(&self, r: &SimResult, row: &mut Vec<Cell>) {
         let (n, k, m) = (self.info.n_states(), self.info.n_outputs(), self.info.n_grad());
         let complete = r.stopped_by.is_complete();
         let non_finite = if complete { self.non_finite(r) } else { None };
@@ -159,27 +157,15 @@ impl<'a> Columns<'a> {
         for j in 0..self.shown_grad {
             row.extend((0..k).map(|i| dy.map_or(Cell::Empty, |d| num_or_empty(d[j * k + i]))));
         }
-        row.push(match self.failure(params, r).or(non_finite) {
+        row.push(match self.failure(r).or(non_finite) {
             Some(message) => Cell::Text(message),
             None => Cell::Empty,
         });
     }
 
     /// The same message `hybc run` prints for a run that ended early.
-    fn failure(&self, params: &[f64], r: &SimResult) -> Option<String> {
-        if matches!(r.stopped_by, StopReason::TEnd | StopReason::Event { .. }) {
-            return None;
-        }
-        RunReport {
-            model: String::new(),
-            t_end: self.t_end,
-            info: self.info.clone(),
-            params: params.to_vec(),
-            result: r.clone(),
-            compile_seconds: 0.0,
-            run_seconds: 0.0,
-        }
-        .failure()
+    fn failure(&self, r: &SimResult) -> Option<String> {
+        r.stopped_by.describe(self.info, &r.events, &r.final_state)
     }
 
     /// Writes the header (CSV only; JSON lines name every value).

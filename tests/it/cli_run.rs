@@ -151,3 +151,21 @@ fn ball_with_each_rosenbrock_method_reproduces_the_closed_form_and_checks_its_gr
         }
     }
 }
+
+#[test]
+fn h_max_caps_the_step_size() {
+    // The ball's free flight is a parabola, which the explicit pair steps over in a few steps; a
+    // cap of 0.01 s makes at least 2.5 / 0.01 of them, and the bounces stay where they were.
+    let (free, _) = run_json(&["models/ball.hyb"]);
+    let (capped, out) = run_json(&["models/ball.hyb", "--h-max", "0.01"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let steps = |json: &Value| json["stats"]["steps"].as_u64().expect("steps");
+    assert!(steps(&free) < 100, "{}", steps(&free));
+    assert!(steps(&capped) >= 250, "{}", steps(&capped));
+    let times = |json: &Value| -> Vec<f64> {
+        json["events"].as_array().unwrap().iter().map(|e| f(&e["time"])).collect()
+    };
+    for (a, b) in times(&free).iter().zip(times(&capped)) {
+        assert_relative_eq!(*a, b, max_relative = 1e-8);
+    }
+}

@@ -251,7 +251,7 @@ fn a_zeno_point_has_its_error_in_the_row_and_the_sweep_goes_on() {
 fn columns_are_named_by_the_documented_scheme() {
     let (_, compiled) = ball(&[1]);
     let info = hybc::sim::HybridSystem::info(&compiled);
-    let columns = Columns::new(info, 2.5, 2, 1);
+    let columns = Columns::new(info, 2, 1);
     let expect = "g,e,h0,status,events,event1,t1,dt1/de,event2,t2,dt2/de,t_final,y,v,energy,dy/de,dv/de,denergy/de,error";
     assert_eq!(columns.header().join(","), expect);
     let mut csv = Vec::new();

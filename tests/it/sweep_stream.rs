@@ -74,7 +74,7 @@ fn the_library_stream_writes_what_the_in_memory_sweep_writes() {
     let model = hybc::Model::parse(DECAY).expect("model");
     let compiled = model.compile(&["k"]).expect("compiles");
     let opts = SimOptions { t_end: 0.01, rtol: 1e-3, atol: 1e-6, ..SimOptions::default() };
-    let columns = Columns::new(compiled.info(), opts.t_end, 1, 1);
+    let columns = Columns::new(compiled.info(), 1, 1);
     let grid =
         Points::Grid(Grid::new(vec![1.0], vec![(0, Axis::Even { lo: 0.0, hi: 10.0, n })]).expect("grid"));
     let samples = Points::Samples(Samples::new(vec![1.0], vec![(0, 0.0, 10.0)], n, 3));

@@ -93,6 +93,20 @@ fn params_take_a_vector_whole_or_by_element() {
     assert!(matches!(err, ParamError::NotAVector { .. }), "{err:?}");
 }
 
+#[test]
+fn a_parameter_list_expands_a_vector_once_and_refuses_a_name_twice() {
+    let model = Model::parse(DOT).expect("checks");
+    let list = model.param_list(&["h", "u", "w[2]"]).expect("known names");
+    let names: Vec<&str> = list.iter().map(|p| model.checked().params[p.0 as usize].name.as_str()).collect();
+    assert_eq!(names, ["h", "u[0]", "u[1]", "u[2]", "u[3]", "u[4]", "w[2]"]);
+    let twice = model.param_list(&["u", "u[1]"]).expect_err("u[1] twice");
+    assert_eq!(twice, ParamError::Duplicate { name: "u[1]".into() });
+    assert!(matches!(model.param_list(&["v"]), Err(ParamError::Unknown { .. })));
+    // Compiling reads its gradient names the same way: a vector's name is its elements.
+    let compiled = model.compile(&["u"]).expect("compiles");
+    assert_eq!(compiled.grad_names().collect::<Vec<_>>(), ["u[0]", "u[1]", "u[2]", "u[3]", "u[4]"]);
+}
+
 fn stdout(args: &[&str]) -> (i32, String, String) {
     let out = hybc(args);
     let code = out.status.code().expect("exit code");

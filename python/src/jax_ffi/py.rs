@@ -49,8 +49,7 @@ pub fn jax_register(
     hybc::limits::count("events", events, 0, hybc::limits::MAX_EVENT_COLUMNS)
         .map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))?;
     let inner = model.inner();
-    let mut opts = keywords.options(inner)?;
-    opts.at = crate::options::sample_times(at)?;
+    let opts = keywords.options_at(inner, at)?;
     // Every point's buffers hold each column at the end and at each time, with a Jacobian row
     // per column and time: bounded like `hybc sweep`'s event columns times the sampled rows.
     let per_point = (columns.len() * (1 + opts.at.len())) as f64 * (1 + params.len()) as f64;
