@@ -4,7 +4,7 @@
 
 use approx::assert_relative_eq;
 use hybc::sim::StopReason;
-use hybc::{Model, SimOptions};
+use hybc::{Method, Model, SimOptions};
 
 use crate::support::reference::BallForm;
 use crate::support::runs::{run, times};
@@ -171,6 +171,46 @@ fn a_reset_that_moves_a_crosses_guard_to_its_other_side_cascades_from_either_sid
             let want: &[f64] = if fires { &[0.5, 0.5] } else { &[0.5] };
             assert_eq!(times(&r), want, "{y0} -> {y1}, {guard}");
             assert_relative_eq!(r.state("x").unwrap(), if fires { 11.0 } else { 1.0 }, max_relative = 1e-12);
+        }
+    }
+}
+
+#[test]
+fn a_crossing_whose_condition_is_false_does_not_hide_the_next_crossing_of_its_guard() {
+    // x = (t - 1)^2 (integrated exactly, in long steps) crosses 0.25 at 0.5 and 1.5, where
+    // y = t - 1 is -0.5 and 0.5: the condition picks which crossing fires, and both fire without
+    // one. A directional guard meets only its own direction. `late` (y >= 1.8, at 2.8) makes a
+    // second candidate in the step, the other path of the search. Found by the relation harness:
+    // both crossings in one step, the first disabled, and the event never fired.
+    let cases: [(&str, &[f64]); 6] = [
+        ("x crosses 0.25 if y > 0", &[1.5]),
+        ("x crosses 0.25 if y < 0", &[0.5]),
+        ("x crosses 0.25", &[0.5, 1.5]),
+        ("x >= 0.25 if y > 0", &[1.5]),
+        ("x <= 0.25 if y > 0", &[]),
+        ("x crosses 0.25 if y > 0.6", &[]),
+    ];
+    for method in [Method::Dopri5, Method::Dop853, Method::Rodas5p, Method::Auto] {
+        for (guard, want) in cases {
+            for late in [false, true] {
+                let extra = if late { "event late when y >= 1.8\n" } else { "" };
+                let text = format!(
+                    "model two\nstate x = 1\nstate v = -2\nstate y = -1\nder(x) = v\nder(v) = 2\nder(y) = 1\n\
+                     event a when {guard} {{\n}}\n{extra}"
+                );
+                let r = run(&text, &[], |o| {
+                    o.t_end = 3.0;
+                    o.method = method;
+                });
+                let fired: Vec<f64> = r.events().iter().filter(|e| &*e.name == "a").map(|e| e.time).collect();
+                assert_eq!(fired.len(), want.len(), "{method:?} {guard} (late: {late}): {fired:?}");
+                for (t, w) in fired.iter().zip(want) {
+                    assert_relative_eq!(*t, *w, max_relative = 1e-9);
+                }
+                if late {
+                    assert_eq!(r.events().iter().filter(|e| &*e.name == "late").count(), 1);
+                }
+            }
         }
     }
 }

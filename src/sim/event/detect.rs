@@ -142,6 +142,8 @@ pub(crate) struct Detector {
     /// bounce) while the guard has not yet been strictly on that side again (see
     /// [`Detector::penetrated`]).
     bounced: Vec<Option<f64>>,
+    /// The end of the step `scan` last searched.
+    step_end: f64,
     gtmp: Vec<f64>,
     gx: Vec<f64>,
     gp: Vec<f64>,
@@ -282,6 +284,7 @@ impl Detector {
             found: vec![Finding::Nothing; ne],
             group: Vec::with_capacity(ne),
             bounced: vec![None; ne],
+            step_end: f64::NAN,
             gtmp: per_event(),
             gx: vec![0.0; nx],
             gp: vec![0.0; m],
@@ -729,10 +732,27 @@ impl Detector {
     /// `found`. The step ends at `t1` exactly (a breakpoint it landed on; `t0 + h` may round
     /// elsewhere).
     pub fn scan<S: HybridSystem + ?Sized, I: Interpolant>(&mut self, cx: &Guards<S>, dense: &I, t1: f64) {
-        let (info, evs) = (cx.info, cx.events());
-        let t0 = dense.t0();
+        self.step_end = t1;
         for c in 0..self.candidates.len() {
             let pos = self.candidates[c];
+            let dir = cx.info.events[cx.events()[pos]].direction;
+            self.build_samples(cx, dense, pos);
+            self.found[pos] = self.scan_samples(cx, dir, pos, dense);
+        }
+    }
+
+    /// The samples of the guard at `pos` along the step, in time order, for `scan_samples`: its
+    /// ends, and what its shape needs between them so that each piece holds at most one sign
+    /// change.
+    fn build_samples<S: HybridSystem + ?Sized, I: Interpolant>(
+        &mut self,
+        cx: &Guards<S>,
+        dense: &I,
+        pos: usize,
+    ) {
+        let (info, evs) = (cx.info, cx.events());
+        let (t0, t1) = (dense.t0(), self.step_end);
+        {
             let ev = evs[pos];
             let einfo = &info.events[ev];
             let dir = einfo.direction;
@@ -776,8 +796,51 @@ impl Detector {
                     self.samples.push(Sample { t: t1, g: g1, dg: dg1, extremum: false });
                 }
             }
-            self.found[pos] = self.scan_samples(cx, dir, pos, dense);
         }
+    }
+
+    /// The next crossing of the guard at `pos` in the step after `after` (a crossing located
+    /// there whose enabling condition was false): the step's samples of that guard beyond
+    /// `after`, from the guard's value there. A step can hold several crossings of one guard
+    /// (a polynomial flow integrated exactly in one long step); the first being disabled does
+    /// not end the search (docs/language.md, `if C`).
+    fn crossing_after<S: HybridSystem + ?Sized, I: Interpolant>(
+        &mut self,
+        cx: &Guards<S>,
+        pos: usize,
+        dense: &I,
+        after: f64,
+    ) -> Option<Crossing> {
+        if after >= self.step_end {
+            return None;
+        }
+        let ev = cx.events()[pos];
+        let dir = cx.info.events[ev].direction;
+        self.build_samples(cx, dense, pos);
+        let g = self.guard_on_dense(cx, pos, after, dense);
+        let dg = self.speed_on_dense(cx, ev, after, dense);
+        self.samples.retain(|s| s.t > after);
+        self.samples.insert(0, Sample { t: after, g, dg, extremum: false });
+        // The start rules (a guard pending on zero, a bounce leaving zero) are the step start's,
+        // not this point's.
+        let (pending, bounced) = (self.pending[pos], self.bounced[pos]);
+        self.pending[pos] = Pending::None;
+        self.bounced[pos] = None;
+        let finding =
+            if self.samples.len() < 2 { Finding::Nothing } else { self.scan_samples(cx, dir, pos, dense) };
+        self.pending[pos] = pending;
+        self.bounced[pos] = bounced;
+        let crossing = match finding {
+            Finding::Bracket { .. } => {
+                self.found[pos] = finding;
+                let c = self.locate(cx, pos, dense);
+                self.found[pos] = Finding::Nothing;
+                c
+            }
+            Finding::Located(c) => c,
+            Finding::Nothing | Finding::Stuck | Finding::NotFinite { .. } => return None,
+        };
+        (crossing.t > after).then_some(crossing)
     }
 
     /// A guard that reads only the time, in a step that does not resolve it (taken anyway, being
@@ -966,18 +1029,22 @@ impl Detector {
             return match finding {
                 Finding::Bracket { .. } | Finding::Located(_) => {
                     self.found[pos] = finding;
-                    let crossing = self.locate(cx, pos, dense);
+                    let mut crossing = self.locate(cx, pos, dense);
                     self.found[pos] = Finding::Nothing;
                     let ev = evs[pos];
-                    let holds = !info.events[ev].has_condition || {
-                        dense.eval(crossing.t, &mut self.x);
-                        sys.condition(ev, crossing.t, &self.x, p)
-                    };
-                    if holds {
-                        self.group.push((ev, crossing));
-                        Selection::Fire(crossing.t)
-                    } else {
-                        Selection::Nothing
+                    loop {
+                        let holds = !info.events[ev].has_condition || {
+                            dense.eval(crossing.t, &mut self.x);
+                            sys.condition(ev, crossing.t, &self.x, p)
+                        };
+                        if holds {
+                            self.group.push((ev, crossing));
+                            return Selection::Fire(crossing.t);
+                        }
+                        match self.crossing_after(cx, pos, dense, crossing.t) {
+                            Some(next) => crossing = next,
+                            None => return Selection::Nothing,
+                        }
                     }
                 }
                 Finding::NotFinite { t } => Selection::NotFinite { pos, t },
@@ -1018,8 +1085,13 @@ impl Detector {
             };
             if !holds {
                 // Not the instant's first event; it may still join a group whose earlier events
-                // make its condition true (judged when its turn comes in `fire_group`).
+                // make its condition true (judged when its turn comes in `fire_group`). Its next
+                // crossing in the step is a candidate of its own.
                 self.located_off.push((pos, crossing));
+                if let Some(next) = self.crossing_after(cx, pos, dense, crossing.t) {
+                    self.found[pos] = Finding::Located(next);
+                    self.estimates[best] = next.t;
+                }
                 continue;
             }
             self.located.push((pos, crossing));

@@ -601,7 +601,6 @@ const KNOWN: &[(u64, &str)] = &[
     (849, STEPS_EXHAUSTED),
     (884, STEPS_EXHAUSTED),
     (863, STOPPED_AS_ZENO),
-    (893, CONDITION_FALSE_HIDES_A_LATER_CROSSING),
     (899, STOPPED_AS_ZENO),
     (901, STOPPED_AS_ZENO),
     (952, STOPPED_AS_ZENO),
@@ -615,12 +614,6 @@ const STOPPED_AS_ZENO: &str = "a contact stopped as Zeno where the run goes on";
 /// More than `--max-steps` steps where the reference runs through (damped and stiff tops, a
 /// contact at the start): the run stops with a fault.
 const STEPS_EXHAUSTED: &str = "a run exhausts max_steps where the reference runs through";
-/// `x crosses 0.25 if y > 0` with `x = (t - 1)^2`: the crossing at 0.5 (condition false) and the
-/// one at 1.5 (condition true) fall in one step; the first is dropped and the second is never
-/// looked for, so the event never fires (`tests` of the event issue: two crossings of one guard
-/// in one step, the first disabled).
-const CONDITION_FALSE_HIDES_A_LATER_CROSSING: &str =
-    "a crossing whose condition is false hides a later crossing of the same guard in the step";
 /// Under `--t-start 1e6` (every time shifted), DOP853 locates the third crossing of a `crosses`
 /// guard 0.029 early, where unshifted it is exact.
 const SHIFTED_EVENT_TIME: &str = "a crossing located far off under a large time shift";
