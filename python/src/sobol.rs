@@ -156,7 +156,9 @@ pub fn evaluate<'py>(
     let (start, stop) = range;
     check_range(design, start, stop)?;
     let evaluated = py
-        .detach(|| sobol::evaluate_rows(compiled, design, start..stop, outputs, opts, threads, &|| ()))
+        .detach(|| {
+            sobol::evaluate_rows(compiled.system(), design, start..stop, outputs, opts, threads, &|| ())
+        })
         .map_err(|e| PyValueError::new_err(format!("threads: {}", crate::errors::chain(&e))))?;
     let early = evaluated.ended_early.iter().map(|(w, c)| (w.to_string(), *c)).collect();
     let values = PyArray1::from_vec(py, evaluated.values).reshape([stop - start, outputs.len()])?;

@@ -169,7 +169,7 @@ pub fn run<'py>(
     let info = compiled.info();
     let columns = Columns::new(info, request.events, request.grad_len);
     let gathered = py.detach(|| -> Result<Vec<Column>, String> {
-        let results = sweep::run_points(compiled, &points, &request.opts, request.threads, &|| ())
+        let results = sweep::run_points(compiled.system(), &points, &request.opts, request.threads, &|| ())
             .map_err(|e| format!("threads: {}", crate::errors::chain(&e)))?;
         gather(&columns, request, info.n_params(), &points, &results)
     });

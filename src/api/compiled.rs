@@ -33,11 +33,17 @@ impl Compiled {
         &self.model
     }
 
-    /// The native code, which implements [`sim::HybridSystem`], for tests and measurements that
-    /// reach the kernels. A front end hands the `Compiled` itself to an analysis: it is a
-    /// `HybridSystem` too (`system.rs`).
+    /// The native code, for tests and measurements that reach the kernels. A front end never
+    /// needs it: an analysis takes [`Self::system`].
     pub fn native(&self) -> &CompiledModel {
         &self.native
+    }
+
+    /// The compiled model as the integrator runs it, for the analysis cores (generic over the
+    /// system, so that their tests can hand them a hand-written one). The type is opaque: what
+    /// stands behind the door stays there, and the analyses call the native kernels directly.
+    pub fn system(&self) -> &(impl sim::HybridSystem + '_) {
+        &*self.native
     }
 
     /// The model's shape as the integrator sees it (names, modes, events, gradient columns).

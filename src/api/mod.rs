@@ -16,7 +16,6 @@ mod model;
 mod options;
 mod params;
 mod run;
-mod system;
 
 pub use compiled::{Compiled, Simulator};
 pub use error::{Error, ModelError, ParamError};

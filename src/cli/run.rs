@@ -113,8 +113,8 @@ fn run_streaming(
     let cannot_write = |e: std::io::Error| format!("--trajectory: cannot write `{}`: {e}", path.display());
     let out = output::create(path).map_err(cannot_write)?;
     let p = params.values();
-    let mut recorder =
-        StreamingTrajectory::new(compiled, p, opts.trajectory, opts.t_start, out).map_err(cannot_write)?;
+    let mut recorder = StreamingTrajectory::new(compiled.system(), p, opts.trajectory, opts.t_start, out)
+        .map_err(cannot_write)?;
     // The recorder takes the rows; the run keeps none.
     let run_opts = SimOptions { trajectory: TrajectoryRequest::None, ..opts.clone() };
     let mut simulator = compiled.simulator(&run_opts).map_err(|e| error_chain(&e))?;
@@ -152,7 +152,7 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
             let report = compiled.simulate(&params, &opts).map_err(|e| error_chain(&e))?.into_report();
             if let Some(path) = trajectory {
                 let rows = report.result.trajectory.as_deref().unwrap_or_default();
-                trajectory::write_kept(path, &compiled, &report.params, rows)
+                trajectory::write_kept(path, compiled.system(), &report.params, rows)
                     .map_err(|e| format!("--trajectory: cannot write `{}`: {e}", path.display()))?;
             }
             report
@@ -178,7 +178,7 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
     let check = match check_opts {
         Some(check_opts) => {
             let ranges: Vec<_> = model.checked().params.iter().map(|p| p.range).collect();
-            let (sys, p, result) = (&compiled, &report.params, &report.result);
+            let (sys, p, result) = (compiled.system(), &report.params, &report.result);
             Some(
                 gradcheck::check_within(sys, p, &ranges, &opts, result, &check_opts)
                     .map_err(|e| e.to_string())?,

@@ -165,7 +165,8 @@ fn sobol_model(model: &Model, args: &SobolArgs) -> Result<ExitCode, String> {
     }
 
     let bar = progress_bar(rows);
-    let evaluated = sobol::evaluate(&compiled, &design, &outputs, &opts, args.threads, &|| bar.inc(1));
+    let evaluated =
+        sobol::evaluate(compiled.system(), &design, &outputs, &opts, args.threads, &|| bar.inc(1));
     bar.finish_and_clear();
     let evaluated = evaluated.map_err(|e| format!("--threads: {}", super::error_chain(&e)))?;
     let how = Analysis {

@@ -266,7 +266,7 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
     let bar = progress_bar(points.len());
     let keep = args.plot.is_some();
     let streamed = sweep::stream_rows(
-        &compiled,
+        compiled.system(),
         &points,
         &opts,
         &columns,
@@ -359,7 +359,7 @@ fn plot_sweep(
         let with_param = model
             .compile_params(&[ParamIdx(param as u32)])
             .map_err(|e| format!("--plot: {}", super::error_chain(&e)))?;
-        let at_results = sweep::run_points(&with_param, &at_points, opts, threads, &|| ())
+        let at_results = sweep::run_points(with_param.system(), &at_points, opts, threads, &|| ())
             .map_err(|e| format!("--threads: {e}"))?;
         figure.add_tangents(with_param.info(), param, &at_points, &at_results)
     };

@@ -67,7 +67,7 @@ pub fn run(
     }
     let bounds = free.iter().map(|&p| Bounds::from_range(model.checked().params[p].range)).collect();
     let problem =
-        FitProblem { system: compiled.native(), start: request.start, bounds, targets, sim: request.sim };
+        FitProblem { system: compiled.system(), start: request.start, bounds, targets, sim: request.sim };
     let started = Instant::now();
     let result = match fit(&problem, &request.options) {
         Ok(result) => result,

@@ -90,7 +90,7 @@ pub fn run(
             .map_err(|e| Failure::Constraint(e.to_string()))?;
     }
     let problem = OptimizeProblem {
-        system: compiled.native(),
+        system: compiled.system(),
         start: request.start,
         bounds: request.bounds,
         objective,

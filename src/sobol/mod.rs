@@ -377,7 +377,7 @@ pub fn indices(
     how: &Analysis,
     threads: usize,
 ) -> Result<(Evaluated, Vec<Result<OutputIndices, AnalysisError>>), SweepError> {
-    let evaluated = evaluate(compiled.native(), design, outputs, opts, threads, &|| ())?;
+    let evaluated = evaluate(compiled.system(), design, outputs, opts, threads, &|| ())?;
     let results = outputs
         .iter()
         .enumerate()
