@@ -134,15 +134,14 @@ impl Run {
     /// `--max-events` cap holds 10^6 event records). The one place a `RunReport` is made: every
     /// report of a run, the CLI's and Python's, comes from a `Run`.
     pub fn into_report(self) -> RunReport {
-        RunReport {
-            model: self.compiled.model().name().to_string(),
-            t_end: self.t_end,
-            info: self.info().clone(),
-            params: self.params,
-            result: self.result,
-            compile_seconds: self.compiled.compile_seconds(),
-            run_seconds: self.run_seconds,
-        }
+        RunReport::new(
+            self.compiled.model().name().to_string(),
+            self.t_end,
+            self.info().clone(),
+            self.params,
+            self.result,
+            (self.compiled.compile_seconds(), self.run_seconds),
+        )
     }
 
     fn info(&self) -> &crate::sim::SystemInfo {

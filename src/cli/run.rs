@@ -151,8 +151,8 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         (trajectory, _) => {
             let report = compiled.simulate(&params, &opts).map_err(|e| error_chain(&e))?.into_report();
             if let Some(path) = trajectory {
-                let rows = report.result.trajectory.as_deref().unwrap_or_default();
-                trajectory::write_kept(path, compiled.system(), &report.params, rows)
+                let rows = report.result().trajectory.as_deref().unwrap_or_default();
+                trajectory::write_kept(path, compiled.system(), report.params(), rows)
                     .map_err(|e| format!("--trajectory: cannot write `{}`: {e}", path.display()))?;
             }
             report
@@ -166,19 +166,19 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
     }
     // A run into a Zeno point grazes ever more often; the first few warnings say it all.
     const SHOWN_WARNINGS: usize = 3;
-    for w in report.result.warnings.iter().take(SHOWN_WARNINGS) {
+    for w in report.result().warnings.iter().take(SHOWN_WARNINGS) {
         eprintln!("warning: {w}");
     }
-    if report.result.warnings.len() > SHOWN_WARNINGS {
+    if report.result().warnings.len() > SHOWN_WARNINGS {
         eprintln!(
             "warning: ... and {} more (all are in --format json)",
-            report.result.warnings.len() - SHOWN_WARNINGS
+            report.result().warnings.len() - SHOWN_WARNINGS
         );
     }
     let check = match check_opts {
         Some(check_opts) => {
             let ranges: Vec<_> = model.checked().params.iter().map(|p| p.range).collect();
-            let (sys, p, result) = (compiled.system(), &report.params, &report.result);
+            let (sys, p, result) = (compiled.system(), report.params(), report.result());
             Some(
                 gradcheck::check_within(sys, p, &ranges, &opts, result, &check_opts)
                     .map_err(|e| e.to_string())?,
