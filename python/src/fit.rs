@@ -52,11 +52,7 @@ pub fn fit_report(
         )));
     }
     for (name, v) in [("xtol", xtol), ("gtol", gtol), ("ftol", ftol)] {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(PyValueError::new_err(format!(
-                "{name}: expected a positive finite number, found {v}"
-            )));
-        }
+        crate::options::positive(name, v)?;
     }
     let start = model.param_values(params)?.values().to_vec();
     let compiled = model.compiled(py, &free)?;

@@ -54,11 +54,7 @@ pub fn optimize_report(
     count("starts", starts, 1, hybc::limits::MAX_STARTS)?;
     count("threads", threads, 0, hybc::limits::MAX_THREADS)?;
     for (name, v) in [("kkt_tol", kkt_tol), ("xtol", xtol), ("ftol", ftol)] {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(PyValueError::new_err(format!(
-                "{name}: expected a positive finite number, found {v}"
-            )));
-        }
+        crate::options::positive(name, v)?;
     }
     let boxes = free_boxes(&model, &free, bounds)?;
     let start = model.param_values(params)?.values().to_vec();

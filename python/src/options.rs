@@ -24,12 +24,10 @@ fn keywords() -> impl Iterator<Item = &'static str> {
     SimOverrides::OPTIONS.into_iter().filter(|o| !matches!(*o, "at" | "linear_solver"))
 }
 
-fn positive(name: &str, v: f64) -> PyResult<f64> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        Err(PyValueError::new_err(format!("{name}: expected a positive finite number, found {v}")))
-    }
+/// `v` if it is a finite number above 0, else a `ValueError` in the command line's words
+/// (`hybc::positive_number`).
+pub fn positive(name: &str, v: f64) -> PyResult<f64> {
+    hybc::positive_number(name, v).map_err(PyValueError::new_err)
 }
 
 fn value_error(e: hybc::OptionError) -> PyErr {

@@ -20,6 +20,6 @@ mod run;
 pub use compiled::{Compiled, Simulator};
 pub use error::{Error, ModelError, ParamError};
 pub use model::{Model, MAX_MODEL_BYTES};
-pub use options::{method_named, time_span, OptionError, SimOverrides, Spelling};
+pub use options::{method_named, positive_number, time_span, OptionError, SimOverrides, Spelling};
 pub use params::Params;
 pub use run::Run;

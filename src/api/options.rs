@@ -87,7 +87,7 @@ impl SimOverrides {
     pub fn apply(&self, base: &SimOptions, spelling: Spelling) -> Result<SimOptions, OptionError> {
         let refuse = |option: &'static str| move |message: String| OptionError { option, message };
         let positive =
-            |option: &'static str, v: f64| positive(&spelling.of(option), v).map_err(refuse(option));
+            |option: &'static str, v: f64| positive_number(&spelling.of(option), v).map_err(refuse(option));
         let count = |option: &'static str, v: usize, max: usize| {
             limits::count(&spelling.of(option), v, 1, max).map_err(|e| refuse(option)(e.to_string()))
         };
@@ -161,7 +161,9 @@ pub fn method_named(name: &str, spelling: Spelling) -> Result<Method, OptionErro
     })
 }
 
-fn positive(name: &str, v: f64) -> Result<f64, String> {
+/// `v` if it is a finite number above 0, else the refusal every front end words alike:
+/// `NAME: expected a positive number, found V`, `name` spelled as the front end spells it.
+pub fn positive_number(name: &str, v: f64) -> Result<f64, String> {
     if v.is_finite() && v > 0.0 {
         Ok(v)
     } else {
