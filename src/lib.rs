@@ -52,8 +52,9 @@ pub mod sweep;
 pub mod syntax;
 
 pub use api::{
-    method_named, positive_number, time_span, Compiled, Error, Model, ModelError, OptionError, ParamError,
-    Params, Run, SimOverrides, Simulator, Spelling, MAX_MODEL_BYTES,
+    method_named, positive_number, time_span, Compiled, Error, FitFailure, FitRequest, GradCheckRequest,
+    Model, ModelError, OptimizeFailure, OptimizeRequest, OptionError, ParamError, Params, Run, SimOverrides,
+    Simulator, Spelling, MAX_MODEL_BYTES,
 };
 pub use sim::{Method, SimOptions, StopReason, TrajectoryRequest};
 

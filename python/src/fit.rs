@@ -9,10 +9,10 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use hybc::fit::request::{self, Failure, Request};
 use hybc::fit::FitOptions;
+use hybc::{Error, FitFailure, FitRequest};
 
-use crate::errors::ParameterError;
+use crate::errors::{self, ParameterError};
 use crate::model::Model;
 use crate::options::SimKeywords;
 
@@ -57,9 +57,8 @@ pub fn fit_report(
     let start = model.param_values(params)?.values().to_vec();
     let compiled = model.compiled(py, &free)?;
     let options = FitOptions { max_iter, xtol, gtol, ftol };
-    let inner = inner.clone();
     let (report, warnings) = py.detach(move || {
-        let request = Request {
+        let request = FitRequest {
             targets: &targets,
             data: data.as_deref().map(|text| (text, "data")),
             start,
@@ -67,14 +66,16 @@ pub fn fit_report(
             options,
         };
         let mut warnings = Vec::new();
-        let report = request::run(&inner, &compiled, request, &mut |w| warnings.push(w.to_string()));
+        let report = request.run(&compiled, &mut |w| warnings.push(w.to_string()));
         (report, warnings)
     });
     match report {
         Ok(report) => Ok((report.to_json().to_string(), warnings)),
-        Err(Failure::Target(e)) => Err(PyValueError::new_err(format!("targets: {e}"))),
-        Err(Failure::Data(e)) => Err(PyValueError::new_err(format!("data: {e}"))),
-        Err(Failure::Usage(message)) => Err(PyValueError::new_err(message)),
-        Err(Failure::StartRun(e) | Failure::StartObjective(e)) => Err(PyRuntimeError::new_err(e.to_string())),
+        Err(Error::Fit(FitFailure::Target(e))) => Err(PyValueError::new_err(format!("targets: {e}"))),
+        Err(Error::Fit(FitFailure::Data(e))) => Err(PyValueError::new_err(format!("data: {e}"))),
+        Err(Error::Fit(FitFailure::StartRun(e) | FitFailure::StartObjective(e))) => {
+            Err(PyRuntimeError::new_err(e.to_string()))
+        }
+        Err(e) => Err(errors::to_py(e)),
     }
 }

@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use super::{FitFailure, OptimizeFailure};
 use crate::codegen::CodegenError;
 use crate::sim::SimError;
 use crate::FrontendError;
@@ -37,6 +38,12 @@ pub enum Error {
     /// The simulation options, or the parameter vector's length, were refused before running.
     #[error(transparent)]
     Sim(#[from] SimError),
+    /// A fit gave no report ([`FitRequest`](super::FitRequest)).
+    #[error(transparent)]
+    Fit(#[from] FitFailure),
+    /// An optimisation gave no report ([`OptimizeRequest`](super::OptimizeRequest)).
+    #[error(transparent)]
+    Optimize(#[from] OptimizeFailure),
 }
 
 /// A model text that does not parse or check, with its diagnostics rendered against the source.

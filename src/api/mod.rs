@@ -15,6 +15,7 @@ mod error;
 mod model;
 mod options;
 mod params;
+mod request;
 mod run;
 
 pub use compiled::{Compiled, Simulator};
@@ -22,4 +23,7 @@ pub use error::{Error, ModelError, ParamError};
 pub use model::{Model, MAX_MODEL_BYTES};
 pub use options::{method_named, positive_number, time_span, OptionError, SimOverrides, Spelling};
 pub use params::Params;
+pub use request::fit::{FitFailure, FitRequest};
+pub use request::gradcheck::GradCheckRequest;
+pub use request::optimize::{OptimizeFailure, OptimizeRequest};
 pub use run::Run;

@@ -10,10 +10,10 @@ use super::options::{parameter_values, parse_param_list, positive, SimFlags};
 use super::trajectory::{self, StreamingTrajectory};
 use super::{compile_model, error_chain, load_model, output, usage_error, ModelArg};
 use super::{EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
-use crate::gradcheck::{self, CheckOptions};
+use crate::gradcheck::CheckOptions;
 use crate::report::RunReport;
 use crate::sim::{SimOptions, TrajectoryRequest};
-use crate::{Compiled, Model, Params, Spelling};
+use crate::{Compiled, GradCheckRequest, Model, Params, Spelling};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum Format {
@@ -176,13 +176,9 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         );
     }
     let check = match check_opts {
-        Some(check_opts) => {
-            let ranges: Vec<_> = model.checked().params.iter().map(|p| p.range).collect();
-            let (sys, p, result) = (compiled.system(), report.params(), report.result());
-            Some(
-                gradcheck::check_within(sys, p, &ranges, &opts, result, &check_opts)
-                    .map_err(|e| e.to_string())?,
-            )
+        Some(check) => {
+            let request = GradCheckRequest { sim: opts.clone(), check };
+            Some(request.run(&compiled, report.params(), report.result()).map_err(|e| error_chain(&e))?)
         }
         None => None,
     };
@@ -200,12 +196,7 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
                 }
             }
             Format::Json => {
-                let mut extra = Vec::new();
-                if let Some(check) = &check {
-                    let mut value = serde_json::json!(check);
-                    value["passed"] = check.passed().into();
-                    extra.push(("check_grad", value));
-                }
+                let extra: Vec<_> = check.iter().map(|check| ("check_grad", check.to_json())).collect();
                 // Streamed: the text of 10^6 events is never held whole (docs/cli.md, Limits).
                 output::write_to(report_to, |mut out| {
                     report.write_json(&mut out, &extra)?;

@@ -12,14 +12,13 @@
 //!
 //! Code map: `target` (what to match, parsed from `NAME=VALUE@WEIGHT`), `evaluate` (one run ->
 //! residuals and Jacobian), `lm` (the solver), `report` (names, table, JSON), `data` (a CSV of
-//! measurements as targets, standard errors), `request` (a whole fit from text, for the CLI and
-//! Python).
+//! measurements as targets, standard errors). A whole fit from text, for the CLI and Python, is
+//! the door's `FitRequest` (`api/request/fit.rs`).
 
 pub mod data;
 mod evaluate;
 mod lm;
 mod report;
-pub mod request;
 mod target;
 
 pub use evaluate::{evaluate, Evaluation, Rejection};

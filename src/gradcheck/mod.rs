@@ -62,9 +62,9 @@
 //!   early (Zeno behaviour or a fault) has its final state skipped.
 
 mod compare;
+mod report;
 mod sequence;
 mod stencil;
-mod table;
 
 use serde::Serialize;
 

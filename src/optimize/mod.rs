@@ -18,17 +18,20 @@
 //! One entry point for every front end: [`optimize`] takes the problem and options and returns an
 //! [`OptimizeResult`]. Code map: `spec` (objective and constraints from text), `evaluate` (one
 //! run -> program values and gradients), `solver` (the seam), `slsqp` (the optimiser), `kkt`
-//! (the verdict), `report` (table and JSON).
+//! (the verdict), `report` (table and JSON), `shards` (the report of a multi-start run in
+//! shards, merged). A whole problem from text, for the CLI and Python, is the door's
+//! `OptimizeRequest` (`api/request/optimize.rs`).
 
 mod evaluate;
 mod kkt;
 pub mod report;
-pub mod request;
+mod shards;
 mod slsqp;
 pub mod solver;
 mod spec;
 
 pub use kkt::Kkt;
+pub use shards::merge_shards;
 pub use slsqp::Slsqp;
 pub use spec::{parse_constraint, Constraint, Quantity, Sense, SpecError};
 
@@ -73,7 +76,7 @@ pub struct OptimizeOptions {
     /// Worker threads for the starts (0: one per core).
     pub threads: usize,
     /// Only the starts `first..last` of the `starts` (the same seeded draw): one shard of a
-    /// multi-start spread over processes (`hybc.dask.optimize`). `request::merge_shards` puts
+    /// multi-start spread over processes (`hybc.dask.optimize`). `merge_shards` puts
     /// the shards' reports together into the report of the whole. `None`: every start.
     pub shard: Option<(usize, usize)>,
 }
