@@ -286,11 +286,21 @@ impl Model {
         // Compiled without gradient parameters: indices need values only, and a run without
         // sensitivities is several times cheaper (as `hybc sobol`).
         let compiled = self.compiled(py, &[])?;
-        let outputs = sobol::outputs(&compiled, &outputs, &design)?;
+        // The policy and the bootstrap are the analysis's (`sobol_analyze`), not the runs'.
+        let request = hybc::SobolRequest {
+            design,
+            seed,
+            outputs: &outputs,
+            on_fail: "error",
+            bootstrap: 0,
+            sim: opts,
+            threads,
+        };
+        let outputs = sobol::outputs(&compiled, &request)?;
         if check_only {
             return Ok(None);
         }
-        sobol::evaluate(py, &compiled, &design, &outputs, (start, stop), &opts, threads).map(Some)
+        sobol::evaluate(py, &compiled, &request, &outputs, (start, stop)).map(Some)
     }
 }
 

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use super::{FitFailure, OptimizeFailure};
+use super::{FitFailure, OptimizeFailure, SobolFailure};
 use crate::codegen::CodegenError;
 use crate::sim::SimError;
 use crate::FrontendError;
@@ -44,6 +44,9 @@ pub enum Error {
     /// An optimisation gave no report ([`OptimizeRequest`](super::OptimizeRequest)).
     #[error(transparent)]
     Optimize(#[from] OptimizeFailure),
+    /// A Sobol' analysis gave no report ([`SobolRequest`](super::SobolRequest)).
+    #[error(transparent)]
+    Sobol(#[from] SobolFailure),
 }
 
 /// A model text that does not parse or check, with its diagnostics rendered against the source.

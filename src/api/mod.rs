@@ -26,4 +26,5 @@ pub use params::Params;
 pub use request::fit::{FitFailure, FitRequest};
 pub use request::gradcheck::GradCheckRequest;
 pub use request::optimize::{OptimizeFailure, OptimizeRequest};
+pub use request::sobol::{SobolFailure, SobolRequest, VaryPriorError};
 pub use run::Run;

@@ -1,12 +1,14 @@
-//! Global sensitivity: Sobol' indices of a model's outputs over parameter priors. A tool on the
-//! front door beside `sweep/` and `fit/`: it runs a compiled model at the rows of a Saltelli
-//! design and reads the results; it knows no `sim` internals and no CLI.
+//! Global sensitivity: Sobol' indices of a model's outputs over parameter priors: a system run at
+//! the rows of a Saltelli design, the results read. Generic over the system; knows no `sim`
+//! internals, no door and no CLI.
 //!
 //! Code map: `sequence` (the scrambled Sobol' sequence, point `i` from `i`), `joe_kuo` (its
 //! direction numbers), `design` (priors, the Saltelli design in SALib's row order, row `r` from
 //! `r`), `estimate` (S1, ST, S2 and bootstrap errors over one output's values), this file (the
 //! outputs a row reports, running the design in parallel keeping only those numbers, the policy
-//! for rows without a value, and [`analyze`], which takes the values however they were computed).
+//! for rows without a value, and [`analyze`], which takes the values however they were computed),
+//! `report` (`SobolReport`: table, JSON). A whole analysis as a user asks for it is the door's
+//! `SobolRequest` (`api/request/sobol.rs`).
 //!
 //! Seams for other callers: a shard (Dask) computes rows `Design::fill(r)` for its range of `r`
 //! and returns the outputs; [`analyze`] turns the values of all rows into indices.
@@ -14,12 +16,14 @@
 pub mod design;
 pub mod estimate;
 mod joe_kuo;
+mod report;
 pub mod sequence;
 
 use rayon::prelude::*;
 
 pub use design::{parse_prior, Design, Prior, PriorError, PriorProblem, RowKind, TooManyVaried, MAX_VARIED};
 pub use estimate::{Blocks, Indices};
+pub use report::SobolReport;
 
 use crate::fit::{Observable, TargetError};
 use crate::sim::{self, HybridSystem, SimOptions, SimResult, SystemInfo};
@@ -112,38 +116,6 @@ impl OnFail {
                 .map(OnFail::Value),
         }
     }
-}
-
-/// Why a parameter cannot be varied with a prior.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-pub enum VaryError {
-    #[error(transparent)]
-    Param(#[from] crate::ParamError),
-    #[error("`{name}` has no declared range; give its prior")]
-    NoRange { name: String },
-    #[error("the prior reaches [{from}, {to}], outside `{name}`'s declared range [{lo}, {hi}]")]
-    OutsideRange { name: String, from: f64, to: f64, lo: f64, hi: f64 },
-}
-
-/// The parameter `name` of `model` and its prior: `prior`, or uniform on its declared range for
-/// `None`. A prior whose support leaves the declared range is refused, not truncated: hybc never
-/// runs a parameter outside the range its model declares.
-pub fn vary(model: &crate::Model, name: &str, prior: Option<Prior>) -> Result<(usize, Prior), VaryError> {
-    let idx = model.param_index(name)?.0 as usize;
-    let range = model.checked().params[idx].range;
-    let prior = match (prior, range) {
-        (Some(prior), None) => prior,
-        (None, Some((lo, hi))) => Prior::Uniform { lo, hi },
-        (None, None) => return Err(VaryError::NoRange { name: name.to_string() }),
-        (Some(prior), Some((lo, hi))) => {
-            let (from, to) = prior.support();
-            if from < lo || to > hi {
-                return Err(VaryError::OutsideRange { name: name.to_string(), from, to, lo, hi });
-            }
-            prior
-        }
-    };
-    Ok((idx, prior))
 }
 
 /// The outputs of every row of a design, and how its runs ended.
@@ -303,6 +275,15 @@ pub enum AnalysisError {
     TooFewPoints { label: String, used: usize, dropped: usize },
 }
 
+impl AnalysisError {
+    /// The output it is about, as the user wrote it.
+    pub fn label(&self) -> &str {
+        match self {
+            AnalysisError::Failed { label, .. } | AnalysisError::TooFewPoints { label, .. } => label,
+        }
+    }
+}
+
 /// What [`analyze`] needs besides the values.
 #[derive(Clone, Copy, Debug)]
 pub struct Analysis {
@@ -312,6 +293,14 @@ pub struct Analysis {
     /// Bootstrap resamples (0: none).
     pub bootstrap: usize,
     pub seed: u64,
+}
+
+impl Analysis {
+    /// The indices of every output from `values` (row-major, `labels.len()` per row, NaN where a
+    /// row has none), each with its label, or why it has none ([`analyze`]).
+    pub fn outputs(&self, labels: &[String], values: &[f64]) -> Vec<Result<OutputIndices, AnalysisError>> {
+        labels.iter().enumerate().map(|(k, label)| analyze(label, values, labels.len(), k, self)).collect()
+    }
 }
 
 /// The indices of output `offset` of row-major `values` (`stride` values per row, `block` rows
@@ -364,24 +353,4 @@ pub fn analyze(
         indices,
         errors,
     })
-}
-
-/// The whole analysis, for a library caller: runs `compiled` at every row of `design` (see
-/// [`evaluate`]) and analyses each output (see [`analyze`]). The indices come per output, an
-/// output without them (its policy refused the missing rows) as its error.
-pub fn indices(
-    compiled: &crate::Compiled,
-    design: &Design,
-    outputs: &[Output],
-    opts: &SimOptions,
-    how: &Analysis,
-    threads: usize,
-) -> Result<(Evaluated, Vec<Result<OutputIndices, AnalysisError>>), SweepError> {
-    let evaluated = evaluate(compiled.system(), design, outputs, opts, threads, &|| ())?;
-    let results = outputs
-        .iter()
-        .enumerate()
-        .map(|(k, o)| analyze(&o.label, &evaluated.values, outputs.len(), k, how))
-        .collect();
-    Ok((evaluated, results))
 }

@@ -15,3 +15,4 @@
 pub mod fit;
 pub mod gradcheck;
 pub mod optimize;
+pub mod sobol;
