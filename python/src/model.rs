@@ -14,6 +14,7 @@ use crate::options::{trajectory_request, SimKeywords};
 use crate::run::Run;
 use crate::sobol;
 use crate::sweep;
+use hybc::sweep::Points;
 
 /// A checked model. Compiling is the costly step (milliseconds to seconds), so each gradient set
 /// is compiled once and kept: `Compiled` is `Send + Sync + 'static` and cheap to clone.
@@ -229,8 +230,8 @@ impl Model {
             return Ok(PyDict::new(py));
         }
         let compiled = self.compiled(py, &grad)?;
-        let request = sweep::SweepRequest { grad_len: grad.len(), events, threads, opts };
-        sweep::run(py, &compiled, rows, &request)
+        let request = hybc::SweepRequest { points: Points::Rows(rows), sim: opts, events, threads };
+        sweep::run(py, &compiled, &request)
     }
 
     /// Rows `[start, stop)` of the Saltelli design of `Model.sobol`: the varied parameters'

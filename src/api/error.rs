@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use super::{FitFailure, OptimizeFailure, SobolFailure};
 use crate::codegen::CodegenError;
 use crate::sim::SimError;
+use crate::sweep::SweepError;
 use crate::FrontendError;
 
 /// Everything the library's front door can refuse. The messages are complete sentences for a
@@ -47,6 +48,9 @@ pub enum Error {
     /// A Sobol' analysis gave no report ([`SobolRequest`](super::SobolRequest)).
     #[error(transparent)]
     Sobol(#[from] SobolFailure),
+    /// A sweep could not run or write its rows ([`SweepRequest`](super::SweepRequest)).
+    #[error(transparent)]
+    Sweep(#[from] SweepError),
 }
 
 /// A model text that does not parse or check, with its diagnostics rendered against the source.

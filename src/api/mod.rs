@@ -27,4 +27,5 @@ pub use request::fit::{FitFailure, FitRequest};
 pub use request::gradcheck::GradCheckRequest;
 pub use request::optimize::{OptimizeFailure, OptimizeRequest};
 pub use request::sobol::{SobolFailure, SobolRequest, VaryPriorError};
+pub use request::sweep::SweepRequest;
 pub use run::Run;

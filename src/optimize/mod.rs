@@ -295,7 +295,7 @@ pub fn optimize<S: HybridSystem + Sync>(
     }
     let ranges = free.iter().zip(&problem.bounds).map(|(&j, b)| (j, b.lower, b.upper)).collect();
     let samples =
-        crate::sweep::Samples::new(problem.start.clone(), ranges, opts.starts.saturating_sub(1), opts.seed);
+        crate::sweep::Draws::new(problem.start.clone(), ranges, opts.starts.saturating_sub(1), opts.seed);
     let start_of = |i: usize| {
         let mut p = problem.start.clone();
         if i > 0 {

@@ -4,10 +4,13 @@
 //!
 //! Code map: `points` (which vectors: grids, lists, seeded samples, each computed from its
 //! index), `table` (the row and column scheme, CSV and JSON lines), `stream` (rows written as they
-//! complete through a bounded reorder window: memory independent of the number of points), this
-//! file (in-memory runs for library callers and small sweeps).
+//! complete through a bounded reorder window: memory independent of the number of points),
+//! `report` (`SweepReport`: a sweep held in memory, its rows), this file (in-memory runs for
+//! library callers and small sweeps). A sweep as a user asks for it is the door's `SweepRequest`
+//! (`api/request/sweep.rs`).
 
 pub mod points;
+mod report;
 mod stream;
 pub mod table;
 
@@ -16,11 +19,12 @@ use rayon::prelude::*;
 use crate::sim::{self, HybridSystem, SimError, SimOptions, SimResult};
 
 pub use points::{
-    full_grid, lerp, linspace, parse_vary, uniform_samples, uniform_samples_from, Axis, AxisSpec, Grid,
-    Points, Samples, TooManyPoints, VaryError, VarySpec,
+    full_grid, lerp, linspace, parse_vary, uniform_samples, uniform_samples_from, Axis, AxisSpec, Draws,
+    Grid, Points, TooManyPoints, VarySpec, VarySpecError,
 };
+pub use report::SweepReport;
 pub use stream::{stream_rows, Streamed, BATCH, WINDOW_BYTES, WINDOW_ROWS};
-pub use table::{Columns, Format};
+pub use table::{CellKind, Columns, Format};
 
 /// The outcome of one point: exactly what `sim::run` returned for it. A run that stopped early
 /// (Zeno, a runtime fault) is an `Ok` whose `stopped_by` says so; `Err` is bad input.

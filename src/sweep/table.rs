@@ -49,6 +49,18 @@ pub enum Cell {
     Empty,
 }
 
+/// What a column holds: the kind of every cell in it but the empty ones (for a front end that
+/// keeps columns typed, as Python's NumPy arrays).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CellKind {
+    /// Numbers (`Cell::Num`).
+    Num,
+    /// The event count (`Cell::Count`).
+    Count,
+    /// Text: `status`, `event<k>` and `error` (`Cell::Text`).
+    Text,
+}
+
 /// The column scheme of one sweep.
 #[derive(Clone, Debug)]
 pub struct Columns<'a> {
@@ -74,6 +86,20 @@ impl<'a> Columns<'a> {
     /// The column names, in row order.
     pub fn header(&self) -> &[String] {
         &self.header
+    }
+
+    /// The kind of each column, in header order: the parameters, `status`, `events`, then per
+    /// event slot `event<k>`, `t<k>` and its gradients, then numbers up to `error`.
+    pub fn kinds(&self) -> Vec<CellKind> {
+        let n_params = self.info.n_params();
+        let mut kinds = vec![CellKind::Num; self.header.len()];
+        kinds[n_params] = CellKind::Text;
+        kinds[n_params + 1] = CellKind::Count;
+        for k in 0..self.events {
+            kinds[n_params + 2 + k * (2 + self.shown_grad)] = CellKind::Text;
+        }
+        kinds[self.header.len() - 1] = CellKind::Text;
+        kinds
     }
 
     fn grad_names(&self) -> impl Iterator<Item = &str> + '_ {

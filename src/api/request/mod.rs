@@ -16,3 +16,4 @@ pub mod fit;
 pub mod gradcheck;
 pub mod optimize;
 pub mod sobol;
+pub mod sweep;
