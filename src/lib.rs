@@ -53,8 +53,9 @@ pub mod syntax;
 
 pub use api::{
     method_named, positive_number, time_span, Compiled, Error, FitFailure, FitRequest, GradCheckRequest,
-    Model, ModelError, OptimizeFailure, OptimizeRequest, OptionError, ParamError, Params, Run, SimOverrides,
-    Simulator, SobolFailure, SobolRequest, Spelling, SweepRequest, VaryPriorError, MAX_MODEL_BYTES,
+    Model, ModelError, OptimizeFailure, OptimizeRequest, OptionError, ParamError, Params, PeriodicRequest,
+    Run, SimOverrides, Simulator, SobolFailure, SobolRequest, Spelling, SweepRequest, VaryPriorError,
+    MAX_MODEL_BYTES,
 };
 pub use sim::{Method, SimOptions, StopReason, TrajectoryRequest};
 

@@ -1,4 +1,4 @@
-//! `Model.fit`: the library's whole fit (`hybc::fit::request`, what `hybc fit` runs) from Python's
+//! `Model.fit`: the library's whole fit (`hybc::FitRequest`, what `hybc fit` runs) from Python's
 //! arguments. The Python layer turns a DataFrame-like mapping into the CSV text `hybc fit --data`
 //! reads, so one parser gives both front ends the same rules and messages; the report comes back
 //! as the JSON `hybc fit --format json` prints.

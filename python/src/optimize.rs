@@ -1,4 +1,4 @@
-//! `Model.optimize`: the library's whole optimisation (`hybc::optimize::request`, what
+//! `Model.optimize`: the library's whole optimisation (`hybc::OptimizeRequest`, what
 //! `hybc optimize` runs) from Python's arguments; the report comes back as the JSON
 //! `hybc optimize --format json` prints (the Python layer adds the run at the optimum).
 

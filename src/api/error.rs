@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use super::{FitFailure, OptimizeFailure, SobolFailure};
 use crate::codegen::CodegenError;
+use crate::periodic::PeriodicError;
 use crate::sim::SimError;
 use crate::sweep::SweepError;
 use crate::FrontendError;
@@ -45,6 +46,9 @@ pub enum Error {
     /// An optimisation gave no report ([`OptimizeRequest`](super::OptimizeRequest)).
     #[error(transparent)]
     Optimize(#[from] OptimizeFailure),
+    /// No periodic orbit found, or the request refused ([`PeriodicRequest`](super::PeriodicRequest)).
+    #[error(transparent)]
+    Periodic(#[from] PeriodicError),
     /// A Sobol' analysis gave no report ([`SobolRequest`](super::SobolRequest)).
     #[error(transparent)]
     Sobol(#[from] SobolFailure),

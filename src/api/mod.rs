@@ -26,6 +26,7 @@ pub use params::Params;
 pub use request::fit::{FitFailure, FitRequest};
 pub use request::gradcheck::GradCheckRequest;
 pub use request::optimize::{OptimizeFailure, OptimizeRequest};
+pub use request::periodic::PeriodicRequest;
 pub use request::sobol::{SobolFailure, SobolRequest, VaryPriorError};
 pub use request::sweep::SweepRequest;
 pub use run::Run;

@@ -202,6 +202,19 @@ impl Model {
         self.compile_params(&all)
     }
 
+    /// A model an analysis derived from this one (periodic's section made a `stop`, one
+    /// parameter per initial state): `checked`, with this one's source and file name for
+    /// messages. It is not checked again: the analysis built it from a checked model, through
+    /// the checker's own types.
+    pub(crate) fn derived(&self, checked: sema::Model) -> Model {
+        let inner = ModelInner {
+            checked,
+            source: self.inner.source.clone(),
+            file_name: self.inner.file_name.clone(),
+        };
+        Model { inner: Arc::new(inner) }
+    }
+
     /// Whether `other` is this very model (the same parse, or a clone of it).
     pub(crate) fn same(&self, other: &Model) -> bool {
         Arc::ptr_eq(&self.inner, &other.inner)

@@ -15,5 +15,6 @@
 pub mod fit;
 pub mod gradcheck;
 pub mod optimize;
+pub mod periodic;
 pub mod sobol;
 pub mod sweep;
