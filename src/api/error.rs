@@ -2,12 +2,12 @@
 
 use std::path::PathBuf;
 
+use super::FrontendError;
 use super::{FitFailure, OptimizeFailure, SobolFailure};
 use crate::codegen::CodegenError;
 use crate::periodic::PeriodicError;
 use crate::sim::SimError;
 use crate::sweep::SweepError;
-use crate::FrontendError;
 
 /// Everything the library's front door can refuse. The messages are complete sentences for a
 /// user: a model error renders its diagnostics (file:line:column, the line, a caret).

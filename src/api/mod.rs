@@ -12,14 +12,17 @@
 
 mod compiled;
 mod error;
+mod frontend;
 mod model;
 mod options;
 mod params;
 mod request;
 mod run;
+mod summary;
 
 pub use compiled::{Compiled, Simulator};
 pub use error::{Error, ModelError, ParamError};
+pub use frontend::{check_source, FrontendError};
 pub use model::{Model, MAX_MODEL_BYTES};
 pub use options::{method_named, positive_number, time_span, OptionError, SimOverrides, Spelling};
 pub use params::Params;

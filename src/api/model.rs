@@ -35,7 +35,7 @@ impl Model {
 
     /// Parses and checks `text`, naming `file_name` in every diagnostic.
     pub fn parse_named(text: &str, file_name: &str) -> Result<Model, Error> {
-        match crate::check_source(text) {
+        match super::check_source(text) {
             Ok(checked) => Ok(Model {
                 inner: Arc::new(ModelInner {
                     checked,

@@ -93,7 +93,7 @@ mod tests {
     use super::quadrature_states;
 
     fn quadrature(text: &str) -> Vec<bool> {
-        quadrature_states(&crate::check_source(text).expect("checks"))
+        quadrature_states(&super::super::check(&crate::syntax::parse(text).expect("parses")).expect("checks"))
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! Stage 1: source text -> AST with spans. The only module that knows pest.
 
 pub mod ast;
+pub mod chars;
 mod parser;
 
 pub use parser::parse;

@@ -513,15 +513,15 @@ fn found_at(source: &str, pos: usize) -> (String, usize) {
     if c == '\n' || c == '\r' {
         return ("end of line".to_string(), 0);
     }
-    if crate::diag::is_invisible(c) {
+    if super::chars::is_invisible(c) {
         let kind = if c.is_control() {
             "control character"
-        } else if crate::diag::is_combining(c) {
+        } else if super::chars::is_combining(c) {
             "combining character"
         } else {
             "invisible character"
         };
-        return (format!("{kind} {}", crate::diag::escaped(c)), c.len_utf8());
+        return (format!("{kind} {}", super::chars::escaped(c)), c.len_utf8());
     }
     let word: String =
         rest.chars().take_while(|ch| ch.is_alphanumeric() || *ch == '_' || *ch == '.').collect();
