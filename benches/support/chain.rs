@@ -1,6 +1,6 @@
 //! The generated chain models shared by the benches, the examples and the tests
 //! (`tests/it/support`): `chain_source` (`benches/jit.rs`), `diffusion_source` (workload W5),
-//! `hub_source` and `grid_source` (the sparse LU, `examples/sparse_hub.rs`).
+//! `hub_source` and `grid_source` (the sparse LU, `benches/measure/sparse_hub.rs`).
 // Each includer (benches, examples, tests) uses only some of the generators.
 #![allow(dead_code)]
 

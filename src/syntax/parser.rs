@@ -1,5 +1,6 @@
-//! pest parse tree -> AST. The grammar is `grammar/hyb.pest`; this file is the only one that sees
-//! pest's `Pair`s. Operator precedence is applied here with pest's Pratt parser.
+//! pest parse tree -> AST. The grammar is `hyb.pest` beside this file (its rule names are the
+//! AST's); this file is the only one that sees pest's `Pair`s. Operator precedence is applied
+//! here with pest's Pratt parser.
 
 use std::sync::OnceLock;
 
@@ -12,7 +13,7 @@ use super::ast::*;
 use super::{ParseError, Span};
 
 #[derive(pest_derive::Parser)]
-#[grammar = "grammar/hyb.pest"]
+#[grammar = "syntax/hyb.pest"]
 struct HybParser;
 
 /// Parses a whole `.hyb` source text.

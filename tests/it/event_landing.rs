@@ -1,6 +1,6 @@
 //! Landing a step on each event instant (`SimOptions::land_events`, `Stepper::land`): the state
 //! and sensitivities the events jump from come from a step end under the error control, not from
-//! the dense output. Measured on the W5 diffusion chain of `examples/w5_accuracy.rs` (10 cells, a
+//! the dense output. Measured on the W5 diffusion chain of `benches/measure/w5_accuracy.rs` (10 cells, a
 //! source refilled 19 times, the 10 conductances differentiated) against DOP853 at rtol 1e-12.
 
 use hybc::sim::{Method, SimOptions, SimResult};

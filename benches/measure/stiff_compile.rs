@@ -12,7 +12,7 @@ use hybc::lower::{lower, system_info};
 use hybc::sema::ParamIdx;
 use hybc::sim::{HybridSystem, Method, SimOptions, Simulator};
 use std::time::Instant;
-#[path = "../benches/support/chain.rs"]
+#[path = "../support/chain.rs"]
 mod chain;
 use chain::best;
 
