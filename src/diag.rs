@@ -14,6 +14,7 @@ use crate::syntax::Span;
 pub struct Diagnostic {
     /// The headline, lowercase, no trailing period.
     pub message: String,
+    /// The source range the caret underlines.
     pub span: Span,
     /// Text under the caret: what was expected there.
     pub label: String,

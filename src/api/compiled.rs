@@ -135,10 +135,12 @@ impl Simulator {
         self.sim.run(p)
     }
 
+    /// The checked options every run of this simulator takes.
     pub fn options(&self) -> &SimOptions {
         self.sim.options()
     }
 
+    /// The compiled model it runs.
     pub fn compiled(&self) -> &Compiled {
         &self.compiled
     }

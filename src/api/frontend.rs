@@ -8,8 +8,10 @@ use crate::{sema, syntax};
 /// Everything the front end can reject in a model text.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum FrontendError {
+    /// The text does not parse.
     #[error(transparent)]
     Parse(#[from] syntax::ParseError),
+    /// The parsed model does not check: every error, in source order.
     #[error("{} error(s) in the model", .0.len())]
     Check(Vec<sema::CheckError>),
 }

@@ -41,17 +41,29 @@ pub struct OptionError {
 /// line over [`SimOptions::default`]). Only [`Self::apply`] checks the values.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SimOverrides {
+    /// The start time.
     pub t_start: Option<f64>,
+    /// The end time.
     pub t_end: Option<f64>,
+    /// The relative tolerance.
     pub rtol: Option<f64>,
+    /// The absolute tolerance.
     pub atol: Option<f64>,
+    /// The integration method.
     pub method: Option<Method>,
+    /// The most events before the run stops.
     pub max_events: Option<usize>,
+    /// The most step attempts before the run stops with a fault.
     pub max_steps: Option<usize>,
+    /// The grazing threshold (`|g''| delta / d^2`).
     pub graze_tol: Option<f64>,
+    /// The largest step size.
     pub h_max: Option<f64>,
+    /// Whether the sensitivities take part in the step-size error control.
     pub sens_error_control: Option<bool>,
+    /// Whether running costs take part in it.
     pub quadrature_error_control: Option<bool>,
+    /// `Some(true)`: every method lands a step on each event; `Some(false)`: none does.
     pub land_events: Option<bool>,
     /// Library only (tests and measurements): no front end exposes it.
     pub linear_solver: Option<LinearSolver>,

@@ -49,6 +49,7 @@ impl Run {
         matches!(self.result.stopped_by, StopReason::TEnd | StopReason::Event { .. })
     }
 
+    /// Every warning of the run (grazing, near-grazing, derivatives that stopped existing).
     pub fn warnings(&self) -> &[SimWarning] {
         &self.result.warnings
     }
@@ -112,6 +113,7 @@ impl Run {
         &self.result
     }
 
+    /// The raw result, taken.
     pub fn into_result(self) -> SimResult {
         self.result
     }
@@ -121,6 +123,7 @@ impl Run {
         &self.compiled
     }
 
+    /// Seconds the run took.
     pub fn run_seconds(&self) -> f64 {
         self.run_seconds
     }

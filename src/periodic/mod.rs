@@ -85,25 +85,59 @@ pub struct PeriodicResult {
     pub events: usize,
 }
 
+/// Why no periodic orbit was found, or the question was refused.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum PeriodicError {
+    /// The section names no event.
     #[error("model has no event `{name}`; its events are {known}")]
-    NoSection { name: String, known: String },
+    NoSection {
+        /// The name given.
+        name: String,
+        /// The model's events.
+        known: String,
+    },
+    /// No free parameters to solve for.
     #[error("no free parameters: name the parameters that set the initial state")]
     NoFree,
+    /// A firing number outside 1 to `MAX_FIRING`.
     #[error("the section's firing must be 1 to {max}, found {firing}")]
-    BadFiring { firing: usize, max: usize },
+    BadFiring {
+        /// The firing asked for.
+        firing: usize,
+        /// The most.
+        max: usize,
+    },
+    /// A section that is neither `EVENT` nor `EVENT#K`.
     #[error("`{text}`: expected EVENT or EVENT#K with K from 1 to {MAX_FIRING}")]
-    BadSection { text: String },
+    BadSection {
+        /// The section as written.
+        text: String,
+    },
+    /// A section's model could not be compiled (the code generator's message).
     #[error("cannot compile the model: {0}")]
     Compile(String),
+    /// A run of the return map did not reach the section.
     #[error("the run from the initial state does not reach the section `{section}`: {how}")]
-    Missed { section: String, how: String },
+    Missed {
+        /// The section's name.
+        section: String,
+        /// How the run ended instead.
+        how: String,
+    },
     #[error(
         "no fixed point found: after {iterations} Newton iterations the run returns {residual:e} away from its \
          initial state (tolerance {tol:e}); try another start (--set) or other free parameters"
     )]
-    NotConverged { iterations: usize, residual: f64, tol: f64 },
+    /// Newton did not converge in `max_iter` iterations.
+    NotConverged {
+        /// The iterations made.
+        iterations: usize,
+        /// The last residual.
+        residual: f64,
+        /// The tolerance.
+        tol: f64,
+    },
+    /// The return map's Jacobian with respect to the free parameters is not finite.
     #[error("the return map's Jacobian with respect to the free parameters is not finite")]
     Singular,
 }

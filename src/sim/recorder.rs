@@ -24,11 +24,17 @@ pub enum PointKind {
 /// One point of the trajectory. `s` holds the sensitivities, column per parameter.
 #[derive(Clone, Copy, Debug)]
 pub struct Point<'a> {
+    /// Where it comes from.
     pub kind: PointKind,
+    /// The time.
     pub t: f64,
+    /// The mode (index).
     pub mode: usize,
+    /// The states.
     pub x: &'a [f64],
+    /// The sensitivities (n * m).
     pub s: &'a [f64],
+    /// The outputs.
     pub outputs: &'a [f64],
 }
 
@@ -46,6 +52,7 @@ pub trait Recorder {
     fn next_sample(&self) -> Option<f64> {
         None
     }
+    /// Takes one point the recorder wants.
     fn record(&mut self, point: &Point<'_>);
 }
 
@@ -72,6 +79,7 @@ pub struct TrajectoryRecorder {
 }
 
 impl TrajectoryRecorder {
+    /// Keeps the rows `request` asks for, from `t_start`.
     pub fn new(request: TrajectoryRequest, t_start: f64) -> TrajectoryRecorder {
         TrajectoryRecorder { schedule: RowSchedule::new(request, t_start), rows: Vec::new() }
     }
@@ -92,14 +100,17 @@ pub struct RowSchedule {
 }
 
 impl RowSchedule {
+    /// The rows `request` asks for, from `t_start`.
     pub fn new(request: TrajectoryRequest, t_start: f64) -> RowSchedule {
         RowSchedule { request, t_start, next_sample: 0 }
     }
 
+    /// Whether any row is wanted.
     pub fn is_active(&self) -> bool {
         self.request != TrajectoryRequest::None
     }
 
+    /// Whether points of `kind` are wanted (the samples by `next_sample`).
     pub fn wants(&self, kind: PointKind) -> bool {
         match self.request {
             TrajectoryRequest::None => false,

@@ -57,8 +57,11 @@ enum Work {
 
 /// One run in progress with the stepper the options chose (see [`Simulator::integrator`]).
 pub enum Driver<'a, S: HybridSystem + ?Sized, R: Recorder> {
+    /// A forced explicit pair.
     Explicit(Integrator<'a, S, R, Rk>),
+    /// A forced Rosenbrock method.
     Rosenbrock(Integrator<'a, S, R, Rosenbrock>),
+    /// `--method auto`.
     Auto(Integrator<'a, S, R, Auto>),
 }
 
@@ -131,7 +134,9 @@ fn run_to_end<S: HybridSystem + ?Sized, R: Recorder, St: Stepper>(
 /// dereferences to a [`HybridSystem`]. An owned handle (`Arc<CompiledModel>`) makes an owned
 /// simulator that a thread or a Python object can keep.
 pub trait SystemRef {
+    /// The system referred to.
     type System: HybridSystem + ?Sized;
+    /// The system.
     fn system(&self) -> &Self::System;
 }
 
@@ -240,6 +245,7 @@ impl<H: SystemRef> Simulator<H> {
         })
     }
 
+    /// The checked options every run takes.
     pub fn options(&self) -> &SimOptions {
         &self.opts
     }

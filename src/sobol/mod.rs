@@ -37,7 +37,9 @@ pub const Z_95: f64 = 1.959963984540054;
 /// One `--output` of an analysis: what it reads and its label as the user wrote it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Output {
+    /// The output as the user wrote it.
     pub label: String,
+    /// What it reads.
     pub quantity: Observable,
 }
 
@@ -123,6 +125,7 @@ impl OnFail {
 pub struct Evaluated {
     /// Row-major: row `r`'s value of output `k` is `values[r * outputs + k]`, NaN where missing.
     pub values: Vec<f64>,
+    /// Outputs per row.
     pub outputs: usize,
     /// Runs that did not end as asked, by status word (`zeno`, `fault`, ...; `error` for a run
     /// that was refused), in the order of [`RunStatus`].
@@ -252,12 +255,15 @@ pub fn evaluate_rows<S: HybridSystem + ?Sized>(
 /// One output's indices and what went into them.
 #[derive(Clone, Debug, PartialEq)]
 pub struct OutputIndices {
+    /// The output as the user wrote it.
     pub label: String,
     /// Rows without a value (the run ended early, the event did not fire, not finite).
     pub failed_rows: usize,
     /// Base points left out (`OnFail::Drop`), and those the indices use.
     pub dropped_points: usize,
+    /// Base points the indices use.
     pub used_points: usize,
+    /// The indices.
     pub indices: Indices,
     /// Bootstrap standard errors (the same shape), when resamples were asked for.
     pub errors: Option<Indices>,
@@ -270,9 +276,27 @@ pub enum AnalysisError {
         "output `{label}`: {failed_rows} of {rows} rows have no value (the first is row {first_row}); \
          choose --on-fail drop or --on-fail value=X to analyse anyway"
     )]
-    Failed { label: String, failed_rows: usize, rows: usize, first_row: usize },
+    /// Rows without a value under `OnFail::Error`.
+    Failed {
+        /// The output.
+        label: String,
+        /// Rows without a value.
+        failed_rows: usize,
+        /// Rows of the design.
+        rows: usize,
+        /// The first of them (1-based).
+        first_row: usize,
+    },
+    /// Fewer than 2 base points left under `OnFail::Drop`.
     #[error("output `{label}`: {used} base points left after dropping {dropped}; at least 2 are needed")]
-    TooFewPoints { label: String, used: usize, dropped: usize },
+    TooFewPoints {
+        /// The output.
+        label: String,
+        /// Base points left.
+        used: usize,
+        /// Base points dropped.
+        dropped: usize,
+    },
 }
 
 impl AnalysisError {
@@ -287,11 +311,15 @@ impl AnalysisError {
 /// What [`analyze`] needs besides the values.
 #[derive(Clone, Copy, Debug)]
 pub struct Analysis {
+    /// Varied parameters.
     pub d: usize,
+    /// Whether second-order indices are estimated.
     pub second_order: bool,
+    /// What to do with rows without a value.
     pub on_fail: OnFail,
     /// Bootstrap resamples (0: none).
     pub bootstrap: usize,
+    /// The bootstrap's seed.
     pub seed: u64,
 }
 

@@ -30,24 +30,36 @@ pub use table::{CellKind, Columns, Format};
 /// (Zeno, a runtime fault) is an `Ok` whose `stopped_by` says so; `Err` is bad input.
 pub type PointResult = Result<SimResult, SimError>;
 
+/// Why a sweep could not run or write its rows. (A point whose run failed is a row, not an error.)
 #[derive(Debug, thiserror::Error)]
 pub enum SweepError {
+    /// The thread pool could not be built.
     #[error("cannot start {threads} worker threads")]
     ThreadPool {
+        /// The threads asked for.
         threads: usize,
+        /// Why.
         #[source]
         source: rayon::ThreadPoolBuildError,
     },
+    /// A worker thread could not be started.
     #[error("cannot start {threads} worker threads")]
     Spawn {
+        /// The threads asked for.
         threads: usize,
+        /// Why.
         #[source]
         source: std::io::Error,
     },
+    /// Writing the rows failed.
     #[error("cannot write the rows")]
     Write(#[source] std::io::Error),
+    /// A worker panicked (a bug).
     #[error("a worker thread panicked at point {index}")]
-    WorkerPanicked { index: usize },
+    WorkerPanicked {
+        /// The point it was running.
+        index: usize,
+    },
 }
 
 /// Rows formatted in parallel per chunk, then written in order: formatting costs about as much

@@ -8,11 +8,23 @@ use rand_core::{Rng as _, SeedableRng as _};
 #[derive(Clone, Debug, PartialEq)]
 pub enum AxisSpec {
     /// `P=LO:HI:N`: N evenly spaced values from LO to HI, both included.
-    Grid { lo: f64, hi: f64, n: usize },
+    Grid {
+        /// The first value.
+        lo: f64,
+        /// The last value.
+        hi: f64,
+        /// How many.
+        n: usize,
+    },
     /// `P=V1,V2,...`: exactly these values, in this order.
     List(Vec<f64>),
     /// `P=LO:HI`: a range to sample from (with `--samples`).
-    Range { lo: f64, hi: f64 },
+    Range {
+        /// The lower end.
+        lo: f64,
+        /// The upper end.
+        hi: f64,
+    },
     /// `P` alone: sample from the parameter's declared range (with `--samples`).
     Declared,
 }
@@ -20,23 +32,42 @@ pub enum AxisSpec {
 /// A parsed `--vary` flag.
 #[derive(Clone, Debug, PartialEq)]
 pub struct VarySpec {
+    /// The parameter's name, as written.
     pub name: String,
+    /// What it asks for.
     pub axis: AxisSpec,
 }
 
+/// A `--vary` text that does not parse (`hybc sweep`).
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum VarySpecError {
+    /// A number that is not a finite number.
     #[error("`{text}` is not a finite number")]
-    NotANumber { text: String },
+    NotANumber {
+        /// The number as written.
+        text: String,
+    },
     /// A decimal a double cannot hold (`1e-400` would round to 0).
     #[error(transparent)]
     Unrepresentable(crate::number::NumberError),
+    /// Not one of the shapes a `--vary` takes.
     #[error("`{text}`: expected P=LO:HI:N, P=LO:HI, P=V1,V2,... or P")]
-    Shape { text: String },
+    Shape {
+        /// The text as written.
+        text: String,
+    },
+    /// A grid count that is not a whole number from 2.
     #[error("`{text}`: the number of grid points must be an integer of at least 2")]
-    GridCount { text: String },
+    GridCount {
+        /// The text as written.
+        text: String,
+    },
+    /// A range whose lower end is not below its upper end.
     #[error("`{text}`: LO must be below HI")]
-    EmptyRange { text: String },
+    EmptyRange {
+        /// The text as written.
+        text: String,
+    },
 }
 
 fn number(text: &str) -> Result<f64, VarySpecError> {
@@ -122,12 +153,20 @@ pub fn linspace(lo: f64, hi: f64, n: usize) -> Vec<f64> {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Axis {
     /// `n >= 2` evenly spaced values from `lo` to `hi`, both included.
-    Even { lo: f64, hi: f64, n: usize },
+    Even {
+        /// The first value.
+        lo: f64,
+        /// The last value.
+        hi: f64,
+        /// How many.
+        n: usize,
+    },
     /// Exactly these values, in this order.
     List(Vec<f64>),
 }
 
 impl Axis {
+    /// The number of values.
     pub fn len(&self) -> usize {
         match self {
             Axis::Even { n, .. } => *n,
@@ -135,6 +174,7 @@ impl Axis {
         }
     }
 
+    /// Whether there are none.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
@@ -203,6 +243,7 @@ pub struct Draws {
 }
 
 impl Draws {
+    /// `n` points from `base`, the parameters `ranges` (index, lo, hi) drawn with `seed`.
     pub fn new(base: Vec<f64>, ranges: Vec<(usize, f64, f64)>, n: usize, seed: u64) -> Draws {
         let mut key = [0u8; 32];
         key[..8].copy_from_slice(&seed.to_le_bytes());
@@ -236,6 +277,7 @@ pub enum Points {
 }
 
 impl Points {
+    /// The number of points.
     pub fn len(&self) -> usize {
         match self {
             Points::Grid(g) => g.len,
@@ -244,6 +286,7 @@ impl Points {
         }
     }
 
+    /// Whether there are none.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }

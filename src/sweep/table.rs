@@ -33,8 +33,10 @@ use super::PointResult;
 use crate::report::non_finite_name;
 use crate::sim::{non_finite_finals, SimResult, StopReason, SystemInfo};
 
+/// How rows are written.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
+    /// Comma-separated values with a header line.
     Csv,
     /// One JSON object per line, keyed by the column names.
     Jsonl,
@@ -43,9 +45,13 @@ pub enum Format {
 /// One cell of a row.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Cell {
+    /// A number.
     Num(f64),
+    /// A count (the events).
     Count(usize),
+    /// Text (`status`, `event<k>`, `error`).
     Text(String),
+    /// Nothing: the value does not exist.
     Empty,
 }
 
