@@ -8,7 +8,7 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use hybc::periodic::{self, PeriodicError};
+use hybc::periodic::{self, PeriodicError, Search};
 use hybc::{Error, PeriodicRequest};
 
 use crate::errors;
@@ -38,15 +38,14 @@ pub fn periodic_report(
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
     let (section, firing) =
         periodic::parse_section(section).map_err(|e| PyValueError::new_err(format!("section: {e}")))?;
-    let request = PeriodicRequest {
-        section,
-        firing,
+    let search = Search {
         free,
         params: model.param_values(params)?.values().to_vec(),
         sim: keywords.options(&inner)?,
         max_iter,
         tol: crate::options::positive("tol", tol)?,
     };
+    let request = PeriodicRequest { section, firing, search };
     match py.detach(move || request.run(&inner)) {
         Ok(report) => Ok(report.to_json().to_string()),
         Err(Error::Periodic(

@@ -7,7 +7,7 @@ use clap::ValueEnum;
 
 use super::options::{at_most, parameter_values, parse_param_list, positive, sim_options, SimFlags};
 use super::{error_chain, load_model, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
-use crate::periodic::{self, PeriodicError};
+use crate::periodic::{self, PeriodicError, Search};
 use crate::{Error, Model, PeriodicRequest};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -60,15 +60,14 @@ fn solve(model: &Model, args: &PeriodicArgs) -> Result<ExitCode, String> {
     let free = parse_param_list(model, &args.free, "--free")?;
     at_most("--max-iter", args.max_iter, crate::limits::MAX_FIT_ITER)?;
     let (section, firing) = periodic::parse_section(&args.section).map_err(|e| format!("--section: {e}"))?;
-    let request = PeriodicRequest {
-        section,
-        firing,
+    let search = Search {
         free,
         params: parameter_values(model, &args.set)?.values().to_vec(),
         sim: sim_options(model, &args.sim)?,
         max_iter: args.max_iter,
         tol: positive("--tol", args.tol)?,
     };
+    let request = PeriodicRequest { section, firing, search };
     match request.run(model) {
         Ok(report) => {
             let text = match args.format {

@@ -28,7 +28,7 @@ mod report;
 mod section;
 
 pub use report::PeriodicReport;
-pub use section::{parse_section, section_models, SectionModels, MAX_FIRING};
+pub use section::{parse_section, section_models, Section, SectionModels, MAX_FIRING};
 
 /// Multipliers of at most this magnitude are the section's trivial ones: a perturbation along
 /// the flow reaches the section at another time but at the same point, and the state right after
@@ -36,18 +36,9 @@ pub use section::{parse_section, section_models, SectionModels, MAX_FIRING};
 /// round-off. They take no part in the stability verdict.
 pub const TRIVIAL_MULTIPLIER: f64 = 1e-8;
 
-/// What to solve for, on the systems of a section's models ([`SectionModels`]).
+/// How to search for the orbit: what the user asks.
 #[derive(Clone, Debug)]
-pub struct PeriodicProblem {
-    /// The section's name, as the user wrote it (for messages).
-    pub name: String,
-    /// The index of the event that stops the return map ([`SectionModels::section`]).
-    pub section: usize,
-    /// The states of the orbit ([`SectionModels::orbit`]).
-    pub orbit: Vec<usize>,
-    /// The model's own states: the fixed point reports these (a counter of firings may follow
-    /// them in the systems).
-    pub n_states: usize,
+pub struct Search {
     /// The parameters to solve for (they set the initial state).
     pub free: Vec<ParamIdx>,
     /// All parameter values; the free ones are the starting guess.
@@ -179,7 +170,8 @@ fn return_map<M: HybridSystem>(
     Ok((f.state.clone(), m, f.time - sim.options().t_start, r.events.len()))
 }
 
-/// Finds the periodic orbit of `problem` and its multipliers. `initial` is the section's
+/// Finds the periodic orbit `search` asks for through `section`, and its multipliers. `initial`
+/// is the section's
 /// stopping model compiled with the free parameters as its gradient parameters (its initial
 /// state and sensitivities start each iterate), `map` the seeded model compiled with the seeds as
 /// its gradient parameters (a run of it is the return map, its total derivatives the monodromy
@@ -187,22 +179,24 @@ fn return_map<M: HybridSystem>(
 pub fn find<S: HybridSystem, M: HybridSystem>(
     initial: &S,
     map: &M,
-    problem: &PeriodicProblem,
+    section: &Section,
+    search: &Search,
 ) -> Result<PeriodicResult, PeriodicError> {
+    let problem = search;
     if problem.free.is_empty() {
         return Err(PeriodicError::NoFree);
     }
-    let (section, n, orbit) = (problem.section, problem.n_states, problem.orbit.clone());
+    let (n, orbit) = (section.n_states, section.orbit.clone());
     let k_orbit = orbit.len();
     let mut sim = Simulator::new(map, &problem.sim)
-        .map_err(|e| PeriodicError::Missed { section: problem.name.clone(), how: e.to_string() })?;
+        .map_err(|e| PeriodicError::Missed { section: section.name.clone(), how: e.to_string() })?;
     let mut params = problem.params.clone();
     let n_all = initial.info().n_states();
     let (mut x0, mut x0p) = (vec![0.0; n_all], vec![0.0; n_all * problem.free.len()]);
     let mut residuals = Vec::new();
     for iteration in 0..=problem.max_iter {
         initial.initial_state(&params, &mut x0);
-        let (x1, m, period, events) = return_map(&mut sim, &params, &x0, section, &problem.name)?;
+        let (x1, m, period, events) = return_map(&mut sim, &params, &x0, section.index, &section.name)?;
         // The counter (if any) and the quadrature states are no part of the orbit.
         let m = DMatrix::from_fn(k_orbit, k_orbit, |i, j| m[(orbit[i], orbit[j])]);
         let r: Vec<f64> = orbit.iter().map(|&i| x1[i] - x0[i]).collect();

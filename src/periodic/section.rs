@@ -39,13 +39,24 @@ pub struct SectionModels {
     pub seeded: sema::Model,
     /// Those parameters, in state order.
     pub seeds: Vec<ParamIdx>,
-    /// The stop event's index, in both models.
-    pub section: usize,
+    /// Where the return map stops, and which states its orbit has.
+    pub section: Section,
+}
+
+/// Where a return map stops and which states its orbit has.
+#[derive(Clone, Debug)]
+pub struct Section {
+    /// The section event's name, as the user wrote it (for messages).
+    pub name: String,
+    /// The index of the event that stops the return map, in both derived models.
+    pub index: usize,
     /// The states of the orbit: every state of the model but the quadrature ones (a running cost
     /// that no flow, guard or other state reads grows from period to period and is no part of
     /// the orbit). A counter of the section's firings follows the model's own states in the
     /// derived models, outside the orbit too.
     pub orbit: Vec<usize>,
+    /// The model's own states: the fixed point reports these.
+    pub n_states: usize,
 }
 
 /// The models of an orbit through the `firing`-th firing of the event named `section`.
@@ -61,11 +72,12 @@ pub fn section_models(
     if firing == 0 || firing > MAX_FIRING {
         return Err(PeriodicError::BadFiring { firing, max: MAX_FIRING });
     }
-    let (stopping, section) = stop_at_firing(model, event, firing);
+    let (stopping, index) = stop_at_firing(model, event, firing);
     let (seeded, seeds) = seeded(&stopping);
     let quadrature = sema::quadrature_states(model);
     let orbit = (0..model.states.len()).filter(|&i| !quadrature[i]).collect();
-    Ok(SectionModels { stopping, seeded, seeds, section, orbit })
+    let section = Section { name: section.to_string(), index, orbit, n_states: model.states.len() };
+    Ok(SectionModels { stopping, seeded, seeds, section })
 }
 
 /// `model` with the section's `firing`-th firing a `stop` event, and that event's index. For the

@@ -119,15 +119,8 @@ fn the_passive_gait_is_a_stable_fixed_point_with_the_running_cost_left_out() {
         params[p.0 as usize] *= 1.05;
     }
     let sim = hybc::sim::SimOptions { t_end: 3.0, rtol: 1e-12, atol: 1e-14, ..Default::default() };
-    let request = PeriodicRequest {
-        section: "strike".into(),
-        firing: 1,
-        free: free.clone(),
-        params,
-        sim,
-        max_iter: 30,
-        tol: 1e-11,
-    };
+    let search = hybc::periodic::Search { free: free.clone(), params, sim, max_iter: 30, tol: 1e-11 };
+    let request = PeriodicRequest { section: "strike".into(), firing: 1, search };
     let r = request.run(&model).expect("a fixed point").result;
     for (p, want) in free.iter().zip(&published) {
         assert!((r.params[p.0 as usize] - want).abs() < 1e-8, "{:?}", r.params);

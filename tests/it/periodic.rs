@@ -2,7 +2,7 @@
 //! fixed point of the heel-strike return map, and its Floquet multipliers against an independent
 //! computation: central differences of the return map, run by run.
 
-use hybc::periodic::PeriodicResult;
+use hybc::periodic::{PeriodicResult, Search};
 use hybc::{Model, PeriodicRequest};
 
 use crate::event_edges::WALKER;
@@ -19,15 +19,8 @@ fn problem_from(model: &Model, start: [f64; 3]) -> (Model, PeriodicRequest) {
         params[p.0 as usize] = v;
     }
     let sim = hybc::sim::SimOptions { t_end: 10.0, rtol: 1e-12, atol: 1e-14, ..Default::default() };
-    let request = PeriodicRequest {
-        section: "heelstrike".into(),
-        firing: 1,
-        free,
-        params,
-        sim,
-        max_iter: 30,
-        tol: 1e-11,
-    };
+    let search = Search { free, params, sim, max_iter: 30, tol: 1e-11 };
+    let request = PeriodicRequest { section: "heelstrike".into(), firing: 1, search };
     (model.clone(), request)
 }
 

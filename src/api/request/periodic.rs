@@ -5,9 +5,8 @@
 //! Newton on them (`periodic::find`, the core), so `periodic/` knows no compiler.
 
 use crate::api::{Compiled, Error, Model};
-use crate::periodic::{self, PeriodicError, PeriodicProblem, PeriodicReport};
+use crate::periodic::{self, PeriodicError, PeriodicReport, Search};
 use crate::sema::{self, ParamIdx};
-use crate::sim::SimOptions;
 
 /// What orbit to find.
 #[derive(Clone, Debug)]
@@ -17,16 +16,9 @@ pub struct PeriodicRequest {
     /// Which of its firings closes the orbit (1-based; `periodic::parse_section` reads
     /// `EVENT#K`).
     pub firing: usize,
-    /// The parameters that set the initial state, solved for.
-    pub free: Vec<ParamIdx>,
-    /// Every parameter's value: the free ones start there, the others stay there.
-    pub params: Vec<f64>,
-    /// The options of every run of the return map.
-    pub sim: SimOptions,
-    /// The most Newton iterations (one run each).
-    pub max_iter: usize,
-    /// Converged when every state returns within `tol (1 + |x0|)` of its initial value.
-    pub tol: f64,
+    /// The free parameters that set the initial state, their start, the options, the Newton
+    /// iterations and the tolerance.
+    pub search: Search,
 }
 
 impl PeriodicRequest {
@@ -34,7 +26,7 @@ impl PeriodicRequest {
     pub fn run(&self, model: &Model) -> Result<PeriodicReport, Error> {
         let checked = model.checked();
         let derived = periodic::section_models(checked, &self.section, self.firing)?;
-        if self.free.is_empty() {
+        if self.search.free.is_empty() {
             return Err(PeriodicError::NoFree.into());
         }
         let compile = |m: sema::Model, grad: &[ParamIdx]| -> Result<Compiled, Error> {
@@ -43,26 +35,15 @@ impl PeriodicRequest {
                 e => e,
             })
         };
-        let initial = compile(derived.stopping, &self.free)?;
+        let initial = compile(derived.stopping, &self.search.free)?;
         let map = compile(derived.seeded, &derived.seeds)?;
-        let problem = PeriodicProblem {
-            name: self.section.clone(),
-            section: derived.section,
-            orbit: derived.orbit,
-            n_states: checked.states.len(),
-            free: self.free.clone(),
-            params: self.params.clone(),
-            sim: self.sim.clone(),
-            max_iter: self.max_iter,
-            tol: self.tol,
-        };
-        let result = periodic::find(initial.system(), map.system(), &problem)?;
+        let result = periodic::find(initial.system(), map.system(), &derived.section, &self.search)?;
         Ok(PeriodicReport {
             model: model.name().to_string(),
             section: self.section.clone(),
             firing: self.firing,
             params: checked.params.iter().map(|p| p.name.clone()).collect(),
-            free: self.free.clone(),
+            free: self.search.free.clone(),
             states: checked.states.iter().map(|s| s.name.clone()).collect(),
             result,
         })
