@@ -26,6 +26,8 @@
 // All `unsafe` is in `codegen` (calling the JIT's code) and in `sim::method::sums`, the stage
 // sums (a CPU feature dispatch and checked-once block loads); each allows it where it stands.
 #![deny(unsafe_code)]
+// Every public item says what it is: the library is used from outside (the CLI, Python, tests).
+#![warn(missing_docs)]
 
 mod api;
 #[cfg(feature = "cli")]

@@ -95,7 +95,12 @@ pub enum StepOutcome {
     Accepted,
     /// The step was cut at an event instant and a group fired there: the run's events
     /// `first..first + count` (flow switches are not events, so `count` may be 0).
-    Fired { first: usize, count: usize },
+    Fired {
+        /// The first of them, in the run's event record.
+        first: usize,
+        /// How many fired.
+        count: usize,
+    },
     /// The run is over: this is why. Further calls return the same.
     Done(StopReason),
 }
