@@ -115,7 +115,7 @@ pub fn trajectory_request(value: Option<&Bound<'_, PyAny>>) -> PyResult<Trajecto
         };
     }
     match value.extract::<f64>() {
-        Ok(dt) => Ok(TrajectoryRequest::Sample(positive("trajectory", dt)?)),
+        Ok(dt) => Ok(TrajectoryRequest::Every(positive("trajectory", dt)?)),
         Err(_) => Err(PyValueError::new_err(format!(
             "trajectory: expected None, \"steps\" or a sampling interval dt > 0, found {}",
             value.repr().map(|r| r.to_string()).unwrap_or_default()

@@ -76,7 +76,7 @@ impl Compiled {
     /// buffers allocated once. Owned (it holds a clone of this `Compiled`), so it can live in a
     /// thread or a binding.
     pub fn simulator(&self, opts: &SimOptions) -> Result<Simulator, Error> {
-        Ok(Simulator { compiled: self.clone(), sim: sim::Simulator::new(Arc::clone(&self.native), opts)? })
+        Ok(Simulator { compiled: self.clone(), sim: sim::Runner::new(Arc::clone(&self.native), opts)? })
     }
 
     fn check_params(&self, params: &Params) -> Result<(), ParamError> {
@@ -97,7 +97,7 @@ impl Compiled {
 #[derive(Debug)]
 pub struct Simulator {
     compiled: Compiled,
-    sim: sim::Simulator<Arc<CompiledModel>>,
+    sim: sim::Runner<Arc<CompiledModel>>,
 }
 
 impl Simulator {

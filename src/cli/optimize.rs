@@ -192,7 +192,7 @@ fn plot(
     path: &std::path::Path,
 ) -> Result<(), String> {
     let opts = SimOptions {
-        trajectory: TrajectoryRequest::Sample((sim.t_end - sim.t_start) / 1000.0),
+        trajectory: TrajectoryRequest::Every((sim.t_end - sim.t_start) / 1000.0),
         ..sim.clone()
     };
     let run = compiled

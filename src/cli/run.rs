@@ -98,7 +98,7 @@ fn trajectory_request(args: &RunArgs, opts: &SimOptions) -> Result<TrajectoryReq
             let dt = positive("--sample", dt)?;
             let cap = if args.plot.is_some() { MAX_PLOTTED_ROWS } else { trajectory::MAX_TRAJECTORY_ROWS };
             trajectory::check_rows(opts, dt, cap)?;
-            TrajectoryRequest::Sample(dt)
+            TrajectoryRequest::Every(dt)
         }
     })
 }
@@ -238,7 +238,7 @@ fn plot_trajectory(args: &RunArgs, opts: &mut SimOptions) -> Result<(), String> 
     if let Some(path) = &args.plot {
         crate::plot::ImageFormat::from_path(path).map_err(|e| format!("--plot: {e}"))?;
         if opts.trajectory == TrajectoryRequest::None {
-            opts.trajectory = TrajectoryRequest::Sample((opts.t_end - opts.t_start) / 1000.0);
+            opts.trajectory = TrajectoryRequest::Every((opts.t_end - opts.t_start) / 1000.0);
         }
     }
     Ok(())

@@ -4,15 +4,15 @@
 //!
 //! Code map: `plan` decides what each kernel computes and checks every index (no Cranelift);
 //! `stiff` plans the Rosenbrock kernels (Jacobians, second derivatives), compiled on demand;
-//! `lower` turns a plan into IR, one `translate_*` method per node kind; `runtime` holds the host
+//! `translate` turns a plan into IR, one `translate_*` method per node kind; `runtime` holds the host
 //! wrappers for transcendental functions; `compiled` owns the JIT module and calls the kernels.
 
 #[allow(unsafe_code)]
 mod compiled;
-mod lower;
 mod plan;
 mod runtime;
 mod stiff;
+mod translate;
 
 pub use compiled::CompiledModel;
 

@@ -8,7 +8,7 @@ use std::fmt;
 use nalgebra::DMatrix;
 
 use super::target::{Observable, Target};
-use crate::sim::{HybridSystem, SimResult, Simulator, StopReason, SystemInfo};
+use crate::sim::{HybridSystem, Runner, SimResult, StopReason, SystemInfo};
 
 /// The residuals of one run and their Jacobian with respect to the free parameters.
 #[derive(Clone, Debug)]
@@ -103,9 +103,9 @@ impl fmt::Display for Rejection {
 }
 
 /// Runs the simulator's model at parameters `p` (all of them) and reads the targets. A fit keeps
-/// one `Simulator` for all its evaluations, so its scratch buffers are allocated once.
+/// one `Runner` for all its evaluations, so its scratch buffers are allocated once.
 pub fn evaluate<S: HybridSystem + ?Sized>(
-    simulator: &mut Simulator<&S>,
+    simulator: &mut Runner<&S>,
     p: &[f64],
     targets: &[Target],
 ) -> Result<Evaluation, Rejection> {

@@ -25,7 +25,7 @@ pub use evaluate::{evaluate, Evaluation, Rejection};
 pub use report::FitReport;
 pub use target::{sample_times, Observable, Target, TargetError};
 
-use crate::sim::{HybridSystem, SimOptions, Simulator};
+use crate::sim::{HybridSystem, Runner, SimOptions};
 
 /// The box a free parameter must stay in; infinite ends for none. Trial points are projected
 /// onto the box, and a parameter at a bound that the gradient pushes outwards is held there.
@@ -292,7 +292,7 @@ pub fn fit<S: HybridSystem>(problem: &FitProblem<'_, S>, opts: &FitOptions) -> R
     // `NAME@TIME` targets are read off the run's samples at their times.
     let sampled =
         SimOptions { at: sample_times(problem.targets.iter().map(|t| &t.observable)), ..problem.sim.clone() };
-    let mut simulator = Simulator::new(problem.system, &sampled)
+    let mut simulator = Runner::new(problem.system, &sampled)
         .map_err(|e| FitError::Start(Rejection::RunStopped { message: e.to_string() }))?;
     let solved = lm::minimize(x0, &problem.bounds, opts, |x| {
         evaluate(&mut simulator, &with_free(x), &problem.targets)

@@ -68,7 +68,7 @@ mod stencil;
 
 use serde::Serialize;
 
-use crate::sim::{HybridSystem, SimError, SimOptions, SimResult, Simulator, TrajectoryRequest};
+use crate::sim::{HybridSystem, Runner, SimError, SimOptions, SimResult, TrajectoryRequest};
 
 pub use sequence::{rerun_options, EventCheck, STEPS_PER_SPAN, TIGHTER};
 pub use stencil::{stencil, Difference, Stencil};
@@ -240,9 +240,9 @@ pub fn check_within(
     let info = sys.info();
     let opts = SimOptions { trajectory: TrajectoryRequest::None, ..opts.clone() };
     let rerun_opts = sequence::rerun_options(&opts);
-    let rerun = Simulator::new(sys, &rerun_opts)?.run(p)?;
+    let rerun = Runner::new(sys, &rerun_opts)?.run(p)?;
     let events = sequence::compare(info, nominal, &rerun, &opts, &rerun_opts);
-    let mut simulator = Simulator::new(sys, &opts)?;
+    let mut simulator = Runner::new(sys, &opts)?;
     let mut params = Vec::with_capacity(info.n_grad());
     for (j, &param) in info.grad_params.iter().enumerate() {
         let mut param_check = ParamCheck {

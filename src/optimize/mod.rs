@@ -38,7 +38,7 @@ pub use spec::{parse_constraint, Constraint, Quantity, Sense, SpecError};
 use rayon::prelude::*;
 
 use crate::fit::{sample_times, target_tolerance, Bounds, Rejection};
-use crate::sim::{HybridSystem, SimOptions, SimResult, SimWarning, Simulator, StopReason};
+use crate::sim::{HybridSystem, Runner, SimOptions, SimResult, SimWarning, StopReason};
 use evaluate::{Evaluated, Layout};
 use solver::{LocalSolver, Program, SmoothPoint};
 
@@ -442,7 +442,7 @@ fn local<S: HybridSystem>(
         run: None,
         cusp_notes: Vec::new(),
     };
-    let mut simulator = match Simulator::new(problem.system, &sampled) {
+    let mut simulator = match Runner::new(problem.system, &sampled) {
         Ok(s) => s,
         Err(e) => return failed(e.to_string(), "not started", 0),
     };

@@ -22,7 +22,7 @@
 use nalgebra::DMatrix;
 
 use crate::sema::ParamIdx;
-use crate::sim::{HybridSystem, SimOptions, SimResult, Simulator, StopReason};
+use crate::sim::{HybridSystem, Runner, SimOptions, SimResult, StopReason};
 
 mod report;
 mod section;
@@ -136,7 +136,7 @@ pub enum PeriodicError {
 /// One run of the return map from `x0`: the state right after the section, the monodromy
 /// matrix, the period and the number of events.
 fn return_map<M: HybridSystem>(
-    sim: &mut Simulator<&M>,
+    sim: &mut Runner<&M>,
     params: &[f64],
     x0: &[f64],
     section: usize,
@@ -188,7 +188,7 @@ pub fn find<S: HybridSystem, M: HybridSystem>(
     }
     let (n, orbit) = (section.n_states, section.orbit.clone());
     let k_orbit = orbit.len();
-    let mut sim = Simulator::new(map, &problem.sim)
+    let mut sim = Runner::new(map, &problem.sim)
         .map_err(|e| PeriodicError::Missed { section: section.name.clone(), how: e.to_string() })?;
     let mut params = problem.params.clone();
     let n_all = initial.info().n_states();

@@ -44,7 +44,7 @@ pub struct RunFigure<'a> {
     rows: &'a [TrajectoryRow],
 }
 
-/// Plots `report` (which must hold a trajectory, e.g. from `TrajectoryRequest::Sample`) into
+/// Plots `report` (which must hold a trajectory, e.g. from `TrajectoryRequest::Every`) into
 /// `path` (`.svg` or `.png`).
 pub fn plot_run(report: &RunReport, path: &Path) -> Result<(), PlotError> {
     let rows = report.result().trajectory.as_deref().filter(|rows| rows.len() >= 2).ok_or_else(|| {

@@ -105,7 +105,7 @@ pub enum StepOutcome {
     Done(StopReason),
 }
 
-/// The scratch state of a run, sized by the model and the options; kept by a `Simulator`
+/// The scratch state of a run, sized by the model and the options; kept by a `Runner`
 /// between runs so that a run allocates only what its result holds.
 pub(crate) struct Workspace<St: Stepper = Rk> {
     pub(crate) stepper: St,
@@ -146,7 +146,7 @@ fn existing(d: &[f64]) -> Option<Vec<f64>> {
     (d.is_empty() || d.iter().any(|v| !v.is_nan())).then(|| d.to_vec())
 }
 
-/// One run in progress. Made by `Simulator::integrator`; [`Self::step`] advances it,
+/// One run in progress. Made by `Runner::integrator`; [`Self::step`] advances it,
 /// [`Self::finish`] turns it into the run's result.
 pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = Rk> {
     /// The values at `SimOptions::at` taken so far, and the recorder's dense-output samples.
@@ -159,7 +159,7 @@ pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = R
     m: usize,
     t: f64,
     mode: usize,
-    /// The stepper, the detector, `z` and every scratch buffer: the `Simulator`'s, kept between
+    /// The stepper, the detector, `z` and every scratch buffer: the `Runner`'s, kept between
     /// runs.
     work: &'a mut Workspace<St>,
     recorder: &'a mut R,

@@ -65,7 +65,7 @@ pub enum TrajectoryRequest {
     /// The start, every accepted step end, both sides of every event, and the end.
     Steps,
     /// Every multiple of this interval from the start, taken from the dense output.
-    Sample(f64),
+    Every(f64),
 }
 
 /// Options of [`run`](super::run). Times are model time; tolerances are per component, applied

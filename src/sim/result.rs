@@ -131,7 +131,7 @@ pub enum SimError {
          {cap:.0} a run keeps in memory (sample more coarsely)"
     )]
     /// A trajectory sampled so finely that its rows exceed what a run keeps.
-    TooManySamples {
+    TooManyRows {
         /// The sampling interval.
         dt: f64,
         /// The run's start.

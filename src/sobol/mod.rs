@@ -139,7 +139,7 @@ const CHUNK_POINTS: usize = 64;
 
 /// Runs `sys` at every row of `design` with `opts` on `threads` workers (0: one per core),
 /// keeping only the values of `outputs` (memory: `rows x outputs` numbers, never a run's
-/// record). Each row is an independent run of a reused `Simulator` (bit for bit a fresh run), and
+/// record). Each row is an independent run of a reused `Runner` (bit for bit a fresh run), and
 /// its values land in its own slots, so the result does not depend on the thread count; rayon's
 /// work stealing keeps the other workers going while one grinds through a Zeno row. `progress`
 /// is called once per row.
@@ -192,7 +192,7 @@ pub fn evaluate_rows<S: HybridSystem + ?Sized>(
             .par_chunks_mut(chunk)
             .enumerate()
             .map_init(
-                || (sim::Simulator::new(sys, opts), vec![0.0; design.width()]),
+                || (sim::Runner::new(sys, opts), vec![0.0; design.width()]),
                 |(simulator, p), (c, slots)| {
                     let mut tally: Tally = ([0; 9], None);
                     let first_row = range.start + c * CHUNK_POINTS * block;

@@ -78,7 +78,7 @@ fn pool(threads: usize) -> Result<rayon::ThreadPool, SweepError> {
 /// (0: one per core). Returns one result per point, in the order of `points`.
 ///
 /// Each point is one independent run with nothing shared but the read-only compiled model (each
-/// worker reuses a `sim::Simulator` for its scratch buffers, and a reused simulator gives bit for
+/// worker reuses a `sim::Runner` for its scratch buffers, and a reused simulator gives bit for
 /// bit the result of a fresh run), so every result is the one a single `sim::run` at that point
 /// gives, whatever the number of threads or the scheduling. `progress` is called once after each
 /// point (from any worker thread).
@@ -93,7 +93,7 @@ pub fn run_points<S: HybridSystem + ?Sized>(
         points
             .par_iter()
             .map_init(
-                || sim::Simulator::new(sys, opts),
+                || sim::Runner::new(sys, opts),
                 |sim, p| {
                     let result = match sim {
                         Ok(sim) => sim.run(p),
