@@ -1,7 +1,7 @@
 //! One run of the compiled bouncing ball to T = 2.5 at rtol 1e-10 with gradients with respect to
 //! all three parameters (the headline figure of docs/performance.md), plus the same without gradients. Each is
-//! timed twice: through `sim::run` (a fresh `Simulator` per run: options checked and scratch
-//! buffers allocated every time) and through one `Simulator` reused for every run, which is what
+//! timed twice: through `sim::run` (a fresh `Runner` per run: options checked and scratch
+//! buffers allocated every time) and through one `Runner` reused for every run, which is what
 //! sweeps, fits and gradient checks do. Last, the reused run with gradients and 100 `--at` samples
 //! from the dense output, against the same run without (`_at100`); and the same pair on the dosing
 //! model (two doses, gradients with respect to ka and ke, 53 steps to t = 12), the shape of a fit
@@ -14,7 +14,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use hybc::codegen::{compile, CompileOptions};
 use hybc::lower::{lower, system_info};
 use hybc::sema::ParamIdx;
-use hybc::sim::{run, SimOptions, Simulator};
+use hybc::sim::{run, Runner, SimOptions};
 
 fn ball_run(c: &mut Criterion) {
     let model = hybc::check_source(include_str!("../models/ball.hyb")).expect("ball checks");
@@ -27,14 +27,14 @@ fn ball_run(c: &mut Criterion) {
         c.bench_function(&format!("ball_run_T2.5_rtol1e-10_{label}"), |b| {
             b.iter(|| run(black_box(&compiled), black_box(&p), &opts).expect("runs"))
         });
-        let mut sim = Simulator::new(&compiled, &opts).expect("valid options");
+        let mut sim = Runner::new(&compiled, &opts).expect("valid options");
         c.bench_function(&format!("ball_run_T2.5_rtol1e-10_{label}_reused_simulator"), |b| {
             b.iter(|| sim.run(black_box(&p)).expect("runs"))
         });
         if label == "grad_all" {
             let at: Vec<f64> = (0..100).map(|k| 2.5 * k as f64 / 99.0).collect();
             let sampled = SimOptions { at, ..opts.clone() };
-            let mut sim = Simulator::new(&compiled, &sampled).expect("valid options");
+            let mut sim = Runner::new(&compiled, &sampled).expect("valid options");
             c.bench_function("ball_run_T2.5_rtol1e-10_grad_all_reused_simulator_at100", |b| {
                 b.iter(|| sim.run(black_box(&p)).expect("runs"))
             });
@@ -51,7 +51,7 @@ fn dosing_samples(c: &mut Criterion) {
     let opts = SimOptions { t_end: 12.0, rtol: 1e-10, atol: 1e-12, ..SimOptions::default() };
     let at: Vec<f64> = (0..100).map(|k| 12.0 * k as f64 / 99.0).collect();
     for (label, opts) in [("", opts.clone()), ("_at100", SimOptions { at, ..opts })] {
-        let mut sim = Simulator::new(&compiled, &opts).expect("valid options");
+        let mut sim = Runner::new(&compiled, &opts).expect("valid options");
         c.bench_function(&format!("dosing_run_T12_grad_ka_ke_reused_simulator{label}"), |b| {
             b.iter(|| sim.run(black_box(&p)).expect("runs"))
         });

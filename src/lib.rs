@@ -26,6 +26,8 @@
 // All `unsafe` is in `codegen` (calling the JIT's code) and in `sim::method::sums`, the stage
 // sums (a CPU feature dispatch and checked-once block loads); each allows it where it stands.
 #![deny(unsafe_code)]
+// Every public item says what it is: the library is used from outside (the CLI, Python, tests).
+#![warn(missing_docs)]
 
 mod api;
 #[cfg(feature = "cli")]
@@ -52,44 +54,9 @@ pub mod sweep;
 pub mod syntax;
 
 pub use api::{
-    method_named, time_span, Compiled, Error, Model, ModelError, OptionError, ParamError, Params, Run,
-    SimOverrides, Simulator, Spelling, MAX_MODEL_BYTES,
+    check_source, method_named, positive_number, time_span, Compiled, Error, FitFailure, FitRequest,
+    FrontendError, GradCheckRequest, Model, ModelError, OptimizeFailure, OptimizeRequest, OptionError,
+    ParamError, Params, PeriodicRequest, Run, SimOverrides, Simulator, SobolFailure, SobolRequest, Spelling,
+    SweepRequest, VaryPriorError, MAX_MODEL_BYTES,
 };
 pub use sim::{Method, SimOptions, StopReason, TrajectoryRequest};
-
-use diag::Diagnostic;
-
-/// Everything the front end can reject in a model text.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-pub enum FrontendError {
-    #[error(transparent)]
-    Parse(#[from] syntax::ParseError),
-    #[error("{} error(s) in the model", .0.len())]
-    Check(Vec<sema::CheckError>),
-}
-
-impl FrontendError {
-    /// The errors as diagnostics, in source order.
-    pub fn diagnostics(&self, source: &str) -> Vec<Diagnostic> {
-        match self {
-            FrontendError::Parse(e) => vec![Diagnostic {
-                message: e.message.clone(),
-                span: e.span,
-                label: format!("expected {}", e.expected),
-                notes: Vec::new(),
-            }],
-            FrontendError::Check(errors) => errors.iter().map(|e| e.to_diagnostic(source)).collect(),
-        }
-    }
-
-    /// The errors rendered against the source, with `file_name` in every location.
-    pub fn render(&self, file_name: &str, source: &str) -> String {
-        diag::render(file_name, source, &self.diagnostics(source))
-    }
-}
-
-/// Parses and checks a model text.
-pub fn check_source(source: &str) -> Result<sema::Model, FrontendError> {
-    let file = syntax::parse(source)?;
-    sema::check(&file).map_err(FrontendError::Check)
-}

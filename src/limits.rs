@@ -51,10 +51,26 @@ pub const MAX_OPTIMIZE_FREE: usize = 1_000;
 /// `{what}: at most {max}, found {value}`, `what` naming the flag or keyword.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 pub enum CountError {
+    /// Below the least allowed.
     #[error("{what}: at least {min}, found {value}")]
-    TooFew { what: String, min: usize, value: usize },
+    TooFew {
+        /// The flag or keyword.
+        what: String,
+        /// The least.
+        min: usize,
+        /// The value given.
+        value: usize,
+    },
+    /// Above the most allowed.
     #[error("{what}: at most {max}, found {value}")]
-    TooMany { what: String, max: usize, value: usize },
+    TooMany {
+        /// The flag or keyword.
+        what: String,
+        /// The most.
+        max: usize,
+        /// The value given.
+        value: usize,
+    },
 }
 
 /// `value` if `min <= value <= max`, else the error naming `what`.

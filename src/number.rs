@@ -7,18 +7,33 @@
 /// Why a text is not a number hybc accepts.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 pub enum NumberError {
+    /// Not a number at all.
     #[error("`{text}` is not a number")]
-    NotANumber { text: String },
+    NotANumber {
+        /// The text as written.
+        text: String,
+    },
     /// `inf`, `nan` and their spellings.
     #[error("`{text}` is not a finite number")]
-    NotFinite { text: String },
+    NotFinite {
+        /// The text as written.
+        text: String,
+    },
+    /// Beyond the largest double.
     #[error("`{text}` is too large for a double (the largest is 1.7976931348623157e308)")]
-    TooLarge { text: String },
+    TooLarge {
+        /// The text as written.
+        text: String,
+    },
     #[error(
         "`{text}` is too small for a double: it would round to 0 (the smallest positive double is \
          about 4.9e-324); write 0 if 0 is meant"
     )]
-    TooSmall { text: String },
+    /// Below the smallest positive double: it would round to 0.
+    TooSmall {
+        /// The text as written.
+        text: String,
+    },
 }
 
 /// Parses a finite decimal number (Rust's syntax: `1`, `-2.5`, `.5`, `3e-7`), refusing one a

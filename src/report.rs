@@ -6,17 +6,18 @@ use serde_json::{json, Map, Value};
 
 use crate::sim::{EventRecord, Sample, SimResult, StopReason, SystemInfo};
 
-/// The result of one run, with the names needed to report it.
+/// The result of one run, with the names needed to report it. Made only by
+/// [`Run::into_report`](crate::Run::into_report) (its fields are private and its maker is the
+/// crate's), so every report of a run, the CLI's and Python's, says the same about it.
 #[derive(Clone, Debug)]
 pub struct RunReport {
-    pub model: String,
-    pub t_end: f64,
-    pub info: SystemInfo,
-    /// All parameter values used, in declaration order.
-    pub params: Vec<f64>,
-    pub result: SimResult,
-    pub compile_seconds: f64,
-    pub run_seconds: f64,
+    model: String,
+    t_end: f64,
+    info: SystemInfo,
+    params: Vec<f64>,
+    result: SimResult,
+    compile_seconds: f64,
+    run_seconds: f64,
 }
 
 /// A method's name as the command line and JSON spell it (`dopri5`, `rodas5p`, ...).
@@ -25,6 +26,44 @@ fn method_name(method: crate::sim::Method) -> String {
 }
 
 impl RunReport {
+    /// The report of `result`, a run of `model` (its shape `info`) at `params` to `t_end`: for
+    /// `Run::into_report` only.
+    pub(crate) fn new(
+        model: String,
+        t_end: f64,
+        info: SystemInfo,
+        params: Vec<f64>,
+        result: SimResult,
+        (compile_seconds, run_seconds): (f64, f64),
+    ) -> RunReport {
+        RunReport { model, t_end, info, params, result, compile_seconds, run_seconds }
+    }
+
+    /// The model's name.
+    pub fn model(&self) -> &str {
+        &self.model
+    }
+
+    /// The end time asked for.
+    pub fn t_end(&self) -> f64 {
+        self.t_end
+    }
+
+    /// The model's shape as the run saw it (names, modes, events, gradient columns).
+    pub fn info(&self) -> &SystemInfo {
+        &self.info
+    }
+
+    /// All parameter values of the run, in declaration order.
+    pub fn params(&self) -> &[f64] {
+        &self.params
+    }
+
+    /// The run's result (layouts in `sim::result`).
+    pub fn result(&self) -> &SimResult {
+        &self.result
+    }
+
     /// Whether the run ended as asked (at `t_end` or a `stop` event) rather than early.
     pub fn is_complete(&self) -> bool {
         self.result.stopped_by.is_complete()

@@ -1,6 +1,7 @@
 //! The generated chain models shared by the benches, the examples and the tests
 //! (`tests/it/support`): `chain_source` (`benches/jit.rs`), `diffusion_source` (workload W5),
-//! `hub_source` and `grid_source` (the sparse LU, `examples/sparse_hub.rs`).
+//! `refill_source` (the W5 chain refilled: landing on events),
+//! `hub_source` and `grid_source` (the sparse LU, `benches/measure/sparse_hub.rs`).
 // Each includer (benches, examples, tests) uses only some of the generators.
 #![allow(dead_code)]
 
@@ -52,10 +53,30 @@ pub fn chain_source(n: usize) -> String {
 /// a matrix exponential (the tests' closed form).
 pub fn diffusion_source(n: usize, with_event: bool) -> String {
     assert!(n >= 2, "a chain has at least two cells");
+    let mut s = diffusion_cells("diffusion_chain", n, |i| diffusion_start(i, n));
+    if with_event {
+        s.push_str("initial mode fill {\n    event top_up when x0 <= 0.6 -> rest {\n        x0 := x0 + 0.3\n    }\n}\nmode rest {\n}\n");
+    }
+    s.push_str(&format!("output y = x{}\n", n - 1));
+    s
+}
+
+/// The W5 chain's flow from a full first cell (`x0 = 1`, the others empty), with `x0` refilled to 1
+/// whenever it drains to 0.5 (`refill`, 19 times to t = 10 with 10 cells): the event landing
+/// test's and `benches/measure/w5_accuracy.rs`'s model.
+pub fn refill_source(n: usize) -> String {
+    let mut s = diffusion_cells("refill_chain", n, |i| if i == 0 { 1.0 } else { 0.0 });
+    s.push_str("event refill when x0 <= 0.5 {\n    x0 := 1\n}\n");
+    s
+}
+
+/// The diffusion chain's declarations and flows (see [`diffusion_source`]) as model `name`, cell
+/// `i` starting at `start(i)`.
+fn diffusion_cells(name: &str, n: usize, start: impl Fn(usize) -> f64) -> String {
     let seg = |i: usize| 10 * i / n;
-    let mut s = String::from("model diffusion_chain\nparam d[10] = 50 in [0.1, 1000]\nparam c = 0.1\n");
+    let mut s = format!("model {name}\nparam d[10] = 50 in [0.1, 1000]\nparam c = 0.1\n");
     for i in 0..n {
-        s.push_str(&format!("state x{i} = {}\n", diffusion_start(i, n)));
+        s.push_str(&format!("state x{i} = {}\n", start(i)));
     }
     for i in 0..n {
         let mut rhs = format!("-c * x{i}");
@@ -67,10 +88,6 @@ pub fn diffusion_source(n: usize, with_event: bool) -> String {
         }
         s.push_str(&format!("der(x{i}) = {rhs}\n"));
     }
-    if with_event {
-        s.push_str("initial mode fill {\n    event top_up when x0 <= 0.6 -> rest {\n        x0 := x0 + 0.3\n    }\n}\nmode rest {\n}\n");
-    }
-    s.push_str(&format!("output y = x{}\n", n - 1));
     s
 }
 

@@ -337,6 +337,49 @@ class Model:
         report["run"] = self.simulate(report["params"], grad=problem.free, **problem.options)
         return report
 
+    def periodic(
+        self,
+        section: str,
+        free: Sequence[str],
+        *,
+        params: Mapping[str, Any] | None = None,
+        max_iter: int = 50,
+        tol: float = 1e-10,
+        **options: Any,
+    ) -> dict[str, Any]:
+        """A periodic orbit through events and its Floquet multipliers, as ``hybc periodic`` finds
+        it (docs/periodic.md): the initial state the run returns to right after the section event
+        ``section`` fires (``"EVENT"``, or ``"EVENT#K"`` for its K-th firing), solved for by Newton's
+        method over the parameters ``free`` (a vector's name for every element) from ``params``
+        (their start and the other parameters' values). Returns the dict of ``hybc periodic --format
+        json``: ``fixed_point``, ``params`` (the free ones), ``period``, ``multipliers`` (``[re, im]``
+        pairs, largest first), ``trivial``, ``stable``, ``orbit``, ``monodromy``, ``iterations``,
+        ``residuals``, ``events``.
+
+        - ``max_iter``: the most Newton iterations (one run each); ``tol``: converged when every
+          state returns within ``tol (1 + |x0|)`` of its initial value.
+        - ``options``: the keywords of :meth:`simulate` (``t_end``, ``rtol``, ...).
+
+        An unknown section or free parameter raises ``ValueError`` (``hybc.ParameterError`` for a
+        name); no orbit found (a run that misses the section, Newton not converging, a Jacobian that
+        is not finite) raises ``RuntimeError`` with the words of ``hybc periodic``.
+        """
+        if not isinstance(section, str):
+            raise TypeError(f"section: expected an event name, found {section!r}")
+        vectors = dict(self._native.vectors)
+        free = _expand_names(_names(free, "free"), vectors)
+        _check_counts({"max_iter": max_iter, **options})
+        report = _hybc.periodic_report(
+            self._native,
+            section,
+            free,
+            _param_dict(_expand_vectors(params, vectors)),
+            int(max_iter),
+            float(tol),
+            **options,
+        )
+        return json.loads(report)
+
     def sobol_design(
         self,
         problem: Mapping[str, Any],

@@ -20,7 +20,7 @@ as :meth:`hybc.Model.sobol`, so the indices are identical to the local ones.
 
 With :func:`optimize` each task runs a range of the starts of the same seeded draw (only the
 problem's arguments travel) and returns its report; the client merges them
-(``hybc::optimize::request::merge_shards``: the optima grouped again over every start, the
+(``hybc::optimize::merge_shards``: the optima grouped again over every start, the
 reported end from the shard that ran it), so the report equals :meth:`hybc.Model.optimize`'s
 with the same ``starts`` and ``seed``, timings apart (``stats.optimize_seconds`` adds the
 shards' times).

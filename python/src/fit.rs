@@ -1,4 +1,4 @@
-//! `Model.fit`: the library's whole fit (`hybc::fit::request`, what `hybc fit` runs) from Python's
+//! `Model.fit`: the library's whole fit (`hybc::FitRequest`, what `hybc fit` runs) from Python's
 //! arguments. The Python layer turns a DataFrame-like mapping into the CSV text `hybc fit --data`
 //! reads, so one parser gives both front ends the same rules and messages; the report comes back
 //! as the JSON `hybc fit --format json` prints.
@@ -9,10 +9,10 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use hybc::fit::request::{self, Failure, Request};
 use hybc::fit::FitOptions;
+use hybc::{Error, FitFailure, FitRequest};
 
-use crate::errors::ParameterError;
+use crate::errors::{self, ParameterError};
 use crate::model::Model;
 use crate::options::SimKeywords;
 
@@ -52,18 +52,13 @@ pub fn fit_report(
         )));
     }
     for (name, v) in [("xtol", xtol), ("gtol", gtol), ("ftol", ftol)] {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(PyValueError::new_err(format!(
-                "{name}: expected a positive finite number, found {v}"
-            )));
-        }
+        crate::options::positive(name, v)?;
     }
     let start = model.param_values(params)?.values().to_vec();
     let compiled = model.compiled(py, &free)?;
     let options = FitOptions { max_iter, xtol, gtol, ftol };
-    let inner = inner.clone();
     let (report, warnings) = py.detach(move || {
-        let request = Request {
+        let request = FitRequest {
             targets: &targets,
             data: data.as_deref().map(|text| (text, "data")),
             start,
@@ -71,14 +66,16 @@ pub fn fit_report(
             options,
         };
         let mut warnings = Vec::new();
-        let report = request::run(&inner, &compiled, request, &mut |w| warnings.push(w.to_string()));
+        let report = request.run(&compiled, &mut |w| warnings.push(w.to_string()));
         (report, warnings)
     });
     match report {
         Ok(report) => Ok((report.to_json().to_string(), warnings)),
-        Err(Failure::Target(e)) => Err(PyValueError::new_err(format!("targets: {e}"))),
-        Err(Failure::Data(e)) => Err(PyValueError::new_err(format!("data: {e}"))),
-        Err(Failure::Usage(message)) => Err(PyValueError::new_err(message)),
-        Err(Failure::StartRun(e) | Failure::StartObjective(e)) => Err(PyRuntimeError::new_err(e.to_string())),
+        Err(Error::Fit(FitFailure::Target(e))) => Err(PyValueError::new_err(format!("targets: {e}"))),
+        Err(Error::Fit(FitFailure::Data(e))) => Err(PyValueError::new_err(format!("data: {e}"))),
+        Err(Error::Fit(FitFailure::StartRun(e) | FitFailure::StartObjective(e))) => {
+            Err(PyRuntimeError::new_err(e.to_string()))
+        }
+        Err(e) => Err(errors::to_py(e)),
     }
 }

@@ -5,7 +5,8 @@
 //! `SimOptions`), `run` (one run's result as Python values and NumPy arrays), `sweep` (many points
 //! in parallel, the columns of `hybc sweep`), `sobol` (Sobol' indices: the library's design and
 //! estimators, a shard of rows at a time), `fit` (`Model.fit`: the library's whole fit, the report
-//! as JSON), `optimize` (`Model.optimize`, the same for `hybc optimize`). Every call that integrates releases the GIL.
+//! as JSON), `optimize` (`Model.optimize`, the same for `hybc optimize`), `periodic` (`Model.periodic`, the
+//! same for `hybc periodic`). Every call that integrates releases the GIL.
 //!
 //! Where the JAX primitive plugs in (branch `jax`): a module `jax_ffi` declared below next to the
 //! others, registered by one line in [`_hybc`]; it reaches compiled models through
@@ -17,6 +18,7 @@ mod jax_ffi;
 mod model;
 mod optimize;
 mod options;
+mod periodic;
 mod run;
 mod sobol;
 mod sweep;
@@ -32,6 +34,7 @@ fn _hybc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit::fit_report, m)?)?;
     m.add_function(wrap_pyfunction!(optimize::optimize_report, m)?)?;
     m.add_function(wrap_pyfunction!(optimize::optimize_merge, m)?)?;
+    m.add_function(wrap_pyfunction!(periodic::periodic_report, m)?)?;
     jax_ffi::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

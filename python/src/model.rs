@@ -14,6 +14,7 @@ use crate::options::{trajectory_request, SimKeywords};
 use crate::run::Run;
 use crate::sobol;
 use crate::sweep;
+use hybc::sweep::Points;
 
 /// A checked model. Compiling is the costly step (milliseconds to seconds), so each gradient set
 /// is compiled once and kept: `Compiled` is `Send + Sync + 'static` and cheap to clone.
@@ -229,8 +230,8 @@ impl Model {
             return Ok(PyDict::new(py));
         }
         let compiled = self.compiled(py, &grad)?;
-        let request = sweep::SweepRequest { grad_len: grad.len(), events, threads, opts };
-        sweep::run(py, &compiled, rows, &request)
+        let request = hybc::SweepRequest { points: Points::Rows(rows), sim: opts, events, threads };
+        sweep::run(py, &compiled, &request)
     }
 
     /// Rows `[start, stop)` of the Saltelli design of `Model.sobol`: the varied parameters'
@@ -286,11 +287,21 @@ impl Model {
         // Compiled without gradient parameters: indices need values only, and a run without
         // sensitivities is several times cheaper (as `hybc sobol`).
         let compiled = self.compiled(py, &[])?;
-        let outputs = sobol::outputs(&compiled, &outputs, &design)?;
+        // The policy and the bootstrap are the analysis's (`sobol_analyze`), not the runs'.
+        let request = hybc::SobolRequest {
+            design,
+            seed,
+            outputs: &outputs,
+            on_fail: "error",
+            bootstrap: 0,
+            sim: opts,
+            threads,
+        };
+        let outputs = sobol::outputs(&compiled, &request)?;
         if check_only {
             return Ok(None);
         }
-        sobol::evaluate(py, &compiled, &design, &outputs, (start, stop), &opts, threads).map(Some)
+        sobol::evaluate(py, &compiled, &request, &outputs, (start, stop)).map(Some)
     }
 }
 

@@ -1,4 +1,4 @@
-//! `Model.optimize`: the library's whole optimisation (`hybc::optimize::request`, what
+//! `Model.optimize`: the library's whole optimisation (`hybc::OptimizeRequest`, what
 //! `hybc optimize` runs) from Python's arguments; the report comes back as the JSON
 //! `hybc optimize --format json` prints (the Python layer adds the run at the optimum).
 
@@ -8,8 +8,8 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use hybc::optimize::request::{self, Failure, Request};
 use hybc::optimize::OptimizeOptions;
+use hybc::{Error, OptimizeFailure, OptimizeRequest};
 
 use crate::errors::{self, ParameterError};
 use crate::model::Model;
@@ -42,8 +42,7 @@ pub fn optimize_report(
     sim: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<String> {
     let keywords = SimKeywords::from_kwargs(sim)?;
-    let inner = model.inner().clone();
-    let sim = keywords.options(&inner)?;
+    let sim = keywords.options(model.inner())?;
     if free.is_empty() {
         return Err(ParameterError::new_err("free: name at least one parameter to optimise"));
     }
@@ -54,11 +53,7 @@ pub fn optimize_report(
     count("starts", starts, 1, hybc::limits::MAX_STARTS)?;
     count("threads", threads, 0, hybc::limits::MAX_THREADS)?;
     for (name, v) in [("kkt_tol", kkt_tol), ("xtol", xtol), ("ftol", ftol)] {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(PyValueError::new_err(format!(
-                "{name}: expected a positive finite number, found {v}"
-            )));
-        }
+        crate::options::positive(name, v)?;
     }
     let boxes = free_boxes(&model, &free, bounds)?;
     let start = model.param_values(params)?.values().to_vec();
@@ -72,15 +67,26 @@ pub fn optimize_report(
     }
     let options = OptimizeOptions { max_iter, kkt_tol, xtol, ftol, starts, seed, threads, shard };
     let report = py.detach(move || {
-        let request =
-            Request { minimize: &minimize, subject_to: &subject_to, bounds: boxes, start, sim, options };
-        request::run(&inner, &compiled, request, None)
+        let request = OptimizeRequest {
+            minimize: &minimize,
+            subject_to: &subject_to,
+            bounds: boxes,
+            start,
+            sim,
+            options,
+        };
+        request.run(&compiled, None)
     });
     match report {
         Ok(report) => Ok(report.to_json().to_string()),
-        Err(Failure::Objective(e)) => Err(PyValueError::new_err(format!("minimize: {e}"))),
-        Err(Failure::Constraint(e)) => Err(PyValueError::new_err(format!("subject_to: {e}"))),
-        Err(Failure::Refused(e)) => Err(PyRuntimeError::new_err(e.to_string())),
+        Err(Error::Optimize(OptimizeFailure::Objective(e))) => {
+            Err(PyValueError::new_err(format!("minimize: {e}")))
+        }
+        Err(Error::Optimize(OptimizeFailure::Constraint(e))) => {
+            Err(PyValueError::new_err(format!("subject_to: {e}")))
+        }
+        Err(Error::Optimize(OptimizeFailure::Refused(e))) => Err(PyRuntimeError::new_err(e.to_string())),
+        Err(e) => Err(errors::to_py(e)),
     }
 }
 
@@ -102,11 +108,12 @@ fn free_boxes(
     let mut narrow: Vec<(String, f64, f64)> =
         bounds.unwrap_or_default().into_iter().map(|(name, (lo, hi))| (name, lo, hi)).collect();
     narrow.sort_by(|a, b| a.0.cmp(&b.0));
-    request::bounds(inner, &free_idx, &narrow).map_err(|e| PyValueError::new_err(format!("bounds: {e}")))
+    OptimizeRequest::bounds(inner, &free_idx, &narrow)
+        .map_err(|e| PyValueError::new_err(format!("bounds: {e}")))
 }
 
 /// The report of a whole multi-start from the JSON reports of its shards (in start order), as
-/// `hybc::optimize::request::merge_shards`: what one process running every start reports.
+/// `hybc::optimize::merge_shards`: what one process running every start reports.
 #[pyfunction]
 pub fn optimize_merge(
     model: PyRef<'_, Model>,
@@ -119,6 +126,6 @@ pub fn optimize_merge(
         .iter()
         .map(|r| serde_json::from_str(r).map_err(|e| PyValueError::new_err(format!("reports: {e}"))))
         .collect::<PyResult<Vec<serde_json::Value>>>()?;
-    let merged = request::merge_shards(&shards, &boxes).map_err(PyValueError::new_err)?;
+    let merged = hybc::optimize::merge_shards(&shards, &boxes).map_err(PyValueError::new_err)?;
     Ok(merged.to_string())
 }

@@ -24,12 +24,10 @@ fn keywords() -> impl Iterator<Item = &'static str> {
     SimOverrides::OPTIONS.into_iter().filter(|o| !matches!(*o, "at" | "linear_solver"))
 }
 
-fn positive(name: &str, v: f64) -> PyResult<f64> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        Err(PyValueError::new_err(format!("{name}: expected a positive finite number, found {v}")))
-    }
+/// `v` if it is a finite number above 0, else a `ValueError` in the command line's words
+/// (`hybc::positive_number`).
+pub fn positive(name: &str, v: f64) -> PyResult<f64> {
+    hybc::positive_number(name, v).map_err(PyValueError::new_err)
 }
 
 fn value_error(e: hybc::OptionError) -> PyErr {
@@ -117,7 +115,7 @@ pub fn trajectory_request(value: Option<&Bound<'_, PyAny>>) -> PyResult<Trajecto
         };
     }
     match value.extract::<f64>() {
-        Ok(dt) => Ok(TrajectoryRequest::Sample(positive("trajectory", dt)?)),
+        Ok(dt) => Ok(TrajectoryRequest::Every(positive("trajectory", dt)?)),
         Err(_) => Err(PyValueError::new_err(format!(
             "trajectory: expected None, \"steps\" or a sampling interval dt > 0, found {}",
             value.repr().map(|r| r.to_string()).unwrap_or_default()

@@ -12,8 +12,9 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
-use hybc::limits::{MAX_BOOTSTRAP, MAX_SOBOL_BASE_POINTS, MAX_SOBOL_VALUES, MAX_SWEEP_POINTS};
-use hybc::sobol::{self, Analysis, AnalysisError, Design, OnFail, Output, Prior, VaryError, Z_95};
+use hybc::limits::{MAX_BOOTSTRAP, MAX_SOBOL_BASE_POINTS};
+use hybc::sobol::{Analysis, AnalysisError, Design, OnFail, Output, Prior, Z_95};
+use hybc::{Error, SobolFailure, SobolRequest, VaryPriorError};
 
 use crate::errors::ParameterError;
 
@@ -64,8 +65,8 @@ pub fn design(
     let mut varied: Vec<(usize, Prior)> = Vec::with_capacity(priors.len());
     for (i, (name, dist, bounds)) in priors.iter().enumerate() {
         let given = prior(i, name, dist, bounds)?;
-        let (idx, prior) = sobol::vary(model, name, Some(given)).map_err(|e| match e {
-            VaryError::Param(e) => ParameterError::new_err(format!("problem: {e}")),
+        let (idx, prior) = SobolRequest::vary(model, name, Some(given)).map_err(|e| match e {
+            VaryPriorError::Param(e) => ParameterError::new_err(format!("problem: {e}")),
             other => ParameterError::new_err(format!("problem: `{name}` ({dist}): {other}")),
         })?;
         if varied.iter().any(|v| v.0 == idx) {
@@ -78,12 +79,7 @@ pub fn design(
     }
     let design = Design::new(base, varied, n, second_order, seed)
         .map_err(|e| ParameterError::new_err(format!("problem: {e}")))?;
-    design.rows().filter(|r| *r <= MAX_SWEEP_POINTS).ok_or_else(|| {
-        PyValueError::new_err(format!(
-            "n: {n} base points of {} rows are more than {MAX_SWEEP_POINTS} runs",
-            design.block()
-        ))
-    })?;
+    SobolRequest::rows(&design).map_err(|e| PyValueError::new_err(format!("n: {e}")))?;
     Ok(design)
 }
 
@@ -116,26 +112,26 @@ fn check_range(design: &Design, start: usize, stop: usize) -> PyResult<()> {
     Ok(())
 }
 
-/// The outputs to analyse, by name (`energy`, `touchdown#2`, `touchdown#last`), and the check
-/// that the whole design's values fit the cap of what an analysis keeps.
-pub fn outputs(compiled: &hybc::Compiled, names: &[String], design: &Design) -> PyResult<Vec<Output>> {
-    if names.is_empty() {
-        return Err(PyValueError::new_err("outputs: name at least one output, state or EVENT#K"));
+/// The request's outputs (`energy`, `touchdown#2`, `touchdown#last`) parsed against `compiled`,
+/// and the check that the whole design's values fit the cap of what an analysis keeps.
+pub fn outputs(compiled: &hybc::Compiled, request: &SobolRequest<'_>) -> PyResult<Vec<Output>> {
+    request.outputs(compiled).map_err(refused)
+}
+
+/// A refusal of the request, named by the keyword it is about.
+fn refused(e: Error) -> PyErr {
+    match e {
+        Error::Sobol(e @ (SobolFailure::NoOutputs | SobolFailure::Output(_))) => {
+            PyValueError::new_err(format!("outputs: {e}"))
+        }
+        Error::Sobol(e @ (SobolFailure::TooManyRuns { .. } | SobolFailure::TooManyValues { .. })) => {
+            PyValueError::new_err(format!("n: {e}"))
+        }
+        Error::Sobol(SobolFailure::Pool(e)) => {
+            PyValueError::new_err(format!("threads: {}", crate::errors::chain(&e)))
+        }
+        e => crate::errors::to_py(e),
     }
-    let outputs: Vec<Output> = names
-        .iter()
-        .map(|s| {
-            Output::parse(s, compiled.info()).map_err(|e| PyValueError::new_err(format!("outputs: {e}")))
-        })
-        .collect::<PyResult<_>>()?;
-    let rows = design.rows().unwrap_or(usize::MAX);
-    if rows.saturating_mul(outputs.len()) > MAX_SOBOL_VALUES {
-        return Err(PyValueError::new_err(format!(
-            "n: {rows} rows x {} outputs are more than the {MAX_SOBOL_VALUES} values an analysis keeps",
-            outputs.len()
-        )));
-    }
-    Ok(outputs)
 }
 
 /// What `evaluate` returns to Python: the values of rows `[start, stop)` (one row per run, one
@@ -143,21 +139,18 @@ pub fn outputs(compiled: &hybc::Compiled, names: &[String], design: &Design) -> 
 /// and the first such row (0-based, of the whole design).
 pub type Evaluated<'py> = (Bound<'py, PyArray2<f64>>, Vec<(String, usize)>, Option<usize>);
 
-/// Runs rows `[start, stop)` of `design` (GIL released) on `threads` workers.
+/// Runs rows `[start, stop)` of the request's design (GIL released).
 pub fn evaluate<'py>(
     py: Python<'py>,
     compiled: &hybc::Compiled,
-    design: &Design,
+    request: &SobolRequest<'_>,
     outputs: &[Output],
     range: (usize, usize),
-    opts: &hybc::SimOptions,
-    threads: usize,
 ) -> PyResult<Evaluated<'py>> {
     let (start, stop) = range;
-    check_range(design, start, stop)?;
-    let evaluated = py
-        .detach(|| sobol::evaluate_rows(compiled, design, start..stop, outputs, opts, threads, &|| ()))
-        .map_err(|e| PyValueError::new_err(format!("threads: {}", crate::errors::chain(&e))))?;
+    check_range(&request.design, start, stop)?;
+    let evaluated =
+        py.detach(|| request.evaluate(compiled, outputs, start..stop, &|| ())).map_err(refused)?;
     let early = evaluated.ended_early.iter().map(|(w, c)| (w.to_string(), *c)).collect();
     let values = PyArray1::from_vec(py, evaluated.values).reshape([stop - start, outputs.len()])?;
     Ok((values, early, evaluated.first_ended_early))
@@ -202,9 +195,7 @@ pub fn sobol_analyze<'py>(
     let values =
         values.as_slice().map_err(|_| PyValueError::new_err("values: expected a C-ordered array"))?;
     let how = Analysis { d, second_order, on_fail, bootstrap, seed };
-    let results: Vec<_> = py.detach(|| {
-        labels.iter().enumerate().map(|(j, label)| sobol::analyze(label, values, k, j, &how)).collect()
-    });
+    let results = py.detach(|| how.outputs(&labels, values));
     let list = PyList::empty(py);
     for result in results {
         let dict = PyDict::new(py);

@@ -1,6 +1,6 @@
 //! `Model.sweep`: one compiled model run at many points in parallel (the library's
-//! `sweep::run_points`, with the GIL released), returned as the columns `hybc sweep` writes
-//! (`sweep::Columns`), one NumPy array per column.
+//! `SweepRequest`, with the GIL released), returned as the columns `hybc sweep` writes (the
+//! report's `sweep::Columns`), one NumPy array per column.
 //!
 //! Column types: numbers are float64 arrays with NaN where `hybc sweep` leaves a cell empty;
 //! `events` is int64; `status`, `event<k>` and `error` are lists of str (empty where the CSV cell
@@ -14,25 +14,17 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyString};
 use rayon::prelude::*;
 
-use hybc::sim::SimOptions;
 use hybc::sweep::table::Cell;
-use hybc::sweep::{self, Columns, PointResult};
+use hybc::sweep::{CellKind, SweepReport};
+use hybc::{Spelling, SweepRequest};
 
 use crate::errors::ParameterError;
 
 /// The caps of every interface (`hybc::limits`): a sweep from Python keeps all its rows, so its
 /// points are capped as a sweep held in memory; event columns and threads as `hybc sweep`'s.
-pub use hybc::limits::{MAX_EVENT_COLUMNS, MAX_SWEEP_POINTS_IN_MEMORY as MAX_POINTS, MAX_THREADS};
+pub use hybc::limits::MAX_SWEEP_POINTS_IN_MEMORY as MAX_POINTS;
 /// Rows are turned into cells in parallel per chunk; the chunk bounds the memory the cells take.
 const CELL_CHUNK: usize = 4096;
-
-/// What a sweep asks for beyond the points.
-pub struct SweepRequest {
-    pub grad_len: usize,
-    pub events: usize,
-    pub threads: usize,
-    pub opts: SimOptions,
-}
 
 /// The parameter vectors of the sweep: `base` with the columns `names` of `points` (one row per
 /// point) set, each value checked to be finite and within its parameter's declared range.
@@ -144,12 +136,7 @@ pub fn sample_ranges(model: &hybc::Model, ranges: Option<RangeArgs>) -> PyResult
 
 /// The checks on `events` and `threads`, as `hybc sweep` makes them.
 pub fn check_counts(events: usize, threads: usize) -> PyResult<()> {
-    let cap = |what, value, max| {
-        hybc::limits::count(what, value, 0, max).map_err(|e| PyValueError::new_err(e.to_string()))
-    };
-    cap("events", events, MAX_EVENT_COLUMNS)?;
-    cap("threads", threads, MAX_THREADS)?;
-    Ok(())
+    SweepRequest::check_counts(events, threads, Spelling::Keyword).map_err(PyValueError::new_err)
 }
 
 /// One column's values while they are gathered.
@@ -159,23 +146,22 @@ enum Column {
     Text(Vec<String>),
 }
 
-/// Runs the points (GIL released) and returns the columns of `hybc sweep`, in its order.
+/// Runs the request's points (GIL released) and returns the columns of `hybc sweep`, in its
+/// order.
 pub fn run<'py>(
     py: Python<'py>,
     compiled: &hybc::Compiled,
-    points: Vec<Vec<f64>>,
     request: &SweepRequest,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let info = compiled.info();
-    let columns = Columns::new(info, request.events, request.grad_len);
-    let gathered = py.detach(|| -> Result<Vec<Column>, String> {
-        let results = sweep::run_points(compiled, &points, &request.opts, request.threads, &|| ())
-            .map_err(|e| format!("threads: {}", crate::errors::chain(&e)))?;
-        gather(&columns, request, info.n_params(), &points, &results)
+    let gathered = py.detach(|| -> Result<(Vec<String>, Vec<Column>), String> {
+        let report =
+            request.run(compiled, &|| ()).map_err(|e| format!("threads: {}", crate::errors::chain(&e)))?;
+        let columns = gather(&report, request.threads)?;
+        Ok((report.columns().header().to_vec(), columns))
     });
-    let gathered = gathered.map_err(PyValueError::new_err)?;
+    let (header, gathered) = gathered.map_err(PyValueError::new_err)?;
     let dict = PyDict::new(py);
-    for (name, column) in columns.header().iter().zip(gathered) {
+    for (name, column) in header.iter().zip(gathered) {
         match column {
             Column::Num(v) => dict.set_item(name, PyArray1::from_vec(py, v))?,
             Column::Count(v) => dict.set_item(name, PyArray1::from_vec(py, v))?,
@@ -185,24 +171,18 @@ pub fn run<'py>(
     Ok(dict)
 }
 
-/// The cells of every row, transposed into columns. Each column's kind is fixed by the scheme
-/// (`sweep::table`): `events` is a count, `status`, `event<k>` and `error` are text, the rest are
-/// numbers; an empty cell is NaN or "".
-fn gather(
-    columns: &Columns<'_>,
-    request: &SweepRequest,
-    n_params: usize,
-    points: &[Vec<f64>],
-    results: &[PointResult],
-) -> Result<Vec<Column>, String> {
-    let threads = request.threads;
-    let kinds = column_kinds(n_params, request.events, request.grad_len, columns.header().len());
-    let mut out: Vec<Column> = kinds
+/// The cells of every row, transposed into columns of the kinds the scheme gives them
+/// (`Columns::kinds`); an empty cell is NaN, -1 or "".
+fn gather(report: &SweepReport, threads: usize) -> Result<Vec<Column>, String> {
+    let columns = report.columns();
+    let (points, results) = (&report.points, &report.results);
+    let mut out: Vec<Column> = columns
+        .kinds()
         .iter()
         .map(|k| match k {
-            Kind::Num => Column::Num(Vec::with_capacity(points.len())),
-            Kind::Count => Column::Count(Vec::with_capacity(points.len())),
-            Kind::Text => Column::Text(Vec::with_capacity(points.len())),
+            CellKind::Num => Column::Num(Vec::with_capacity(points.len())),
+            CellKind::Count => Column::Count(Vec::with_capacity(points.len())),
+            CellKind::Text => Column::Text(Vec::with_capacity(points.len())),
         })
         .collect();
     let pool = rayon::ThreadPoolBuilder::new()
@@ -227,27 +207,6 @@ fn gather(
         }
     }
     Ok(out)
-}
-
-#[derive(Clone, Copy, PartialEq)]
-enum Kind {
-    Num,
-    Count,
-    Text,
-}
-
-/// The kind of each column, by its place in the scheme (`sweep::table`): the parameters,
-/// `status`, `events`, then per event slot `event<k>`, `t<k>` and its `grad_len` gradients, then
-/// numbers up to `error`, the last column.
-fn column_kinds(n_params: usize, events: usize, grad_len: usize, total: usize) -> Vec<Kind> {
-    let mut kinds = vec![Kind::Num; total];
-    kinds[n_params] = Kind::Text;
-    kinds[n_params + 1] = Kind::Count;
-    for k in 0..events {
-        kinds[n_params + 2 + k * (2 + grad_len)] = Kind::Text;
-    }
-    kinds[total - 1] = Kind::Text;
-    kinds
 }
 
 /// A list of Python strings, each distinct text made once (statuses and event names repeat).

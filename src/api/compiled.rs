@@ -33,11 +33,17 @@ impl Compiled {
         &self.model
     }
 
-    /// The native code, which implements [`sim::HybridSystem`], for tests and measurements that
-    /// reach the kernels. A front end hands the `Compiled` itself to an analysis: it is a
-    /// `HybridSystem` too (`system.rs`).
+    /// The native code, for tests and measurements that reach the kernels. A front end never
+    /// needs it: an analysis takes [`Self::system`].
     pub fn native(&self) -> &CompiledModel {
         &self.native
+    }
+
+    /// The compiled model as the integrator runs it, for the analysis cores (generic over the
+    /// system, so that their tests can hand them a hand-written one). The type is opaque: what
+    /// stands behind the door stays there, and the analyses call the native kernels directly.
+    pub fn system(&self) -> &(impl sim::HybridSystem + '_) {
+        &*self.native
     }
 
     /// The model's shape as the integrator sees it (names, modes, events, gradient columns).
@@ -70,7 +76,7 @@ impl Compiled {
     /// buffers allocated once. Owned (it holds a clone of this `Compiled`), so it can live in a
     /// thread or a binding.
     pub fn simulator(&self, opts: &SimOptions) -> Result<Simulator, Error> {
-        Ok(Simulator { compiled: self.clone(), sim: sim::Simulator::new(Arc::clone(&self.native), opts)? })
+        Ok(Simulator { compiled: self.clone(), sim: sim::Runner::new(Arc::clone(&self.native), opts)? })
     }
 
     fn check_params(&self, params: &Params) -> Result<(), ParamError> {
@@ -91,7 +97,7 @@ impl Compiled {
 #[derive(Debug)]
 pub struct Simulator {
     compiled: Compiled,
-    sim: sim::Simulator<Arc<CompiledModel>>,
+    sim: sim::Runner<Arc<CompiledModel>>,
 }
 
 impl Simulator {
@@ -129,10 +135,12 @@ impl Simulator {
         self.sim.run(p)
     }
 
+    /// The checked options every run of this simulator takes.
     pub fn options(&self) -> &SimOptions {
         self.sim.options()
     }
 
+    /// The compiled model it runs.
     pub fn compiled(&self) -> &Compiled {
         &self.compiled
     }

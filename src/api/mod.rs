@@ -12,15 +12,24 @@
 
 mod compiled;
 mod error;
+mod frontend;
 mod model;
 mod options;
 mod params;
+mod request;
 mod run;
-mod system;
+mod summary;
 
 pub use compiled::{Compiled, Simulator};
 pub use error::{Error, ModelError, ParamError};
+pub use frontend::{check_source, FrontendError};
 pub use model::{Model, MAX_MODEL_BYTES};
-pub use options::{method_named, time_span, OptionError, SimOverrides, Spelling};
+pub use options::{method_named, positive_number, time_span, OptionError, SimOverrides, Spelling};
 pub use params::Params;
+pub use request::fit::{FitFailure, FitRequest};
+pub use request::gradcheck::GradCheckRequest;
+pub use request::optimize::{OptimizeFailure, OptimizeRequest};
+pub use request::periodic::PeriodicRequest;
+pub use request::sobol::{SobolFailure, SobolRequest, VaryPriorError};
+pub use request::sweep::SweepRequest;
 pub use run::Run;

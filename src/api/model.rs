@@ -35,7 +35,7 @@ impl Model {
 
     /// Parses and checks `text`, naming `file_name` in every diagnostic.
     pub fn parse_named(text: &str, file_name: &str) -> Result<Model, Error> {
-        match crate::check_source(text) {
+        match super::check_source(text) {
             Ok(checked) => Ok(Model {
                 inner: Arc::new(ModelInner {
                     checked,
@@ -200,6 +200,19 @@ impl Model {
     pub fn compile_all(&self) -> Result<Compiled, Error> {
         let all: Vec<ParamIdx> = (0..self.inner.checked.params.len()).map(|i| ParamIdx(i as u32)).collect();
         self.compile_params(&all)
+    }
+
+    /// A model an analysis derived from this one (periodic's section made a `stop`, one
+    /// parameter per initial state): `checked`, with this one's source and file name for
+    /// messages. It is not checked again: the analysis built it from a checked model, through
+    /// the checker's own types.
+    pub(crate) fn derived(&self, checked: sema::Model) -> Model {
+        let inner = ModelInner {
+            checked,
+            source: self.inner.source.clone(),
+            file_name: self.inner.file_name.clone(),
+        };
+        Model { inner: Arc::new(inner) }
     }
 
     /// Whether `other` is this very model (the same parse, or a clone of it).

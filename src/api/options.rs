@@ -41,17 +41,29 @@ pub struct OptionError {
 /// line over [`SimOptions::default`]). Only [`Self::apply`] checks the values.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SimOverrides {
+    /// The start time.
     pub t_start: Option<f64>,
+    /// The end time.
     pub t_end: Option<f64>,
+    /// The relative tolerance.
     pub rtol: Option<f64>,
+    /// The absolute tolerance.
     pub atol: Option<f64>,
+    /// The integration method.
     pub method: Option<Method>,
+    /// The most events before the run stops.
     pub max_events: Option<usize>,
+    /// The most step attempts before the run stops with a fault.
     pub max_steps: Option<usize>,
+    /// The grazing threshold (`|g''| delta / d^2`).
     pub graze_tol: Option<f64>,
+    /// The largest step size.
     pub h_max: Option<f64>,
+    /// Whether the sensitivities take part in the step-size error control.
     pub sens_error_control: Option<bool>,
+    /// Whether running costs take part in it.
     pub quadrature_error_control: Option<bool>,
+    /// `Some(true)`: every method lands a step on each event; `Some(false)`: none does.
     pub land_events: Option<bool>,
     /// Library only (tests and measurements): no front end exposes it.
     pub linear_solver: Option<LinearSolver>,
@@ -87,7 +99,7 @@ impl SimOverrides {
     pub fn apply(&self, base: &SimOptions, spelling: Spelling) -> Result<SimOptions, OptionError> {
         let refuse = |option: &'static str| move |message: String| OptionError { option, message };
         let positive =
-            |option: &'static str, v: f64| positive(&spelling.of(option), v).map_err(refuse(option));
+            |option: &'static str, v: f64| positive_number(&spelling.of(option), v).map_err(refuse(option));
         let count = |option: &'static str, v: usize, max: usize| {
             limits::count(&spelling.of(option), v, 1, max).map_err(|e| refuse(option)(e.to_string()))
         };
@@ -161,7 +173,9 @@ pub fn method_named(name: &str, spelling: Spelling) -> Result<Method, OptionErro
     })
 }
 
-fn positive(name: &str, v: f64) -> Result<f64, String> {
+/// `v` if it is a finite number above 0, else the refusal every front end words alike:
+/// `NAME: expected a positive number, found V`, `name` spelled as the front end spells it.
+pub fn positive_number(name: &str, v: f64) -> Result<f64, String> {
     if v.is_finite() && v > 0.0 {
         Ok(v)
     } else {

@@ -49,6 +49,7 @@ impl Run {
         matches!(self.result.stopped_by, StopReason::TEnd | StopReason::Event { .. })
     }
 
+    /// Every warning of the run (grazing, near-grazing, derivatives that stopped existing).
     pub fn warnings(&self) -> &[SimWarning] {
         &self.result.warnings
     }
@@ -112,6 +113,7 @@ impl Run {
         &self.result
     }
 
+    /// The raw result, taken.
     pub fn into_result(self) -> SimResult {
         self.result
     }
@@ -121,6 +123,7 @@ impl Run {
         &self.compiled
     }
 
+    /// Seconds the run took.
     pub fn run_seconds(&self) -> f64 {
         self.run_seconds
     }
@@ -134,15 +137,14 @@ impl Run {
     /// `--max-events` cap holds 10^6 event records). The one place a `RunReport` is made: every
     /// report of a run, the CLI's and Python's, comes from a `Run`.
     pub fn into_report(self) -> RunReport {
-        RunReport {
-            model: self.compiled.model().name().to_string(),
-            t_end: self.t_end,
-            info: self.info().clone(),
-            params: self.params,
-            result: self.result,
-            compile_seconds: self.compiled.compile_seconds(),
-            run_seconds: self.run_seconds,
-        }
+        RunReport::new(
+            self.compiled.model().name().to_string(),
+            self.t_end,
+            self.info().clone(),
+            self.params,
+            self.result,
+            (self.compiled.compile_seconds(), self.run_seconds),
+        )
     }
 
     fn info(&self) -> &crate::sim::SystemInfo {

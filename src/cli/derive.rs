@@ -4,7 +4,6 @@ use std::process::ExitCode;
 
 use super::options::parse_param_list;
 use super::{load_model, usage_error, ModelArg};
-use crate::lower::{derive_report, lower};
 
 #[derive(Debug, clap::Args)]
 pub struct DeriveArgs {
@@ -42,7 +41,6 @@ pub fn run(args: &DeriveArgs) -> ExitCode {
             }
         },
     };
-    let funcs = lower(checked);
-    super::print_out(&derive_report(checked, &funcs, &wrt, mode));
+    super::print_out(&model.derivatives(&wrt, mode));
     ExitCode::SUCCESS
 }

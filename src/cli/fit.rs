@@ -6,9 +6,8 @@ use std::process::ExitCode;
 
 use super::options::{at_most, parameter_values, parse_param_list, positive, sim_options, SimFlags};
 use super::{compile_model, load_model, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
-use crate::fit::request::{self, Failure, Request};
 use crate::fit::FitOptions;
-use crate::Model;
+use crate::{Error, FitFailure, FitRequest, Model};
 
 /// The most trials `--max-iter` allows.
 pub(crate) use crate::limits::MAX_FIT_ITER as MAX_ITER;
@@ -104,27 +103,27 @@ fn fit_model(model: &Model, args: &FitArgs) -> Result<ExitCode, String> {
         }
         None => None,
     };
-    let request = Request {
+    let request = FitRequest {
         targets: &args.targets,
         data: data.as_ref().map(|(text, file)| (text.as_str(), file.as_str())),
         start,
         sim,
         options,
     };
-    let report = match request::run(model, &compiled, request, &mut |w| eprintln!("warning: {w}")) {
+    let report = match request.run(&compiled, &mut |w| eprintln!("warning: {w}")) {
         Ok(report) => report,
-        Err(Failure::Target(e)) => return Err(format!("--target: {e}")),
-        Err(Failure::Data(e)) => return Err(format!("--data: {e}")),
-        Err(Failure::Usage(message)) => return Err(message),
+        Err(Error::Fit(FitFailure::Target(e))) => return Err(format!("--target: {e}")),
+        Err(Error::Fit(FitFailure::Data(e))) => return Err(format!("--data: {e}")),
         // The run works, but the fit's goal cannot be stated in doubles: the goal is not met.
-        Err(Failure::StartObjective(e)) => {
+        Err(Error::Fit(FitFailure::StartObjective(e))) => {
             eprintln!("error: {e}");
             return Ok(ExitCode::from(EXIT_GOAL_NOT_MET));
         }
-        Err(Failure::StartRun(e)) => {
+        Err(Error::Fit(FitFailure::StartRun(e))) => {
             eprintln!("error: {e}");
             return Ok(ExitCode::from(EXIT_SIM_STOPPED));
         }
+        Err(e) => return Err(super::error_chain(&e)),
     };
     match args.format {
         Format::Table => super::print_out(&report.to_table()),

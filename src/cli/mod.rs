@@ -54,6 +54,7 @@ enum Command {
 
 /// Exit codes, as documented in docs/cli.md.
 pub const EXIT_MODEL_ERROR: u8 = 1;
+/// A usage error: a bad flag, an unreadable file.
 pub const EXIT_USAGE_ERROR: u8 = 2;
 /// The simulation stopped early (Zeno behaviour or a runtime fault); what it computed is printed.
 pub const EXIT_SIM_STOPPED: u8 = 3;
@@ -61,6 +62,7 @@ pub const EXIT_SIM_STOPPED: u8 = 3;
 /// disagrees with its central difference, or `hybc fit` did not converge.
 pub const EXIT_GOAL_NOT_MET: u8 = 4;
 
+/// Runs the command line: parses the arguments, runs the command, returns its exit code.
 pub fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,

@@ -11,11 +11,10 @@ use super::options::{at_most, parameter_values, parse_param_list, positive, sim_
 use super::{compile_model, load_model, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
 use crate::fit::Bounds;
 use crate::optimize::report::OptimizeReport;
-use crate::optimize::request::{self, Failure, Request};
 use crate::optimize::{self, OptimizeOptions, Verdict};
 use crate::sema::ParamIdx;
 use crate::sim::{SimOptions, TrajectoryRequest};
-use crate::Model;
+use crate::{Error, Model, OptimizeFailure, OptimizeRequest};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum Format {
@@ -126,7 +125,7 @@ fn bounds(model: &Model, free: &[ParamIdx], flags: &[String]) -> Result<Vec<Boun
         }
         narrow.push((name.trim().to_string(), lo, hi));
     }
-    request::bounds(model, free, &narrow).map_err(|e| format!("--bounds: {e}"))
+    OptimizeRequest::bounds(model, free, &narrow).map_err(|e| format!("--bounds: {e}"))
 }
 
 fn optimize_model(model: &Model, args: &OptimizeArgs) -> Result<ExitCode, String> {
@@ -152,7 +151,7 @@ fn optimize_model(model: &Model, args: &OptimizeArgs) -> Result<ExitCode, String
         eprintln!("{}", OptimizeReport::progress_line(&info, starts, start, t));
     };
     let progress: Option<&optimize::Progress<'_>> = if args.quiet { None } else { Some(&progress) };
-    let request = Request {
+    let request = OptimizeRequest {
         minimize: &args.minimize,
         subject_to: &args.subject_to,
         bounds,
@@ -160,11 +159,11 @@ fn optimize_model(model: &Model, args: &OptimizeArgs) -> Result<ExitCode, String
         sim: sim.clone(),
         options,
     };
-    let report = match request::run(model, &compiled, request, progress) {
+    let report = match request.run(&compiled, progress) {
         Ok(report) => report,
-        Err(Failure::Objective(e)) => return Err(format!("--minimize: {e}")),
-        Err(Failure::Constraint(e)) => return Err(format!("--subject-to: {e}")),
-        Err(Failure::Refused(e)) => return Err(e.to_string()),
+        Err(Error::Optimize(OptimizeFailure::Objective(e))) => return Err(format!("--minimize: {e}")),
+        Err(Error::Optimize(OptimizeFailure::Constraint(e))) => return Err(format!("--subject-to: {e}")),
+        Err(e) => return Err(super::error_chain(&e)),
     };
     if report.result.locals.iter().all(|l| matches!(l.verdict, Verdict::StartFailed { .. })) {
         eprintln!("error: {}", report.reason());
@@ -193,7 +192,7 @@ fn plot(
     path: &std::path::Path,
 ) -> Result<(), String> {
     let opts = SimOptions {
-        trajectory: TrajectoryRequest::Sample((sim.t_end - sim.t_start) / 1000.0),
+        trajectory: TrajectoryRequest::Every((sim.t_end - sim.t_start) / 1000.0),
         ..sim.clone()
     };
     let run = compiled

@@ -207,14 +207,9 @@ pub(crate) fn at_most(flag: &str, value: usize, cap: usize) -> Result<usize, Str
     crate::limits::count(flag, value, 0, cap).map_err(|e| e.to_string())
 }
 
-/// `v` if it is a finite number above 0, else a usage error naming the flag.
-pub(crate) fn positive(name: &str, v: f64) -> Result<f64, String> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        Err(format!("{name}: expected a positive number, found {v}"))
-    }
-}
+/// `v` if it is a finite number above 0, else a usage error naming the flag (the library's
+/// wording, Python's too).
+pub(crate) use crate::positive_number as positive;
 
 #[cfg(test)]
 mod tests {

@@ -10,10 +10,10 @@ use super::options::{parameter_values, parse_param_list, positive, SimFlags};
 use super::trajectory::{self, StreamingTrajectory};
 use super::{compile_model, error_chain, load_model, output, usage_error, ModelArg};
 use super::{EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
-use crate::gradcheck::{self, CheckOptions};
+use crate::gradcheck::CheckOptions;
 use crate::report::RunReport;
 use crate::sim::{SimOptions, TrajectoryRequest};
-use crate::{Compiled, Model, Params, Spelling};
+use crate::{Compiled, GradCheckRequest, Model, Params, Spelling};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum Format {
@@ -98,7 +98,7 @@ fn trajectory_request(args: &RunArgs, opts: &SimOptions) -> Result<TrajectoryReq
             let dt = positive("--sample", dt)?;
             let cap = if args.plot.is_some() { MAX_PLOTTED_ROWS } else { trajectory::MAX_TRAJECTORY_ROWS };
             trajectory::check_rows(opts, dt, cap)?;
-            TrajectoryRequest::Sample(dt)
+            TrajectoryRequest::Every(dt)
         }
     })
 }
@@ -113,8 +113,8 @@ fn run_streaming(
     let cannot_write = |e: std::io::Error| format!("--trajectory: cannot write `{}`: {e}", path.display());
     let out = output::create(path).map_err(cannot_write)?;
     let p = params.values();
-    let mut recorder =
-        StreamingTrajectory::new(compiled, p, opts.trajectory, opts.t_start, out).map_err(cannot_write)?;
+    let mut recorder = StreamingTrajectory::new(compiled.system(), p, opts.trajectory, opts.t_start, out)
+        .map_err(cannot_write)?;
     // The recorder takes the rows; the run keeps none.
     let run_opts = SimOptions { trajectory: TrajectoryRequest::None, ..opts.clone() };
     let mut simulator = compiled.simulator(&run_opts).map_err(|e| error_chain(&e))?;
@@ -151,8 +151,8 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         (trajectory, _) => {
             let report = compiled.simulate(&params, &opts).map_err(|e| error_chain(&e))?.into_report();
             if let Some(path) = trajectory {
-                let rows = report.result.trajectory.as_deref().unwrap_or_default();
-                trajectory::write_kept(path, &compiled, &report.params, rows)
+                let rows = report.result().trajectory.as_deref().unwrap_or_default();
+                trajectory::write_kept(path, compiled.system(), report.params(), rows)
                     .map_err(|e| format!("--trajectory: cannot write `{}`: {e}", path.display()))?;
             }
             report
@@ -166,23 +166,19 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
     }
     // A run into a Zeno point grazes ever more often; the first few warnings say it all.
     const SHOWN_WARNINGS: usize = 3;
-    for w in report.result.warnings.iter().take(SHOWN_WARNINGS) {
+    for w in report.result().warnings.iter().take(SHOWN_WARNINGS) {
         eprintln!("warning: {w}");
     }
-    if report.result.warnings.len() > SHOWN_WARNINGS {
+    if report.result().warnings.len() > SHOWN_WARNINGS {
         eprintln!(
             "warning: ... and {} more (all are in --format json)",
-            report.result.warnings.len() - SHOWN_WARNINGS
+            report.result().warnings.len() - SHOWN_WARNINGS
         );
     }
     let check = match check_opts {
-        Some(check_opts) => {
-            let ranges: Vec<_> = model.checked().params.iter().map(|p| p.range).collect();
-            let (sys, p, result) = (&compiled, &report.params, &report.result);
-            Some(
-                gradcheck::check_within(sys, p, &ranges, &opts, result, &check_opts)
-                    .map_err(|e| e.to_string())?,
-            )
+        Some(check) => {
+            let request = GradCheckRequest { sim: opts.clone(), check };
+            Some(request.run(&compiled, report.params(), report.result()).map_err(|e| error_chain(&e))?)
         }
         None => None,
     };
@@ -200,12 +196,7 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
                 }
             }
             Format::Json => {
-                let mut extra = Vec::new();
-                if let Some(check) = &check {
-                    let mut value = serde_json::json!(check);
-                    value["passed"] = check.passed().into();
-                    extra.push(("check_grad", value));
-                }
+                let extra: Vec<_> = check.iter().map(|check| ("check_grad", check.to_json())).collect();
                 // Streamed: the text of 10^6 events is never held whole (docs/cli.md, Limits).
                 output::write_to(report_to, |mut out| {
                     report.write_json(&mut out, &extra)?;
@@ -247,7 +238,7 @@ fn plot_trajectory(args: &RunArgs, opts: &mut SimOptions) -> Result<(), String> 
     if let Some(path) = &args.plot {
         crate::plot::ImageFormat::from_path(path).map_err(|e| format!("--plot: {e}"))?;
         if opts.trajectory == TrajectoryRequest::None {
-            opts.trajectory = TrajectoryRequest::Sample((opts.t_end - opts.t_start) / 1000.0);
+            opts.trajectory = TrajectoryRequest::Every((opts.t_end - opts.t_start) / 1000.0);
         }
     }
     Ok(())

@@ -57,7 +57,7 @@ pub(crate) fn write_csv(path: &Path, report: &RunReport) -> Result<(), String> {
 }
 
 fn write_rows(out: &mut dyn Write, report: &RunReport) -> io::Result<()> {
-    let info = &report.info;
+    let info = report.info();
     let grad: Vec<&str> = info.grad_params.iter().map(|&j| info.param_names[j].as_str()).collect();
     let names: Vec<&String> = info.output_names.iter().chain(&info.state_names).collect();
     let mut head = vec!["time".to_string(), "reached".into(), "after_events".into(), "near_event".into()];
@@ -67,7 +67,7 @@ fn write_rows(out: &mut dyn Write, report: &RunReport) -> io::Result<()> {
     }
     writeln!(out, "{}", head.join(","))?;
     let (k, n) = (info.n_outputs(), info.n_states());
-    for s in report.result.samples.iter() {
+    for s in report.result().samples.iter() {
         let mut row = vec![
             format!("{:e}", s.time),
             s.reached.to_string(),

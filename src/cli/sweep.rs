@@ -1,6 +1,6 @@
 //! `hybc sweep FILE`: compile a model once, run it at many parameter points in parallel and write
-//! one row per point (CSV or JSON lines), optionally with a plot. A thin layer over
-//! `crate::sweep` and `crate::plot`: flags to points and options, files, exit codes.
+//! one row per point (CSV or JSON lines), optionally with a plot. Flags to points and a
+//! `SweepRequest`, its rows streamed to the output; the plot, exit codes.
 
 use std::io::{IsTerminal as _, Write};
 use std::path::PathBuf;
@@ -9,13 +9,13 @@ use std::process::ExitCode;
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::options::{at_most, parameter_values, parse_param_list, sim_options, SimFlags};
+use super::options::{parameter_values, parse_param_list, sim_options, SimFlags};
 use super::{compile_model, load_model, usage_error, ModelArg, EXIT_SIM_STOPPED};
 use crate::plot::{self, Shown, SweepFigure};
 use crate::sema::ParamIdx;
 use crate::sim::SimOptions;
-use crate::sweep::{self, Axis, AxisSpec, Columns, Format, Grid, PointResult, Points, Samples};
-use crate::{Compiled, Model};
+use crate::sweep::{self, Axis, AxisSpec, Format, Grid, PointResult, Points, SweepError};
+use crate::{Compiled, Error, Model, Spelling, SweepRequest};
 
 /// Caps on the counts the flags accept (docs/cli.md, "Limits"), shared with the Python interface
 /// (`crate::limits`). Rows are streamed, so the number of points costs time, not memory; the cap
@@ -23,9 +23,6 @@ use crate::{Compiled, Model};
 pub(crate) use crate::limits::MAX_SWEEP_POINTS as MAX_POINTS;
 /// With `--plot` every point's result is kept until the figure is drawn (about 4 KB each).
 const MAX_PLOT_POINTS: usize = 100_000;
-/// Caps on flags whose size is allocated per row or up front (columns per event, worker
-/// threads), so that a typo is a usage error rather than an out-of-memory abort.
-pub(crate) use crate::limits::{MAX_EVENT_COLUMNS, MAX_THREADS};
 /// Tangents drawn per panel of a sweep plot.
 const PLOT_TANGENTS: usize = 5;
 
@@ -156,7 +153,7 @@ fn points(model: &Model, args: &SweepArgs) -> Result<(Points, Vec<usize>), Strin
                 ));
             }
             let varied = ranges.iter().map(|r| r.0).collect();
-            Ok((Points::Samples(Samples::new(base, ranges, n, args.seed.unwrap_or(0))), varied))
+            Ok((Points::Draws(sweep::Draws::new(base, ranges, n, args.seed.unwrap_or(0))), varied))
         }
         None => {
             if specs.is_empty() {
@@ -219,8 +216,9 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
         Some(list) => parse_param_list(model, list, "--grad")?,
         None => Vec::new(),
     };
-    at_most("--events", args.events, MAX_EVENT_COLUMNS)?;
-    at_most("--threads", args.threads, MAX_THREADS)?;
+    // Columns per event and worker threads are allocated per row or up front: a typo is a usage
+    // error rather than an out-of-memory abort.
+    SweepRequest::check_counts(args.events, args.threads, Spelling::Flag)?;
     let (points, varied) = points(model, args)?;
     let opts = sim_options(model, &args.sim)?;
     if let Some(path) = &args.plot {
@@ -257,35 +255,25 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
         Ok(c) => c,
         Err(code) => return Ok(code),
     };
-    let info = compiled.info();
-    let columns = Columns::new(info, args.events, grad.len());
     let format = match args.format {
         FormatArg::Csv => Format::Csv,
         FormatArg::Jsonl => Format::Jsonl,
     };
     let bar = progress_bar(points.len());
-    let keep = args.plot.is_some();
-    let streamed = sweep::stream_rows(
-        &compiled,
-        &points,
-        &opts,
-        &columns,
-        format,
-        args.threads,
-        keep,
-        &|| bar.inc(1),
-        &mut out,
-    );
+    let request = SweepRequest { points, sim: opts.clone(), events: args.events, threads: args.threads };
+    let streamed = request.stream(&compiled, format, args.plot.is_some(), &|| bar.inc(1), &mut out);
     bar.finish_and_clear();
     let streamed = match streamed {
         Ok(streamed) => streamed,
         // A closed stdout pipe (`hybc sweep ... | head`) means the reader has what it wanted.
-        Err(sweep::SweepError::Write(_)) if output.is_none() => return Ok(ExitCode::SUCCESS),
-        Err(sweep::SweepError::Write(e)) => {
+        Err(Error::Sweep(SweepError::Write(_))) if output.is_none() => return Ok(ExitCode::SUCCESS),
+        Err(Error::Sweep(SweepError::Write(e))) => {
             let path = output.unwrap_or(std::path::Path::new(super::output::STDOUT));
             return Err(format!("--output: cannot write `{}`: {e}", path.display()));
         }
-        Err(e @ sweep::SweepError::WorkerPanicked { .. }) => return Err(format!("internal error: {e}")),
+        Err(Error::Sweep(e @ SweepError::WorkerPanicked { .. })) => {
+            return Err(format!("internal error: {e}"))
+        }
         Err(e) => return Err(format!("--threads: {}", super::error_chain(&e))),
     };
     drop(out);
@@ -359,9 +347,9 @@ fn plot_sweep(
         let with_param = model
             .compile_params(&[ParamIdx(param as u32)])
             .map_err(|e| format!("--plot: {}", super::error_chain(&e)))?;
-        let at_results = sweep::run_points(&with_param, &at_points, opts, threads, &|| ())
-            .map_err(|e| format!("--threads: {e}"))?;
-        figure.add_tangents(with_param.info(), param, &at_points, &at_results)
+        let request = SweepRequest { points: Points::Rows(at_points), sim: opts.clone(), events: 0, threads };
+        let at = request.run(&with_param, &|| ()).map_err(|e| format!("--threads: {e}"))?;
+        figure.add_tangents(with_param.info(), param, &at.points, &at.results)
     };
     added.and_then(|()| plot::plot_sweep(&figure, path)).map_err(|e| format!("--plot: {e}"))
 }

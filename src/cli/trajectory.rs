@@ -144,8 +144,8 @@ impl<S: HybridSystem + ?Sized, W: Write> Recorder for StreamingTrajectory<'_, S,
         self.schedule.wants(kind)
     }
 
-    fn next_sample(&self) -> Option<f64> {
-        self.schedule.next_sample()
+    fn next_grid_time(&self) -> Option<f64> {
+        self.schedule.next_grid_time()
     }
 
     fn record(&mut self, p: &Point<'_>) {

@@ -9,10 +9,10 @@ use cranelift_frontend::FunctionBuilderContext;
 use cranelift_jit::{JITBuilder, JITModule};
 use cranelift_module::{default_libcall_names, FuncId, Module};
 
-use super::lower::{declare_callees, define_driver, define_kernel};
 use super::plan::{plan_model, KernelPlan, Lens, ModelKernels, N_OUTS};
 use super::runtime::Callee;
 use super::stiff::plan_stiff;
+use super::translate::{declare_callees, define_driver, define_kernel};
 use super::{
     CodegenError, CompileOptions, OptLevel, RegAlloc, AUTO_REGALLOC_LIMIT, AUTO_REGALLOC_NODE_LIMIT,
 };
@@ -122,8 +122,10 @@ impl CompiledModel {
         let parts = plan.try_map(|k| Ok::<_, CodegenError>((k.name.clone(), k.parts(opts.max_part_size))))?;
         let all_parts = || parts.iter().flat_map(|(_, p)| p);
         let largest = all_parts().map(KernelPlan::size).max().unwrap_or(0);
-        let most_nodes =
-            all_parts().map(|k| super::lower::needed_nodes(&funcs.store, k.roots()).len()).max().unwrap_or(0);
+        let most_nodes = all_parts()
+            .map(|k| super::translate::needed_nodes(&funcs.store, k.roots()).len())
+            .max()
+            .unwrap_or(0);
         let mut module = new_module(opts, largest, most_nodes)?;
         match build_kernels(&mut module, funcs, &parts) {
             Ok(kernels) => Ok(CompiledModel {
@@ -177,8 +179,10 @@ impl CompiledModel {
         let (jac, dir) = (cut(&plan.jac), cut(&plan.dir));
         let all_parts = || jac.iter().chain(&dir).flat_map(|(_, p)| p);
         let largest = all_parts().map(KernelPlan::size).max().unwrap_or(0);
-        let most_nodes =
-            all_parts().map(|k| super::lower::needed_nodes(&funcs.store, k.roots()).len()).max().unwrap_or(0);
+        let most_nodes = all_parts()
+            .map(|k| super::translate::needed_nodes(&funcs.store, k.roots()).len())
+            .max()
+            .unwrap_or(0);
         let mut module = new_module(&self.opts, largest, most_nodes)?;
         let built = (|| {
             let callees = declare_callees(&mut module)?;

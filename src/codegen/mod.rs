@@ -4,15 +4,15 @@
 //!
 //! Code map: `plan` decides what each kernel computes and checks every index (no Cranelift);
 //! `stiff` plans the Rosenbrock kernels (Jacobians, second derivatives), compiled on demand;
-//! `lower` turns a plan into IR, one `translate_*` method per node kind; `runtime` holds the host
+//! `translate` turns a plan into IR, one `translate_*` method per node kind; `runtime` holds the host
 //! wrappers for transcendental functions; `compiled` owns the JIT module and calls the kernels.
 
 #[allow(unsafe_code)]
 mod compiled;
-mod lower;
 mod plan;
 mod runtime;
 mod stiff;
+mod translate;
 
 pub use compiled::CompiledModel;
 
@@ -96,9 +96,11 @@ pub const MAX_PART_SIZE: usize = 500;
 /// How kernels are compiled.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct CompileOptions {
+    /// How hard Cranelift optimises.
     pub opt_level: OptLevel,
     /// Run Cranelift's IR verifier on every kernel (catches codegen bugs, costs 20-30%).
     pub verifier: bool,
+    /// The register allocator.
     pub regalloc: RegAlloc,
     /// Kernels larger than this (`KernelPlan::size`: output entries plus
     /// sensitivity products) are compiled as several native functions of at most this size,
@@ -125,32 +127,89 @@ impl Default for CompileOptions {
 /// Why a model could not be compiled to native code.
 #[derive(Debug, thiserror::Error)]
 pub enum CodegenError {
+    /// Cranelift does not support this machine.
     #[error("host machine is not supported by cranelift: {reason}")]
-    UnsupportedHost { reason: &'static str },
+    UnsupportedHost {
+        /// Cranelift's reason.
+        reason: &'static str,
+    },
+    /// A Cranelift setting was refused.
     #[error("invalid cranelift setting")]
     Setting(#[source] cranelift_codegen::settings::SetError),
+    /// Cranelift could not describe the target.
     #[error("cranelift could not build the target description")]
     Target(#[source] cranelift_codegen::CodegenError),
+    /// Cranelift failed on one kernel.
     #[error("cranelift failed on kernel `{kernel}`")]
     Module {
+        /// The kernel's name.
         kernel: String,
+        /// Cranelift's error.
         #[source]
         source: Box<cranelift_module::ModuleError>,
     },
+    /// An array of the plan has another length than the model's shape says.
     #[error("{what} has {found} entries, expected {expected}")]
-    ShapeMismatch { what: String, expected: usize, found: usize },
+    ShapeMismatch {
+        /// Which array.
+        what: String,
+        /// The length expected.
+        expected: usize,
+        /// The length found.
+        found: usize,
+    },
+    /// An index of the plan past its array's end.
     #[error("{what} index {index} out of range for length {len}")]
-    IndexOutOfRange { what: String, index: usize, len: usize },
+    IndexOutOfRange {
+        /// Which index.
+        what: String,
+        /// The index.
+        index: usize,
+        /// The array's length.
+        len: usize,
+    },
+    /// Sparse entries out of order.
     #[error("{what} entries are not strictly ascending at position {position}")]
-    UnsortedSparse { what: String, position: usize },
+    UnsortedSparse {
+        /// Which array.
+        what: String,
+        /// The first entry out of order.
+        position: usize,
+    },
+    /// A gradient parameter listed twice.
     #[error("parameter {param} is listed twice among the gradient parameters")]
-    DuplicateGradParam { param: usize },
+    DuplicateGradParam {
+        /// The parameter.
+        param: usize,
+    },
+    /// An expression id not in the store.
     #[error("expression {id} is not in the store of {len} nodes")]
-    UnknownExpr { id: u32, len: usize },
+    UnknownExpr {
+        /// The id.
+        id: u32,
+        /// The store's nodes.
+        len: usize,
+    },
+    /// An output entry no kernel writes.
     #[error("{what} entry {index} would never be written")]
-    Unwritten { what: String, index: usize },
+    Unwritten {
+        /// Which output.
+        what: String,
+        /// The entry.
+        index: usize,
+    },
+    /// An array too large for a kernel.
     #[error("{what} is too large for a kernel ({len} entries)")]
-    TooLarge { what: String, len: usize },
+    TooLarge {
+        /// Which array.
+        what: String,
+        /// Its entries.
+        len: usize,
+    },
+    /// A bug in the code generator.
     #[error("internal codegen error: {reason}")]
-    Internal { reason: &'static str },
+    Internal {
+        /// What went wrong.
+        reason: &'static str,
+    },
 }

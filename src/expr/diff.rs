@@ -34,8 +34,11 @@ use super::store::ExprStore;
 /// A variable to differentiate with respect to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Var {
+    /// State `i`.
     State(u32),
+    /// Parameter `i`.
     Param(u32),
+    /// The time `t`.
     Time,
 }
 
@@ -51,6 +54,7 @@ pub fn diff(store: &mut ExprStore, id: ExprId, wrt: Var) -> ExprId {
 }
 
 impl Differentiator {
+    /// A differentiator with nothing memoised yet.
     pub fn new() -> Self {
         Self::default()
     }

@@ -154,6 +154,7 @@ pub struct Tape {
 }
 
 impl Tape {
+    /// The tape of every node `roots` need, in evaluation order.
     pub fn new(store: &ExprStore, roots: &[ExprId]) -> Tape {
         let needed = reachable(store, roots);
         // slot[id] = position of node `id` in `insts`; only set for needed nodes.
@@ -188,6 +189,7 @@ impl Tape {
         self.insts.len()
     }
 
+    /// Whether it evaluates nothing.
     pub fn is_empty(&self) -> bool {
         self.insts.is_empty()
     }

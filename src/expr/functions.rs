@@ -11,6 +11,7 @@ use super::store::ExprStore;
 /// A sparse vector: `(index, expression)` for each structurally non-zero entry, ascending.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SparseVec {
+    /// `(index, expression)`, ascending by index.
     pub entries: Vec<(u32, ExprId)>,
 }
 
@@ -18,8 +19,11 @@ pub struct SparseVec {
 /// by row, then column.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SparseMat {
+    /// Rows.
     pub n_rows: u32,
+    /// Columns.
     pub n_cols: u32,
+    /// `(row, column, expression)`, ascending by row, then column.
     pub entries: Vec<(u32, u32, ExprId)>,
 }
 
@@ -41,7 +45,9 @@ pub struct ModeFunctions {
 pub struct EventFunctions {
     /// `g(t, x, p) = lhs - rhs`.
     pub guard: ExprId,
+    /// `dg/dx`.
     pub guard_x: SparseVec,
+    /// `dg/dp`.
     pub guard_p: SparseVec,
     /// `dg/dt` (the constant 0 node when `t` does not appear).
     pub guard_t: ExprId,
@@ -61,8 +67,11 @@ pub struct EventFunctions {
 /// Everything hybc compiles for one model, sharing one store.
 #[derive(Clone, Debug)]
 pub struct ModelFunctions {
+    /// The store every function's nodes are in.
     pub store: ExprStore,
+    /// States.
     pub n_states: u32,
+    /// Parameters.
     pub n_params: u32,
     /// Indexed by `ModeId`.
     pub modes: Vec<ModeFunctions>,
@@ -78,5 +87,6 @@ pub struct ModelFunctions {
     pub output_x: SparseMat,
     /// n_outputs x n_params.
     pub output_p: SparseMat,
+    /// `dh/dt`, per output.
     pub output_t: SparseVec,
 }

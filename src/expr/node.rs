@@ -7,6 +7,7 @@
 pub struct ExprId(pub u32);
 
 impl ExprId {
+    /// The id as an index into the store's nodes.
     pub fn index(self) -> usize {
         self.0 as usize
     }
@@ -16,20 +17,35 @@ impl ExprId {
 /// exactly 0.0 or 1.0.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum UnaryOp {
+    /// `-a`.
     Neg,
+    /// `sin`.
     Sin,
+    /// `cos`.
     Cos,
+    /// `tan`.
     Tan,
+    /// `asin`.
     Asin,
+    /// `acos`.
     Acos,
+    /// `atan`.
     Atan,
+    /// `sinh`.
     Sinh,
+    /// `cosh`.
     Cosh,
+    /// `tanh`.
     Tanh,
+    /// `exp`.
     Exp,
+    /// `log` (natural).
     Log,
+    /// `sqrt`.
     Sqrt,
+    /// `abs`.
     Abs,
+    /// `sign`: -1, 0 or 1.
     Sign,
     /// Boolean negation: 1.0 where the argument is 0.0, else 0.0.
     Not,
@@ -38,19 +54,29 @@ pub enum UnaryOp {
 /// Two-argument operations. There is no `Sub`: `a - b` is `a + (-b)`, so sums stay canonical.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum BinaryOp {
+    /// `a + b`.
     Add,
+    /// `a * b`.
     Mul,
+    /// `a / b`.
     Div,
+    /// `a ^ b`.
     Pow,
+    /// `atan2(a, b)`.
     Atan2,
+    /// `hypot(a, b)`.
     Hypot,
+    /// `min(a, b)`.
     Min,
+    /// `max(a, b)`.
     Max,
     /// Comparisons yield 1.0 (true) or 0.0 (false).
     Lt,
+    /// `a <= b`.
     Le,
     /// Boolean and/or of two 0.0/1.0 values.
     And,
+    /// `a or b`.
     Or,
 }
 
@@ -93,6 +119,7 @@ impl BinaryOp {
         BinaryOp::Or,
     ];
 
+    /// Whether the operands may be swapped (the store orders them by id).
     pub fn is_commutative(self) -> bool {
         matches!(
             self,
@@ -124,8 +151,11 @@ pub enum LookupKind {
 /// parameter interpolated in time). `len >= 1` (`>= 2` for `Pwl`, `PwlSlope`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct Lookup {
+    /// How the vector is read.
     pub kind: LookupKind,
+    /// The vector's first parameter.
     pub base: u32,
+    /// Its number of parameters.
     pub len: u32,
 }
 
@@ -140,11 +170,17 @@ impl Lookup {
 /// distinct constants, and NaN constants are never created by simplification.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Node {
+    /// A constant, as the bits of its f64.
     Const(u64),
+    /// State `i`.
     State(u32),
+    /// Parameter `i`.
     Param(u32),
+    /// The time `t`.
     Time,
+    /// `op(a)`.
     Unary(UnaryOp, ExprId),
+    /// `op(a, b)`.
     Binary(BinaryOp, ExprId, ExprId),
     /// `Select(c, a, b)` is `a` where `c != 0.0`, else `b`.
     Select(ExprId, ExprId, ExprId),
@@ -155,10 +191,12 @@ pub enum Node {
 }
 
 impl Node {
+    /// The constant `value`.
     pub fn constant(value: f64) -> Node {
         Node::Const(value.to_bits())
     }
 
+    /// Its value, when the node is a constant.
     pub fn as_const(&self) -> Option<f64> {
         match *self {
             Node::Const(bits) => Some(f64::from_bits(bits)),

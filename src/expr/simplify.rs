@@ -31,22 +31,27 @@ impl ExprStore {
         self.intern(Node::constant(value))
     }
 
+    /// The constant 0.
     pub fn zero(&mut self) -> ExprId {
         self.constant(0.0)
     }
 
+    /// The constant 1.
     pub fn one(&mut self) -> ExprId {
         self.constant(1.0)
     }
 
+    /// State `index`.
     pub fn state(&mut self, index: u32) -> ExprId {
         self.intern(Node::State(index))
     }
 
+    /// Parameter `index`.
     pub fn param(&mut self, index: u32) -> ExprId {
         self.intern(Node::Param(index))
     }
 
+    /// The time `t`.
     pub fn time(&mut self) -> ExprId {
         self.intern(Node::Time)
     }
@@ -91,10 +96,12 @@ impl ExprStore {
         value.is_finite().then(|| self.constant(value))
     }
 
+    /// `-a`, simplified.
     pub fn neg(&mut self, a: ExprId) -> ExprId {
         self.unary(UnaryOp::Neg, a)
     }
 
+    /// `a + b`, simplified.
     pub fn add(&mut self, a: ExprId, b: ExprId) -> ExprId {
         self.binary(BinaryOp::Add, a, b)
     }
@@ -105,14 +112,17 @@ impl ExprStore {
         self.add(a, nb)
     }
 
+    /// `a * b`, simplified.
     pub fn mul(&mut self, a: ExprId, b: ExprId) -> ExprId {
         self.binary(BinaryOp::Mul, a, b)
     }
 
+    /// `a / b`, simplified.
     pub fn div(&mut self, a: ExprId, b: ExprId) -> ExprId {
         self.binary(BinaryOp::Div, a, b)
     }
 
+    /// `a ^ b`, simplified.
     pub fn pow(&mut self, a: ExprId, b: ExprId) -> ExprId {
         self.binary(BinaryOp::Pow, a, b)
     }
@@ -123,10 +133,12 @@ impl ExprStore {
         self.pow(a, c)
     }
 
+    /// `a < b` (1 or 0), simplified.
     pub fn lt(&mut self, a: ExprId, b: ExprId) -> ExprId {
         self.binary(BinaryOp::Lt, a, b)
     }
 
+    /// `a <= b` (1 or 0), simplified.
     pub fn le(&mut self, a: ExprId, b: ExprId) -> ExprId {
         self.binary(BinaryOp::Le, a, b)
     }
@@ -141,14 +153,17 @@ impl ExprStore {
         self.le(b, a)
     }
 
+    /// `a and b` (1 or 0), simplified.
     pub fn and(&mut self, a: ExprId, b: ExprId) -> ExprId {
         self.binary(BinaryOp::And, a, b)
     }
 
+    /// `a or b` (1 or 0), simplified.
     pub fn or(&mut self, a: ExprId, b: ExprId) -> ExprId {
         self.binary(BinaryOp::Or, a, b)
     }
 
+    /// `not a` (1 or 0), simplified.
     pub fn not(&mut self, a: ExprId) -> ExprId {
         self.unary(UnaryOp::Not, a)
     }

@@ -16,6 +16,7 @@ pub struct ExprStore {
 }
 
 impl ExprStore {
+    /// An empty store.
     pub fn new() -> Self {
         Self::default()
     }
@@ -32,14 +33,17 @@ impl ExprStore {
         id
     }
 
+    /// The node `id` stands for.
     pub fn node(&self, id: ExprId) -> &Node {
         &self.nodes[id.index()]
     }
 
+    /// The number of distinct nodes.
     pub fn len(&self) -> usize {
         self.nodes.len()
     }
 
+    /// Whether it holds no node.
     pub fn is_empty(&self) -> bool {
         self.nodes.is_empty()
     }

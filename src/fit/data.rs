@@ -15,28 +15,108 @@ pub const MAX_OBSERVATIONS: usize = 1_000_000;
 /// A data file that cannot be read as measurements of the model.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum DataError {
+    /// No line at all.
     #[error("{file}: the file is empty; expected a header line with a `time` column")]
-    Empty { file: String },
+    Empty {
+        /// The file's name, as messages give it.
+        file: String,
+    },
+    /// No `time` column.
     #[error("{file}:1: no `time` column in the header (columns: {columns})")]
-    NoTime { file: String, columns: String },
+    NoTime {
+        /// The file's name, as messages give it.
+        file: String,
+        /// The columns there are.
+        columns: String,
+    },
+    /// A column that is no output or state of the model.
     #[error("{file}:1: column `{name}` is not an output or a state of the model{hint} (outputs: {outputs}; states: {states})")]
-    UnknownColumn { file: String, name: String, hint: String, outputs: String, states: String },
+    UnknownColumn {
+        /// The file's name, as messages give it.
+        file: String,
+        /// The column's name.
+        name: String,
+        /// ` (did you mean ..?)`, or empty.
+        hint: String,
+        /// The model's outputs.
+        outputs: String,
+        /// The model's states.
+        states: String,
+    },
+    /// A column named twice.
     #[error("{file}:1: column `{name}` appears twice")]
-    Repeated { file: String, name: String },
+    Repeated {
+        /// The file's name, as messages give it.
+        file: String,
+        /// The column's name.
+        name: String,
+    },
+    /// A `sigma_NAME` column without its `NAME` column.
     #[error("{file}:1: `sigma_{name}` has no column `{name}` to weigh")]
-    LoneSigma { file: String, name: String },
+    LoneSigma {
+        /// The file's name, as messages give it.
+        file: String,
+        /// The name it would weigh.
+        name: String,
+    },
+    /// A row with another number of cells than the header.
     #[error("{file}:{line}: expected {expected} cells as in the header, found {found}")]
-    Cells { file: String, line: usize, expected: usize, found: usize },
+    Cells {
+        /// The file's name, as messages give it.
+        file: String,
+        /// The line (1-based, the header line 1).
+        line: usize,
+        /// The header's cells.
+        expected: usize,
+        /// The row's.
+        found: usize,
+    },
+    /// A cell that is not a finite number.
     #[error("{file}:{line}: column `{column}`: `{text}` is not a finite number")]
-    NotANumber { file: String, line: usize, column: String, text: String },
+    NotANumber {
+        /// The file's name, as messages give it.
+        file: String,
+        /// The line (1-based, the header line 1).
+        line: usize,
+        /// The column's name.
+        column: String,
+        /// The cell as written.
+        text: String,
+    },
+    /// A standard deviation that is not positive.
     #[error("{file}:{line}: column `{column}`: a standard deviation must be positive, found {text}")]
-    BadSigma { file: String, line: usize, column: String, text: String },
+    BadSigma {
+        /// The file's name, as messages give it.
+        file: String,
+        /// The line (1-based, the header line 1).
+        line: usize,
+        /// The column's name.
+        column: String,
+        /// The cell as written.
+        text: String,
+    },
+    /// A row without its time.
     #[error("{file}:{line}: a row needs its time")]
-    NoTimeValue { file: String, line: usize },
+    NoTimeValue {
+        /// The file's name, as messages give it.
+        file: String,
+        /// The line (1-based, the header line 1).
+        line: usize,
+    },
+    /// More measurements than `MAX_FIT_TARGETS`-like caps allow.
     #[error("{file}: more than {cap} measurements")]
-    TooMany { file: String, cap: usize },
+    TooMany {
+        /// The file's name, as messages give it.
+        file: String,
+        /// The most a fit takes.
+        cap: usize,
+    },
+    /// A file whose value cells are all empty.
     #[error("{file}: no measurements (every value cell is empty)")]
-    Nothing { file: String },
+    Nothing {
+        /// The file's name, as messages give it.
+        file: String,
+    },
 }
 
 /// The measurements of `text` (a CSV file's contents, named `file` in messages) as targets: a
@@ -46,12 +126,15 @@ pub enum DataError {
 /// Measurements read from a data file: one observed target per value cell.
 #[derive(Clone, Debug)]
 pub struct Data {
+    /// One target per value cell: `NAME@TIME=VALUE`, weighted by `1 / sigma`.
     pub targets: Vec<Target>,
     /// Whether every value column has its `sigma_` column: the weighted residuals are then in
     /// units of the measurements' standard deviations (see [`standard_errors`]).
     pub sigma_known: bool,
 }
 
+/// The measurements of `text` (a CSV file's contents, named `file` in messages) as targets:
+/// see [`Data`]; refused with the line and column at fault.
 pub fn parse_data(text: &str, file: &str, info: &SystemInfo) -> Result<Data, DataError> {
     let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
     let Some((_, header)) = lines.next() else {

@@ -8,7 +8,7 @@ use std::fmt;
 use nalgebra::DMatrix;
 
 use super::target::{Observable, Target};
-use crate::sim::{HybridSystem, SimResult, Simulator, StopReason, SystemInfo};
+use crate::sim::{HybridSystem, Runner, SimResult, StopReason, SystemInfo};
 
 /// The residuals of one run and their Jacobian with respect to the free parameters.
 #[derive(Clone, Debug)]
@@ -35,18 +35,40 @@ impl Evaluation {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Rejection {
     /// The run stopped early (Zeno behaviour or a runtime fault), or refused its input.
-    RunStopped { message: String },
+    RunStopped {
+        /// Why it stopped.
+        message: String,
+    },
     /// A target's event fired fewer times than its firing number.
-    MissingEvent { target: String, fired: usize },
+    MissingEvent {
+        /// The target.
+        target: String,
+        /// How many times its event fired.
+        fired: usize,
+    },
     /// A target's gradient does not exist: a grazing event came at or before it.
-    NoGradient { target: String },
+    NoGradient {
+        /// The target.
+        target: String,
+    },
     /// A `NAME@TIME` target's time is after the run's stop (a `stop` event).
-    NotReached { target: String },
+    NotReached {
+        /// The target.
+        target: String,
+    },
     /// A target's value or gradient is not a finite number.
-    NonFinite { target: String },
+    NonFinite {
+        /// The target.
+        target: String,
+    },
     /// Every residual is finite but `0.5 * sum(residual^2)` overflows: the objective, its
     /// gradient and every convergence test would be infinities and NaNs.
-    ObjectiveOverflow { target: String, residual: f64 },
+    ObjectiveOverflow {
+        /// The target with the largest residual.
+        target: String,
+        /// That residual.
+        residual: f64,
+    },
 }
 
 impl fmt::Display for Rejection {
@@ -81,9 +103,9 @@ impl fmt::Display for Rejection {
 }
 
 /// Runs the simulator's model at parameters `p` (all of them) and reads the targets. A fit keeps
-/// one `Simulator` for all its evaluations, so its scratch buffers are allocated once.
+/// one `Runner` for all its evaluations, so its scratch buffers are allocated once.
 pub fn evaluate<S: HybridSystem + ?Sized>(
-    simulator: &mut Simulator<&S>,
+    simulator: &mut Runner<&S>,
     p: &[f64],
     targets: &[Target],
 ) -> Result<Evaluation, Rejection> {

@@ -12,31 +12,33 @@
 //!
 //! Code map: `target` (what to match, parsed from `NAME=VALUE@WEIGHT`), `evaluate` (one run ->
 //! residuals and Jacobian), `lm` (the solver), `report` (names, table, JSON), `data` (a CSV of
-//! measurements as targets, standard errors), `request` (a whole fit from text, for the CLI and
-//! Python).
+//! measurements as targets, standard errors). A whole fit from text, for the CLI and Python, is
+//! the door's `FitRequest` (`api/request/fit.rs`).
 
 pub mod data;
 mod evaluate;
 mod lm;
 mod report;
-pub mod request;
 mod target;
 
 pub use evaluate::{evaluate, Evaluation, Rejection};
 pub use report::FitReport;
 pub use target::{sample_times, Observable, Target, TargetError};
 
-use crate::sim::{HybridSystem, SimOptions, Simulator};
+use crate::sim::{HybridSystem, Runner, SimOptions};
 
 /// The box a free parameter must stay in; infinite ends for none. Trial points are projected
 /// onto the box, and a parameter at a bound that the gradient pushes outwards is held there.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Bounds {
+    /// The lower end (`-inf` for none).
     pub lower: f64,
+    /// The upper end (`inf` for none).
     pub upper: f64,
 }
 
 impl Bounds {
+    /// No bounds.
     pub const NONE: Bounds = Bounds { lower: f64::NEG_INFINITY, upper: f64::INFINITY };
 
     /// The declared range of a parameter (`param e = 0.8 in [0, 1]`), or no bounds.
@@ -44,6 +46,7 @@ impl Bounds {
         range.map_or(Bounds::NONE, |(lower, upper)| Bounds { lower, upper })
     }
 
+    /// Whether `x` is inside (the ends included).
     pub fn contains(&self, x: f64) -> bool {
         (self.lower..=self.upper).contains(&x)
     }
@@ -101,16 +104,20 @@ pub struct Iteration {
     pub damping: Option<f64>,
     /// Whether the trial lies on another smooth piece (its event sequence differs).
     pub cusp: bool,
+    /// How the trial went.
     pub outcome: Outcome,
 }
 
 /// A trial whose event sequence differed from the current point's.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Cusp {
+    /// The trial (numbered from 1).
     pub iteration: usize,
     /// Number of events at the current point and at the trial.
     pub events_before: usize,
+    /// Number of events at the trial.
     pub events_after: usize,
+    /// Whether the trial was accepted.
     pub accepted: bool,
 }
 
@@ -120,7 +127,12 @@ pub enum StallCause {
     /// The last trial rejected on another piece of the objective.
     Cusp(Cusp),
     /// The last trial that gave no residuals.
-    Failed { iteration: usize, rejection: Rejection },
+    Failed {
+        /// The trial.
+        iteration: usize,
+        /// Why it gave no residuals.
+        rejection: Rejection,
+    },
     /// Trials on the same piece did not lower the objective although the Gauss-Newton step is not
     /// small: the simulation's error is larger than the step (tighten the tolerances).
     NoDecrease,
@@ -146,6 +158,7 @@ pub enum FitStop {
 }
 
 impl FitStop {
+    /// Whether the fit converged (a least-squares minimum).
     pub fn is_converged(&self) -> bool {
         matches!(self, FitStop::Gradient | FitStop::Step | FitStop::Objective)
     }
@@ -154,12 +167,15 @@ impl FitStop {
 /// What to fit: a compiled model whose gradient parameters are the free parameters.
 #[derive(Clone, Debug)]
 pub struct FitProblem<'s, S: HybridSystem> {
+    /// The compiled model, its gradient parameters the free parameters.
     pub system: &'s S,
     /// All parameter values; those of the free parameters are the starting point.
     pub start: Vec<f64>,
     /// One per free parameter, in the system's gradient order.
     pub bounds: Vec<Bounds>,
+    /// What to match.
     pub targets: Vec<Target>,
+    /// The options of every run.
     pub sim: SimOptions,
 }
 
@@ -175,6 +191,7 @@ pub struct FitResult {
     pub condition: f64,
     /// The start and every trial.
     pub iterations: Vec<Iteration>,
+    /// Trials whose event sequence differed from the current point's.
     pub cusps: Vec<Cusp>,
     /// Why the solver stopped: a least-squares minimum (converged) or not.
     pub stop: FitStop,
@@ -214,14 +231,33 @@ pub fn target_tolerance(goal: f64, value: f64, sim: &SimOptions) -> f64 {
 /// A fit that cannot start.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum FitError {
+    /// The system has no gradient parameters to fit.
     #[error("no free parameters: compile the model with the free parameters as gradient parameters")]
     NoFreeParameters,
+    /// Nothing to fit to.
     #[error("no targets")]
     NoTargets,
+    /// Not one box per free parameter.
     #[error("{got} bounds for {expected} free parameters")]
-    BoundsLength { expected: usize, got: usize },
+    BoundsLength {
+        /// The free parameters.
+        expected: usize,
+        /// The boxes given.
+        got: usize,
+    },
+    /// A start outside its box.
     #[error("start value {value} of `{name}` is outside its bounds [{lower}, {upper}]")]
-    StartOutsideBounds { name: String, value: f64, lower: f64, upper: f64 },
+    StartOutsideBounds {
+        /// The parameter.
+        name: String,
+        /// Its start.
+        value: f64,
+        /// The box's lower end.
+        lower: f64,
+        /// The box's upper end.
+        upper: f64,
+    },
+    /// The targets cannot be evaluated at the start.
     #[error("cannot evaluate the targets at the starting point: {0}")]
     Start(Rejection),
 }
@@ -256,7 +292,7 @@ pub fn fit<S: HybridSystem>(problem: &FitProblem<'_, S>, opts: &FitOptions) -> R
     // `NAME@TIME` targets are read off the run's samples at their times.
     let sampled =
         SimOptions { at: sample_times(problem.targets.iter().map(|t| &t.observable)), ..problem.sim.clone() };
-    let mut simulator = Simulator::new(problem.system, &sampled)
+    let mut simulator = Runner::new(problem.system, &sampled)
         .map_err(|e| FitError::Start(Rejection::RunStopped { message: e.to_string() }))?;
     let solved = lm::minimize(x0, &problem.bounds, opts, |x| {
         evaluate(&mut simulator, &with_free(x), &problem.targets)

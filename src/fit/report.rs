@@ -13,12 +13,19 @@ use crate::sim::SystemInfo;
 /// A fit's result with the names and settings needed to report it.
 #[derive(Clone, Debug)]
 pub struct FitReport {
+    /// The model's name.
     pub model: String,
+    /// The model's shape (names, gradient columns).
     pub info: SystemInfo,
+    /// What was fitted to.
     pub targets: Vec<Target>,
+    /// The options the fit ran with.
     pub options: FitOptions,
+    /// The outcome.
     pub result: FitResult,
+    /// Seconds spent compiling the model.
     pub compile_seconds: f64,
+    /// Seconds spent fitting.
     pub fit_seconds: f64,
     /// Whether every measurement (`--data`) came with its standard deviation: the parameters'
     /// standard errors are then not rescaled by the residual variance.

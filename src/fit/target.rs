@@ -17,11 +17,26 @@ pub enum Observable {
     /// The time of the `occurrence`-th firing (1-based) of any event named `name`; the name, not
     /// an event id, because events of different modes may share a name and the user counts
     /// firings of the name.
-    EventTime { name_event: usize, occurrence: usize },
+    EventTime {
+        /// An event with the name (the first declared).
+        name_event: usize,
+        /// Which firing, from 1.
+        occurrence: usize,
+    },
     /// The time of the last firing of any event named as `name_event` is.
-    LastFiring { name_event: usize },
+    LastFiring {
+        /// An event with the name (the first declared).
+        name_event: usize,
+    },
     /// An output (`output: true`) or a state at time `time`.
-    At { output: bool, index: usize, time: f64 },
+    At {
+        /// Whether `index` is an output's (else a state's).
+        output: bool,
+        /// The output's or state's index.
+        index: usize,
+        /// The time.
+        time: f64,
+    },
 }
 
 impl Observable {
@@ -89,7 +104,9 @@ fn parse_observable(name: &str, text: &str, info: &SystemInfo) -> Result<Observa
 /// One residual: `weight * (observed - value)`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Target {
+    /// What is compared.
     pub observable: Observable,
+    /// The goal (or the measured value).
     pub value: f64,
     /// Multiplies the residual (the inverse of a standard deviation, in a weighted fit).
     pub weight: f64,
@@ -105,26 +122,68 @@ pub enum TargetError {
         "expected NAME=VALUE, NAME@TIME=VALUE, EVENT#K=TIME or EVENT#last=TIME, each with an optional \
          @WEIGHT after the value, found `{text}`"
     )]
-    Malformed { text: String },
+    /// Not one of the shapes a target takes.
+    Malformed {
+        /// The target as written.
+        text: String,
+    },
+    /// A goal that is not a finite number.
     #[error("`{text}` is not a finite number")]
-    NotANumber { text: String },
+    NotANumber {
+        /// The goal as written.
+        text: String,
+    },
     /// A goal a double cannot hold (`1e-400` would round to 0).
     #[error(transparent)]
     Unrepresentable(crate::number::NumberError),
+    /// A weight that is not a positive finite number.
     #[error("weight `{text}` must be a positive finite number")]
-    BadWeight { text: String },
+    BadWeight {
+        /// The weight as written.
+        text: String,
+    },
     #[error(
         "in `{text}`: the firing number K of EVENT#K must be a whole number from 1 (1 is the first firing), or `last`"
     )]
-    BadOccurrence { text: String },
+    /// A firing number K that is neither a whole number from 1 nor `last`.
+    BadOccurrence {
+        /// The target as written.
+        text: String,
+    },
+    /// A time of NAME@TIME that is not a finite number.
     #[error("in `{text}`: the time of NAME@TIME must be a finite number")]
-    BadTime { text: String },
+    BadTime {
+        /// The target as written.
+        text: String,
+    },
+    /// No event of that name.
     #[error("model has no event `{name}`{hint}; its events are {known}")]
-    UnknownEvent { name: String, hint: String, known: String },
+    UnknownEvent {
+        /// The name given.
+        name: String,
+        /// ` (did you mean ..?)`, or empty.
+        hint: String,
+        /// The model's events.
+        known: String,
+    },
+    /// No output or state of that name.
     #[error("model has no output or state `{name}`{hint}; its outputs are {outputs}, its states {states}")]
-    UnknownName { name: String, hint: String, outputs: String, states: String },
+    UnknownName {
+        /// The name given.
+        name: String,
+        /// ` (did you mean ..?)`, or empty.
+        hint: String,
+        /// The model's outputs.
+        outputs: String,
+        /// The model's states.
+        states: String,
+    },
+    /// A name that is an output and a state.
     #[error("`{name}` is both an output and a state; write `output:{name}` or `state:{name}`")]
-    Ambiguous { name: String },
+    Ambiguous {
+        /// The name.
+        name: String,
+    },
 }
 
 impl Target {

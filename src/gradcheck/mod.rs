@@ -62,13 +62,13 @@
 //!   early (Zeno behaviour or a fault) has its final state skipped.
 
 mod compare;
+mod report;
 mod sequence;
 mod stencil;
-mod table;
 
 use serde::Serialize;
 
-use crate::sim::{HybridSystem, SimError, SimOptions, SimResult, Simulator, TrajectoryRequest};
+use crate::sim::{HybridSystem, Runner, SimError, SimOptions, SimResult, TrajectoryRequest};
 
 pub use sequence::{rerun_options, EventCheck, STEPS_PER_SPAN, TIGHTER};
 pub use stencil::{stencil, Difference, Stencil};
@@ -110,6 +110,7 @@ pub struct Comparison {
     /// The derivative compared, as a failure names it: `dt(touchdown#2)/de` (the time of the
     /// second firing of `touchdown`), `d(energy)/dh0` (a final output or state).
     pub derivative: String,
+    /// The derivative the run reported.
     pub reported: f64,
     /// The finite difference (central, or one-sided at a bound: [`ParamCheck::difference`]).
     pub central: f64,
@@ -150,11 +151,13 @@ pub struct Cusp {
 /// The check of one gradient parameter.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ParamCheck {
+    /// The parameter's name.
     pub name: String,
     /// Index into all parameters.
     pub param: usize,
     /// The step `h` (0 when the parameter could not be varied).
     pub step: f64,
+    /// Which difference was taken.
     pub difference: Difference,
     /// Steps (accepted and rejected) of the runs at the difference's three points, ascending.
     pub steps: [usize; 3],
@@ -172,6 +175,7 @@ pub struct ParamCheck {
     /// Every comparison made at step `h` (for the refinement at `h / 2`; not reported).
     #[serde(skip)]
     pub(crate) all: Vec<Comparison>,
+    /// Where the event sequences of the difference's runs part, if they do.
     pub cusp: Option<Cusp>,
     /// Why some quantities were not compared (grazing, a run that stopped early), and how the step
     /// was chosen where that needs saying.
@@ -179,6 +183,7 @@ pub struct ParamCheck {
 }
 
 impl ParamCheck {
+    /// The largest discrepancy of this parameter's comparisons that are not within noise.
     pub fn worst_discrepancy(&self) -> f64 {
         self.worst.as_ref().map_or(0.0, |w| w.discrepancy)
     }
@@ -187,7 +192,9 @@ impl ParamCheck {
 /// The outcome of a gradient check.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct GradCheck {
+    /// The step and the tolerance.
     pub options: CheckOptions,
+    /// One check per gradient parameter.
     pub params: Vec<ParamCheck>,
     /// The run's events against a re-run at tighter tolerances and capped steps.
     pub events: EventCheck,
@@ -233,9 +240,9 @@ pub fn check_within(
     let info = sys.info();
     let opts = SimOptions { trajectory: TrajectoryRequest::None, ..opts.clone() };
     let rerun_opts = sequence::rerun_options(&opts);
-    let rerun = Simulator::new(sys, &rerun_opts)?.run(p)?;
+    let rerun = Runner::new(sys, &rerun_opts)?.run(p)?;
     let events = sequence::compare(info, nominal, &rerun, &opts, &rerun_opts);
-    let mut simulator = Simulator::new(sys, &opts)?;
+    let mut simulator = Runner::new(sys, &opts)?;
     let mut params = Vec::with_capacity(info.n_grad());
     for (j, &param) in info.grad_params.iter().enumerate() {
         let mut param_check = ParamCheck {

@@ -26,7 +26,9 @@ pub const STEPS_PER_SPAN: f64 = 10_000.0;
 pub struct EventCheck {
     /// The re-run's options.
     pub rtol: f64,
+    /// The re-run's absolute tolerance.
     pub atol: f64,
+    /// The re-run's largest step.
     pub h_max: f64,
     /// Event times that differ by at most this are the same crossing: `sqrt(rtol) * span`.
     pub time_tol: f64,
@@ -43,6 +45,7 @@ pub struct EventCheck {
 }
 
 impl EventCheck {
+    /// Whether the two runs' events agree (within `time_tol`), as compared.
     pub fn is_consistent(&self) -> bool {
         self.difference.is_none()
     }

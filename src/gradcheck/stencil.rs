@@ -50,7 +50,9 @@ impl Difference {
 /// The step of one parameter and the three points of its difference (one of them `p` itself).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Stencil {
+    /// Central, or one-sided at a bound.
     pub difference: Difference,
+    /// The step `h`.
     pub step: f64,
     /// Parameter values at the three points, ascending.
     pub points: [f64; 3],

@@ -18,6 +18,7 @@ pub struct ExprPrinter<'m> {
 }
 
 impl<'m> ExprPrinter<'m> {
+    /// A printer for the expressions of `model` (its states' and parameters' names).
     pub fn new(model: &'m Model) -> ExprPrinter<'m> {
         ExprPrinter {
             model,

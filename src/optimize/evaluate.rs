@@ -6,7 +6,7 @@
 use super::solver::SmoothPoint;
 use super::spec::{Constraint, Quantity, Sense};
 use crate::fit::{self, Rejection, Target};
-use crate::sim::{HybridSystem, Simulator, SystemInfo};
+use crate::sim::{HybridSystem, Runner, SystemInfo};
 
 /// The quantities of a problem, in the order the program sees them.
 pub struct Layout {
@@ -61,7 +61,7 @@ pub struct Evaluated {
 
 /// Runs the model at `p` (all parameters) and reads the layout's quantities.
 pub fn evaluate<S: HybridSystem + ?Sized>(
-    simulator: &mut Simulator<&S>,
+    simulator: &mut Runner<&S>,
     info: &SystemInfo,
     layout: &Layout,
     p: &[f64],

@@ -18,37 +18,44 @@
 //! One entry point for every front end: [`optimize`] takes the problem and options and returns an
 //! [`OptimizeResult`]. Code map: `spec` (objective and constraints from text), `evaluate` (one
 //! run -> program values and gradients), `solver` (the seam), `slsqp` (the optimiser), `kkt`
-//! (the verdict), `report` (table and JSON).
+//! (the verdict), `report` (table and JSON), `shards` (the report of a multi-start run in
+//! shards, merged). A whole problem from text, for the CLI and Python, is the door's
+//! `OptimizeRequest` (`api/request/optimize.rs`).
 
 mod evaluate;
 mod kkt;
 pub mod report;
-pub mod request;
+mod shards;
 mod slsqp;
 pub mod solver;
 mod spec;
 
 pub use kkt::Kkt;
+pub use shards::merge_shards;
 pub use slsqp::Slsqp;
 pub use spec::{parse_constraint, Constraint, Quantity, Sense, SpecError};
 
 use rayon::prelude::*;
 
 use crate::fit::{sample_times, target_tolerance, Bounds, Rejection};
-use crate::sim::{HybridSystem, SimOptions, SimResult, SimWarning, Simulator, StopReason};
+use crate::sim::{HybridSystem, Runner, SimOptions, SimResult, SimWarning, StopReason};
 use evaluate::{Evaluated, Layout};
 use solver::{LocalSolver, Program, SmoothPoint};
 
 /// What to optimise: a compiled model whose gradient parameters are the free parameters.
 #[derive(Clone, Debug)]
 pub struct OptimizeProblem<'s, S: HybridSystem> {
+    /// The compiled model, its gradient parameters the free parameters.
     pub system: &'s S,
     /// All parameter values; those of the free parameters are the first start.
     pub start: Vec<f64>,
     /// One per free parameter, in the system's gradient order.
     pub bounds: Vec<Bounds>,
+    /// What to minimise.
     pub objective: Quantity,
+    /// What must hold.
     pub constraints: Vec<Constraint>,
+    /// The options of every run.
     pub sim: SimOptions,
 }
 
@@ -73,7 +80,7 @@ pub struct OptimizeOptions {
     /// Worker threads for the starts (0: one per core).
     pub threads: usize,
     /// Only the starts `first..last` of the `starts` (the same seeded draw): one shard of a
-    /// multi-start spread over processes (`hybc.dask.optimize`). `request::merge_shards` puts
+    /// multi-start spread over processes (`hybc.dask.optimize`). `merge_shards` puts
     /// the shards' reports together into the report of the whole. `None`: every start.
     pub shard: Option<(usize, usize)>,
 }
@@ -115,9 +122,11 @@ pub struct Trial {
 /// A run whose event sequence differed from the previous successful run's.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SequenceChange {
+    /// The run (numbered from 1).
     pub run: usize,
     /// Event ids before and after.
     pub before: Vec<usize>,
+    /// Event ids after.
     pub after: Vec<usize>,
 }
 
@@ -130,15 +139,24 @@ pub enum Verdict {
     MaxIterations,
     /// The optimiser stopped where runs nearby have another event sequence (the last such run is
     /// named): the point sits at a cusp or jump of the problem, not at a smooth optimum.
-    StalledAtCusp { run: usize },
+    StalledAtCusp {
+        /// The last run with another event sequence.
+        run: usize,
+    },
     /// The optimiser stopped after runs that failed (the last one's reason).
-    RunsFailing { message: String },
+    RunsFailing {
+        /// Why the last run failed.
+        message: String,
+    },
     /// A constraint is not met to its tolerance (the optimiser found no feasible point).
     Infeasible,
     /// Feasible, but the Lagrangian's gradient does not vanish to `kkt_tol`.
     Stalled,
     /// The starting point cannot be evaluated.
-    StartFailed { message: String },
+    StartFailed {
+        /// Why it cannot be evaluated.
+        message: String,
+    },
 }
 
 impl Verdict {
@@ -161,8 +179,9 @@ impl Verdict {
 pub struct LocalResult {
     /// Which start this is (0 the problem's own, then the drawn ones in order).
     pub index: usize,
-    /// Free parameters at the start and at the end.
+    /// Free parameters at the start.
     pub start: Vec<f64>,
+    /// Free parameters at the end.
     pub x: Vec<f64>,
     /// All parameter values at the end.
     pub params: Vec<f64>,
@@ -171,6 +190,7 @@ pub struct LocalResult {
     pub values: Vec<f64>,
     /// The KKT measures at the end, when it could be evaluated.
     pub kkt: Option<Kkt>,
+    /// Why the solve ended.
     pub verdict: Verdict,
     /// The optimiser's own status word.
     pub status: String,
@@ -178,6 +198,7 @@ pub struct LocalResult {
     pub trials: Vec<Trial>,
     /// Simulation runs in all: the evaluations, and one or two at the end for the report.
     pub runs: usize,
+    /// The runs whose event sequence differed from the previous one's.
     pub changes: Vec<SequenceChange>,
     /// The end's run (events, final state, warnings), when it could be run.
     pub run: Option<SimResult>,
@@ -187,6 +208,7 @@ pub struct LocalResult {
 }
 
 impl LocalResult {
+    /// Whether it ended at a point where the KKT conditions hold.
     pub fn converged(&self) -> bool {
         self.verdict == Verdict::Converged
     }
@@ -204,11 +226,13 @@ pub struct OptimizeResult {
     pub constraints: Vec<Constraint>,
     /// Per constraint, how far it may be off (at the best end; at the first end if none converged).
     pub tolerances: Vec<f64>,
+    /// Every start's solve, in start order.
     pub locals: Vec<LocalResult>,
     /// Distinct converged optima, best first: the indices of the starts that reached each (the
     /// first is its representative). Two ends are the same optimum when they have the same event
     /// sequence and every free parameter agrees to 1e-6 of its scale.
     pub optima: Vec<Vec<usize>>,
+    /// The optimiser's name.
     pub solver: &'static str,
 }
 
@@ -223,6 +247,7 @@ impl OptimizeResult {
         self.best().unwrap_or(&self.locals[0])
     }
 
+    /// Simulation runs in all, over every start.
     pub fn runs(&self) -> usize {
         self.locals.iter().map(|l| l.runs).sum()
     }
@@ -231,14 +256,36 @@ impl OptimizeResult {
 /// An optimisation that cannot start.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum OptimizeError {
+    /// The system has no gradient parameters to optimise.
     #[error("no free parameters: compile the model with the free parameters as gradient parameters")]
     NoFreeParameters,
+    /// Not one box per free parameter.
     #[error("{got} bounds for {expected} free parameters")]
-    BoundsLength { expected: usize, got: usize },
+    BoundsLength {
+        /// The free parameters.
+        expected: usize,
+        /// The boxes given.
+        got: usize,
+    },
+    /// A start outside its box.
     #[error("start value {value} of `{name}` is outside its bounds [{lower}, {upper}]")]
-    StartOutsideBounds { name: String, value: f64, lower: f64, upper: f64 },
+    StartOutsideBounds {
+        /// The parameter.
+        name: String,
+        /// Its start.
+        value: f64,
+        /// The box's lower end.
+        lower: f64,
+        /// The box's upper end.
+        upper: f64,
+    },
+    /// Several starts asked for, and a free parameter without a finite box to draw them in.
     #[error("several starts are drawn within the bounds, but `{name}` has no finite range: declare `in [lo, hi]` or give --bounds")]
-    StartsNeedBounds { name: String },
+    StartsNeedBounds {
+        /// The parameter.
+        name: String,
+    },
+    /// No start asked for.
     #[error("at least one start")]
     NoStarts,
     #[error(
@@ -246,11 +293,26 @@ pub enum OptimizeError {
         crate::limits::MAX_OPTIMIZE_FREE,
         crate::limits::MAX_CONSTRAINTS
     )]
-    TooLarge { free: usize, constraints: usize },
+    /// More free parameters or constraints than the optimiser's dense workspace takes.
+    TooLarge {
+        /// The free parameters.
+        free: usize,
+        /// The constraints.
+        constraints: usize,
+    },
+    /// The worker threads could not be started.
     #[error("cannot start a worker thread: {0}")]
     Threads(String),
+    /// A shard outside the starts.
     #[error("shard {first}..{last} of {starts} starts: expected first < last <= starts")]
-    Shard { first: usize, last: usize, starts: usize },
+    Shard {
+        /// Its first start.
+        first: usize,
+        /// One past its last.
+        last: usize,
+        /// The starts in all.
+        starts: usize,
+    },
 }
 
 /// Progress: called after every run with the start's index and the run.
@@ -292,7 +354,7 @@ pub fn optimize<S: HybridSystem + Sync>(
     }
     let ranges = free.iter().zip(&problem.bounds).map(|(&j, b)| (j, b.lower, b.upper)).collect();
     let samples =
-        crate::sweep::Samples::new(problem.start.clone(), ranges, opts.starts.saturating_sub(1), opts.seed);
+        crate::sweep::Draws::new(problem.start.clone(), ranges, opts.starts.saturating_sub(1), opts.seed);
     let start_of = |i: usize| {
         let mut p = problem.start.clone();
         if i > 0 {
@@ -380,7 +442,7 @@ fn local<S: HybridSystem>(
         run: None,
         cusp_notes: Vec::new(),
     };
-    let mut simulator = match Simulator::new(problem.system, &sampled) {
+    let mut simulator = match Runner::new(problem.system, &sampled) {
         Ok(s) => s,
         Err(e) => return failed(e.to_string(), "not started", 0),
     };

@@ -13,12 +13,19 @@ use crate::sim::{short, SystemInfo};
 /// An optimisation's result with the names and settings needed to report it.
 #[derive(Clone, Debug)]
 pub struct OptimizeReport {
+    /// The model's name.
     pub model: String,
+    /// The model's shape (names, gradient columns).
     pub info: SystemInfo,
+    /// What was minimised.
     pub objective: Quantity,
+    /// The options the solve ran with.
     pub options: OptimizeOptions,
+    /// Every start's outcome.
     pub result: OptimizeResult,
+    /// Seconds spent compiling the model.
     pub compile_seconds: f64,
+    /// Seconds spent optimising.
     pub optimize_seconds: f64,
 }
 
@@ -37,6 +44,7 @@ impl OptimizeReport {
         events.iter().map(|&e| self.info.events[e].name.to_string()).collect()
     }
 
+    /// Whether the reported end converged (the KKT conditions hold there).
     pub fn converged(&self) -> bool {
         self.result.best().is_some()
     }
@@ -118,6 +126,7 @@ impl OptimizeReport {
         line
     }
 
+    /// The table `hybc optimize` prints.
     pub fn to_table(&self) -> String {
         let mut out = String::new();
         let r = self.result.reported();
@@ -255,6 +264,7 @@ impl OptimizeReport {
         })
     }
 
+    /// The JSON object `hybc optimize --format json` prints (docs/optimize.md).
     pub fn to_json(&self) -> Value {
         let r = self.result.reported();
         let params: Map<String, Value> =

@@ -8,8 +8,11 @@
 /// `n_eq`, then `c_i(x) <= 0`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SmoothPoint {
+    /// The objective's value.
     pub objective: f64,
+    /// Its gradient.
     pub gradient: Vec<f64>,
+    /// Each constraint's value.
     pub constraints: Vec<f64>,
     /// One gradient row per constraint.
     pub jacobian: Vec<Vec<f64>>,
@@ -20,7 +23,9 @@ pub struct SmoothPoint {
 pub struct Program {
     /// Box of each variable (infinite ends for none).
     pub bounds: Vec<(f64, f64)>,
+    /// Equality constraints (the first ones).
     pub n_eq: usize,
+    /// Inequality constraints (the rest).
     pub n_ineq: usize,
     /// How much each constraint may be off and still count as met; an optimiser may aim at
     /// a narrow band within this width around an equality (see `slsqp`).

@@ -46,12 +46,16 @@ impl Quantity {
 /// How a constraint compares its quantity with its value.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Sense {
+    /// `Q = V`.
     Eq,
+    /// `Q <= V`.
     Le,
+    /// `Q >= V`.
     Ge,
 }
 
 impl Sense {
+    /// The symbol as written (`=`, `<=`, `>=`).
     pub fn symbol(self) -> &'static str {
         match self {
             Sense::Eq => "=",
@@ -64,8 +68,11 @@ impl Sense {
 /// `quantity SENSE value`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Constraint {
+    /// What is constrained.
     pub quantity: Quantity,
+    /// How it compares.
     pub sense: Sense,
+    /// The bound.
     pub value: f64,
 }
 
@@ -96,18 +103,41 @@ impl Constraint {
 /// A `--minimize` or `--subject-to` text that does not say what it must.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum SpecError {
+    /// The quantity is neither an observable of the model nor a parameter.
     #[error("{0} (or a parameter)")]
     Name(TargetError),
+    /// No `=`, `<=` or `>=`.
     #[error("expected QUANTITY = VALUE, QUANTITY <= VALUE or QUANTITY >= VALUE, found `{text}`")]
-    NoComparison { text: String },
+    NoComparison {
+        /// The text as written.
+        text: String,
+    },
+    /// A bound that is not a finite number.
     #[error("in `{text}`: `{value}` is not a finite number")]
-    BadValue { text: String, value: String },
+    BadValue {
+        /// The constraint as written.
+        text: String,
+        /// The bound as written.
+        value: String,
+    },
     #[error(
         "in `{text}`: a path grid is NAME@LO:HI:N with finite LO < HI and N >= 2 (N at most {max}), found `{grid}`"
     )]
-    BadGrid { text: String, grid: String, max: usize },
+    /// A path grid `LO:HI:N` that is not one (or has more than `max` times).
+    BadGrid {
+        /// The constraint as written.
+        text: String,
+        /// The grid as written.
+        grid: String,
+        /// The most times a path constraint takes.
+        max: usize,
+    },
+    /// A path constraint on something that has no value at a time (an event time, a parameter).
     #[error("in `{text}`: a path constraint NAME@LO:HI:N needs an output or a state as NAME")]
-    PathOfNonValue { text: String },
+    PathOfNonValue {
+        /// The text as written.
+        text: String,
+    },
 }
 
 /// Parses `QUANTITY OP VALUE` (one constraint) or `NAME@LO:HI:N OP VALUE` (one per grid time).

@@ -11,14 +11,24 @@
 //! free parameter moves alone (the walker's swing angle starts at twice its stance angle): the
 //! model is compiled a second time with one extra parameter per state as that state's initial
 //! value (the identity as the initial sensitivities), so every derivative is the compiled
-//! model's own. Knows models, runs and their results; no IO.
+//! model's own.
+//!
+//! Code map: `section` (the two models, derived from the checked model: sema in, sema out),
+//! this file (Newton on the return map over any two systems, the multipliers), `report`
+//! (`PeriodicReport`: table, JSON). The door's `PeriodicRequest` (`api/request/periodic.rs`)
+//! compiles the section's models and runs [`find`] on them. Knows runs and their results; no
+//! compiler, no IO.
 
 use nalgebra::DMatrix;
 
-use crate::codegen::{compile, CompileOptions, CompiledModel};
-use crate::lower::{lower, system_info};
-use crate::sema::{self, Expr, ParamIdx};
-use crate::sim::{HybridSystem, SimOptions, SimResult, Simulator, StopReason};
+use crate::sema::ParamIdx;
+use crate::sim::{HybridSystem, Runner, SimOptions, SimResult, StopReason};
+
+mod report;
+mod section;
+
+pub use report::PeriodicReport;
+pub use section::{parse_section, section_models, Section, SectionModels, MAX_FIRING};
 
 /// Multipliers of at most this magnitude are the section's trivial ones: a perturbation along
 /// the flow reaches the section at another time but at the same point, and the state right after
@@ -26,21 +36,16 @@ use crate::sim::{HybridSystem, SimOptions, SimResult, Simulator, StopReason};
 /// round-off. They take no part in the stability verdict.
 pub const TRIVIAL_MULTIPLIER: f64 = 1e-8;
 
-/// What to solve for.
+/// How to search for the orbit: what the user asks.
 #[derive(Clone, Debug)]
-pub struct PeriodicProblem<'m> {
-    pub model: &'m sema::Model,
-    /// The section: an event; the orbit returns to its initial state right after its
-    /// `firing`-th firing (the event is made a `stop` event there for the analysis).
-    pub section: String,
-    /// Which firing of the section closes the orbit (1-based): 2 for a gait whose period holds
-    /// two impacts.
-    pub firing: usize,
+pub struct Search {
     /// The parameters to solve for (they set the initial state).
     pub free: Vec<ParamIdx>,
     /// All parameter values; the free ones are the starting guess.
     pub params: Vec<f64>,
+    /// The options of every run of the return map.
     pub sim: SimOptions,
+    /// The most Newton iterations (one run each).
     pub max_iter: usize,
     /// Converged when every component of `x(section) - x0` is within `tol (1 + |x0|)`.
     pub tol: f64,
@@ -71,109 +76,67 @@ pub struct PeriodicResult {
     pub events: usize,
 }
 
+/// Why no periodic orbit was found, or the question was refused.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum PeriodicError {
+    /// The section names no event.
     #[error("model has no event `{name}`; its events are {known}")]
-    NoSection { name: String, known: String },
+    NoSection {
+        /// The name given.
+        name: String,
+        /// The model's events.
+        known: String,
+    },
+    /// No free parameters to solve for.
     #[error("no free parameters: name the parameters that set the initial state")]
     NoFree,
+    /// A firing number outside 1 to `MAX_FIRING`.
     #[error("the section's firing must be 1 to {max}, found {firing}")]
-    BadFiring { firing: usize, max: usize },
+    BadFiring {
+        /// The firing asked for.
+        firing: usize,
+        /// The most.
+        max: usize,
+    },
+    /// A section that is neither `EVENT` nor `EVENT#K`.
+    #[error("`{text}`: expected EVENT or EVENT#K with K from 1 to {MAX_FIRING}")]
+    BadSection {
+        /// The section as written.
+        text: String,
+    },
+    /// A section's model could not be compiled (the code generator's message).
     #[error("cannot compile the model: {0}")]
     Compile(String),
+    /// A run of the return map did not reach the section.
     #[error("the run from the initial state does not reach the section `{section}`: {how}")]
-    Missed { section: String, how: String },
+    Missed {
+        /// The section's name.
+        section: String,
+        /// How the run ended instead.
+        how: String,
+    },
     #[error(
         "no fixed point found: after {iterations} Newton iterations the run returns {residual:e} away from its \
          initial state (tolerance {tol:e}); try another start (--set) or other free parameters"
     )]
-    NotConverged { iterations: usize, residual: f64, tol: f64 },
+    /// Newton did not converge in `max_iter` iterations.
+    NotConverged {
+        /// The iterations made.
+        iterations: usize,
+        /// The last residual.
+        residual: f64,
+        /// The tolerance.
+        tol: f64,
+    },
+    /// The return map's Jacobian with respect to the free parameters is not finite.
     #[error("the return map's Jacobian with respect to the free parameters is not finite")]
     Singular,
 }
 
-/// The most firings of the section an orbit may hold (`--section EVENT#K`).
-pub const MAX_FIRING: usize = 1000;
-
-/// `model` with the section's `firing`-th firing a `stop` event, and that event's index. For the
-/// first, the section itself stops. For a later one, a counter state (`der = 0`, starting at 0)
-/// counts the firings: the section fires as declared (and adds 1) while fewer than `firing - 1`
-/// have fired, and a copy of it that stops fires instead at the `firing`-th crossing (an
-/// enabling condition on the counter, evaluated just before the event, picks one of the two).
-/// The counter is the last state; the analysis leaves it out of the orbit. A section declared
-/// `stop` no longer stops before its `firing`-th firing.
-fn stop_at_firing(model: &sema::Model, section: usize, firing: usize) -> (sema::Model, usize) {
-    let mut m = model.clone();
-    if firing == 1 {
-        m.events[section].is_stop = true;
-        return (m, section);
-    }
-    let count = sema::StateIdx(m.states.len() as u32);
-    m.states.push(sema::State {
-        name: format!("{}#count", m.events[section].name),
-        init: Expr::Num(0.0),
-        span: m.events[section].span,
-    });
-    for mode in &mut m.modes {
-        mode.flows.push(Expr::Num(0.0));
-    }
-    // The counter is an integer: compare it half-way between two counts.
-    let threshold = Expr::Num(firing as f64 - 1.5);
-    let enabled = |op, own: &Option<sema::Cond>| {
-        let on_count = sema::Cond::Cmp(op, Expr::State(count), threshold.clone());
-        Some(match own {
-            Some(c) => sema::Cond::And(Box::new(c.clone()), Box::new(on_count)),
-            None => on_count,
-        })
-    };
-    let mut last = m.events[section].clone();
-    last.condition = enabled(sema::CmpOp::Gt, &last.condition);
-    last.is_stop = true;
-    let counted = &mut m.events[section];
-    // A section declared `stop` walks on until its `firing`-th firing, which the copy stops.
-    counted.is_stop = false;
-    counted.condition = enabled(sema::CmpOp::Lt, &counted.condition);
-    let plus_one = Expr::Binary(sema::BinOp::Add, Box::new(Expr::State(count)), Box::new(Expr::Num(1.0)));
-    counted.resets.push((count, plus_one));
-    let stop = m.events.len();
-    m.events.push(last);
-    let stop_idx = sema::EventIdx(stop as u32);
-    for mode in &mut m.modes {
-        if mode.events.contains(&sema::EventIdx(section as u32)) {
-            mode.events.push(stop_idx);
-        }
-    }
-    (m, stop)
-}
-
-/// The model with one parameter per state as its initial value (named `NAME(0)`): its
-/// gradient with respect to those is the monodromy matrix.
-fn seeded(model: &sema::Model) -> (sema::Model, Vec<ParamIdx>) {
-    let mut m = model.clone();
-    let mut seeds = Vec::with_capacity(m.states.len());
-    for i in 0..m.states.len() {
-        let idx = ParamIdx(m.params.len() as u32);
-        m.params.push(sema::Param {
-            name: format!("{}(0)", m.states[i].name),
-            default: 0.0,
-            range: None,
-            span: m.states[i].span,
-        });
-        m.states[i].init = Expr::Param(idx);
-        seeds.push(idx);
-    }
-    (m, seeds)
-}
-
-fn compiled(model: &sema::Model, grad: &[ParamIdx]) -> Result<CompiledModel, PeriodicError> {
-    compile(&lower(model), system_info(model, grad), &CompileOptions::default())
-        .map_err(|e| PeriodicError::Compile(e.to_string()))
-}
-
 /// One run of the return map from `x0`: the state right after the section, the monodromy
 /// matrix, the period and the number of events.
-fn return_map(
-    sim: &mut Simulator<&CompiledModel>,
+fn return_map<M: HybridSystem>(
+    sim: &mut Runner<&M>,
     params: &[f64],
     x0: &[f64],
     section: usize,
@@ -207,40 +170,33 @@ fn return_map(
     Ok((f.state.clone(), m, f.time - sim.options().t_start, r.events.len()))
 }
 
-/// Finds the periodic orbit of `problem` and its multipliers.
-pub fn find(problem: &PeriodicProblem<'_>) -> Result<PeriodicResult, PeriodicError> {
-    let model = problem.model;
-    let section = model.events.iter().position(|e| e.name == problem.section).ok_or_else(|| {
-        let known: Vec<&str> = model.events.iter().filter(|e| !e.implicit).map(|e| e.name.as_str()).collect();
-        PeriodicError::NoSection { name: problem.section.clone(), known: known.join(", ") }
-    })?;
-    if problem.firing == 0 || problem.firing > MAX_FIRING {
-        return Err(PeriodicError::BadFiring { firing: problem.firing, max: MAX_FIRING });
-    }
-    // A run of the return map ends right after the section's `firing`-th firing.
-    let (stopping, section) = stop_at_firing(model, section, problem.firing);
-    let model = &stopping;
+/// Finds the periodic orbit `search` asks for through `section`, and its multipliers. `initial`
+/// is the section's
+/// stopping model compiled with the free parameters as its gradient parameters (its initial
+/// state and sensitivities start each iterate), `map` the seeded model compiled with the seeds as
+/// its gradient parameters (a run of it is the return map, its total derivatives the monodromy
+/// matrix).
+pub fn find<S: HybridSystem, M: HybridSystem>(
+    initial: &S,
+    map: &M,
+    section: &Section,
+    search: &Search,
+) -> Result<PeriodicResult, PeriodicError> {
+    let problem = search;
     if problem.free.is_empty() {
         return Err(PeriodicError::NoFree);
     }
-    // The model's own states; a counter of the section's firings may follow them. The orbit is
-    // every one of them but the quadrature states.
-    let n = problem.model.states.len();
-    let quadrature = sema::quadrature_states(problem.model);
-    let orbit: Vec<usize> = (0..n).filter(|&i| !quadrature[i]).collect();
+    let (n, orbit) = (section.n_states, section.orbit.clone());
     let k_orbit = orbit.len();
-    let initial = compiled(model, &problem.free)?;
-    let (augmented, seeds) = seeded(model);
-    let map = compiled(&augmented, &seeds)?;
-    let mut sim = Simulator::new(&map, &problem.sim)
-        .map_err(|e| PeriodicError::Missed { section: problem.section.clone(), how: e.to_string() })?;
+    let mut sim = Runner::new(map, &problem.sim)
+        .map_err(|e| PeriodicError::Missed { section: section.name.clone(), how: e.to_string() })?;
     let mut params = problem.params.clone();
-    let n_all = model.states.len();
+    let n_all = initial.info().n_states();
     let (mut x0, mut x0p) = (vec![0.0; n_all], vec![0.0; n_all * problem.free.len()]);
     let mut residuals = Vec::new();
     for iteration in 0..=problem.max_iter {
         initial.initial_state(&params, &mut x0);
-        let (x1, m, period, events) = return_map(&mut sim, &params, &x0, section, &problem.section)?;
+        let (x1, m, period, events) = return_map(&mut sim, &params, &x0, section.index, &section.name)?;
         // The counter (if any) and the quadrature states are no part of the orbit.
         let m = DMatrix::from_fn(k_orbit, k_orbit, |i, j| m[(orbit[i], orbit[j])]);
         let r: Vec<f64> = orbit.iter().map(|&i| x1[i] - x0[i]).collect();

@@ -40,7 +40,9 @@ pub fn size(panels: usize) -> (u32, u32) {
 /// The image formats a plot can be written in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ImageFormat {
+    /// An SVG file.
     Svg,
+    /// A PNG file.
     Png,
 }
 
@@ -56,14 +58,29 @@ impl ImageFormat {
     }
 }
 
+/// Why a figure was not drawn.
 #[derive(Debug, thiserror::Error)]
 pub enum PlotError {
+    /// A path whose extension is neither `.svg` nor `.png`.
     #[error("`{}`: the plot file must end in .svg or .png", path.display())]
-    Extension { path: PathBuf },
+    Extension {
+        /// The path.
+        path: PathBuf,
+    },
+    /// Nothing to draw.
     #[error("nothing to plot: {what}")]
-    Empty { what: String },
+    Empty {
+        /// What is missing.
+        what: String,
+    },
+    /// Drawing or writing failed.
     #[error("cannot draw `{}`: {message}", path.display())]
-    Draw { path: PathBuf, message: String },
+    Draw {
+        /// The path.
+        path: PathBuf,
+        /// The drawing backend's message.
+        message: String,
+    },
 }
 
 /// Something drawn on a stack of panels, on any plotters backend.

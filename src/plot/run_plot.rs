@@ -44,10 +44,10 @@ pub struct RunFigure<'a> {
     rows: &'a [TrajectoryRow],
 }
 
-/// Plots `report` (which must hold a trajectory, e.g. from `TrajectoryRequest::Sample`) into
+/// Plots `report` (which must hold a trajectory, e.g. from `TrajectoryRequest::Every`) into
 /// `path` (`.svg` or `.png`).
 pub fn plot_run(report: &RunReport, path: &Path) -> Result<(), PlotError> {
-    let rows = report.result.trajectory.as_deref().filter(|rows| rows.len() >= 2).ok_or_else(|| {
+    let rows = report.result().trajectory.as_deref().filter(|rows| rows.len() >= 2).ok_or_else(|| {
         PlotError::Empty { what: "the run recorded no trajectory (ask for one in its SimOptions)".into() }
     })?;
     render(&RunFigure { report, rows }, path)
@@ -56,7 +56,7 @@ pub fn plot_run(report: &RunReport, path: &Path) -> Result<(), PlotError> {
 impl RunFigure<'_> {
     /// Every plotted variable: its name and where it is in a row.
     fn variables(&self) -> Vec<(&str, Variable)> {
-        let info = &self.report.info;
+        let info = self.report.info();
         let states = info.state_names.iter().enumerate().map(|(i, n)| (n.as_str(), Variable::State(i)));
         states
             .chain(info.output_names.iter().enumerate().map(|(i, n)| (n.as_str(), Variable::Output(i))))
@@ -65,7 +65,7 @@ impl RunFigure<'_> {
 
     /// `(from, to, mode)` for each stretch of time spent in one mode.
     fn mode_spans(&self) -> Vec<(f64, f64, usize)> {
-        let r = &self.report.result;
+        let r = self.report.result();
         let mut spans = Vec::new();
         let mut from = self.rows[0].t;
         let mut mode = r.events.first().map_or(r.final_state.mode, |e| e.mode_before);
@@ -103,7 +103,7 @@ fn segments(rows: &[TrajectoryRow], event_times: &[f64]) -> Vec<Range<usize>> {
 
 impl Figure for RunFigure<'_> {
     fn panels(&self) -> usize {
-        self.report.info.n_states() + self.report.info.n_outputs()
+        self.report.info().n_states() + self.report.info().n_outputs()
     }
 
     fn draw<DB: DrawingBackend>(
@@ -112,12 +112,13 @@ impl Figure for RunFigure<'_> {
     ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
         root.fill(&WHITE)?;
         let report = self.report;
-        let info = &report.info;
+        let info = report.info();
         let params: Vec<String> =
-            info.param_names.iter().zip(&report.params).map(|(n, v)| format!("{n} = {v}")).collect();
-        let area = root.titled(&format!("{}   ({})", report.model, params.join(", ")), text(18))?;
-        let (t0, t1) = (self.rows[0].t, report.result.final_state.time.max(self.rows[self.rows.len() - 1].t));
-        let event_times: Vec<f64> = report.result.events.iter().map(|e| e.time).collect();
+            info.param_names.iter().zip(report.params()).map(|(n, v)| format!("{n} = {v}")).collect();
+        let area = root.titled(&format!("{}   ({})", report.model(), params.join(", ")), text(18))?;
+        let (t0, t1) =
+            (self.rows[0].t, report.result().final_state.time.max(self.rows[self.rows.len() - 1].t));
+        let event_times: Vec<f64> = report.result().events.iter().map(|e| e.time).collect();
         let segments = segments(self.rows, &event_times);
         let spans = if info.modes.len() > 1 { self.mode_spans() } else { Vec::new() };
         let panels = area.split_evenly((self.panels(), 1));

@@ -12,17 +12,22 @@ use super::{padded_range, render, text, Figure, PlotError, DATA_COLOR, TANGENT_C
 /// One output's indices, each with the half-width of its interval (NaN: none).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SobolPanel {
+    /// The output's name.
     pub name: String,
+    /// First-order indices with their intervals' half-widths.
     pub s1: Vec<(f64, f64)>,
+    /// Total indices with theirs.
     pub st: Vec<(f64, f64)>,
 }
 
 /// A Sobol' analysis ready to draw.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SobolFigure {
+    /// The figure's title.
     pub title: String,
     /// The varied parameters, in the order of every panel's bars.
     pub params: Vec<String>,
+    /// One panel per output.
     pub panels: Vec<SobolPanel>,
 }
 

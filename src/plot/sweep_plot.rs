@@ -14,24 +14,31 @@ use crate::sweep::PointResult;
 /// A tangent line through `(x, y)` with slope `dy/dx`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Tangent {
+    /// The point's abscissa.
     pub x: f64,
+    /// Its ordinate.
     pub y: f64,
+    /// The slope there.
     pub slope: f64,
 }
 
 /// One plotted quantity.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SweepSeries {
+    /// The quantity's name.
     pub name: String,
     /// `(parameter value, final value)` of every point that ran to its end.
     pub points: Vec<(f64, f64)>,
+    /// Tangents at a few points, from the gradients.
     pub tangents: Vec<Tangent>,
 }
 
 /// A quantity a panel shows: an output or a final state, by index.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Shown {
+    /// Output `i`.
     Output(usize),
+    /// State `i` (its final value).
     State(usize),
 }
 
@@ -65,8 +72,11 @@ impl Shown {
 /// A sweep against one parameter, ready to draw.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SweepFigure {
+    /// The figure's title.
     pub title: String,
+    /// The parameter on the x axis.
     pub param: String,
+    /// One panel per quantity shown.
     pub series: Vec<SweepSeries>,
     /// Join the points by a line (sensible when only this parameter varies).
     pub connect: bool,

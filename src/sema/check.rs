@@ -1,7 +1,7 @@
 //! AST -> checked [`Model`]: builds the scopes, resolves every name, shares `let`s and runs every
 //! semantic check, collecting all errors instead of stopping at the first.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 
 use super::error::CheckError;
 use super::model::*;
@@ -515,7 +515,7 @@ impl<'a> Checker<'a> {
     /// Initial values may use parameters (directly or through `let`s) but not `t` or states.
     fn resolve_init(&mut self, s: &ast::StateDecl) -> Expr {
         let expr = self.resolve(&s.init, ScopeId::GLOBAL);
-        if let Some(what) = first_non_constant(&expr, &self.scopes) {
+        if let Some(what) = self.scopes.non_constant(&expr) {
             self.errors.push(CheckError::InitNotConstant {
                 state: s.name.name.clone(),
                 what,
@@ -523,47 +523,5 @@ impl<'a> Checker<'a> {
             });
         }
         expr
-    }
-}
-
-/// Names the first use of `t` or a state in `e`, if any.
-pub(super) fn first_non_constant(e: &Expr, scopes: &Scopes) -> Option<String> {
-    NonConstant { scopes, searched: HashSet::new() }.find(e)
-}
-
-/// The search for `t` or a state, visiting each shared `let` definition once (a definition seen
-/// before held neither, or the search would have stopped there).
-struct NonConstant<'s, 'a> {
-    scopes: &'s Scopes<'a>,
-    searched: HashSet<*const SharedDef>,
-}
-
-impl NonConstant<'_, '_> {
-    fn find(&mut self, e: &Expr) -> Option<String> {
-        match e {
-            Expr::Time => Some("time `t`".to_string()),
-            Expr::State(i) => Some(format!("state `{}`", self.scopes.state_name(i.0 as usize))),
-            Expr::Num(_) | Expr::Param(_) => None,
-            Expr::Shared(s) => {
-                if self.searched.insert(s.key()) {
-                    crate::stack::deep(|| self.find(s.expr()))
-                } else {
-                    None
-                }
-            }
-            Expr::Neg(a) => self.find(a),
-            Expr::Binary(_, a, b) => self.find(a).or_else(|| self.find(b)),
-            Expr::Call(_, args) => args.iter().find_map(|a| self.find(a)),
-            Expr::If(c, a, b) => self.find_in_cond(c).or_else(|| self.find(a)).or_else(|| self.find(b)),
-            Expr::Input(_) => Some("an input (`pwl`, `pwc`), which varies with `t`".to_string()),
-        }
-    }
-
-    fn find_in_cond(&mut self, c: &Cond) -> Option<String> {
-        match c {
-            Cond::Cmp(_, a, b) => self.find(a).or_else(|| self.find(b)),
-            Cond::And(a, b) | Cond::Or(a, b) => self.find_in_cond(a).or_else(|| self.find_in_cond(b)),
-            Cond::Not(a) => self.find_in_cond(a),
-        }
     }
 }

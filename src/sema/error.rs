@@ -3,77 +3,344 @@
 use crate::diag::Diagnostic;
 use crate::syntax::Span;
 
+/// Everything the checker can refuse in a parsed model, each with the span it is about;
+/// [`CheckError::to_diagnostic`] words it for the user.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum CheckError {
+    /// A name declared in no enclosing scope.
     #[error("unknown name `{name}`")]
-    UnknownName { name: String, span: Span, suggestion: Option<String> },
+    UnknownName {
+        /// The name, as written.
+        name: String,
+        /// Where it stands in the source.
+        span: Span,
+        /// The closest known name, if one is close.
+        suggestion: Option<String>,
+    },
+    /// A call of a function hybc does not have.
     #[error("unknown function `{name}`")]
-    UnknownFunction { name: String, span: Span, suggestion: Option<String> },
+    UnknownFunction {
+        /// The name, as written.
+        name: String,
+        /// Where it stands in the source.
+        span: Span,
+        /// The closest known name, if one is close.
+        suggestion: Option<String>,
+    },
+    /// A `-> MODE` target that names no mode.
     #[error("unknown mode `{name}`")]
-    UnknownMode { name: String, span: Span, suggestion: Option<String> },
+    UnknownMode {
+        /// The name, as written.
+        name: String,
+        /// Where it stands in the source.
+        span: Span,
+        /// The closest known name, if one is close.
+        suggestion: Option<String>,
+    },
+    /// A name declared twice in one scope, or shadowing an enclosing one.
     #[error("`{name}` is declared twice")]
-    Duplicate { name: String, what: &'static str, span: Span, first: Span },
+    Duplicate {
+        /// The name, as written.
+        name: String,
+        /// What kind of declaration it is (`parameter`, `state`, `let`, ...).
+        what: &'static str,
+        /// Where it stands in the source.
+        span: Span,
+        /// Where the first one stands.
+        first: Span,
+    },
+    /// A built-in name (`t`, a function) declared.
     #[error("`{name}` is a built-in name and cannot be declared")]
-    Reserved { name: String, span: Span },
+    Reserved {
+        /// The name, as written.
+        name: String,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// A name used as another kind of thing than it is (a parameter reset, ...).
     #[error("`{name}` is a {found}, expected a {expected}")]
-    WrongKind { name: String, found: &'static str, expected: &'static str, span: Span },
+    WrongKind {
+        /// The name, as written.
+        name: String,
+        /// What the name is.
+        found: &'static str,
+        /// What the place needs.
+        expected: &'static str,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// A state without a flow in a mode.
     #[error("state `{state}` has no flow equation in mode `{mode}`")]
-    MissingFlow { state: String, mode: String, span: Span },
+    MissingFlow {
+        /// The state's name.
+        state: String,
+        /// The mode's name.
+        mode: String,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// Two flows for one state in one mode.
     #[error("state `{state}` has two flow equations in mode `{mode}`")]
-    DuplicateFlow { state: String, mode: String, span: Span, first: Span },
+    DuplicateFlow {
+        /// The state's name.
+        state: String,
+        /// The mode's name.
+        mode: String,
+        /// Where it stands in the source.
+        span: Span,
+        /// Where the first one stands.
+        first: Span,
+    },
+    /// One state reset twice by one event.
     #[error("state `{state}` is reset twice in event `{event}`")]
-    DoubleReset { state: String, event: String, span: Span, first: Span },
+    DoubleReset {
+        /// The state's name.
+        state: String,
+        /// The event's name.
+        event: String,
+        /// Where it stands in the source.
+        span: Span,
+        /// Where the first one stands.
+        first: Span,
+    },
+    /// Modes, none marked `initial`.
     #[error("the model has modes but none is marked `initial`")]
-    NoInitialMode { span: Span },
+    NoInitialMode {
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// A second mode marked `initial`.
     #[error("more than one mode is marked `initial`")]
-    SecondInitialMode { name: String, span: Span, first: Span },
+    SecondInitialMode {
+        /// The second mode's name.
+        name: String,
+        /// Where it stands in the source.
+        span: Span,
+        /// Where the first one stands.
+        first: Span,
+    },
+    /// A `let` that depends on itself.
     #[error("`let {name}` depends on itself")]
-    LetCycle { name: String, path: String, span: Span },
+    LetCycle {
+        /// The name, as written.
+        name: String,
+        /// The chain of `let`s back to it, `a -> b -> a`.
+        path: String,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// A `let` nested deeper than `MAX_EXPR_DEPTH`.
     #[error("`let {name}` nests expressions {depth} levels deep")]
-    TooDeep { name: String, depth: usize, span: Span },
+    TooDeep {
+        /// The name, as written.
+        name: String,
+        /// How deep it nests.
+        depth: usize,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// A function called with the wrong number of arguments.
     #[error("`{func}` takes {expected} argument{}, found {found}", if *expected == 1 { "" } else { "s" })]
-    Arity { func: String, expected: usize, found: usize, span: Span },
+    Arity {
+        /// The function's name.
+        func: String,
+        /// The arguments it takes.
+        expected: usize,
+        /// The arguments given.
+        found: usize,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// A declared range that leaves out the parameter's default.
     #[error("the range of `{name}` excludes its default {default}")]
-    RangeExcludesDefault { name: String, default: f64, lo: f64, hi: f64, span: Span },
+    RangeExcludesDefault {
+        /// The name, as written.
+        name: String,
+        /// The default value.
+        default: f64,
+        /// The range's lower end.
+        lo: f64,
+        /// The range's upper end.
+        hi: f64,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// A range whose lower end is not below its upper end.
     #[error("empty range [{lo}, {hi}]")]
-    EmptyRange { lo: f64, hi: f64, span: Span },
+    EmptyRange {
+        /// The range's lower end.
+        lo: f64,
+        /// The range's upper end.
+        hi: f64,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// An initial value that reads `t`, a state or an input.
     #[error("initial value of `{state}` depends on {what}")]
-    InitNotConstant { state: String, what: String, span: Span },
+    InitNotConstant {
+        /// The state whose initial value it is.
+        state: String,
+        /// What it reads: `time `t``, `state `x``, an input.
+        what: String,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// A model without states.
     #[error("model `{name}` has no states")]
-    EmptyModel { name: String, span: Span },
+    EmptyModel {
+        /// The model's name.
+        name: String,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// A setting given twice on the `simulate` line.
     #[error("`{name}` is set twice on the `simulate` line")]
-    DuplicateSetting { name: String, span: Span, first: Span },
+    DuplicateSetting {
+        /// The setting.
+        name: String,
+        /// Where it stands in the source.
+        span: Span,
+        /// Where the first one stands.
+        first: Span,
+    },
+    /// A `simulate` setting hybc does not have.
     #[error("unknown simulate setting `{name}`")]
-    UnknownSetting { name: String, span: Span },
+    UnknownSetting {
+        /// The setting.
+        name: String,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// A `simulate` setting outside its range.
     #[error("`{name} = {value}` is out of range")]
-    BadSetting { name: String, value: f64, expected: &'static str, span: Span },
+    BadSetting {
+        /// The setting.
+        name: String,
+        /// The value given.
+        value: f64,
+        /// What it takes, in words (`a positive number`).
+        expected: &'static str,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// A guard that jumps where an `if` or `sign` in it switches (an event needs a continuous guard).
     #[error("the guard of event `{event}` jumps where an `if` or `sign` in it switches")]
-    DiscontinuousGuard { event: String, span: Span },
+    DiscontinuousGuard {
+        /// The event's name.
+        event: String,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// A vector parameter whose length is not a whole number from 1 up.
     #[error("vector parameter `{name}` has length {len}")]
-    BadVectorLength { name: String, len: String, span: Span },
+    BadVectorLength {
+        /// The vector's name.
+        name: String,
+        /// The length as written.
+        len: String,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// More parameters than `MAX_PARAMS`.
     #[error("the model declares more than {} parameters", super::model::MAX_PARAMS)]
-    TooManyParams { span: Span },
+    TooManyParams {
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// An element index past the vector's end.
     #[error("index {index} is out of range for `{name}`, a vector of {len}")]
-    IndexOutOfRange { name: String, index: f64, len: u32, span: Span },
+    IndexOutOfRange {
+        /// The vector's name.
+        name: String,
+        /// The index given.
+        index: f64,
+        /// The vector's length.
+        len: u32,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// An element index that is not an integer literal.
     #[error("the index of `{name}` must be an integer literal")]
-    BadIndex { name: String, len: u32, span: Span },
+    BadIndex {
+        /// The vector's name.
+        name: String,
+        /// The vector's length.
+        len: u32,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// A vector parameter used where one number is meant.
     #[error("`{name}` is a vector of {len} parameters")]
-    VectorAsScalar { name: String, len: u32, span: Span },
+    VectorAsScalar {
+        /// The vector's name.
+        name: String,
+        /// The vector's length.
+        len: u32,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// A vector function (`sum`, `dot`, `pwl`, `pwc`) given something that is not a vector parameter.
     #[error("`{func}` takes vector parameters")]
-    NotAVector { func: &'static str, span: Span },
+    NotAVector {
+        /// The function's name.
+        func: &'static str,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// An input whose first argument is not `t`.
     #[error("the first argument of `{func}` must be `t`")]
-    InputTime { func: &'static str, span: Span },
+    InputTime {
+        /// The function's name.
+        func: &'static str,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// An input whose knot window reads `t`, a state or another input.
     #[error("the knot window of `{func}` depends on {what}")]
-    InputWindow { func: &'static str, what: String, span: Span },
+    InputWindow {
+        /// The function's name.
+        func: &'static str,
+        /// What it reads: `time `t``, `state `x``, an input.
+        what: String,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// A `pwl` input over fewer than 2 knots.
     #[error("`pwl` needs at least 2 knots, `{name}` has {len}")]
-    InputTooShort { name: String, len: u32, span: Span },
+    InputTooShort {
+        /// The vector's name.
+        name: String,
+        /// The vector's length.
+        len: u32,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// A guard that reads a `pwc` input (it would jump at the input's knots).
     #[error("the guard of event `{event}` jumps at the knots of a `pwc` input")]
-    PwcInGuard { event: String, span: Span },
+    PwcInGuard {
+        /// The event's name.
+        event: String,
+        /// Where it stands in the source.
+        span: Span,
+    },
+    /// `dot` of two vectors of different lengths.
     #[error("`dot` of vectors of different lengths: `{a}` has {len_a}, `{b}` has {len_b}")]
-    VectorLengths { a: String, len_a: u32, b: String, len_b: u32, span: Span },
+    VectorLengths {
+        /// The first vector's name.
+        a: String,
+        /// Its length.
+        len_a: u32,
+        /// The second vector's name.
+        b: String,
+        /// Its length.
+        len_b: u32,
+        /// Where it stands in the source.
+        span: Span,
+    },
 }
 
 impl CheckError {
+    /// The span the error is about.
     pub fn span(&self) -> Span {
         use CheckError::*;
         match self {

@@ -6,9 +6,8 @@
 //! same guard resets therefore sees the reset value: intended for a flag, a surprise for the
 //! bounce/settle pair written bounce first.
 
-use std::collections::HashSet;
-
-use super::model::{Cond, Event, Expr, Model, SharedDef};
+use super::model::{Event, Model};
+use super::walk::{StatesRead, Walk};
 use crate::diag::Diagnostic;
 
 /// The warnings for a checked model, in declaration order of the events they are about.
@@ -17,8 +16,8 @@ pub fn warnings(model: &Model) -> Vec<Diagnostic> {
     let mut out = Vec::new();
     for (j, later) in declared.iter().enumerate() {
         let Some(cond) = &later.condition else { continue };
-        let mut read = StatesRead::default();
-        read.cond(cond);
+        let mut read = StatesRead::new(model.states.len());
+        let _ = Walk::new().cond(cond, &mut read);
         for earlier in &declared[..j] {
             let shares_a_mode =
                 earlier.owner.is_none() || later.owner.is_none() || earlier.owner == later.owner;
@@ -31,7 +30,7 @@ pub fn warnings(model: &Model) -> Vec<Diagnostic> {
             let reset: Vec<&str> = earlier
                 .resets
                 .iter()
-                .filter(|(s, _)| read.states.contains(&s.0))
+                .filter(|(s, _)| read.by[s.0 as usize])
                 .map(|(s, _)| model.states[s.0 as usize].name.as_str())
                 .collect();
             if reset.is_empty() {
@@ -55,56 +54,4 @@ pub fn warnings(model: &Model) -> Vec<Diagnostic> {
         }
     }
     out
-}
-
-/// The states an expression reads, each shared `let` visited once.
-#[derive(Default)]
-struct StatesRead {
-    states: HashSet<u32>,
-    visited: HashSet<*const SharedDef>,
-}
-
-impl StatesRead {
-    fn expr(&mut self, e: &Expr) {
-        match e {
-            Expr::Num(_) | Expr::Param(_) | Expr::Time => {}
-            Expr::State(s) => {
-                self.states.insert(s.0);
-            }
-            Expr::Shared(s) => {
-                if self.visited.insert(s.key()) {
-                    crate::stack::deep(|| self.expr(s.expr()));
-                }
-            }
-            Expr::Neg(a) => self.expr(a),
-            Expr::Binary(_, a, b) => {
-                self.expr(a);
-                self.expr(b);
-            }
-            Expr::Call(_, args) => args.iter().for_each(|a| self.expr(a)),
-            Expr::Input(i) => {
-                self.expr(&i.t0);
-                self.expr(&i.t1);
-            }
-            Expr::If(c, a, b) => {
-                self.cond(c);
-                self.expr(a);
-                self.expr(b);
-            }
-        }
-    }
-
-    fn cond(&mut self, c: &Cond) {
-        match c {
-            Cond::Cmp(_, l, r) => {
-                self.expr(l);
-                self.expr(r);
-            }
-            Cond::And(a, b) | Cond::Or(a, b) => {
-                self.cond(a);
-                self.cond(b);
-            }
-            Cond::Not(a) => self.cond(a),
-        }
-    }
 }

@@ -7,6 +7,7 @@ pub mod model;
 mod names;
 mod quadrature;
 mod switches;
+mod walk;
 
 pub use check::check;
 pub use error::CheckError;

@@ -23,27 +23,40 @@ pub struct ModeId(pub u16);
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct EventIdx(pub u32);
 
+/// A model that parsed and checked: every name resolved to an index, every `let` shared, the
+/// flow switches and input knots added as implicit events.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Model {
+    /// The `model NAME` line's name.
     pub name: String,
     /// Every parameter, a vector's elements among them (named `u[0]` .. `u[N-1]`, consecutive).
     pub params: Vec<Param>,
     /// The vector parameters (`param u[N]`), in declaration order: which runs of `params` they are.
     pub vectors: Vec<ParamVector>,
+    /// The states, in declaration order.
     pub states: Vec<State>,
+    /// The modes, in declaration order (one, `main`, for a model without modes).
     pub modes: Vec<Mode>,
+    /// The mode the run starts in.
     pub initial_mode: ModeId,
+    /// The events, declared ones in declaration order, then the implicit ones.
     pub events: Vec<Event>,
+    /// The outputs, in declaration order.
     pub outputs: Vec<Output>,
+    /// The `simulate` line's settings.
     pub simulate: SimulateDefaults,
 }
 
+/// A parameter (a scalar, or one element of a vector).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Param {
+    /// Its name (`u[3]` for an element).
     pub name: String,
+    /// Its default value.
     pub default: f64,
     /// Allowed closed interval `[lo, hi]`, if declared.
     pub range: Option<(f64, f64)>,
+    /// Where it is declared in the source.
     pub span: Span,
 }
 
@@ -52,9 +65,13 @@ pub struct Param {
 /// reports.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ParamVector {
+    /// The vector's name.
     pub name: String,
+    /// Its first element's index.
     pub first: ParamIdx,
+    /// Its number of elements.
     pub len: u32,
+    /// Where it is declared in the source.
     pub span: Span,
 }
 
@@ -80,21 +97,27 @@ pub fn element_name(name: &str, k: u32) -> String {
 /// states x parameters).
 pub const MAX_PARAMS: usize = 100_000;
 
+/// A state.
 #[derive(Clone, Debug, PartialEq)]
 pub struct State {
+    /// Its name.
     pub name: String,
     /// Initial value: an expression of parameters only (no `t`, no states).
     pub init: Expr,
+    /// Where it is declared in the source.
     pub span: Span,
 }
 
+/// A mode: a flow for every state, and the events that can fire in it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Mode {
+    /// Its name.
     pub name: String,
     /// `flows[i]` is `der(states[i])` in this mode.
     pub flows: Vec<Expr>,
     /// Events that can fire in this mode (its own and the top-level ones), ascending.
     pub events: Vec<EventIdx>,
+    /// Where it is declared in the source.
     pub span: Span,
 }
 
@@ -109,11 +132,14 @@ pub enum Direction {
     Either,
 }
 
+/// An event, declared or implicit.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Event {
+    /// Its name (implicit events are named for what they are: `flow switch of mode main`).
     pub name: String,
     /// The guard function `g = lhs - rhs`; the event fires when `g` crosses zero in `direction`.
     pub guard: Expr,
+    /// Which way the guard must cross zero.
     pub direction: Direction,
     /// Enabling condition, evaluated on the state just before the event.
     pub condition: Option<Cond>,
@@ -121,9 +147,11 @@ pub struct Event {
     pub resets: Vec<(StateIdx, Expr)>,
     /// Mode after the event; `None` keeps the current mode.
     pub target: Option<ModeId>,
+    /// Whether the run stops after it fires.
     pub is_stop: bool,
     /// `None` for a top-level event (active in every mode).
     pub owner: Option<ModeId>,
+    /// Where it is declared in the source.
     pub span: Span,
     /// Not declared but implied by a discontinuous flow (see `switches`): located and jumped
     /// over like an event, never reported as one.
@@ -144,24 +172,35 @@ impl Event {
 /// `position` (`Input::position`) equals `k`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Knot {
+    /// The input's kind (`pwl` or `pwc`).
     pub kind: InputKind,
+    /// The knot's number, from 0.
     pub k: u32,
+    /// The knot position (`Input::position`).
     pub position: Expr,
+    /// The input's vector's name.
     pub vector: String,
 }
 
+/// An output.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Output {
+    /// Its name.
     pub name: String,
+    /// Its value.
     pub expr: Expr,
+    /// Where it is declared in the source.
     pub span: Span,
 }
 
 /// Defaults from the `simulate` statement; the command line overrides them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SimulateDefaults {
+    /// `t_end`, if set.
     pub t_end: Option<f64>,
+    /// `rtol`, if set.
     pub rtol: Option<f64>,
+    /// `atol`, if set.
     pub atol: Option<f64>,
 }
 
@@ -171,13 +210,21 @@ pub struct SimulateDefaults {
 /// Passes over it visit each shared definition once.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Expr {
+    /// A number.
     Num(f64),
+    /// A state's value.
     State(StateIdx),
+    /// A parameter's value.
     Param(ParamIdx),
+    /// The time `t`.
     Time,
+    /// `-a`.
     Neg(Box<Expr>),
+    /// `a OP b`.
     Binary(BinOp, Box<Expr>, Box<Expr>),
+    /// `f(a, ..)`.
     Call(Func, Vec<Expr>),
+    /// `if C then A else B`.
     If(Box<Cond>, Box<Expr>, Box<Expr>),
     /// A use of a `let`: its resolved definition, shared by all its uses.
     Shared(Shared),
@@ -197,6 +244,7 @@ pub enum InputKind {
 }
 
 impl InputKind {
+    /// The function's name in the language (`pwl`, `pwc`).
     pub fn name(self) -> &'static str {
         match self {
             InputKind::Pwl => "pwl",
@@ -204,6 +252,7 @@ impl InputKind {
         }
     }
 
+    /// The kind named `name`, if any.
     pub fn from_name(name: &str) -> Option<InputKind> {
         [InputKind::Pwl, InputKind::Pwc].into_iter().find(|k| k.name() == name)
     }
@@ -213,10 +262,15 @@ impl InputKind {
 /// expressions of parameters only, checked by `sema`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Input {
+    /// `pwl` (linear between knots) or `pwc` (constant from each knot on).
     pub kind: InputKind,
+    /// The window's start (an expression of parameters).
     pub t0: Expr,
+    /// The window's end.
     pub t1: Expr,
+    /// The vector's first element.
     pub first: ParamIdx,
+    /// Its number of elements (the knots).
     pub len: u32,
 }
 
@@ -259,23 +313,28 @@ pub const MAX_EXPR_DEPTH: usize = 100_000;
 #[derive(Clone, Debug)]
 pub struct Shared(std::sync::Arc<SharedDef>);
 
+/// A `let`'s definition.
 #[derive(Debug)]
 pub struct SharedDef {
+    /// What the `let` stands for.
     pub expr: Expr,
     /// Nesting depth of `expr`, counting through the `let`s it uses.
     pub depth: usize,
 }
 
 impl Shared {
+    /// A definition of `expr`, its depth computed once.
     pub fn new(expr: Expr) -> Shared {
         let depth = expr.depth();
         Shared(std::sync::Arc::new(SharedDef { expr, depth }))
     }
 
+    /// What the `let` stands for.
     pub fn expr(&self) -> &Expr {
         &self.0.expr
     }
 
+    /// The nesting depth of its definition, counting through the `let`s it uses.
     pub fn depth(&self) -> usize {
         self.0.depth
     }
@@ -358,40 +417,66 @@ impl Drop for SharedDef {
     }
 }
 
+/// A binary arithmetic operator.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum BinOp {
+    /// `+`.
     Add,
+    /// `-`.
     Sub,
+    /// `*`.
     Mul,
+    /// `/`.
     Div,
+    /// `^`.
     Pow,
 }
 
 /// The language's functions. `arity` is checked by `sema`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Func {
+    /// `sin`.
     Sin,
+    /// `cos`.
     Cos,
+    /// `tan`.
     Tan,
+    /// `asin`.
     Asin,
+    /// `acos`.
     Acos,
+    /// `atan`.
     Atan,
+    /// `atan2(y, x)`.
     Atan2,
+    /// `sinh`.
     Sinh,
+    /// `cosh`.
     Cosh,
+    /// `tanh`.
     Tanh,
+    /// `exp`.
     Exp,
+    /// `log` (natural).
     Log,
+    /// `sqrt`.
     Sqrt,
+    /// `abs`.
     Abs,
+    /// `sign` (a flow switch where its argument crosses 0).
     Sign,
+    /// `min(a, b)`.
     Min,
+    /// `max(a, b)`.
     Max,
+    /// `pow(a, b)`.
     Pow,
+    /// `hypot(a, b)`.
     Hypot,
 }
 
 impl Func {
+    /// Every function, in the order the language documents them.
     pub const ALL: [Func; 19] = [
         Func::Sin,
         Func::Cos,
@@ -414,6 +499,7 @@ impl Func {
         Func::Hypot,
     ];
 
+    /// The function's name in the language.
     pub fn name(self) -> &'static str {
         match self {
             Func::Sin => "sin",
@@ -438,10 +524,12 @@ impl Func {
         }
     }
 
+    /// The function named `name`, if any.
     pub fn from_name(name: &str) -> Option<Func> {
         Func::ALL.into_iter().find(|f| f.name() == name)
     }
 
+    /// How many arguments it takes.
     pub fn arity(self) -> usize {
         match self {
             Func::Atan2 | Func::Min | Func::Max | Func::Pow | Func::Hypot => 2,
@@ -460,6 +548,7 @@ pub enum VectorFunc {
 }
 
 impl VectorFunc {
+    /// The function's name in the language.
     pub fn name(self) -> &'static str {
         match self {
             VectorFunc::Sum => "sum",
@@ -467,10 +556,12 @@ impl VectorFunc {
         }
     }
 
+    /// The function named `name`, if any.
     pub fn from_name(name: &str) -> Option<VectorFunc> {
         [VectorFunc::Sum, VectorFunc::Dot].into_iter().find(|f| f.name() == name)
     }
 
+    /// How many vectors it takes.
     pub fn arity(self) -> usize {
         match self {
             VectorFunc::Sum => 1,
@@ -482,24 +573,35 @@ impl VectorFunc {
 /// A resolved boolean expression (in `if` and event conditions).
 #[derive(Clone, Debug, PartialEq)]
 pub enum Cond {
+    /// `a OP b`.
     Cmp(CmpOp, Expr, Expr),
+    /// `A and B`.
     And(Box<Cond>, Box<Cond>),
+    /// `A or B`.
     Or(Box<Cond>, Box<Cond>),
+    /// `not A`.
     Not(Box<Cond>),
 }
 
+/// A comparison in a condition.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum CmpOp {
+    /// `<`.
     Lt,
+    /// `<=`.
     Le,
+    /// `>`.
     Gt,
+    /// `>=`.
     Ge,
 }
 
 impl Model {
+    /// How many states.
     pub fn n_states(&self) -> usize {
         self.states.len()
     }
+    /// How many parameters (a vector's elements counted).
     pub fn n_params(&self) -> usize {
         self.params.len()
     }
@@ -520,6 +622,7 @@ impl Model {
     pub fn vector(&self, name: &str) -> Option<&ParamVector> {
         self.vectors.iter().find(|v| v.name == name)
     }
+    /// The index of mode `name`, if the model has one.
     pub fn mode_index(&self, name: &str) -> Option<ModeId> {
         self.modes.iter().position(|m| m.name == name).map(|i| ModeId(i as u16))
     }

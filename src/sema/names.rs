@@ -8,6 +8,7 @@ use std::collections::HashMap;
 
 use super::error::CheckError;
 use super::model::*;
+use super::walk::{first_non_constant, NonConstant};
 use crate::syntax::ast;
 use crate::syntax::Span;
 
@@ -132,6 +133,16 @@ impl<'a> Scopes<'a> {
     /// Where `name` is already declared (in `scope` or an enclosing one), and as what.
     pub fn lookup_decl(&self, scope: ScopeId, name: &str) -> Option<(Span, &'static str)> {
         self.find(scope, name).map(|f| (f.1, f.2))
+    }
+
+    /// Names the first use of `t`, a state or an input in `e`, if any (what an initial value or
+    /// an input's window may not read).
+    pub fn non_constant(&self, e: &Expr) -> Option<String> {
+        first_non_constant(e).map(|found| match found {
+            NonConstant::Time => "time `t`".to_string(),
+            NonConstant::State(i) => format!("state `{}`", self.state_name(i)),
+            NonConstant::Input => "an input (`pwl`, `pwc`), which varies with `t`".to_string(),
+        })
     }
 
     pub fn state_name(&self, i: usize) -> &str {
@@ -479,7 +490,7 @@ fn resolve_input(
     }
     let [t0, t1] = [t0, t1].map(|arg| {
         let e = resolve_names(scopes, errors, arg, scope);
-        if let Some(what) = super::check::first_non_constant(&e, scopes) {
+        if let Some(what) = scopes.non_constant(&e) {
             errors.push(CheckError::InputWindow { func, what, span: arg.span });
         }
         e

@@ -4,29 +4,28 @@
 //! period to period by design), and a trajectory optimiser's cost can live in one without the
 //! events or the other states depending on it. Outputs may read them.
 
-use std::collections::HashSet;
-
-use super::model::{Cond, Expr, Model, SharedDef};
+use super::model::Model;
+use super::walk::{StatesRead, Walk};
 
 /// `quadrature[i]`: whether state `i` is a quadrature state of `model`.
 pub fn quadrature_states(model: &Model) -> Vec<bool> {
     let n = model.states.len();
-    let mut read = Reads { by: vec![false; n], seen: HashSet::new() };
+    let (mut walk, mut read) = (Walk::new(), StatesRead::new(n));
     for mode in &model.modes {
         for flow in &mode.flows {
-            read.expr(flow);
+            let _ = walk.expr(flow, &mut read);
         }
     }
-    let mut own_reset_reads: Vec<Reads> = Vec::new();
+    let mut own_reset_reads: Vec<StatesRead> = Vec::new();
     for event in &model.events {
-        read.expr(&event.guard);
+        let _ = walk.expr(&event.guard, &mut read);
         if let Some(c) = &event.condition {
-            read.cond(c);
+            let _ = walk.cond(c, &mut read);
         }
         for (target, value) in &event.resets {
             // A reset may read its own state (`n := n + 1`); any other state's reset may not.
-            let mut own = Reads { by: vec![false; n], seen: HashSet::new() };
-            own.expr(value);
+            let mut own = StatesRead::new(n);
+            let _ = Walk::new().expr(value, &mut own);
             own.by[target.0 as usize] = false;
             own_reset_reads.push(own);
         }
@@ -39,61 +38,12 @@ pub fn quadrature_states(model: &Model) -> Vec<bool> {
     read.by.iter().map(|r| !r).collect()
 }
 
-/// The states an expression reads, each shared `let` definition walked once.
-struct Reads {
-    by: Vec<bool>,
-    seen: HashSet<*const SharedDef>,
-}
-
-impl Reads {
-    fn expr(&mut self, e: &Expr) {
-        match e {
-            Expr::State(i) => self.by[i.0 as usize] = true,
-            Expr::Num(_) | Expr::Param(_) | Expr::Time => {}
-            Expr::Shared(s) => {
-                if self.seen.insert(s.key()) {
-                    crate::stack::deep(|| self.expr(s.expr()));
-                }
-            }
-            Expr::Neg(a) => self.expr(a),
-            Expr::Binary(_, a, b) => {
-                self.expr(a);
-                self.expr(b);
-            }
-            Expr::Call(_, args) => args.iter().for_each(|a| self.expr(a)),
-            Expr::If(c, a, b) => {
-                self.cond(c);
-                self.expr(a);
-                self.expr(b);
-            }
-            Expr::Input(i) => {
-                self.expr(&i.t0);
-                self.expr(&i.t1);
-            }
-        }
-    }
-
-    fn cond(&mut self, c: &Cond) {
-        match c {
-            Cond::Cmp(_, a, b) => {
-                self.expr(a);
-                self.expr(b);
-            }
-            Cond::And(a, b) | Cond::Or(a, b) => {
-                self.cond(a);
-                self.cond(b);
-            }
-            Cond::Not(a) => self.cond(a),
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::quadrature_states;
 
     fn quadrature(text: &str) -> Vec<bool> {
-        quadrature_states(&crate::check_source(text).expect("checks"))
+        quadrature_states(&super::super::check(&crate::syntax::parse(text).expect("parses")).expect("checks"))
     }
 
     #[test]

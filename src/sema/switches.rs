@@ -17,19 +17,19 @@
 //! moves the sensitivities by `(f- - f+) dt_k/dp`); a `pwl` knot is a kink (`Event::kink`): the
 //! steps land on it so that none straddles it, and nothing jumps.
 
-use std::collections::{HashMap, HashSet};
+use std::convert::Infallible;
+use std::ops::ControlFlow;
 
-use super::model::{
-    Cond, Direction, Event, EventIdx, Expr, Func, Input, InputKind, Knot, ModeId, Model, Shared, SharedDef,
-};
+use super::model::{Direction, Event, EventIdx, Expr, Func, Input, InputKind, Knot, ModeId, Model, Shared};
+use super::walk::{Descend, Visit, Walk};
 
 /// Appends the flow switches of every mode to `model.events` (after all declared events, so
 /// declared events fire first at a shared instant) and to the mode's event list.
 pub(crate) fn add_flow_switches(model: &mut Model) {
     for m in 0..model.modes.len() {
-        let mut switches = Switches::default();
+        let (mut walk, mut switches) = (Walk::new(), Switches::new());
         for flow in &model.modes[m].flows {
-            switches.collect(flow);
+            let _ = walk.expr(flow, &mut switches);
         }
         let guards = switches.found;
         let mode = &model.modes[m];
@@ -98,78 +98,32 @@ fn knot_events(model: &Model, mode: ModeId, input: &Input) -> Vec<Event> {
 /// Whether `e` jumps somewhere in time or the state: it has an `if` comparison or a `sign`
 /// argument that moves with them (a guard like that is refused, see `check`).
 pub(crate) fn jumps(e: &Expr) -> bool {
-    let mut switches = Switches::default();
-    switches.collect(e);
+    let mut switches = Switches::new();
+    let _ = Walk::new().expr(e, &mut switches);
     !switches.found.is_empty()
 }
 
 /// Whether `e` reads a `pwc` input (a guard like that jumps at its knots and is refused).
 pub(crate) fn reads_pwc(e: &Expr) -> bool {
-    let mut switches = Switches::default();
-    switches.collect(e);
+    let mut switches = Switches::new();
+    let _ = Walk::new().expr(e, &mut switches);
     switches.inputs.iter().any(|i| i.kind == InputKind::Pwc)
 }
 
 /// The switch functions found so far, without repeats, and what has been learnt about shared
-/// `let` definitions: each is searched once and its `moves` answer kept, so a model whose `let`s
-/// share subexpressions costs its size, not the size of the expanded tree.
-#[derive(Default)]
+/// `let` definitions: each is searched once (the [`Walk`] a caller keeps across a mode's flows),
+/// and whether it moves is answered once (`moving`, kept across every candidate), so a model
+/// whose `let`s share subexpressions costs its size, not the size of the expanded tree.
 struct Switches {
     found: Vec<Expr>,
     /// The inputs found, without repeats: their knots are implicit events too.
     inputs: Vec<Input>,
-    searched: HashSet<*const SharedDef>,
-    moving: HashMap<*const SharedDef, bool>,
+    moving: Walk<()>,
 }
 
 impl Switches {
-    fn collect(&mut self, e: &Expr) {
-        match e {
-            Expr::Num(_) | Expr::State(_) | Expr::Param(_) | Expr::Time => {}
-            Expr::Shared(s) => {
-                if self.searched.insert(s.key()) {
-                    crate::stack::deep(|| self.collect(s.expr()));
-                }
-            }
-            Expr::Neg(a) => self.collect(a),
-            Expr::Binary(_, a, b) => {
-                self.collect(a);
-                self.collect(b);
-            }
-            Expr::Call(func, args) => {
-                if let (Func::Sign, Some(a)) = (func, args.first()) {
-                    self.push(a.clone());
-                }
-                for a in args {
-                    self.collect(a);
-                }
-            }
-            Expr::If(c, a, b) => {
-                self.collect_cond(c);
-                self.collect(a);
-                self.collect(b);
-            }
-            Expr::Input(input) => {
-                if !self.inputs.contains(input) {
-                    self.inputs.push((**input).clone());
-                }
-            }
-        }
-    }
-
-    fn collect_cond(&mut self, c: &Cond) {
-        match c {
-            Cond::Cmp(_, l, r) => {
-                self.collect(l);
-                self.collect(r);
-                self.push(Expr::Binary(super::BinOp::Sub, Box::new(l.clone()), Box::new(r.clone())));
-            }
-            Cond::And(a, b) | Cond::Or(a, b) => {
-                self.collect_cond(a);
-                self.collect_cond(b);
-            }
-            Cond::Not(a) => self.collect_cond(a),
-        }
+    fn new() -> Switches {
+        Switches { found: Vec::new(), inputs: Vec::new(), moving: Walk::new() }
     }
 
     fn push(&mut self, guard: Expr) {
@@ -178,32 +132,47 @@ impl Switches {
         }
     }
 
-    /// Whether `e` mentions `t` or a state (a switch of parameters alone never moves in time).
+    /// Whether `e` mentions `t`, a state or an input (a switch of parameters alone never moves
+    /// in time).
     fn moves(&mut self, e: &Expr) -> bool {
-        match e {
-            Expr::Num(_) | Expr::Param(_) => false,
-            Expr::State(_) | Expr::Time => true,
-            Expr::Shared(s) => {
-                if let Some(&known) = self.moving.get(&s.key()) {
-                    return known;
+        struct Moves;
+        impl Visit for Moves {
+            type Break = ();
+            fn expr(&mut self, e: &Expr) -> ControlFlow<(), Descend> {
+                match e {
+                    Expr::State(_) | Expr::Time | Expr::Input(_) => ControlFlow::Break(()),
+                    _ => ControlFlow::Continue(Descend::Into),
                 }
-                let known = crate::stack::deep(|| self.moves(s.expr()));
-                self.moving.insert(s.key(), known);
-                known
             }
-            Expr::Neg(a) => self.moves(a),
-            Expr::Binary(_, a, b) => self.moves(a) || self.moves(b),
-            Expr::Call(_, args) => args.iter().any(|a| self.moves(a)),
-            Expr::If(c, a, b) => self.cond_moves(c) || self.moves(a) || self.moves(b),
-            Expr::Input(_) => true,
         }
+        self.moving.expr(e, &mut Moves).is_break()
+    }
+}
+
+impl Visit for Switches {
+    type Break = Infallible;
+
+    fn expr(&mut self, e: &Expr) -> ControlFlow<Infallible, Descend> {
+        match e {
+            Expr::Call(Func::Sign, args) => {
+                if let Some(a) = args.first() {
+                    self.push(a.clone());
+                }
+            }
+            // An input's knots are its switches; its window reads parameters only.
+            Expr::Input(input) => {
+                if !self.inputs.contains(input) {
+                    self.inputs.push((**input).clone());
+                }
+                return ControlFlow::Continue(Descend::Over);
+            }
+            _ => {}
+        }
+        ControlFlow::Continue(Descend::Into)
     }
 
-    fn cond_moves(&mut self, c: &Cond) -> bool {
-        match c {
-            Cond::Cmp(_, l, r) => self.moves(l) || self.moves(r),
-            Cond::And(a, b) | Cond::Or(a, b) => self.cond_moves(a) || self.cond_moves(b),
-            Cond::Not(a) => self.cond_moves(a),
-        }
+    fn comparison(&mut self, lhs: &Expr, rhs: &Expr) -> ControlFlow<Infallible> {
+        self.push(Expr::Binary(super::BinOp::Sub, Box::new(lhs.clone()), Box::new(rhs.clone())));
+        ControlFlow::Continue(())
     }
 }

@@ -95,12 +95,17 @@ pub enum StepOutcome {
     Accepted,
     /// The step was cut at an event instant and a group fired there: the run's events
     /// `first..first + count` (flow switches are not events, so `count` may be 0).
-    Fired { first: usize, count: usize },
+    Fired {
+        /// The first of them, in the run's event record.
+        first: usize,
+        /// How many fired.
+        count: usize,
+    },
     /// The run is over: this is why. Further calls return the same.
     Done(StopReason),
 }
 
-/// The scratch state of a run, sized by the model and the options; kept by a `Simulator`
+/// The scratch state of a run, sized by the model and the options; kept by a `Runner`
 /// between runs so that a run allocates only what its result holds.
 pub(crate) struct Workspace<St: Stepper = Rk> {
     pub(crate) stepper: St,
@@ -141,7 +146,7 @@ fn existing(d: &[f64]) -> Option<Vec<f64>> {
     (d.is_empty() || d.iter().any(|v| !v.is_nan())).then(|| d.to_vec())
 }
 
-/// One run in progress. Made by `Simulator::integrator`; [`Self::step`] advances it,
+/// One run in progress. Made by `Runner::integrator`; [`Self::step`] advances it,
 /// [`Self::finish`] turns it into the run's result.
 pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = Rk> {
     /// The values at `SimOptions::at` taken so far, and the recorder's dense-output samples.
@@ -154,7 +159,7 @@ pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = R
     m: usize,
     t: f64,
     mode: usize,
-    /// The stepper, the detector, `z` and every scratch buffer: the `Simulator`'s, kept between
+    /// The stepper, the detector, `z` and every scratch buffer: the `Runner`'s, kept between
     /// runs.
     work: &'a mut Workspace<St>,
     recorder: &'a mut R,

@@ -19,7 +19,7 @@
 //! - `recorder.rs`: trajectories through an observer.
 //! - `samples.rs`: the values at `SimOptions::at`, taken as the run passes them and completed
 //!   once it is over.
-//! - `run.rs`: a run from start to end, the reusable `Simulator`.
+//! - `run.rs`: a run from start to end, the reusable `Runner`.
 //! - `result.rs`: what a run reports.
 //!
 //! Imports between the wings go one way: `event/` uses `method/`'s `Interpolant` and `Stepper`
@@ -49,5 +49,5 @@ pub use method::stepper::{Interpolant, Rhs, Stepper};
 pub use options::*;
 pub use recorder::{NoRecorder, Point, PointKind, Recorder, RowSchedule, TrajectoryRecorder};
 pub use result::*;
-pub use run::{run, Driver, Simulator, SystemRef, MAX_SAMPLED_ROWS, MIN_RTOL};
+pub use run::{run, Driver, Runner, SystemRef, MAX_SAMPLED_ROWS, MIN_RTOL};
 pub use system::*;

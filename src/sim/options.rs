@@ -65,7 +65,7 @@ pub enum TrajectoryRequest {
     /// The start, every accepted step end, both sides of every event, and the end.
     Steps,
     /// Every multiple of this interval from the start, taken from the dense output.
-    Sample(f64),
+    Every(f64),
 }
 
 /// Options of [`run`](super::run). Times are model time; tolerances are per component, applied
@@ -76,8 +76,11 @@ pub struct SimOptions {
     pub t_start: f64,
     /// End time; the run stops here unless an event stops it earlier.
     pub t_end: f64,
+    /// Relative tolerance.
     pub rtol: f64,
+    /// Absolute tolerance.
     pub atol: f64,
+    /// The integration method.
     pub method: Method,
     /// Largest number of events: the run stops with `StopReason::MaxEvents` when it is reached.
     pub max_events: usize,
@@ -116,6 +119,7 @@ pub struct SimOptions {
     /// is known, the cheapest of the dense, the banded and the sparse LU by operation count;
     /// dense otherwise. Explicit methods ignore it.
     pub linear_solver: super::LinearSolver,
+    /// Which trajectory rows the result keeps.
     pub trajectory: TrajectoryRequest,
     /// Times at which every state and output is sampled with its derivatives, from the dense
     /// output (`SimResult::samples`): ascending, within `[t_start, t_end]`. They do not cut the

@@ -17,18 +17,24 @@ pub enum PointKind {
     BeforeEvents,
     /// The state after an event group.
     AfterEvents,
-    /// A time asked for through [`Recorder::next_sample`], from the dense output.
-    Sample,
+    /// A time asked for through [`Recorder::next_grid_time`], from the dense output.
+    Grid,
 }
 
 /// One point of the trajectory. `s` holds the sensitivities, column per parameter.
 #[derive(Clone, Copy, Debug)]
 pub struct Point<'a> {
+    /// Where it comes from.
     pub kind: PointKind,
+    /// The time.
     pub t: f64,
+    /// The mode (index).
     pub mode: usize,
+    /// The states.
     pub x: &'a [f64],
+    /// The sensitivities (n * m).
     pub s: &'a [f64],
+    /// The outputs.
     pub outputs: &'a [f64],
 }
 
@@ -39,13 +45,14 @@ pub trait Recorder {
     fn is_active(&self) -> bool {
         true
     }
-    /// Whether points of this kind are wanted (samples excepted: see `next_sample`).
+    /// Whether points of this kind are wanted (grid points excepted: see `next_grid_time`).
     fn wants(&self, kind: PointKind) -> bool;
     /// The next time at which a sample from the dense output is wanted, if any. Each
-    /// [`PointKind::Sample`] point recorded moves it on.
-    fn next_sample(&self) -> Option<f64> {
+    /// [`PointKind::Grid`] point recorded moves it on.
+    fn next_grid_time(&self) -> Option<f64> {
         None
     }
+    /// Takes one point the recorder wants.
     fn record(&mut self, point: &Point<'_>);
 }
 
@@ -72,6 +79,7 @@ pub struct TrajectoryRecorder {
 }
 
 impl TrajectoryRecorder {
+    /// Keeps the rows `request` asks for, from `t_start`.
     pub fn new(request: TrajectoryRequest, t_start: f64) -> TrajectoryRecorder {
         TrajectoryRecorder { schedule: RowSchedule::new(request, t_start), rows: Vec::new() }
     }
@@ -88,38 +96,41 @@ impl TrajectoryRecorder {
 pub struct RowSchedule {
     request: TrajectoryRequest,
     t_start: f64,
-    next_sample: usize,
+    grid_rows: usize,
 }
 
 impl RowSchedule {
+    /// The rows `request` asks for, from `t_start`.
     pub fn new(request: TrajectoryRequest, t_start: f64) -> RowSchedule {
-        RowSchedule { request, t_start, next_sample: 0 }
+        RowSchedule { request, t_start, grid_rows: 0 }
     }
 
+    /// Whether any row is wanted.
     pub fn is_active(&self) -> bool {
         self.request != TrajectoryRequest::None
     }
 
+    /// Whether points of `kind` are wanted (the grid points by `next_grid_time`).
     pub fn wants(&self, kind: PointKind) -> bool {
         match self.request {
             TrajectoryRequest::None => false,
-            TrajectoryRequest::Steps => kind != PointKind::Sample,
-            TrajectoryRequest::Sample(_) => kind == PointKind::Sample,
+            TrajectoryRequest::Steps => kind != PointKind::Grid,
+            TrajectoryRequest::Every(_) => kind == PointKind::Grid,
         }
     }
 
     /// Samples fall at `t_start + k dt`, counted rather than summed so that they do not drift.
-    pub fn next_sample(&self) -> Option<f64> {
+    pub fn next_grid_time(&self) -> Option<f64> {
         match self.request {
-            TrajectoryRequest::Sample(dt) => Some(self.t_start + self.next_sample as f64 * dt),
+            TrajectoryRequest::Every(dt) => Some(self.t_start + self.grid_rows as f64 * dt),
             _ => None,
         }
     }
 
     /// Notes that a point of `kind` was recorded.
     pub fn recorded(&mut self, kind: PointKind) {
-        if kind == PointKind::Sample {
-            self.next_sample += 1;
+        if kind == PointKind::Grid {
+            self.grid_rows += 1;
         }
     }
 }
@@ -133,8 +144,8 @@ impl Recorder for TrajectoryRecorder {
         self.schedule.wants(kind)
     }
 
-    fn next_sample(&self) -> Option<f64> {
-        self.schedule.next_sample()
+    fn next_grid_time(&self) -> Option<f64> {
+        self.schedule.next_grid_time()
     }
 
     fn record(&mut self, p: &Point<'_>) {

@@ -16,37 +16,133 @@ use super::system::SystemInfo;
 /// [`StopReason::Fault`] next to everything computed before them).
 #[derive(Clone, Debug, PartialEq, thiserror::Error, Serialize)]
 pub enum SimError {
+    /// The parameter vector is not as long as the model's parameters.
     #[error("parameter vector has {got} values, the model needs {expected}")]
-    ParamLength { expected: usize, got: usize },
+    ParamLength {
+        /// The model's parameters.
+        expected: usize,
+        /// The values given.
+        got: usize,
+    },
+    /// An option's value is refused (`sim::run` checks its own options).
     #[error("option `{name}` has invalid value {value}")]
-    InvalidOption { name: &'static str, value: f64 },
+    InvalidOption {
+        /// The option.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+    },
     #[error(
         "sample time {t} is not in order within the run: sample times are ascending, from t_start = {t_start} \
          to t_end = {t_end} (the one before is {previous})"
     )]
-    SampleTime { t: f64, t_start: f64, t_end: f64, previous: f64 },
+    /// A sample time (`SimOptions::at`) out of order or outside the run.
+    SampleTime {
+        /// The time.
+        t: f64,
+        /// The run's start.
+        t_start: f64,
+        /// The run's end.
+        t_end: f64,
+        /// The sample time before it.
+        previous: f64,
+    },
+    /// The system describes itself inconsistently (an index past its count).
     #[error("model shape is inconsistent: {what} index {index} out of range (count {count})")]
-    BadIndex { what: &'static str, index: usize, count: usize },
+    BadIndex {
+        /// What the index is of.
+        what: &'static str,
+        /// The index.
+        index: usize,
+        /// How many there are.
+        count: usize,
+    },
     // The runtime faults: one wording, `fault_text`, with names (`describe`) or indices (here).
+    /// A fault: the step size fell below the resolution of time.
     #[error("{}", self.fault_text(None))]
-    StepTooSmall { t: f64, h: f64, mode: usize, state: Vec<f64>, rtol: f64, atol: f64 },
+    StepTooSmall {
+        /// The time it happened.
+        t: f64,
+        /// The step size.
+        h: f64,
+        /// The mode it happened in (index).
+        mode: usize,
+        /// The state there.
+        state: Vec<f64>,
+        /// The relative tolerance.
+        rtol: f64,
+        /// The absolute tolerance.
+        atol: f64,
+    },
+    /// A fault: `max_steps` attempts were made.
     #[error("{}", self.fault_text(None))]
-    TooManySteps { t: f64, max_steps: usize, mode: usize, state: Vec<f64> },
+    TooManySteps {
+        /// The time it happened.
+        t: f64,
+        /// The cap.
+        max_steps: usize,
+        /// The mode it happened in (index).
+        mode: usize,
+        /// The state there.
+        state: Vec<f64>,
+    },
+    /// A fault: the state stopped being finite.
     #[error("{}", self.fault_text(None))]
-    NonFinite { t: f64, mode: usize, state: Vec<f64> },
+    NonFinite {
+        /// The time it happened.
+        t: f64,
+        /// The mode it happened in (index).
+        mode: usize,
+        /// The state there.
+        state: Vec<f64>,
+    },
+    /// A fault: a guard stopped being finite before any crossing.
     #[error("{}", self.fault_text(None))]
-    GuardNotFinite { event: Arc<str>, t: f64, mode: usize, state: Vec<f64> },
+    GuardNotFinite {
+        /// The guard's event's name.
+        event: Arc<str>,
+        /// The time it happened.
+        t: f64,
+        /// The mode it happened in (index).
+        mode: usize,
+        /// The state there.
+        state: Vec<f64>,
+    },
     #[error(
         "rtol {rtol:e} cannot be met: below {floor:e} the error estimates are round-off in double precision"
     )]
-    ToleranceTooSmall { rtol: f64, floor: f64 },
+    /// `rtol` below what double precision can resolve.
+    ToleranceTooSmall {
+        /// The tolerance asked for.
+        rtol: f64,
+        /// The smallest that can be met.
+        floor: f64,
+    },
+    /// A Rosenbrock method asked for, and the flow's Jacobian could not be compiled.
     #[error("the method {method} needs the flow's Jacobian, which this model could not provide: {reason}")]
-    NoJacobians { method: &'static str, reason: String },
+    NoJacobians {
+        /// The method's name.
+        method: &'static str,
+        /// Why the Jacobian is missing.
+        reason: String,
+    },
     #[error(
         "a trajectory sampled every {dt:e} from t = {t_start} to {t_end} has {rows:.0} rows, more than the \
          {cap:.0} a run keeps in memory (sample more coarsely)"
     )]
-    TooManySamples { dt: f64, t_start: f64, t_end: f64, rows: f64, cap: f64 },
+    /// A trajectory sampled so finely that its rows exceed what a run keeps.
+    TooManyRows {
+        /// The sampling interval.
+        dt: f64,
+        /// The run's start.
+        t_start: f64,
+        /// The run's end.
+        t_end: f64,
+        /// The rows it would hold.
+        rows: f64,
+        /// The most a run keeps.
+        cap: f64,
+    },
 }
 
 impl SimError {
@@ -150,38 +246,108 @@ pub enum SimWarning {
     /// The guard was crossed (or touched) too slowly for its time to be told apart from a touch
     /// at the run's tolerances (`conditioning = |g''| delta / d^2 >= graze_tol`): its time gradient
     /// does not exist, nor does any later derivative that depends on it.
-    Grazing { event: usize, name: Arc<str>, time: f64, denominator: f64, conditioning: f64 },
+    Grazing {
+        /// The event (index into `SystemInfo::events`).
+        event: usize,
+        /// The event's name.
+        name: Arc<str>,
+        /// When.
+        time: f64,
+        /// The crossing speed `d`.
+        denominator: f64,
+        /// `|g''| delta / d^2`.
+        conditioning: f64,
+    },
     /// A crossing resolved by the tolerances but close to a touch: its gradients are exact but
     /// hold only while parameter changes move the guard's extremum by less than `margin`.
-    NearGrazing { event: usize, name: Arc<str>, time: f64, margin: f64 },
+    NearGrazing {
+        /// The event (index into `SystemInfo::events`).
+        event: usize,
+        /// The event's name.
+        name: Arc<str>,
+        /// When.
+        time: f64,
+        /// How far the guard's extremum is from zero.
+        margin: f64,
+    },
     /// A flow switch was crossed at the instant of a declared event that had already changed the
     /// state or the mode, so the flow before the switch is not known; no later derivative exists.
-    SwitchAtEvent { name: Arc<str>, time: f64 },
+    SwitchAtEvent {
+        /// The switch's name.
+        name: Arc<str>,
+        /// When.
+        time: f64,
+    },
     /// The derivative `d state / d param` (and `count - 1` others) stopped existing at `time`:
     /// the flow's derivative, or the initial state's, is not finite at a finite state there.
-    NotDifferentiable { time: f64, state: Arc<str>, param: Arc<str>, count: usize },
+    NotDifferentiable {
+        /// When.
+        time: f64,
+        /// The state whose derivative stopped existing.
+        state: Arc<str>,
+        /// The parameter it is with respect to.
+        param: Arc<str>,
+        /// How many derivatives stopped existing there.
+        count: usize,
+    },
     /// The run starts strictly on the crossed side of a directional guard (the ball below its
     /// floor): the event fires only after the guard has gone back to its pre-crossing side, which
     /// is rarely what the model means. The run goes on.
-    StartsAcross { event: usize, name: Arc<str>, time: f64, guard: f64 },
+    StartsAcross {
+        /// The event (index into `SystemInfo::events`).
+        event: usize,
+        /// The event's name.
+        name: Arc<str>,
+        /// When.
+        time: f64,
+        /// The guard's value at the start.
+        guard: f64,
+    },
     /// A cascade: the event fired at an instant because a reset there put the state on its guard
     /// to round-off, with the flow carrying it across. Parameter changes that land the state
     /// before the guard make it fire later, by the flow; across it, at the instant: the one-sided
     /// derivatives differ, so its time derivative does not exist, nor does any later derivative
     /// that depends on it.
-    ResetOntoGuard { event: usize, name: Arc<str>, time: f64 },
+    ResetOntoGuard {
+        /// The event (index into `SystemInfo::events`).
+        event: usize,
+        /// The event's name.
+        name: Arc<str>,
+        /// When.
+        time: f64,
+    },
     /// The event fired within `margin` (round-off, below `1e-9 max(|t|, 1)`) before a breakpoint
     /// where the run's values jump or end: `t_end`, or a time event. A parameter change that
     /// moves it past the breakpoint changes the final values by a jump (it leaves the run, or
     /// fires in the other order), so its derivatives hold only while the event moves by less
     /// than `margin`; `margin` 0 is on the breakpoint itself (a cusp; at `t_end` the other side's
     /// values are in `SimResult::end_cusp`).
-    NearBreakpoint { event: usize, name: Arc<str>, time: f64, breakpoint: Arc<str>, margin: f64 },
+    NearBreakpoint {
+        /// The event (index into `SystemInfo::events`).
+        event: usize,
+        /// The event's name.
+        name: Arc<str>,
+        /// When.
+        time: f64,
+        /// The breakpoint: `t_end` or the time event's name.
+        breakpoint: Arc<str>,
+        /// How far before the breakpoint it fired.
+        margin: f64,
+    },
     /// A running cost (a quadrature state), left out of the step-size error test, had a local
     /// error estimate above its tolerance on `steps` accepted steps (the worst `worst` times the
     /// tolerance, on the step from `time`): its value and derivatives may be less accurate than
     /// `rtol` asks. `SimOptions::quadrature_error_control` puts it back in the test.
-    CostUnresolved { state: Arc<str>, steps: usize, worst: f64, time: f64 },
+    CostUnresolved {
+        /// The running cost's name.
+        state: Arc<str>,
+        /// On how many accepted steps.
+        steps: usize,
+        /// The largest error, in tolerances.
+        worst: f64,
+        /// The start of the worst step.
+        time: f64,
+    },
 }
 
 impl fmt::Display for SimWarning {
@@ -254,13 +420,18 @@ pub struct EventRecord {
     pub index: usize,
     /// Event id (index into `SystemInfo::events`).
     pub event: usize,
+    /// The event's name.
     pub name: Arc<str>,
+    /// When it fired.
     pub time: f64,
+    /// The mode before it (index).
     pub mode_before: usize,
+    /// The mode after it (index).
     pub mode_after: usize,
     /// `dt_e/dp_j` per grad parameter, NaN where it does not exist (a grazing event, or one whose
     /// guard reads a derivative that does not exist); `None` when none exists.
     pub dtime: Option<Vec<f64>>,
+    /// Whether the crossing grazed its guard (no time gradient).
     pub grazing: bool,
     /// Crossing speed `g_x f- + g_t` (the denominator of `dtime`).
     pub denominator: f64,
@@ -275,12 +446,16 @@ pub struct EventRecord {
 /// The state where the run stopped.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct FinalState {
+    /// When the run stopped.
     pub time: f64,
+    /// The mode it stopped in (index).
     pub mode: usize,
+    /// The states there.
     pub state: Vec<f64>,
     /// Sensitivities at fixed time (n * m), NaN where a derivative does not exist; `None` when
     /// none exists.
     pub dstate: Option<Vec<f64>>,
+    /// The outputs there.
     pub outputs: Vec<f64>,
     /// `y_x dstate + y_p` (k * m).
     pub doutputs: Option<Vec<f64>>,
@@ -292,6 +467,7 @@ pub struct FinalState {
     pub doutputs_total: Option<Vec<f64>>,
 }
 
+/// Why a run ended.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 #[non_exhaustive]
 pub enum StopReason {
@@ -299,33 +475,45 @@ pub enum StopReason {
     TEnd,
     /// A stop event fired.
     Event {
+        /// The stop event (index).
         event: usize,
+        /// Its name.
         name: Arc<str>,
     },
     /// Events accumulate towards a point: a bounce too small to resolve, or intervals shrinking
     /// geometrically to below the resolution of time.
     Zeno {
+        /// The time of the last event.
         time: f64,
+        /// The event that accumulates (index).
         event: usize,
+        /// How many times it fired.
         count: usize,
         /// Geometric extrapolation of the last inter-event intervals, when they shrink.
         accumulation: Option<f64>,
     },
     /// `max_events` events have fired.
     MaxEvents {
+        /// When the cap was reached.
         time: f64,
+        /// The events fired.
         count: usize,
     },
     /// The state cannot leave an event's guard: a contact whose reset leaves the state on its
     /// guard with the flow carrying it through again, or events that keep firing at one instant.
     Stuck {
+        /// When.
         time: f64,
+        /// The event (index).
         event: usize,
+        /// Its name.
         name: Arc<str>,
         /// Cascade rounds at this instant (0 when the contact is stuck on its guard).
         rounds: usize,
     },
+    /// A runtime fault ended the run; everything computed before it is kept.
     Fault {
+        /// The fault.
         error: SimError,
     },
 }
@@ -395,36 +583,52 @@ impl StopReason {
     }
 }
 
+/// What a run cost.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct SimStats {
     /// Accepted steps.
     pub steps: usize,
+    /// Rejected step attempts.
     pub rejected: usize,
     /// Right-hand side (`flow_sens`) evaluations by the stepper.
     pub rhs_calls: usize,
+    /// Events fired (declared events; flow switches are `switches`).
     pub events: usize,
     /// Flow switches crossed (implicit events, not in `events`).
     pub switches: usize,
 }
 
+/// One row of a recorded trajectory.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct TrajectoryRow {
+    /// The time.
     pub t: f64,
+    /// The mode (index).
     pub mode: usize,
+    /// The states.
     pub x: Vec<f64>,
     /// Sensitivities (n * m).
     pub s: Vec<f64>,
+    /// The outputs.
     pub outputs: Vec<f64>,
 }
 
+/// Everything a run computed: events, final values and derivatives, why it stopped, warnings,
+/// what it cost, the trajectory and samples asked for.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct SimResult {
+    /// The events that fired, in order.
     pub events: Vec<EventRecord>,
+    /// Where the run stopped, with the derivatives there.
     #[serde(rename = "final")]
     pub final_state: FinalState,
+    /// Why it stopped.
     pub stopped_by: StopReason,
+    /// Everything the run warns of (grazing, near-grazing, derivatives that stopped existing).
     pub warnings: Vec<SimWarning>,
+    /// What it cost.
     pub stats: SimStats,
+    /// The trajectory, when `SimOptions::trajectory` asked for one.
     pub trajectory: Option<Vec<TrajectoryRow>>,
     /// Events fired at `t_end` itself make the final values a cusp in the parameters: a change
     /// that moves them later takes them out of the run. `final` is the side with them; this is
@@ -441,10 +645,15 @@ pub struct SimResult {
 /// its accepted and rejected steps.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct MethodSegment {
+    /// Where the stretch starts.
     pub from: f64,
+    /// Where it ends.
     pub to: f64,
+    /// The method.
     pub method: super::options::Method,
+    /// Its accepted steps.
     pub steps: usize,
+    /// Its rejected steps.
     pub rejected: usize,
 }
 
@@ -473,14 +682,18 @@ pub struct Samples {
 /// states. A view into [`Samples`].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Sample<'a> {
+    /// The time asked for.
     pub time: f64,
     /// False when the run stopped before this time (an event `stop`, Zeno, a fault): then the
     /// values are NaN and the derivatives `None`.
     pub reached: bool,
+    /// The mode at that time (index).
     pub mode: usize,
+    /// The states.
     pub state: &'a [f64],
     /// `dx/dp` (n * m), NaN where a derivative does not exist; `None` without parameters.
     pub dstate: Option<&'a [f64]>,
+    /// The outputs.
     pub outputs: &'a [f64],
     /// `y_x dx/dp + y_p` (k * m).
     pub doutputs: Option<&'a [f64]>,
@@ -510,10 +723,12 @@ impl Samples {
         }
     }
 
+    /// The number of times asked for.
     pub fn len(&self) -> usize {
         self.time.len()
     }
 
+    /// Whether no times were asked for.
     pub fn is_empty(&self) -> bool {
         self.time.is_empty()
     }
@@ -611,9 +826,12 @@ impl Serialize for Samples {
 pub struct EndCusp {
     /// The events fired at `t_end` (ids).
     pub events: Vec<usize>,
+    /// The states.
     pub state: Vec<f64>,
     /// As `FinalState::dstate`.
     pub dstate: Option<Vec<f64>>,
+    /// The outputs.
     pub outputs: Vec<f64>,
+    /// As `FinalState::doutputs`.
     pub doutputs: Option<Vec<f64>>,
 }

@@ -1,4 +1,4 @@
-//! Stage 5 (sim): a run from start to end. [`Simulator`] checks a model's shape and the options
+//! Stage 5 (sim): a run from start to end. [`Runner`] checks a model's shape and the options
 //! once and keeps the scratch buffers between runs; [`run`] is one run with a fresh one. Each run
 //! is a loop over `Integrator::step` with the trajectory recorder the options ask for.
 
@@ -27,19 +27,19 @@ pub const MIN_RTOL: f64 = 10.0 * f64::EPSILON;
 /// error; runtime faults, Zeno behaviour and stop events end the run with everything computed so
 /// far and say why in [`SimResult::stopped_by`].
 ///
-/// Shorthand for [`Simulator::new`] followed by one [`Simulator::run`]; to run one model many
-/// times (sweeps, fits, finite differences) keep a `Simulator`, which allocates its scratch
+/// Shorthand for [`Runner::new`] followed by one [`Runner::run`]; to run one model many
+/// times (sweeps, fits, finite differences) keep a `Runner`, which allocates its scratch
 /// buffers once.
 pub fn run<S: HybridSystem + ?Sized>(sys: &S, p: &[f64], opts: &SimOptions) -> Result<SimResult, SimError> {
     check_params(sys.info(), p)?;
-    Simulator::new(sys, opts)?.run(p)
+    Runner::new(sys, opts)?.run(p)
 }
 
 /// A model and options checked once, with the stepper's, interpolant's, detector's and jump's
 /// scratch buffers kept between runs: a run then allocates only what its result holds.
 /// Runs are independent: the same parameters give bit-for-bit the same result, whatever ran
-/// before. One `Simulator` per thread (it is `Send` when the system is `Sync`).
-pub struct Simulator<H: SystemRef> {
+/// before. One `Runner` per thread (it is `Send` when the system is `Sync`).
+pub struct Runner<H: SystemRef> {
     sys: H,
     opts: SimOptions,
     work: Work,
@@ -55,10 +55,13 @@ enum Work {
     Auto(Box<Workspace<Auto>>),
 }
 
-/// One run in progress with the stepper the options chose (see [`Simulator::integrator`]).
+/// One run in progress with the stepper the options chose (see [`Runner::integrator`]).
 pub enum Driver<'a, S: HybridSystem + ?Sized, R: Recorder> {
+    /// A forced explicit pair.
     Explicit(Integrator<'a, S, R, Rk>),
+    /// A forced Rosenbrock method.
     Rosenbrock(Integrator<'a, S, R, Rosenbrock>),
+    /// `--method auto`.
     Auto(Integrator<'a, S, R, Auto>),
 }
 
@@ -127,11 +130,13 @@ fn run_to_end<S: HybridSystem + ?Sized, R: Recorder, St: Stepper>(
     }
 }
 
-/// What a [`Simulator`] holds its model by: a reference, an `Arc`, a `Box`, anything that
+/// What a [`Runner`] holds its model by: a reference, an `Arc`, a `Box`, anything that
 /// dereferences to a [`HybridSystem`]. An owned handle (`Arc<CompiledModel>`) makes an owned
 /// simulator that a thread or a Python object can keep.
 pub trait SystemRef {
+    /// The system referred to.
     type System: HybridSystem + ?Sized;
+    /// The system.
     fn system(&self) -> &Self::System;
 }
 
@@ -145,9 +150,9 @@ where
     }
 }
 
-impl<H: SystemRef> std::fmt::Debug for Simulator<H> {
+impl<H: SystemRef> std::fmt::Debug for Runner<H> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Simulator").field("opts", &self.opts).finish_non_exhaustive()
+        f.debug_struct("Runner").field("opts", &self.opts).finish_non_exhaustive()
     }
 }
 
@@ -162,7 +167,7 @@ fn error_test_exclusions(info: &SystemInfo) -> Vec<bool> {
     q.clone()
 }
 
-impl<H: SystemRef> Simulator<H> {
+impl<H: SystemRef> Runner<H> {
     /// Checks the model's shape and the options (an `Err` for an inconsistent shape or an
     /// invalid option) and allocates the scratch buffers.
     pub fn new(sys: H, opts: &SimOptions) -> Result<Self, SimError> {
@@ -202,7 +207,7 @@ impl<H: SystemRef> Simulator<H> {
                 Work::Explicit(ShapedWork { stepper, info, n, m, k, nz }.build())
             }
         };
-        Ok(Simulator { sys, opts: opts.clone(), work })
+        Ok(Runner { sys, opts: opts.clone(), work })
     }
 
     /// Simulates with parameters `p` (all of them, `n_params` long; an `Err` otherwise).
@@ -240,6 +245,7 @@ impl<H: SystemRef> Simulator<H> {
         })
     }
 
+    /// The checked options every run takes.
     pub fn options(&self) -> &SimOptions {
         &self.opts
     }
@@ -249,7 +255,7 @@ impl<H: SystemRef> Simulator<H> {
         self.sys.system()
     }
 
-    /// The handle the model is held by (for `Simulator<&S>`, the reference itself).
+    /// The handle the model is held by (for `Runner<&S>`, the reference itself).
     pub fn handle(&self) -> &H {
         &self.sys
     }
@@ -303,14 +309,14 @@ fn validate(info: &SystemInfo, opts: &SimOptions) -> Result<(), SimError> {
             return Err(SimError::InvalidOption { name, value });
         }
     }
-    if let TrajectoryRequest::Sample(dt) = opts.trajectory {
+    if let TrajectoryRequest::Every(dt) = opts.trajectory {
         if !(dt.is_finite() && dt > 0.0) {
             return Err(SimError::InvalidOption { name: "trajectory sample interval", value: dt });
         }
         let rows = ((opts.t_end - opts.t_start) / dt).floor() + 1.0;
         if rows > MAX_SAMPLED_ROWS {
             let (t_start, t_end, cap) = (opts.t_start, opts.t_end, MAX_SAMPLED_ROWS);
-            return Err(SimError::TooManySamples { dt, t_start, t_end, rows, cap });
+            return Err(SimError::TooManyRows { dt, t_start, t_end, rows, cap });
         }
     }
     if opts.at.len() as f64 > MAX_SAMPLED_ROWS {

@@ -1,6 +1,6 @@
 //! Stage 5 (sim): sampling at given times, beside the recorder: the values (and the outputs'
 //! derivatives) at `SimOptions::at` as the run passes them, and the dense-output samples a
-//! [`Recorder`] asks for ([`Recorder::next_sample`]), both read off the interpolant of the step
+//! [`Recorder`] asks for ([`Recorder::next_grid_time`]), both read off the interpolant of the step
 //! that passes them or at the current point; once the run is over, the times it did not reach
 //! and which samples sit on or near an event instant. The integrator says when (a step's
 //! interpolant, an instant's far side, the start, the stop); this file says what is taken.
@@ -40,7 +40,7 @@ impl<'a, S: HybridSystem + ?Sized> Sampler<'a, S> {
     /// Whether `recorder` or `at` wants a sample from the dense output of the step ending at
     /// `t_seg_end`.
     pub fn wanted<R: Recorder>(&self, recorder: &R, t_seg_end: f64) -> bool {
-        recorder.next_sample().is_some_and(|ts| ts <= t_seg_end) || self.due(t_seg_end, false)
+        recorder.next_grid_time().is_some_and(|ts| ts <= t_seg_end) || self.due(t_seg_end, false)
     }
 
     /// The recorder's samples up to `t_seg_end` from the dense output of the step just attempted
@@ -54,10 +54,10 @@ impl<'a, S: HybridSystem + ?Sized> Sampler<'a, S> {
         t_seg_end: f64,
     ) {
         let n = self.shape.0;
-        while let Some(ts) = recorder.next_sample().filter(|&ts| ts <= t_seg_end) {
+        while let Some(ts) = recorder.next_grid_time().filter(|&ts| ts <= t_seg_end) {
             dense.eval(ts, z);
             self.sys.outputs(ts, &z[..n], self.p, outputs);
-            let point = Point { kind: PointKind::Sample, t: ts, mode, x: &z[..n], s: &z[n..], outputs };
+            let point = Point { kind: PointKind::Grid, t: ts, mode, x: &z[..n], s: &z[n..], outputs };
             recorder.record(&point);
         }
     }
@@ -72,10 +72,10 @@ impl<'a, S: HybridSystem + ?Sized> Sampler<'a, S> {
         z: &[f64],
     ) {
         let n = self.shape.0;
-        while let Some(ts) = recorder.next_sample().filter(|&ts| ts <= t) {
+        while let Some(ts) = recorder.next_grid_time().filter(|&ts| ts <= t) {
             self.sys.outputs(ts, &z[..n], self.p, outputs);
             let (x, s) = z.split_at(n);
-            let point = Point { kind: PointKind::Sample, t: ts, mode, x, s, outputs };
+            let point = Point { kind: PointKind::Grid, t: ts, mode, x, s, outputs };
             recorder.record(&point);
         }
     }

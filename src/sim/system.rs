@@ -29,21 +29,27 @@ pub enum Direction {
     Either,
 }
 
+/// A mode, as the integrator sees it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ModeInfo {
+    /// Its name.
     pub name: String,
     /// Events that can fire in this mode, ascending (declaration order = firing order).
     pub events: Vec<usize>,
 }
 
+/// An event, as the integrator sees it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EventInfo {
     /// Shared, so that every fired event's record names it without an allocation.
     pub name: Arc<str>,
+    /// Which way its guard must cross zero.
     pub direction: Direction,
     /// Mode after the event; `None` keeps the current one.
     pub target_mode: Option<usize>,
+    /// Whether the run stops after it.
     pub is_stop: bool,
+    /// Whether an enabling condition is judged before it fires.
     pub has_condition: bool,
     /// A flow switch (`sema::switches`): where the mode's flow jumps. Located like an event; at
     /// it the state is kept, the sensitivities jump by `(f- - f+) dt/dp` with the flow evaluated
@@ -81,14 +87,19 @@ pub enum GuardShape {
 /// The static shape of a compiled hybrid model.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SystemInfo {
+    /// State names, in order.
     pub state_names: Vec<String>,
+    /// Output names, in order.
     pub output_names: Vec<String>,
     /// Names of all parameters, in declaration order (the `p` slices have this length).
     pub param_names: Vec<String>,
     /// Indices into `param_names` of the differentiated parameters, in sensitivity column order.
     pub grad_params: Vec<usize>,
+    /// The modes, in order.
     pub modes: Vec<ModeInfo>,
+    /// The events, declared ones first, then the implicit ones.
     pub events: Vec<EventInfo>,
+    /// The mode the run starts in.
     pub initial_mode: usize,
     /// `quadrature[i]`: state `i` is a running cost that no flow, guard, condition or other
     /// state's reset reads (`sema::quadrature_states`); such states stay out of the step-size
@@ -97,12 +108,15 @@ pub struct SystemInfo {
 }
 
 impl SystemInfo {
+    /// How many states.
     pub fn n_states(&self) -> usize {
         self.state_names.len()
     }
+    /// How many outputs.
     pub fn n_outputs(&self) -> usize {
         self.output_names.len()
     }
+    /// How many parameters.
     pub fn n_params(&self) -> usize {
         self.param_names.len()
     }
@@ -115,6 +129,7 @@ impl SystemInfo {
 /// The functions of a hybrid model. `p` always holds all parameters (length `n_params`);
 /// derivatives `_p` are taken only with respect to `grad_params`.
 pub trait HybridSystem: Sync {
+    /// The system's shape: names, modes, events, gradient parameters.
     fn info(&self) -> &SystemInfo;
 
     /// Initial state `x0(p)`.

@@ -8,28 +8,71 @@ use super::sequence::{Sobol, MAX_DIMS};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Prior {
     /// Uniform on `[lo, hi]` (`P=LO:HI`, or `P` for its declared range).
-    Uniform { lo: f64, hi: f64 },
+    Uniform {
+        /// The lower end.
+        lo: f64,
+        /// The upper end.
+        hi: f64,
+    },
     /// `log` uniform on `[log lo, log hi]`, `0 < lo < hi` (`P=loguniform:LO:HI`).
-    LogUniform { lo: f64, hi: f64 },
+    LogUniform {
+        /// The lower end (positive).
+        lo: f64,
+        /// The upper end.
+        hi: f64,
+    },
     /// Normal with mean `mu` and standard deviation `sigma > 0` (`P=normal:MU:SIGMA`).
-    Normal { mu: f64, sigma: f64 },
+    Normal {
+        /// The mean.
+        mu: f64,
+        /// The standard deviation.
+        sigma: f64,
+    },
     /// `exp` of a normal with mean `mu` and standard deviation `sigma > 0` (`P=lognormal:MU:SIGMA`,
     /// the parameters of the logarithm, as NumPy's and SALib's `lognorm`).
-    LogNormal { mu: f64, sigma: f64 },
+    LogNormal {
+        /// The mean of the logarithm.
+        mu: f64,
+        /// Its standard deviation.
+        sigma: f64,
+    },
 }
 
+/// A `--vary` prior that does not parse (`hybc sobol`).
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum PriorError {
+    /// Not one of the shapes a prior takes.
     #[error("`{text}`: expected P=LO:HI, P, P=loguniform:LO:HI, P=normal:MU:SIGMA or P=lognormal:MU:SIGMA")]
-    Shape { text: String },
+    Shape {
+        /// The text as written.
+        text: String,
+    },
+    /// A number that is not a finite number.
     #[error("`{text}`: `{number}` is not a finite number")]
-    NotANumber { text: String, number: String },
+    NotANumber {
+        /// The prior as written.
+        text: String,
+        /// The number as written.
+        number: String,
+    },
+    /// A range whose lower end is not below its upper end.
     #[error("`{text}`: LO must be below HI")]
-    EmptyRange { text: String },
+    EmptyRange {
+        /// The text as written.
+        text: String,
+    },
+    /// A log-uniform range that is not positive.
     #[error("`{text}`: a log-uniform range must be positive")]
-    NotPositive { text: String },
+    NotPositive {
+        /// The text as written.
+        text: String,
+    },
+    /// A standard deviation that is not positive.
     #[error("`{text}`: SIGMA must be positive")]
-    BadSigma { text: String },
+    BadSigma {
+        /// The text as written.
+        text: String,
+    },
 }
 
 /// A parsed `--vary` of `hybc sobol`: the name and its prior, `None` for `P` alone (the declared
@@ -72,12 +115,16 @@ pub fn parse_prior(text: &str) -> Result<(String, Option<Prior>), PriorError> {
 /// What is wrong with a prior's numbers (see [`Prior::check`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
 pub enum PriorProblem {
+    /// A number that is not finite.
     #[error("its numbers must be finite")]
     NotFinite,
+    /// A range whose lower end is not below its upper end.
     #[error("the lower bound must be below the upper bound")]
     EmptyRange,
+    /// A log-uniform range that is not positive.
     #[error("a log-uniform range must be positive")]
     NotPositive,
+    /// A standard deviation that is not positive.
     #[error("the standard deviation must be positive")]
     BadSigma,
 }
@@ -175,7 +222,9 @@ pub fn normal_quantile(u: f64) -> f64 {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
 #[error("{varied} parameters varied; a Sobol' analysis takes 1 to {max} (its design has two coordinates per parameter)")]
 pub struct TooManyVaried {
+    /// The parameters varied.
     pub varied: usize,
+    /// The most a design takes.
     pub max: usize,
 }
 
@@ -186,11 +235,13 @@ pub const MAX_VARIED: usize = MAX_DIMS / 2;
 /// `A, AB_1 .. AB_D, [BA_1 .. BA_D], B`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RowKind {
+    /// Matrix A's row.
     A,
     /// A with parameter `i` (0-based, of the varied ones) taken from B.
     AB(usize),
     /// B with parameter `i` taken from A (second order only).
     BA(usize),
+    /// Matrix B's row.
     B,
 }
 
@@ -234,10 +285,12 @@ impl Design {
         self.n
     }
 
+    /// Whether the design has the BA rows of second-order indices.
     pub fn second_order(&self) -> bool {
         self.second_order
     }
 
+    /// The varied parameters (index, prior), in the design's order.
     pub fn varied(&self) -> &[(usize, Prior)] {
         &self.varied
     }

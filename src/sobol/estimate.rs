@@ -14,12 +14,15 @@ const BOOTSTRAP_STREAM: u64 = 2;
 /// `y[r * stride + offset]`, so several outputs can share one row-major array.
 #[derive(Clone, Copy, Debug)]
 pub struct Blocks<'a> {
+    /// The values, row-major.
     pub y: &'a [f64],
     /// Values per row in `y` (the outputs), and which of them this is.
     pub stride: usize,
+    /// Which value of a row is this output's.
     pub offset: usize,
     /// Varied parameters.
     pub d: usize,
+    /// Whether the blocks hold the BA rows.
     pub second_order: bool,
 }
 

@@ -1,12 +1,14 @@
-//! Global sensitivity: Sobol' indices of a model's outputs over parameter priors. A tool on the
-//! front door beside `sweep/` and `fit/`: it runs a compiled model at the rows of a Saltelli
-//! design and reads the results; it knows no `sim` internals and no CLI.
+//! Global sensitivity: Sobol' indices of a model's outputs over parameter priors: a system run at
+//! the rows of a Saltelli design, the results read. Generic over the system; knows no `sim`
+//! internals, no door and no CLI.
 //!
 //! Code map: `sequence` (the scrambled Sobol' sequence, point `i` from `i`), `joe_kuo` (its
 //! direction numbers), `design` (priors, the Saltelli design in SALib's row order, row `r` from
 //! `r`), `estimate` (S1, ST, S2 and bootstrap errors over one output's values), this file (the
 //! outputs a row reports, running the design in parallel keeping only those numbers, the policy
-//! for rows without a value, and [`analyze`], which takes the values however they were computed).
+//! for rows without a value, and [`analyze`], which takes the values however they were computed),
+//! `report` (`SobolReport`: table, JSON). A whole analysis as a user asks for it is the door's
+//! `SobolRequest` (`api/request/sobol.rs`).
 //!
 //! Seams for other callers: a shard (Dask) computes rows `Design::fill(r)` for its range of `r`
 //! and returns the outputs; [`analyze`] turns the values of all rows into indices.
@@ -14,12 +16,14 @@
 pub mod design;
 pub mod estimate;
 mod joe_kuo;
+mod report;
 pub mod sequence;
 
 use rayon::prelude::*;
 
 pub use design::{parse_prior, Design, Prior, PriorError, PriorProblem, RowKind, TooManyVaried, MAX_VARIED};
 pub use estimate::{Blocks, Indices};
+pub use report::SobolReport;
 
 use crate::fit::{Observable, TargetError};
 use crate::sim::{self, HybridSystem, SimOptions, SimResult, SystemInfo};
@@ -33,7 +37,9 @@ pub const Z_95: f64 = 1.959963984540054;
 /// One `--output` of an analysis: what it reads and its label as the user wrote it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Output {
+    /// The output as the user wrote it.
     pub label: String,
+    /// What it reads.
     pub quantity: Observable,
 }
 
@@ -114,43 +120,12 @@ impl OnFail {
     }
 }
 
-/// Why a parameter cannot be varied with a prior.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-pub enum VaryError {
-    #[error(transparent)]
-    Param(#[from] crate::ParamError),
-    #[error("`{name}` has no declared range; give its prior")]
-    NoRange { name: String },
-    #[error("the prior reaches [{from}, {to}], outside `{name}`'s declared range [{lo}, {hi}]")]
-    OutsideRange { name: String, from: f64, to: f64, lo: f64, hi: f64 },
-}
-
-/// The parameter `name` of `model` and its prior: `prior`, or uniform on its declared range for
-/// `None`. A prior whose support leaves the declared range is refused, not truncated: hybc never
-/// runs a parameter outside the range its model declares.
-pub fn vary(model: &crate::Model, name: &str, prior: Option<Prior>) -> Result<(usize, Prior), VaryError> {
-    let idx = model.param_index(name)?.0 as usize;
-    let range = model.checked().params[idx].range;
-    let prior = match (prior, range) {
-        (Some(prior), None) => prior,
-        (None, Some((lo, hi))) => Prior::Uniform { lo, hi },
-        (None, None) => return Err(VaryError::NoRange { name: name.to_string() }),
-        (Some(prior), Some((lo, hi))) => {
-            let (from, to) = prior.support();
-            if from < lo || to > hi {
-                return Err(VaryError::OutsideRange { name: name.to_string(), from, to, lo, hi });
-            }
-            prior
-        }
-    };
-    Ok((idx, prior))
-}
-
 /// The outputs of every row of a design, and how its runs ended.
 #[derive(Clone, Debug, Default)]
 pub struct Evaluated {
     /// Row-major: row `r`'s value of output `k` is `values[r * outputs + k]`, NaN where missing.
     pub values: Vec<f64>,
+    /// Outputs per row.
     pub outputs: usize,
     /// Runs that did not end as asked, by status word (`zeno`, `fault`, ...; `error` for a run
     /// that was refused), in the order of [`RunStatus`].
@@ -164,7 +139,7 @@ const CHUNK_POINTS: usize = 64;
 
 /// Runs `sys` at every row of `design` with `opts` on `threads` workers (0: one per core),
 /// keeping only the values of `outputs` (memory: `rows x outputs` numbers, never a run's
-/// record). Each row is an independent run of a reused `Simulator` (bit for bit a fresh run), and
+/// record). Each row is an independent run of a reused `Runner` (bit for bit a fresh run), and
 /// its values land in its own slots, so the result does not depend on the thread count; rayon's
 /// work stealing keeps the other workers going while one grinds through a Zeno row. `progress`
 /// is called once per row.
@@ -217,7 +192,7 @@ pub fn evaluate_rows<S: HybridSystem + ?Sized>(
             .par_chunks_mut(chunk)
             .enumerate()
             .map_init(
-                || (sim::Simulator::new(sys, opts), vec![0.0; design.width()]),
+                || (sim::Runner::new(sys, opts), vec![0.0; design.width()]),
                 |(simulator, p), (c, slots)| {
                     let mut tally: Tally = ([0; 9], None);
                     let first_row = range.start + c * CHUNK_POINTS * block;
@@ -280,12 +255,15 @@ pub fn evaluate_rows<S: HybridSystem + ?Sized>(
 /// One output's indices and what went into them.
 #[derive(Clone, Debug, PartialEq)]
 pub struct OutputIndices {
+    /// The output as the user wrote it.
     pub label: String,
     /// Rows without a value (the run ended early, the event did not fire, not finite).
     pub failed_rows: usize,
     /// Base points left out (`OnFail::Drop`), and those the indices use.
     pub dropped_points: usize,
+    /// Base points the indices use.
     pub used_points: usize,
+    /// The indices.
     pub indices: Indices,
     /// Bootstrap standard errors (the same shape), when resamples were asked for.
     pub errors: Option<Indices>,
@@ -298,20 +276,59 @@ pub enum AnalysisError {
         "output `{label}`: {failed_rows} of {rows} rows have no value (the first is row {first_row}); \
          choose --on-fail drop or --on-fail value=X to analyse anyway"
     )]
-    Failed { label: String, failed_rows: usize, rows: usize, first_row: usize },
+    /// Rows without a value under `OnFail::Error`.
+    Failed {
+        /// The output.
+        label: String,
+        /// Rows without a value.
+        failed_rows: usize,
+        /// Rows of the design.
+        rows: usize,
+        /// The first of them (1-based).
+        first_row: usize,
+    },
+    /// Fewer than 2 base points left under `OnFail::Drop`.
     #[error("output `{label}`: {used} base points left after dropping {dropped}; at least 2 are needed")]
-    TooFewPoints { label: String, used: usize, dropped: usize },
+    TooFewPoints {
+        /// The output.
+        label: String,
+        /// Base points left.
+        used: usize,
+        /// Base points dropped.
+        dropped: usize,
+    },
+}
+
+impl AnalysisError {
+    /// The output it is about, as the user wrote it.
+    pub fn label(&self) -> &str {
+        match self {
+            AnalysisError::Failed { label, .. } | AnalysisError::TooFewPoints { label, .. } => label,
+        }
+    }
 }
 
 /// What [`analyze`] needs besides the values.
 #[derive(Clone, Copy, Debug)]
 pub struct Analysis {
+    /// Varied parameters.
     pub d: usize,
+    /// Whether second-order indices are estimated.
     pub second_order: bool,
+    /// What to do with rows without a value.
     pub on_fail: OnFail,
     /// Bootstrap resamples (0: none).
     pub bootstrap: usize,
+    /// The bootstrap's seed.
     pub seed: u64,
+}
+
+impl Analysis {
+    /// The indices of every output from `values` (row-major, `labels.len()` per row, NaN where a
+    /// row has none), each with its label, or why it has none ([`analyze`]).
+    pub fn outputs(&self, labels: &[String], values: &[f64]) -> Vec<Result<OutputIndices, AnalysisError>> {
+        labels.iter().enumerate().map(|(k, label)| analyze(label, values, labels.len(), k, self)).collect()
+    }
 }
 
 /// The indices of output `offset` of row-major `values` (`stride` values per row, `block` rows
@@ -364,24 +381,4 @@ pub fn analyze(
         indices,
         errors,
     })
-}
-
-/// The whole analysis, for a library caller: runs `compiled` at every row of `design` (see
-/// [`evaluate`]) and analyses each output (see [`analyze`]). The indices come per output, an
-/// output without them (its policy refused the missing rows) as its error.
-pub fn indices(
-    compiled: &crate::Compiled,
-    design: &Design,
-    outputs: &[Output],
-    opts: &SimOptions,
-    how: &Analysis,
-    threads: usize,
-) -> Result<(Evaluated, Vec<Result<OutputIndices, AnalysisError>>), SweepError> {
-    let evaluated = evaluate(compiled.native(), design, outputs, opts, threads, &|| ())?;
-    let results = outputs
-        .iter()
-        .enumerate()
-        .map(|(k, o)| analyze(&o.label, &evaluated.values, outputs.len(), k, how))
-        .collect();
-    Ok((evaluated, results))
 }

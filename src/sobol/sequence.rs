@@ -105,6 +105,7 @@ impl Sobol {
         plain
     }
 
+    /// The number of dimensions.
     pub fn dims(&self) -> usize {
         self.directions.len()
     }

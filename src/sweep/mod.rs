@@ -4,10 +4,13 @@
 //!
 //! Code map: `points` (which vectors: grids, lists, seeded samples, each computed from its
 //! index), `table` (the row and column scheme, CSV and JSON lines), `stream` (rows written as they
-//! complete through a bounded reorder window: memory independent of the number of points), this
-//! file (in-memory runs for library callers and small sweeps).
+//! complete through a bounded reorder window: memory independent of the number of points),
+//! `report` (`SweepReport`: a sweep held in memory, its rows), this file (in-memory runs for
+//! library callers and small sweeps). A sweep as a user asks for it is the door's `SweepRequest`
+//! (`api/request/sweep.rs`).
 
 pub mod points;
+mod report;
 mod stream;
 pub mod table;
 
@@ -16,34 +19,47 @@ use rayon::prelude::*;
 use crate::sim::{self, HybridSystem, SimError, SimOptions, SimResult};
 
 pub use points::{
-    full_grid, lerp, linspace, parse_vary, uniform_samples, uniform_samples_from, Axis, AxisSpec, Grid,
-    Points, Samples, TooManyPoints, VaryError, VarySpec,
+    full_grid, lerp, linspace, parse_vary, uniform_samples, uniform_samples_from, Axis, AxisSpec, Draws,
+    Grid, Points, TooManyPoints, VarySpec, VarySpecError,
 };
+pub use report::SweepReport;
 pub use stream::{stream_rows, Streamed, BATCH, WINDOW_BYTES, WINDOW_ROWS};
-pub use table::{Columns, Format};
+pub use table::{CellKind, Columns, Format};
 
 /// The outcome of one point: exactly what `sim::run` returned for it. A run that stopped early
 /// (Zeno, a runtime fault) is an `Ok` whose `stopped_by` says so; `Err` is bad input.
 pub type PointResult = Result<SimResult, SimError>;
 
+/// Why a sweep could not run or write its rows. (A point whose run failed is a row, not an error.)
 #[derive(Debug, thiserror::Error)]
 pub enum SweepError {
+    /// The thread pool could not be built.
     #[error("cannot start {threads} worker threads")]
     ThreadPool {
+        /// The threads asked for.
         threads: usize,
+        /// Why.
         #[source]
         source: rayon::ThreadPoolBuildError,
     },
+    /// A worker thread could not be started.
     #[error("cannot start {threads} worker threads")]
     Spawn {
+        /// The threads asked for.
         threads: usize,
+        /// Why.
         #[source]
         source: std::io::Error,
     },
+    /// Writing the rows failed.
     #[error("cannot write the rows")]
     Write(#[source] std::io::Error),
+    /// A worker panicked (a bug).
     #[error("a worker thread panicked at point {index}")]
-    WorkerPanicked { index: usize },
+    WorkerPanicked {
+        /// The point it was running.
+        index: usize,
+    },
 }
 
 /// Rows formatted in parallel per chunk, then written in order: formatting costs about as much
@@ -62,7 +78,7 @@ fn pool(threads: usize) -> Result<rayon::ThreadPool, SweepError> {
 /// (0: one per core). Returns one result per point, in the order of `points`.
 ///
 /// Each point is one independent run with nothing shared but the read-only compiled model (each
-/// worker reuses a `sim::Simulator` for its scratch buffers, and a reused simulator gives bit for
+/// worker reuses a `sim::Runner` for its scratch buffers, and a reused simulator gives bit for
 /// bit the result of a fresh run), so every result is the one a single `sim::run` at that point
 /// gives, whatever the number of threads or the scheduling. `progress` is called once after each
 /// point (from any worker thread).
@@ -77,7 +93,7 @@ pub fn run_points<S: HybridSystem + ?Sized>(
         points
             .par_iter()
             .map_init(
-                || sim::Simulator::new(sys, opts),
+                || sim::Runner::new(sys, opts),
                 |sim, p| {
                     let result = match sim {
                         Ok(sim) => sim.run(p),

@@ -8,11 +8,23 @@ use rand_core::{Rng as _, SeedableRng as _};
 #[derive(Clone, Debug, PartialEq)]
 pub enum AxisSpec {
     /// `P=LO:HI:N`: N evenly spaced values from LO to HI, both included.
-    Grid { lo: f64, hi: f64, n: usize },
+    Grid {
+        /// The first value.
+        lo: f64,
+        /// The last value.
+        hi: f64,
+        /// How many.
+        n: usize,
+    },
     /// `P=V1,V2,...`: exactly these values, in this order.
     List(Vec<f64>),
     /// `P=LO:HI`: a range to sample from (with `--samples`).
-    Range { lo: f64, hi: f64 },
+    Range {
+        /// The lower end.
+        lo: f64,
+        /// The upper end.
+        hi: f64,
+    },
     /// `P` alone: sample from the parameter's declared range (with `--samples`).
     Declared,
 }
@@ -20,36 +32,55 @@ pub enum AxisSpec {
 /// A parsed `--vary` flag.
 #[derive(Clone, Debug, PartialEq)]
 pub struct VarySpec {
+    /// The parameter's name, as written.
     pub name: String,
+    /// What it asks for.
     pub axis: AxisSpec,
 }
 
+/// A `--vary` text that does not parse (`hybc sweep`).
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
-pub enum VaryError {
+pub enum VarySpecError {
+    /// A number that is not a finite number.
     #[error("`{text}` is not a finite number")]
-    NotANumber { text: String },
+    NotANumber {
+        /// The number as written.
+        text: String,
+    },
     /// A decimal a double cannot hold (`1e-400` would round to 0).
     #[error(transparent)]
     Unrepresentable(crate::number::NumberError),
+    /// Not one of the shapes a `--vary` takes.
     #[error("`{text}`: expected P=LO:HI:N, P=LO:HI, P=V1,V2,... or P")]
-    Shape { text: String },
+    Shape {
+        /// The text as written.
+        text: String,
+    },
+    /// A grid count that is not a whole number from 2.
     #[error("`{text}`: the number of grid points must be an integer of at least 2")]
-    GridCount { text: String },
+    GridCount {
+        /// The text as written.
+        text: String,
+    },
+    /// A range whose lower end is not below its upper end.
     #[error("`{text}`: LO must be below HI")]
-    EmptyRange { text: String },
+    EmptyRange {
+        /// The text as written.
+        text: String,
+    },
 }
 
-fn number(text: &str) -> Result<f64, VaryError> {
+fn number(text: &str) -> Result<f64, VarySpecError> {
     use crate::number::NumberError;
     crate::number::parse_number(text.trim()).map_err(|e| match e {
-        NumberError::TooSmall { .. } => VaryError::Unrepresentable(e),
-        _ => VaryError::NotANumber { text: text.trim().to_string() },
+        NumberError::TooSmall { .. } => VarySpecError::Unrepresentable(e),
+        _ => VarySpecError::NotANumber { text: text.trim().to_string() },
     })
 }
 
 /// Parses one `--vary` value: `P=LO:HI:N`, `P=LO:HI`, `P=V1,V2,...` or `P`.
-pub fn parse_vary(text: &str) -> Result<VarySpec, VaryError> {
-    let shape = || VaryError::Shape { text: text.to_string() };
+pub fn parse_vary(text: &str) -> Result<VarySpec, VarySpecError> {
+    let shape = || VarySpecError::Shape { text: text.to_string() };
     let Some((name, values)) = text.split_once('=') else {
         let name = text.trim();
         if name.is_empty() || name.contains([':', ',']) {
@@ -66,13 +97,13 @@ pub fn parse_vary(text: &str) -> Result<VarySpec, VaryError> {
         [lo, hi] | [lo, hi, _] => {
             let (lo, hi) = (number(lo)?, number(hi)?);
             if lo >= hi {
-                return Err(VaryError::EmptyRange { text: text.to_string() });
+                return Err(VarySpecError::EmptyRange { text: text.to_string() });
             }
             match parts.get(2) {
                 None => AxisSpec::Range { lo, hi },
                 Some(n) => match n.trim().parse::<usize>() {
                     Ok(n) if n >= 2 => AxisSpec::Grid { lo, hi, n },
-                    _ => return Err(VaryError::GridCount { text: text.to_string() }),
+                    _ => return Err(VarySpecError::GridCount { text: text.to_string() }),
                 },
             }
         }
@@ -122,12 +153,20 @@ pub fn linspace(lo: f64, hi: f64, n: usize) -> Vec<f64> {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Axis {
     /// `n >= 2` evenly spaced values from `lo` to `hi`, both included.
-    Even { lo: f64, hi: f64, n: usize },
+    Even {
+        /// The first value.
+        lo: f64,
+        /// The last value.
+        hi: f64,
+        /// How many.
+        n: usize,
+    },
     /// Exactly these values, in this order.
     List(Vec<f64>),
 }
 
 impl Axis {
+    /// The number of values.
     pub fn len(&self) -> usize {
         match self {
             Axis::Even { n, .. } => *n,
@@ -135,6 +174,7 @@ impl Axis {
         }
     }
 
+    /// Whether there are none.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
@@ -193,7 +233,7 @@ impl Grid {
 /// within a point in the order of `ranges`. So one seed gives the same points on every machine and
 /// every version of hybc that keeps this description.
 #[derive(Clone, Debug)]
-pub struct Samples {
+pub struct Draws {
     base: Vec<f64>,
     ranges: Vec<(usize, f64, f64)>,
     n: usize,
@@ -202,11 +242,12 @@ pub struct Samples {
     key: [u8; 32],
 }
 
-impl Samples {
-    pub fn new(base: Vec<f64>, ranges: Vec<(usize, f64, f64)>, n: usize, seed: u64) -> Samples {
+impl Draws {
+    /// `n` points from `base`, the parameters `ranges` (index, lo, hi) drawn with `seed`.
+    pub fn new(base: Vec<f64>, ranges: Vec<(usize, f64, f64)>, n: usize, seed: u64) -> Draws {
         let mut key = [0u8; 32];
         key[..8].copy_from_slice(&seed.to_le_bytes());
-        Samples { base, ranges, n, key }
+        Draws { base, ranges, n, key }
     }
 
     /// Writes point `i < n` into `out` (as long as the base).
@@ -226,18 +267,26 @@ impl Samples {
 /// The points of a sweep, each computed from its index.
 #[derive(Clone, Debug)]
 pub enum Points {
+    /// A full grid over axes (`hybc sweep --vary P=LO:HI:N`, `P=V1,V2`).
     Grid(Grid),
-    Samples(Samples),
+    /// Seeded uniform draws (`hybc sweep --samples N`, Python's `hybc.Samples`).
+    Draws(Draws),
+    /// Explicit parameter vectors (Python's points), every one as long as the model's
+    /// parameters.
+    Rows(Vec<Vec<f64>>),
 }
 
 impl Points {
+    /// The number of points.
     pub fn len(&self) -> usize {
         match self {
             Points::Grid(g) => g.len,
-            Points::Samples(s) => s.n,
+            Points::Draws(s) => s.n,
+            Points::Rows(rows) => rows.len(),
         }
     }
 
+    /// Whether there are none.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
@@ -246,7 +295,8 @@ impl Points {
     pub fn width(&self) -> usize {
         match self {
             Points::Grid(g) => g.base.len(),
-            Points::Samples(s) => s.base.len(),
+            Points::Draws(s) => s.base.len(),
+            Points::Rows(rows) => rows.first().map_or(0, Vec::len),
         }
     }
 
@@ -254,7 +304,8 @@ impl Points {
     pub fn fill(&self, i: usize, out: &mut [f64]) {
         match self {
             Points::Grid(g) => g.fill(i, out),
-            Points::Samples(s) => s.fill(i, out),
+            Points::Draws(s) => s.fill(i, out),
+            Points::Rows(rows) => out.copy_from_slice(&rows[i]),
         }
     }
 
@@ -267,7 +318,10 @@ impl Points {
 
     /// Every point, in order (for sweeps small enough to hold).
     pub fn to_vec(&self) -> Vec<Vec<f64>> {
-        (0..self.len()).map(|i| self.point(i)).collect()
+        match self {
+            Points::Rows(rows) => rows.clone(),
+            _ => (0..self.len()).map(|i| self.point(i)).collect(),
+        }
     }
 }
 
@@ -282,13 +336,13 @@ pub fn full_grid(base: &[f64], axes: &[(usize, Vec<f64>)]) -> Vec<Vec<f64>> {
 }
 
 /// `n` points, each starting from `base` with every parameter of `ranges` (index, lo, hi) drawn
-/// uniformly from `[lo, hi]`: [`Samples`], collected.
+/// uniformly from `[lo, hi]`: [`Draws`], collected.
 pub fn uniform_samples(base: &[f64], ranges: &[(usize, f64, f64)], n: usize, seed: u64) -> Vec<Vec<f64>> {
-    Points::Samples(Samples::new(base.to_vec(), ranges.to_vec(), n, seed)).to_vec()
+    Points::Draws(Draws::new(base.to_vec(), ranges.to_vec(), n, seed)).to_vec()
 }
 
 /// Points `indices` (a range of point numbers) of [`uniform_samples`]`(base, ranges, _, seed)`,
-/// without drawing the points before them (each [`Samples`] point is computed from its index),
+/// without drawing the points before them (each [`Draws`] point is computed from its index),
 /// so a sweep can be sharded by index ranges (a Dask task draws only its own points) and the
 /// shards concatenated equal the whole.
 pub fn uniform_samples_from(
@@ -297,7 +351,7 @@ pub fn uniform_samples_from(
     seed: u64,
     indices: std::ops::Range<usize>,
 ) -> Vec<Vec<f64>> {
-    let points = Points::Samples(Samples::new(base.to_vec(), ranges.to_vec(), indices.end, seed));
+    let points = Points::Draws(Draws::new(base.to_vec(), ranges.to_vec(), indices.end, seed));
     indices.map(|i| points.point(i)).collect()
 }
 
@@ -312,13 +366,13 @@ mod tests {
         assert_eq!(parse_vary("h0=1, 2,3").expect("list").axis, AxisSpec::List(vec![1.0, 2.0, 3.0]));
         assert_eq!(parse_vary("g=9:10").expect("range").axis, AxisSpec::Range { lo: 9.0, hi: 10.0 });
         assert_eq!(parse_vary(" e ").expect("declared").axis, AxisSpec::Declared);
-        assert!(matches!(parse_vary("e=1:0:3"), Err(VaryError::EmptyRange { .. })));
-        assert!(matches!(parse_vary("e=0:1:1"), Err(VaryError::GridCount { .. })));
-        assert!(matches!(parse_vary("e=0:1:x"), Err(VaryError::GridCount { .. })));
-        assert!(matches!(parse_vary("e=0:nan"), Err(VaryError::NotANumber { .. })));
-        assert!(matches!(parse_vary("e=0:1:2:3"), Err(VaryError::Shape { .. })));
-        assert!(matches!(parse_vary("=1"), Err(VaryError::Shape { .. })));
-        assert!(matches!(parse_vary("e="), Err(VaryError::Shape { .. })));
+        assert!(matches!(parse_vary("e=1:0:3"), Err(VarySpecError::EmptyRange { .. })));
+        assert!(matches!(parse_vary("e=0:1:1"), Err(VarySpecError::GridCount { .. })));
+        assert!(matches!(parse_vary("e=0:1:x"), Err(VarySpecError::GridCount { .. })));
+        assert!(matches!(parse_vary("e=0:nan"), Err(VarySpecError::NotANumber { .. })));
+        assert!(matches!(parse_vary("e=0:1:2:3"), Err(VarySpecError::Shape { .. })));
+        assert!(matches!(parse_vary("=1"), Err(VarySpecError::Shape { .. })));
+        assert!(matches!(parse_vary("e="), Err(VarySpecError::Shape { .. })));
     }
 
     #[test]
@@ -384,7 +438,7 @@ mod tests {
         for ranges in [vec![(1, 0.5, 0.9)], vec![(0, 9.0, 10.0), (1, 0.5, 0.9), (2, 0.1, 3.0)]] {
             let indexed = uniform_samples(&[0.0; 3], &ranges, 300, 42);
             assert_eq!(indexed, sequential_samples(&ranges, 300, 42));
-            let points = Points::Samples(Samples::new(vec![0.0; 3], ranges.clone(), 300, 42));
+            let points = Points::Draws(Draws::new(vec![0.0; 3], ranges.clone(), 300, 42));
             for i in [299, 0, 150, 31, 32, 33] {
                 assert_eq!(points.point(i), indexed[i], "point {i} alone");
             }

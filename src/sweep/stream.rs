@@ -12,7 +12,7 @@
 //! once they are `WINDOW_ROWS` ahead.
 //!
 //! The bytes do not depend on the thread count or the scheduling: row `i` is a function of point
-//! `i` alone (`Points::fill`, a fresh or reused `Simulator`, which gives bit for bit the same
+//! `i` alone (`Points::fill`, a fresh or reused `Runner`, which gives bit for bit the same
 //! result) and rows are written in index order.
 
 use std::collections::BTreeMap;
@@ -160,7 +160,7 @@ fn work<S: HybridSystem + ?Sized>(
 ) {
     let total = points.len();
     let batches = total.div_ceil(BATCH);
-    let mut simulator = sim::Simulator::new(sys, opts);
+    let mut simulator = sim::Runner::new(sys, opts);
     let mut p = vec![0.0; points.width()];
     loop {
         let b = {

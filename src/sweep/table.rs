@@ -33,8 +33,10 @@ use super::PointResult;
 use crate::report::non_finite_name;
 use crate::sim::{non_finite_finals, SimResult, StopReason, SystemInfo};
 
+/// How rows are written.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
+    /// Comma-separated values with a header line.
     Csv,
     /// One JSON object per line, keyed by the column names.
     Jsonl,
@@ -43,10 +45,26 @@ pub enum Format {
 /// One cell of a row.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Cell {
+    /// A number.
     Num(f64),
+    /// A count (the events).
     Count(usize),
+    /// Text (`status`, `event<k>`, `error`).
     Text(String),
+    /// Nothing: the value does not exist.
     Empty,
+}
+
+/// What a column holds: the kind of every cell in it but the empty ones (for a front end that
+/// keeps columns typed, as Python's NumPy arrays).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CellKind {
+    /// Numbers (`Cell::Num`).
+    Num,
+    /// The event count (`Cell::Count`).
+    Count,
+    /// Text: `status`, `event<k>` and `error` (`Cell::Text`).
+    Text,
 }
 
 /// The column scheme of one sweep.
@@ -74,6 +92,20 @@ impl<'a> Columns<'a> {
     /// The column names, in row order.
     pub fn header(&self) -> &[String] {
         &self.header
+    }
+
+    /// The kind of each column, in header order: the parameters, `status`, `events`, then per
+    /// event slot `event<k>`, `t<k>` and its gradients, then numbers up to `error`.
+    pub fn kinds(&self) -> Vec<CellKind> {
+        let n_params = self.info.n_params();
+        let mut kinds = vec![CellKind::Num; self.header.len()];
+        kinds[n_params] = CellKind::Text;
+        kinds[n_params + 1] = CellKind::Count;
+        for k in 0..self.events {
+            kinds[n_params + 2 + k * (2 + self.shown_grad)] = CellKind::Text;
+        }
+        kinds[self.header.len() - 1] = CellKind::Text;
+        kinds
     }
 
     fn grad_names(&self) -> impl Iterator<Item = &str> + '_ {

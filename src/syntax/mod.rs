@@ -1,6 +1,7 @@
 //! Stage 1: source text -> AST with spans. The only module that knows pest.
 
 pub mod ast;
+pub mod chars;
 mod parser;
 
 pub use parser::parse;
@@ -8,11 +9,14 @@ pub use parser::parse;
 /// A byte range in the source file. Every AST node has one.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
 pub struct Span {
+    /// The first byte.
     pub start: usize,
+    /// One past the last byte.
     pub end: usize,
 }
 
 impl Span {
+    /// The bytes `start .. end`.
     pub fn new(start: usize, end: usize) -> Self {
         Span { start, end }
     }
@@ -22,6 +26,7 @@ impl Span {
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error("{message}, expected {expected}")]
 pub struct ParseError {
+    /// Where it was found.
     pub span: Span,
     /// What was found, e.g. "unexpected `)`".
     pub message: String,

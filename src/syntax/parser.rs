@@ -1,5 +1,6 @@
-//! pest parse tree -> AST. The grammar is `grammar/hyb.pest`; this file is the only one that sees
-//! pest's `Pair`s. Operator precedence is applied here with pest's Pratt parser.
+//! pest parse tree -> AST. The grammar is `hyb.pest` beside this file (its rule names are the
+//! AST's); this file is the only one that sees pest's `Pair`s. Operator precedence is applied
+//! here with pest's Pratt parser.
 
 use std::sync::OnceLock;
 
@@ -12,7 +13,7 @@ use super::ast::*;
 use super::{ParseError, Span};
 
 #[derive(pest_derive::Parser)]
-#[grammar = "grammar/hyb.pest"]
+#[grammar = "syntax/hyb.pest"]
 struct HybParser;
 
 /// Parses a whole `.hyb` source text.
@@ -513,15 +514,15 @@ fn found_at(source: &str, pos: usize) -> (String, usize) {
     if c == '\n' || c == '\r' {
         return ("end of line".to_string(), 0);
     }
-    if crate::diag::is_invisible(c) {
+    if super::chars::is_invisible(c) {
         let kind = if c.is_control() {
             "control character"
-        } else if crate::diag::is_combining(c) {
+        } else if super::chars::is_combining(c) {
             "combining character"
         } else {
             "invisible character"
         };
-        return (format!("{kind} {}", crate::diag::escaped(c)), c.len_utf8());
+        return (format!("{kind} {}", super::chars::escaped(c)), c.len_utf8());
     }
     let word: String =
         rest.chars().take_while(|ch| ch.is_alphanumeric() || *ch == '_' || *ch == '.').collect();

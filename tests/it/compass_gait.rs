@@ -10,8 +10,7 @@
 
 use nalgebra::{DMatrix, DVector, Matrix2x4};
 
-use hybc::periodic::{find, PeriodicProblem};
-use hybc::Model;
+use hybc::{Model, PeriodicRequest};
 
 use crate::support::cli::hybc;
 
@@ -105,11 +104,11 @@ fn the_strike_is_the_rigid_body_impact_law() {
 
 #[test]
 fn the_passive_gait_is_a_stable_fixed_point_with_the_running_cost_left_out() {
-    let model = hybc::check_source(COMPASS).unwrap();
+    let model = Model::parse(COMPASS).unwrap();
     let free: Vec<_> = ["st0", "dst0", "dsw0"].iter().map(|s| model.param_index(s).unwrap()).collect();
-    let mut params: Vec<f64> = model.params.iter().map(|p| p.default).collect();
+    let mut params: Vec<f64> = model.params().values().to_vec();
     // The passive gait: no torque.
-    for (p, v) in model.params.iter().zip(params.iter_mut()) {
+    for (p, v) in model.checked().params.iter().zip(params.iter_mut()) {
         if p.name.starts_with("tau[") {
             *v = 0.0;
         }
@@ -120,17 +119,9 @@ fn the_passive_gait_is_a_stable_fixed_point_with_the_running_cost_left_out() {
         params[p.0 as usize] *= 1.05;
     }
     let sim = hybc::sim::SimOptions { t_end: 3.0, rtol: 1e-12, atol: 1e-14, ..Default::default() };
-    let problem = PeriodicProblem {
-        model: &model,
-        section: "strike".into(),
-        firing: 1,
-        free: free.clone(),
-        params,
-        sim,
-        max_iter: 30,
-        tol: 1e-11,
-    };
-    let r = find(&problem).expect("a fixed point");
+    let search = hybc::periodic::Search { free: free.clone(), params, sim, max_iter: 30, tol: 1e-11 };
+    let request = PeriodicRequest { section: "strike".into(), firing: 1, search };
+    let r = request.run(&model).expect("a fixed point").result;
     for (p, want) in free.iter().zip(&published) {
         assert!((r.params[p.0 as usize] - want).abs() < 1e-8, "{:?}", r.params);
     }

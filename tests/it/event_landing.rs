@@ -1,30 +1,12 @@
 //! Landing a step on each event instant (`SimOptions::land_events`, `Stepper::land`): the state
 //! and sensitivities the events jump from come from a step end under the error control, not from
-//! the dense output. Measured on the W5 diffusion chain of `examples/w5_accuracy.rs` (10 cells, a
+//! the dense output. Measured on the W5 diffusion chain of `benches/measure/w5_accuracy.rs` (10 cells, a
 //! source refilled 19 times, the 10 conductances differentiated) against DOP853 at rtol 1e-12.
 
 use hybc::sim::{Method, SimOptions, SimResult};
 use hybc::Model;
 
-fn refill_chain(n: usize) -> String {
-    let seg = |i: usize| 10 * i / n;
-    let mut s = String::from("model refill_chain\nparam d[10] = 50 in [0.1, 1000]\nparam c = 0.1\n");
-    for i in 0..n {
-        s.push_str(&format!("state x{i} = {}\n", if i == 0 { 1 } else { 0 }));
-    }
-    for i in 0..n {
-        let mut rhs = format!("-c * x{i}");
-        if i > 0 {
-            rhs.push_str(&format!(" + d[{}] * (x{} - x{i})", seg(i - 1), i - 1));
-        }
-        if i + 1 < n {
-            rhs.push_str(&format!(" - d[{}] * (x{i} - x{})", seg(i), i + 1));
-        }
-        s.push_str(&format!("der(x{i}) = {rhs}\n"));
-    }
-    s.push_str("event refill when x0 <= 0.5 {\n    x0 := 1\n}\n");
-    s
-}
+use crate::support::chain::refill_source;
 
 /// The largest error of the event-time gradients of `r` against `reference`, relative to the
 /// largest entry of each event's gradient.
@@ -44,7 +26,7 @@ fn event_gradient_error(r: &SimResult, reference: &SimResult) -> f64 {
 fn landing_on_events_makes_event_time_gradients_as_accurate_as_values() {
     let names: Vec<String> = (0..10).map(|k| format!("d[{k}]")).collect();
     let names: Vec<&str> = names.iter().map(String::as_str).collect();
-    let model = Model::parse(&refill_chain(10)).unwrap();
+    let model = Model::parse(&refill_source(10)).unwrap();
     let c = model.compile(&names).unwrap();
     let p = c.params();
     let run = |rtol: f64, method: Method, land_events: Option<bool>| {

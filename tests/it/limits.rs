@@ -100,14 +100,14 @@ fn a_sampled_trajectory_too_long_to_keep_is_refused_by_the_library_too() {
         hybc::Model::from_file(concat!(env!("CARGO_MANIFEST_DIR"), "/models/ball.hyb")).expect("ball");
     let compiled = model.compile::<&str>(&[]).expect("compiles");
     let mut opts = model.sim_options();
-    opts.trajectory = hybc::TrajectoryRequest::Sample(1e-8);
+    opts.trajectory = hybc::TrajectoryRequest::Every(1e-8);
     let started = Instant::now();
     let err = compiled.simulate(&model.params(), &opts).expect_err("2.5e8 rows are refused").to_string();
     assert!(started.elapsed() < Duration::from_secs(5), "refused before the run");
     assert!(err.contains("250000001 rows, more than the 1000000 a run keeps in memory"), "{err}");
     // The cap itself is allowed: t = 0 .. 2.5 every 2.5e-6 is exactly 1e6 + 1 rows, one too many;
     // every 2.5e-6 * (1 + 1e-6) fits.
-    opts.trajectory = hybc::TrajectoryRequest::Sample(2.5e-6 * (1.0 + 1e-6));
+    opts.trajectory = hybc::TrajectoryRequest::Every(2.5e-6 * (1.0 + 1e-6));
     let run = compiled.simulate(&model.params(), &opts).expect("1e6 rows are kept");
     assert_eq!(run.final_time(), 2.5);
 }

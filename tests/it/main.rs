@@ -30,6 +30,7 @@ mod jit_diff;
 mod jit_errors;
 mod jit_models;
 mod juggler;
+mod layers;
 mod limits;
 mod optimize;
 mod optimize_problems;

@@ -404,18 +404,18 @@ fn cli_refuses_bad_input_with_usage_errors_and_reports_non_convergence() {
 }
 
 /// A multi-start run in shards (`OptimizeOptions::shard`, what `hybc.dask.optimize` sends each
-/// task) and merged (`request::merge_shards`) reports what one process running every start
+/// task) and merged (`optimize::merge_shards`) reports what one process running every start
 /// reports, timings apart, however the starts are cut; shards out of order or with a gap are
 /// refused.
 #[test]
 fn a_multi_start_in_shards_merges_into_the_report_of_one_process() {
-    use hybc::optimize::request::{self, Request};
+    use hybc::optimize::merge_shards;
     let (model, compiled) = compiled("models/ball.hyb", &["h0", "e"]);
     let subject_to = ["energy = 2".to_string(), "y = 0.1".to_string()];
     let report = |shard: Option<(usize, usize)>| -> Value {
         let options =
             OptimizeOptions { starts: 16, seed: 1, threads: 1, shard, ..OptimizeOptions::default() };
-        let request = Request {
+        let request = hybc::OptimizeRequest {
             minimize: "h0",
             subject_to: &subject_to,
             bounds: ball_bounds(),
@@ -423,7 +423,7 @@ fn a_multi_start_in_shards_merges_into_the_report_of_one_process() {
             sim: model.sim_options(),
             options,
         };
-        let mut json = request::run(&model, &compiled, request, None).expect("solves").to_json();
+        let mut json = request.run(&compiled, None).expect("solves").to_json();
         json["stats"]["compile_seconds"] = Value::Null;
         json
     };
@@ -435,13 +435,13 @@ fn a_multi_start_in_shards_merges_into_the_report_of_one_process() {
     assert_eq!(whole["optima"].as_array().unwrap().len(), 3);
     for cuts in [vec![0, 16], vec![0, 5, 11, 16], (0..=16).collect::<Vec<_>>()] {
         let shards: Vec<Value> = cuts.windows(2).map(|w| report(Some((w[0], w[1])))).collect();
-        let merged = request::merge_shards(&shards, &ball_bounds()).expect("merges");
+        let merged = merge_shards(&shards, &ball_bounds()).expect("merges");
         assert_eq!(without_time(merged), whole, "cuts {cuts:?}");
     }
     let (a, b) = (report(Some((0, 8))), report(Some((8, 16))));
-    assert!(request::merge_shards(&[b.clone(), a.clone()], &ball_bounds()).is_err(), "out of order");
-    assert!(request::merge_shards(&[b], &ball_bounds()).is_err(), "starts 0..8 missing");
-    assert!(request::merge_shards(&[a], &ball_bounds()[..1]).is_err(), "bounds for another problem");
+    assert!(merge_shards(&[b.clone(), a.clone()], &ball_bounds()).is_err(), "out of order");
+    assert!(merge_shards(&[b], &ball_bounds()).is_err(), "starts 0..8 missing");
+    assert!(merge_shards(&[a], &ball_bounds()[..1]).is_err(), "bounds for another problem");
 }
 
 #[test]

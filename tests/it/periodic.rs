@@ -2,7 +2,8 @@
 //! fixed point of the heel-strike return map, and its Floquet multipliers against an independent
 //! computation: central differences of the return map, run by run.
 
-use hybc::periodic::{find, PeriodicProblem};
+use hybc::periodic::{PeriodicResult, Search};
+use hybc::{Model, PeriodicRequest};
 
 use crate::event_edges::WALKER;
 use crate::support::cli::hybc;
@@ -11,23 +12,22 @@ use crate::support::runs::run;
 /// The published fixed point at gamma = 0.009 (theta0, dtheta0, dphi0; phi0 = 2 theta0).
 const PUBLISHED: [f64; 3] = [0.200310900544287, -0.199832473004977, -0.015822999948318];
 
-fn problem_from(model: &hybc::sema::Model, start: [f64; 3]) -> PeriodicProblem<'_> {
+fn problem_from(model: &Model, start: [f64; 3]) -> (Model, PeriodicRequest) {
     let free: Vec<_> = ["theta0", "dtheta0", "dphi0"].iter().map(|n| model.param_index(n).unwrap()).collect();
-    let mut params: Vec<f64> = model.params.iter().map(|p| p.default).collect();
+    let mut params: Vec<f64> = model.params().values().to_vec();
     for (p, v) in free.iter().zip(start) {
         params[p.0 as usize] = v;
     }
     let sim = hybc::sim::SimOptions { t_end: 10.0, rtol: 1e-12, atol: 1e-14, ..Default::default() };
-    PeriodicProblem {
-        model,
-        section: "heelstrike".into(),
-        firing: 1,
-        free,
-        params,
-        sim,
-        max_iter: 30,
-        tol: 1e-11,
-    }
+    let search = Search { free, params, sim, max_iter: 30, tol: 1e-11 };
+    let request = PeriodicRequest { section: "heelstrike".into(), firing: 1, search };
+    (model.clone(), request)
+}
+
+/// The orbit `request` asks for on `model`, through the door (which compiles the section's
+/// models).
+fn find((model, request): &(Model, PeriodicRequest)) -> Result<PeriodicResult, hybc::Error> {
+    request.run(model).map(|report| report.result)
 }
 
 /// The walker's state right after the heel strike from the full initial state `x0` (its swing
@@ -66,7 +66,7 @@ fn differenced_monodromy(x: &[f64]) -> nalgebra::DMatrix<f64> {
 
 #[test]
 fn the_walker_returns_to_its_published_gait_and_its_multipliers_match_differences() {
-    let model = hybc::check_source(WALKER).unwrap();
+    let model = Model::parse(WALKER).unwrap();
     // From a start 1% off the published gait.
     let start = PUBLISHED.map(|v| v * 1.01);
     let r = find(&problem_from(&model, start)).expect("a fixed point");
@@ -100,14 +100,14 @@ fn the_walker_returns_to_its_published_gait_and_its_multipliers_match_difference
 #[test]
 fn a_section_without_stop_is_its_first_firing_and_an_unknown_one_is_refused() {
     // The walker that walks on (no `stop`): its first heel strike is the same section.
-    let walking = hybc::check_source(&WALKER.replace("    stop\n", "")).unwrap();
-    let stopping = hybc::check_source(WALKER).unwrap();
+    let walking = Model::parse(&WALKER.replace("    stop\n", "")).unwrap();
+    let stopping = Model::parse(WALKER).unwrap();
     let a = find(&problem_from(&walking, PUBLISHED.map(|v| v * 1.01))).expect("a fixed point");
     let b = find(&problem_from(&stopping, PUBLISHED.map(|v| v * 1.01))).expect("a fixed point");
     assert_eq!(a.fixed_point, b.fixed_point);
     assert_eq!(a.multipliers, b.multipliers);
     let mut p = problem_from(&stopping, PUBLISHED);
-    p.section = "toe".into();
+    p.1.section = "toe".into();
     assert!(find(&p).unwrap_err().to_string().contains("no event `toe`"));
 }
 
@@ -116,12 +116,12 @@ fn the_second_heel_strike_closes_the_same_gait_with_twice_the_period_and_squared
     // A one-step gait is a fixed point of the two-step map too: the same state, twice the
     // period, and the two-step monodromy is M^2, so its multipliers are the squares. With the
     // section declared `stop` (moved to the second firing) and without (the walker walks on).
-    let stopping = hybc::check_source(WALKER).unwrap();
+    let stopping = Model::parse(WALKER).unwrap();
     let one = find(&problem_from(&stopping, PUBLISHED)).expect("one step");
     for text in [WALKER.to_string(), WALKER.replace("    stop\n", "")] {
-        let model = hybc::check_source(&text).unwrap();
+        let model = Model::parse(&text).unwrap();
         let mut p = problem_from(&model, PUBLISHED.map(|v| v * 1.01));
-        p.firing = 2;
+        p.1.firing = 2;
         let two = find(&p).expect("two steps");
         assert_eq!(two.fixed_point.len(), 4, "the counter is not part of the orbit");
         for (a, b) in two.fixed_point.iter().zip(&one.fixed_point) {
@@ -149,14 +149,14 @@ fn the_second_heel_strike_closes_the_same_gait_with_twice_the_period_and_squared
         assert!(two.stable);
     }
     let mut p = problem_from(&stopping, PUBLISHED);
-    p.firing = 0;
+    p.1.firing = 0;
     assert!(find(&p).unwrap_err().to_string().contains("firing must be 1 to"));
 }
 
 #[test]
 fn the_short_period_gait_is_found_from_its_own_start_and_is_unstable() {
     // Garcia et al.'s second gait at gamma = 0.009: shorter steps, one multiplier near 4.
-    let model = hybc::check_source(WALKER).unwrap();
+    let model = Model::parse(WALKER).unwrap();
     let r = find(&problem_from(&model, [0.194, -0.204, -0.06])).expect("a fixed point");
     assert!((r.fixed_point[0] - 0.19393736).abs() < 1e-7, "{:?}", r.fixed_point);
     assert!(r.period < 3.2, "{}", r.period);

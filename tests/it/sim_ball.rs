@@ -150,7 +150,7 @@ fn stop_event_total_derivative() {
 
 #[test]
 fn sampled_trajectory_follows_the_parabolas() {
-    let o = SimOptions { trajectory: TrajectoryRequest::Sample(0.1), ..opts(2.5, Method::Dopri5, true) };
+    let o = SimOptions { trajectory: TrajectoryRequest::Every(0.1), ..opts(2.5, Method::Dopri5, true) };
     let r = run(&Ball::new(), &[G, E, 1.0], &o).expect("valid");
     let rows = r.trajectory.expect("trajectory requested");
     assert_eq!(rows.len(), 26);
@@ -209,11 +209,11 @@ fn works_through_dyn_and_serialises() {
 fn a_reused_simulator_gives_the_results_of_fresh_runs() {
     // The scratch buffers outlive each run; nothing of one run may leak into the next, also
     // after a run that stopped early (Zeno, a NaN fault) or used other parameters.
-    use hybc::sim::Simulator;
+    use hybc::sim::Runner;
     let ball = Ball::new();
     for method in [Method::Dopri5, Method::Dop853] {
         let o = opts(5.0, method, true);
-        let mut sim = Simulator::new(&ball, &o).expect("valid options");
+        let mut sim = Runner::new(&ball, &o).expect("valid options");
         let points = [[G, E, 1.0], [G, 0.95, 3.0], [f64::NAN, E, 1.0], [3.7, 0.5, 0.2], [G, E, 1.0]];
         for p in points {
             let fresh = run(&ball, &p, &o).expect("valid");

@@ -8,8 +8,8 @@ use std::f64::consts::PI;
 
 use crate::support::cli::hybc;
 
-use hybc::sobol::{self, Analysis, Design, OnFail, Output, OutputIndices, Prior, RowKind};
-use hybc::{Model, SimOptions};
+use hybc::sobol::{self, Design, Output, OutputIndices, Prior, RowKind};
+use hybc::{Model, SimOptions, SobolRequest};
 use serde_json::Value;
 
 const ISHIGAMI: &str = "tests/data/sobol/ishigami.hyb";
@@ -34,12 +34,19 @@ fn ishigami(n: usize, seed: u64, bootstrap: usize) -> OutputIndices {
     let compiled = model.compile::<&str>(&[]).expect("compiles");
     let varied = (0..3).map(|i| (i, Prior::Uniform { lo: -PI, hi: PI })).collect();
     let design = Design::new(compiled.params().values().to_vec(), varied, n, false, seed).expect("design");
-    let outputs = [Output::parse("f", compiled.info()).expect("f")];
-    let how = Analysis { d: 3, second_order: false, on_fail: OnFail::Error, bootstrap, seed };
-    let (evaluated, mut results) =
-        sobol::indices(&compiled, &design, &outputs, &model.sim_options(), &how, 0).expect("runs");
-    assert!(evaluated.ended_early.is_empty());
-    results.remove(0).expect("every row has a value")
+    let outputs = ["f".to_string()];
+    let request = SobolRequest {
+        design,
+        seed,
+        outputs: &outputs,
+        on_fail: "error",
+        bootstrap,
+        sim: model.sim_options(),
+        threads: 0,
+    };
+    let mut report = request.run(&compiled, &|| ()).expect("runs");
+    assert!(report.evaluated.ended_early.is_empty());
+    report.outputs.remove(0).expect("every row has a value")
 }
 
 #[test]
@@ -186,11 +193,21 @@ fn each_failure_policy_counts_the_rows_the_closed_form_says_have_no_value() {
     let complete_points = (0..64).filter(|b| (0..block).all(|j| !missing[b * block + j])).count();
     assert!(failed > 0 && (2..64).contains(&complete_points), "{failed} {complete_points}");
 
-    let run = |on_fail: OnFail, threads: usize| {
-        let how = Analysis { d: 3, second_order: false, on_fail, bootstrap: 0, seed: 0 };
-        sobol::indices(&compiled, &design, &outputs, &opts, &how, threads).expect("runs")
+    let labels: Vec<String> = outputs.iter().map(|o| o.label.clone()).collect();
+    let run = |on_fail: &str, threads: usize| {
+        let request = SobolRequest {
+            design: design.clone(),
+            seed: 0,
+            outputs: &labels,
+            on_fail,
+            bootstrap: 0,
+            sim: opts.clone(),
+            threads,
+        };
+        let report = request.run(&compiled, &|| ()).expect("runs");
+        (report.evaluated, report.outputs)
     };
-    let (evaluated, results) = run(OnFail::Error, 1);
+    let (evaluated, results) = run("error", 1);
     assert!(evaluated.ended_early.is_empty(), "{:?}", evaluated.ended_early);
     for r in 0..rows {
         let (t3, energy, t_last) =
@@ -210,7 +227,7 @@ fn each_failure_policy_counts_the_rows_the_closed_form_says_have_no_value() {
     assert!(results[1].as_ref().is_ok_and(|r| r.failed_rows == 0 && r.used_points == 64));
     assert!(results[2].is_ok());
 
-    let (again, dropped) = run(OnFail::Drop, 3);
+    let (again, dropped) = run("drop", 3);
     assert!(again.values.iter().zip(&evaluated.values).all(|(a, b)| a.to_bits() == b.to_bits()), "threads");
     let dropped = dropped[0].as_ref().expect("drop analyses");
     assert_eq!(
@@ -218,7 +235,7 @@ fn each_failure_policy_counts_the_rows_the_closed_form_says_have_no_value() {
         (failed, complete_points, 64 - complete_points)
     );
 
-    let (_, valued) = run(OnFail::Value(T_END), 2);
+    let (_, valued) = run(&format!("value={T_END}"), 2);
     let valued = valued[0].as_ref().expect("value analyses");
     assert_eq!((valued.failed_rows, valued.used_points, valued.dropped_points), (failed, 64, 0));
     // With the missing times set to t_end, the output is min(t3, t_end), computed here.

@@ -219,7 +219,7 @@ fn stiff_jumps_dense_output_matches_the_closed_form_between_jumps() {
             rtol: 1e-10,
             atol: 1e-12,
             method,
-            trajectory: TrajectoryRequest::Sample(0.0025),
+            trajectory: TrajectoryRequest::Every(0.0025),
             ..SimOptions::default()
         };
         let run = compiled.simulate(&compiled.params(), &opts).expect("runs");

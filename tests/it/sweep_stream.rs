@@ -11,7 +11,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use hybc::sim::SimOptions;
-use hybc::sweep::{self, Axis, Columns, Format, Grid, Points, Samples};
+use hybc::sweep::{self, Axis, Columns, Draws, Format, Grid, Points};
 
 fn sweep_bytes(args: &[&str], threads: &str) -> Vec<u8> {
     let mut all = vec!["sweep"];
@@ -77,7 +77,7 @@ fn the_library_stream_writes_what_the_in_memory_sweep_writes() {
     let columns = Columns::new(compiled.info(), 1, 1);
     let grid =
         Points::Grid(Grid::new(vec![1.0], vec![(0, Axis::Even { lo: 0.0, hi: 10.0, n })]).expect("grid"));
-    let samples = Points::Samples(Samples::new(vec![1.0], vec![(0, 0.0, 10.0)], n, 3));
+    let samples = Points::Draws(Draws::new(vec![1.0], vec![(0, 0.0, 10.0)], n, 3));
     for points in [grid, samples] {
         let held = points.to_vec();
         let results = sweep::run_points(compiled.native(), &held, &opts, 2, &|| ()).expect("pool");

@@ -97,7 +97,7 @@ impl FactorCosts {
 /// `Auto` takes the sparse LU when its multiply-adds times this factor are fewer than the
 /// band's and the dense LU's: the price of its indirect addressing against the band's
 /// contiguous columns and the dense LU's kernels. Measured on whole Rodas5P runs with 10
-/// gradients (`examples/sparse_hub.rs`, docs/performance.md), where the paths tie: the sparse
+/// gradients (`benches/measure/sparse_hub.rs`, docs/performance.md), where the paths tie: the sparse
 /// and the banded LU on the W5 chain (counts equal: within 4% either way at 10, 100 and 1000
 /// states), a 3-state hub (ratio 1.5: within 3% either way) and a 3 x 3 grid (ratio 2.9: the
 /// sparse LU 3-5% faster, 6% at 4 x 4, 10% at 5 x 5); the sparse and the dense LU on a 2 x 2
@@ -108,7 +108,7 @@ pub const SPARSE_COST: f64 = 2.0;
 /// From this many states `Auto` uses a structured factorisation, banded or sparse (when the
 /// model gives its Jacobian's pattern and it costs fewer operations than the dense LU). Measured
 /// for the band on the diffusion
-/// chain of workload W5 (Rodas5P, 10 gradients, `examples/w5_chain.rs`, docs/performance.md):
+/// chain of workload W5 (Rodas5P, 10 gradients, `benches/measure/w5_chain.rs`, docs/performance.md):
 /// a run with the band takes the time of the dense one at 2 states (0.188 ms both), 0.93 of it at
 /// 3, 0.54 at 10, 0.40 at 30 and 0.008 at 1000; the switch is where the band becomes narrower
 /// than the matrix, not a size. The dense LU stays for one and two states, where there is no

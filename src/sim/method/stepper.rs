@@ -23,6 +23,7 @@ use super::poly::{chebyshev_node, Poly, CAP};
 /// model); the provided defaults take central differences of [`Self::eval`], for closures in
 /// tests.
 pub trait Rhs {
+    /// The right-hand side `dz = F(t, z)`: the flow and, for the sensitivity columns, their rates.
     fn eval(&mut self, t: f64, z: &[f64], dz: &mut [f64]);
 
     /// The state block's Jacobian `fx = f_x` (n * n, row-major; `n` from its length) and the
@@ -112,7 +113,9 @@ impl<F: FnMut(f64, &[f64], &mut [f64])> Rhs for F {
 
 /// The dense output of one step `[t0, t0 + h]`: values and time derivatives of every component.
 pub trait Interpolant {
+    /// The step's start.
     fn t0(&self) -> f64;
+    /// The step's length.
     fn h(&self) -> f64;
     /// Values of the first `out.len()` components at `t`.
     fn eval(&self, t: f64, out: &mut [f64]);
@@ -149,6 +152,7 @@ pub trait Interpolant {
 /// the integrator has looked at the end point and possibly `build_interpolant`, either `accept`
 /// (the step stands) or `restart` at a point inside it (an event cut it short).
 pub trait Stepper {
+    /// The dense output of the stepper's last attempt.
     type Interpolant: Interpolant;
 
     /// Forgets an earlier run entirely (statistics included).

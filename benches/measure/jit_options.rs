@@ -25,7 +25,7 @@ use hybc::lower::{lower, system_info};
 use hybc::sema::ParamIdx;
 use hybc::sim::{HybridSystem, SystemInfo};
 
-#[path = "../benches/support/chain.rs"]
+#[path = "../support/chain.rs"]
 mod chain;
 use chain::chain_source;
 

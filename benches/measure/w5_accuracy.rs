@@ -15,29 +15,9 @@
 use hybc::sim::{Method, SimOptions};
 use hybc::Model;
 
-/// The ten conductances, the parameters differentiated.
-const D_NAMES: [&str; 10] = ["d[0]", "d[1]", "d[2]", "d[3]", "d[4]", "d[5]", "d[6]", "d[7]", "d[8]", "d[9]"];
-
-/// The W5 chain's flow (`diffusion_source`'s equations) from a full first cell, with refills.
-fn refill_source(n: usize) -> String {
-    let seg = |i: usize| 10 * i / n;
-    let mut s = String::from("model refill_chain\nparam d[10] = 50 in [0.1, 1000]\nparam c = 0.1\n");
-    for i in 0..n {
-        s.push_str(&format!("state x{i} = {}\n", if i == 0 { 1 } else { 0 }));
-    }
-    for i in 0..n {
-        let mut rhs = format!("-c * x{i}");
-        if i > 0 {
-            rhs.push_str(&format!(" + d[{}] * (x{} - x{i})", seg(i - 1), i - 1));
-        }
-        if i + 1 < n {
-            rhs.push_str(&format!(" - d[{}] * (x{i} - x{})", seg(i), i + 1));
-        }
-        s.push_str(&format!("der(x{i}) = {rhs}\n"));
-    }
-    s.push_str("event refill when x0 <= 0.5 {\n    x0 := 1\n}\n");
-    s
-}
+#[path = "../support/chain.rs"]
+mod chain;
+use chain::{refill_source, D_NAMES};
 
 fn max_abs<'a>(v: impl IntoIterator<Item = &'a f64>) -> f64 {
     v.into_iter().fold(0.0f64, |a, b| a.max(b.abs()))

@@ -13,7 +13,7 @@
 use hybc::sim::{LinearSolver, Method, SimOptions};
 use hybc::Model;
 use std::time::Instant;
-#[path = "../benches/support/chain.rs"]
+#[path = "../support/chain.rs"]
 mod chain;
 use chain::{best, D_NAMES};
 

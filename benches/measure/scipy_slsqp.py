@@ -2,7 +2,7 @@
 
 Each evaluation is one `hybc run --format json --grad ...` (a process per run: the counts compare,
 the times do not). Needs scipy (not a dependency of hybc): `python3 -m pip install scipy`, then
-`python3 examples/optimize/scipy_slsqp.py target/release/hybc`.
+`python3 benches/measure/scipy_slsqp.py target/release/hybc`.
 """
 import json
 import subprocess

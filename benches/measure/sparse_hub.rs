@@ -15,7 +15,7 @@ use hybc::sim::{FactorCosts, HybridSystem, LinearSolver, Method, SimOptions};
 use hybc::Model;
 use std::time::Instant;
 
-#[path = "../benches/support/chain.rs"]
+#[path = "../support/chain.rs"]
 mod chain;
 use chain::{best, D_NAMES};
 

@@ -10,9 +10,9 @@
 use hybc::codegen::{CompileOptions, CompiledModel};
 use hybc::lower::{lower, system_info};
 use hybc::sema::ParamIdx;
-use hybc::sim::{HybridSystem, Method, SimOptions, Simulator};
+use hybc::sim::{HybridSystem, Method, Runner, SimOptions};
 use std::time::Instant;
-#[path = "../benches/support/chain.rs"]
+#[path = "../support/chain.rs"]
 mod chain;
 use chain::best;
 
@@ -38,7 +38,7 @@ fn main() {
         let mut runs = Vec::new();
         for method in [Method::Dopri5, Method::Rodas5p] {
             let opts = SimOptions { t_end: 10.0, rtol: 1e-8, atol: 1e-10, method, ..SimOptions::default() };
-            let mut sim = Simulator::new(&m, &opts).unwrap();
+            let mut sim = Runner::new(&m, &opts).unwrap();
             let (ms, r) = best(reps, || sim.run(&p).unwrap());
             runs.push(format!(
                 "{method:?} {} steps ({} rejected) {ms:.3} ms",

@@ -1,4 +1,5 @@
-//! Gradient check: the table `hybc run --check-grad` prints. Text only; no runs.
+//! Gradient check: the table `hybc run --check-grad` prints and the JSON it adds to the run's
+//! (`check_grad`). Text only; no runs.
 
 use std::fmt::Write as _;
 
@@ -6,6 +7,14 @@ use super::GradCheck;
 use crate::report::num;
 
 impl GradCheck {
+    /// The check as the JSON field `check_grad` of `hybc run --check-grad --format json` (every
+    /// field of the check, and `passed`).
+    pub fn to_json(&self) -> serde_json::Value {
+        let mut value = serde_json::json!(self);
+        value["passed"] = self.passed().into();
+        value
+    }
+
     /// One row per parameter with its worst discrepancy and where it occurred, then what was
     /// within noise, cusps and notes, then the event-sequence check, then the verdict.
     pub fn to_table(&self) -> String {

@@ -11,7 +11,7 @@ use hybc::lower::{lower, system_info};
 use hybc::sema::ParamIdx;
 use hybc::sim::HybridSystem;
 use std::time::Instant;
-#[path = "../benches/support/chain.rs"]
+#[path = "../support/chain.rs"]
 mod chain;
 fn main() {
     let ra = match std::env::var("RA").as_deref() {

@@ -1,0 +1,143 @@
+//! What the command line prints about a model without running it: `hybc check`'s summary (names,
+//! flows, events, flow switches, input knots, outputs) and `hybc derive`'s derivatives, through
+//! the door, so that a front end needs neither `lower` nor the checked model's walkers.
+
+use std::fmt::Write;
+
+use super::Model;
+use crate::lower::{derive_report, lower, ExprPrinter};
+use crate::sema::{self, Direction, ModeId, ParamIdx};
+
+impl Model {
+    /// The summary `hybc check` prints for a valid model: counts, parameters (a vector on one
+    /// line), states, each mode's flows, events, flow switches, input knots, outputs.
+    pub fn summary(&self) -> String {
+        summary(self.checked())
+    }
+
+    /// Every symbolic derivative of the model's functions with respect to `wrt`, as `hybc
+    /// derive` prints them; only mode `mode`'s (and the model-level events) when given.
+    pub fn derivatives(&self, wrt: &[ParamIdx], mode: Option<ModeId>) -> String {
+        let checked = self.checked();
+        derive_report(checked, &lower(checked), wrt, mode)
+    }
+}
+
+/// The text `hybc check` prints for the checked model `model`.
+fn summary(model: &sema::Model) -> String {
+    let mut out = String::new();
+    let plural = |n: usize, word: &str| format!("{n} {word}{}", if n == 1 { "" } else { "s" });
+    let _ = writeln!(
+        out,
+        "model {}: {}, {}, {}, {}, {}",
+        model.name,
+        plural(model.states.len(), "state"),
+        plural(model.params.len(), "parameter"),
+        plural(model.modes.len(), "mode"),
+        plural(model.events.iter().filter(|e| !e.implicit).count(), "event"),
+        plural(model.outputs.len(), "output"),
+    );
+    let show = ExprPrinter::new(model);
+    let _ = writeln!(out, "parameters");
+    // A vector is one line, as declared (its elements share default and range): a listing of
+    // 1000 elements would bury the rest of the summary.
+    let mut vectors = model.vectors.iter().peekable();
+    let mut k = 0;
+    while k < model.params.len() {
+        let p = &model.params[k];
+        let range = p.range.map(|(lo, hi)| format!("  in [{lo}, {hi}]")).unwrap_or_default();
+        match vectors.next_if(|v| v.first.0 as usize == k) {
+            Some(v) => {
+                let last = v.len.saturating_sub(1);
+                let _ =
+                    writeln!(out, "  {}[{}] = {}{range}  ({0}[0] .. {0}[{last}])", v.name, v.len, p.default);
+                k += v.len as usize;
+            }
+            None => {
+                let _ = writeln!(out, "  {} = {}{range}", p.name, p.default);
+                k += 1;
+            }
+        }
+    }
+    let _ = writeln!(out, "states");
+    for s in &model.states {
+        let _ = writeln!(out, "  {} = {}", s.name, show.show(&s.init));
+    }
+    let _ = writeln!(out, "modes");
+    for (k, m) in model.modes.iter().enumerate() {
+        let initial = if k == model.initial_mode.0 as usize { " (initial)" } else { "" };
+        let _ = writeln!(out, "  {}{initial}", m.name);
+        for (s, f) in model.states.iter().zip(&m.flows) {
+            let _ = writeln!(out, "    der({}) = {}", s.name, show.show(f));
+        }
+    }
+    let _ = writeln!(out, "events");
+    for ev in model.events.iter().filter(|e| !e.implicit) {
+        let dir = match ev.direction {
+            Direction::Falling => "falling (from > 0 to <= 0)",
+            Direction::Rising => "rising (from < 0 to >= 0)",
+            Direction::Either => "either way",
+        };
+        let scope = match ev.owner {
+            Some(m) => format!("in mode {}", model.modes[m.0 as usize].name),
+            None => "in every mode".to_string(),
+        };
+        let _ = writeln!(out, "  {} ({scope}): guard {}, fires {dir}", ev.name, show.show(&ev.guard));
+        if ev.condition.is_some() {
+            let _ = writeln!(out, "    only if its condition holds");
+        }
+        for (s, e) in &ev.resets {
+            let _ = writeln!(out, "    {} := {}", model.states[s.0 as usize].name, show.show(e));
+        }
+        if let Some(t) = ev.target {
+            let _ = writeln!(out, "    -> {}", model.modes[t.0 as usize].name);
+        }
+        if ev.is_stop {
+            let _ = writeln!(out, "    stop");
+        }
+    }
+    let switches: Vec<_> = model.events.iter().filter(|e| e.implicit && e.knot.is_none()).collect();
+    if !switches.is_empty() {
+        let _ = writeln!(
+            out,
+            "flow switches (where a flow jumps: located like events, the gradients jump there)"
+        );
+        for ev in switches {
+            let _ = writeln!(out, "  {}: at {} = 0", ev.name, show.show(&ev.guard));
+        }
+    }
+    // An input's knots are one line per input and mode (an input may have thousands).
+    let knots: Vec<_> = model.events.iter().filter_map(|e| Some((e, e.knot.as_ref()?))).collect();
+    if !knots.is_empty() {
+        let _ = writeln!(out, "input knots (integrator breakpoints)");
+        let mut start = 0;
+        while start < knots.len() {
+            let (ev, first) = knots[start];
+            let same = |&(e, k): &(&sema::Event, &sema::Knot)| {
+                e.owner == ev.owner && k.position == first.position && k.kind == first.kind
+            };
+            let run = knots[start..].iter().take_while(|e| same(e)).count();
+            let last = knots[start + run - 1].1;
+            let mode = ev.owner.map_or("?", |m| model.modes[m.0 as usize].name.as_str());
+            let what = match first.kind {
+                sema::InputKind::Pwl => "kinks: steps land on them",
+                sema::InputKind::Pwc => "jumps: located like flow switches",
+            };
+            let _ = writeln!(
+                out,
+                "  {}(t, .., {}) in mode {mode}: knots {} .. {} at {} = k ({what})",
+                first.kind.name(),
+                first.vector,
+                first.k,
+                last.k,
+                show.show(&first.position),
+            );
+            start += run;
+        }
+    }
+    let _ = writeln!(out, "outputs");
+    for o in &model.outputs {
+        let _ = writeln!(out, "  {} = {}", o.name, show.show(&o.expr));
+    }
+    out
+}
