@@ -37,6 +37,7 @@ pub mod diag;
 pub mod expr;
 pub mod fit;
 pub mod gradcheck;
+pub mod interval;
 pub mod limits;
 pub mod lower;
 pub mod number;

@@ -133,7 +133,7 @@ fn bool_value(b: bool) -> f64 {
 
 /// One instruction of a [`Tape`]; operands are slots of earlier instructions.
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Inst {
+pub(super) enum Inst {
     Const(f64),
     State(u32),
     Param(u32),
@@ -177,6 +177,17 @@ impl Tape {
         }
         let roots = roots.iter().map(|r| slot[r.index()]).collect();
         Tape { insts, roots }
+    }
+
+    /// The instructions, in evaluation order (for the other evaluators of the store's
+    /// semantics: `enclose`).
+    pub(super) fn insts(&self) -> &[Inst] {
+        &self.insts
+    }
+
+    /// The slots of the roots' values.
+    pub(super) fn roots(&self) -> &[u32] {
+        &self.roots
     }
 
     /// Number of root values `eval` writes.
