@@ -104,10 +104,10 @@ def without_timings(report):
 
 @pytest.mark.parametrize("shards", [None, 3, 16])
 def test_multi_start_optimisation_equals_the_local_one(client, ball, shards):
-    # The ball's two-parameter exercise: 16 seeded starts over h0 in [0.5, 2] find three bounce
+    # The ball's two-parameter exercise: 32 seeded starts over h0 in [0.5, 2] find three bounce
     # branches; spread over 2 workers in 2, 3 or 16 shards the report is the local one.
     problem = (["h0", "e"], "h0", ["energy = 2", "y = 0.1"])
-    kw = dict(bounds={"h0": (0.5, 2), "e": (0.75, 0.95)}, starts=16, seed=1)
+    kw = dict(bounds={"h0": (0.5, 2), "e": (0.75, 0.95)}, starts=32, seed=1)
     local = ball.optimize(*problem, **kw)
     shared = hybc.dask.optimize(ball, *problem, client=client, shards=shards, **kw)
     assert len(local["optima"]) == 3, local["optima"]

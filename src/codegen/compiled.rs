@@ -16,7 +16,8 @@ use super::translate::{declare_callees, define_driver, define_kernel};
 use super::{
     CodegenError, CompileOptions, OptLevel, RegAlloc, AUTO_REGALLOC_LIMIT, AUTO_REGALLOC_NODE_LIMIT,
 };
-use crate::expr::ModelFunctions;
+use crate::expr::{Enclosure, ModelFunctions};
+use crate::interval::{Dual, Interval};
 use crate::sim::{HybridSystem, SystemInfo};
 
 /// The native signature shared by every kernel (see `lower`).
@@ -80,6 +81,8 @@ pub struct CompiledModel {
     kernels: ModelKernels<Kernel>,
     /// Each event's `R_x` entries, in the order its `reset_jac` kernel writes their values.
     reset_patterns: Vec<Vec<(u32, u32)>>,
+    /// Each event's guard as interval code (`HybridSystem::guard_enclosure`).
+    enclosures: Vec<Enclosure>,
     n_kernels: usize,
     module: Mutex<Option<JITModule>>,
     /// The model's functions, kept to compile the stiff kernels on demand (their second
@@ -135,6 +138,7 @@ impl CompiledModel {
                     .iter()
                     .map(|ev| ev.reset_x.entries.iter().map(|&(i, c, _)| (i, c)).collect())
                     .collect(),
+                enclosures: funcs.events.iter().map(|ev| Enclosure::new(&funcs.store, ev.guard)).collect(),
                 // A kernel cut into parts is the parts plus their driver.
                 n_kernels: parts.iter().map(|(_, p)| if p.len() > 1 { p.len() + 1 } else { 1 }).sum(),
                 kernels,
@@ -482,6 +486,33 @@ impl HybridSystem for CompiledModel {
                 f64::NAN
             }
         }
+    }
+
+    fn guard_enclosure(
+        &self,
+        event: usize,
+        t: Interval,
+        x: &[Interval],
+        dx: &[Interval],
+        p: &[f64],
+        scratch: &mut Vec<Dual>,
+    ) -> Dual {
+        match self.enclosures.get(event) {
+            // The interval code reads only the guard's states and parameters, by index; the
+            // slices must be long enough (the integrator passes the model's lengths).
+            Some(e)
+                if x.len() >= self.info.n_states()
+                    && dx.len() >= x.len()
+                    && p.len() >= self.info.n_params() =>
+            {
+                e.eval(t, x, dx, p, scratch)
+            }
+            _ => Dual { v: Interval::ENTIRE, d: Interval::ENTIRE },
+        }
+    }
+
+    fn guard_states(&self, event: usize) -> Option<&[u32]> {
+        self.enclosures.get(event).map(Enclosure::states)
     }
 
     fn condition(&self, event: usize, t: f64, x: &[f64], p: &[f64]) -> bool {

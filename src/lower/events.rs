@@ -60,8 +60,5 @@ pub fn classify_events(funcs: &ModelFunctions, info: &mut SystemInfo) {
         let contact = (0..read.len()).any(|j| read[j] && assigns(j));
         info.events[e].guard = shape;
         info.events[e].contact = contact;
-        // Reads neither a state nor anything else that moves but the time (not `Time`: then the
-        // steps land on its crossing anyway).
-        info.events[e].time_only = shape == GuardShape::Nonlinear && ev.guard_x.entries.is_empty();
     }
 }

@@ -7,7 +7,8 @@
 //! `src/sim/system.rs`. Array lengths are the caller's responsibility, as the trait states; a mode
 //! or event index out of range leaves the outputs untouched instead of panicking.
 
-use crate::expr::{ExprId, ModelFunctions, SparseMat, SparseVec, Tape};
+use crate::expr::{Enclosure, ExprId, ModelFunctions, SparseMat, SparseVec, Tape};
+use crate::interval::{Dual, Interval};
 use crate::sim::{HybridSystem, SystemInfo};
 
 /// Roots evaluated together and scattered into up to three output arrays.
@@ -62,6 +63,7 @@ struct EventKernels {
     reset: Tape,
     /// Arrays: rx, rp, rt.
     reset_jac: Kernel,
+    enclosure: Enclosure,
 }
 
 /// Runs a model's functions with the reference evaluator.
@@ -163,6 +165,7 @@ impl Interpreter {
                     condition: ev.condition.map(|c| Tape::new(store, &[c])),
                     reset: Tape::new(store, &ev.reset),
                     reset_jac: Kernel::new(store, rparts),
+                    enclosure: Enclosure::new(store, ev.guard),
                 }
             })
             .collect();
@@ -251,6 +254,25 @@ impl HybridSystem for Interpreter {
             e.guard_grad.run(t, x, p, &mut [gx, gp, &mut gt]);
         }
         gt[0]
+    }
+
+    fn guard_enclosure(
+        &self,
+        event: usize,
+        t: Interval,
+        x: &[Interval],
+        dx: &[Interval],
+        p: &[f64],
+        scratch: &mut Vec<Dual>,
+    ) -> Dual {
+        match self.events.get(event) {
+            Some(e) => e.enclosure.eval(t, x, dx, p, scratch),
+            None => Dual { v: Interval::ENTIRE, d: Interval::ENTIRE },
+        }
+    }
+
+    fn guard_states(&self, event: usize) -> Option<&[u32]> {
+        self.events.get(event).map(|e| e.enclosure.states())
     }
 
     fn condition(&self, event: usize, t: f64, x: &[f64], p: &[f64]) -> bool {

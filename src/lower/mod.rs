@@ -132,7 +132,6 @@ pub fn system_info(model: &Model, grad_params: &[sema::ParamIdx]) -> SystemInfo 
                 // the interpreter call it); until then the cautious defaults.
                 guard: sim::GuardShape::Nonlinear,
                 contact: false,
-                time_only: false,
             })
             .collect(),
         initial_mode: model.initial_mode.0 as usize,

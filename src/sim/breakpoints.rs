@@ -45,8 +45,7 @@ impl Breakpoints {
 }
 
 /// Events this close to a breakpoint, relative to `max(|t|, 1)`, are flagged: their derivatives
-/// hold only while they stay on their side of it (the resolution at which Zeno tells instants
-/// apart, `zeno::ACCUMULATION_RESOLUTION`).
+/// hold only while parameter changes keep them on their side of it.
 const NEAR_BREAKPOINT: f64 = 1e-9;
 
 /// Whether `t` is on the breakpoint `at` to round-off (16 spacings of `t`, as the guards'
@@ -56,8 +55,7 @@ pub(crate) fn on_breakpoint(t: f64, at: f64) -> bool {
     (at - t).abs() <= 16.0 * (at.abs().next_up() - at.abs())
 }
 
-/// Events within the resolution at which instants are told apart (`1e-9 max(|t|, 1)`, as for
-/// Zeno) before `t_end`, or of a time event they are not a time event with: their derivatives
+/// Events within `1e-9 max(|t|, 1)` before `t_end`, or of a time event they are not a time event with: their derivatives
 /// hold only while they stay on their side (`SimWarning::NearBreakpoint`). Time events fire on
 /// their breakpoint by construction and are not warned about themselves.
 pub(crate) fn near_breakpoints(

@@ -48,15 +48,16 @@ const AFTER_RESET_GROWTH: f64 = 1000.0;
 const SWITCH_SIDE_TRIES: usize = 40;
 /// Rejections in a row with a non-finite trial state before the run gives up on shrinking.
 const MAX_NONFINITE_REJECTS: usize = 30;
-/// A step this short relative to `max(|t|, 1)` is taken even when a nonlinear guard is not
-/// resolved by it, with the guard checked at its samples only: a guard with a kink (`abs`, `min`,
-/// `max`) is not resolved by a cubic however short the step.
-const GUARD_RESOLUTION_FLOOR: f64 = 1e-9;
+/// A step this short relative to `max(|t|, 1)` is taken even when a guard's walk over it examined
+/// its most pieces (`event::enclose::MAX_PIECES`), with what the walk found: longer ones are
+/// retried a quarter as long.
+const GUARD_WALK_FLOOR: f64 = 1e-9;
+/// A step this short relative to `max(|t|, 1)` is kept even when a running cost's own error
+/// exceeds its tolerance (an integrable singularity, `1 / sqrt(t)` at 0): the run warns instead.
+const COST_FLOOR: f64 = 1e-9;
 /// After an instant, the next step reaches this far past the next crossing the last step saw
 /// (relative to the distance to it): past it despite the error of its estimate, not far beyond.
 const NEXT_CROSSING_REACH: f64 = 1.5;
-/// Growth of the step size allowed by a resolved nonlinear guard, per step.
-const GUARD_GROWTH: f64 = 4.0;
 /// The largest Newton correction of a landed event instant, relative to the landed step: the
 /// dense output's error moves the root by far less; more means something else went wrong, and
 /// the dense output's state is taken.
@@ -78,12 +79,11 @@ struct Plan {
 }
 
 /// What an accepted attempt needs: its dense output for the events (`for_events`) or for samples
-/// (`sample_due`), and the growth its nonlinear guards allow the next step.
+/// (`sample_due`).
 #[derive(Clone, Copy, Debug)]
 struct Look {
     for_events: bool,
     sample_due: bool,
-    guard_factor: f64,
 }
 
 /// What one [`Integrator::step`] did.
@@ -120,6 +120,9 @@ pub(crate) struct Workspace<St: Stepper = Rk> {
     pub(crate) output_jac: OutputJac,
     /// The states on either side of a flow switch.
     pub(crate) x_sides: (Vec<f64>, Vec<f64>),
+    /// The flow before a flow switch (where the far side is found along it), and the state on the
+    /// far side of the switches of an instant, where the run restarts (`restart_past_switches`).
+    pub(crate) switch_flow: (Vec<f64>, Vec<f64>),
     /// Outputs and an interpolated `z` for recorded points.
     pub(crate) record_buf: (Vec<f64>, Vec<f64>),
     /// The state before a round of events at one instant, and the guards there.
@@ -178,6 +181,8 @@ pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = R
     /// The mode the last step integrated in (the detector's speeds belong to its guards).
     step_mode: usize,
     events: Vec<EventRecord>,
+    /// Whether the events accumulate (rule 10), watched round by round.
+    zeno: zeno::Watch,
     warnings: Vec<SimWarning>,
     stats: SimStats,
     /// Total derivative of the final state and `dt/dp` of a stop event.
@@ -211,6 +216,8 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         sys.initial_state(p, &mut work.z[..n]);
         sys.initial_sens(p, &mut work.z[n..]);
         work.void.fill(false);
+        // The affine guards' gradients are the parameters' of this run.
+        work.det.start_run();
         let mut it = Integrator {
             sys,
             info,
@@ -230,6 +237,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             instant: None,
             step_mode: info.initial_mode,
             events: Vec::new(),
+            zeno: zeno::Watch::default(),
             warnings: Vec::new(),
             stats: SimStats::default(),
             stop_total: None,
@@ -365,7 +373,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                     self.work.det.group.push((ev, c));
                 }
                 None if self.work.det.dg0[pos].abs() <= speed_noise => {
-                    self.work.det.pending[pos] = Pending::OnGuard;
+                    self.work.det.set_pending(pos, Pending::OnGuard, noise);
                 }
                 None => {}
             }
@@ -455,18 +463,34 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         if err > 1.0 || err.is_nan() {
             return self.reject(&cx, plan, err, &mut rhs);
         }
+        // A running cost takes no part in the error test's norm, but a step that leaves it less
+        // accurate than the tolerance is not kept: its own scaled error rejects the step, down
+        // to the floor below which the run goes on and warns (`SimWarning::CostUnresolved`).
+        let (cost_err, _) = self.work.stepper.outside_error();
+        if cost_err > 1.0 && cost_err.is_finite() && plan.h > COST_FLOOR * plan.t0.abs().max(1.0) {
+            return self.reject(&cx, plan, cost_err, &mut rhs);
+        }
         self.nonfinite_rejects = 0;
         let look = match self.examine(&cx, plan, &mut rhs) {
             Ok(look) => look,
             Err(outcome) => return outcome,
         };
-        self.note_cost_error(plan.t0);
-        let h_next = self.work.stepper.grow(err).min(plan.h * look.guard_factor);
-        self.stats.steps += 1;
+        // The controller learns from the step (and counts it) only once it stands: a step retried
+        // to land before a flow switch is a rejection, for the step statistics as for `auto`'s.
         let selection = match self.select_events(&cx, plan, look, &mut rhs) {
             Ok(selection) => selection,
+            Err(StepOutcome::Done(stop)) => {
+                self.work.stepper.grow(err);
+                self.stats.steps += 1;
+                return StepOutcome::Done(stop);
+            }
             Err(outcome) => return outcome,
         };
+        let h_next = self.work.stepper.grow(err);
+        self.stats.steps += 1;
+        // Only a step that stands counts: one retried to land before a flow switch it straddled
+        // carried the other branch's error.
+        self.note_cost_error(plan.t0);
         match selection {
             Selection::Nothing if self.work.det.penetrated().is_some() => {
                 // Stop where the last bounce left the state (the step is not taken).
@@ -551,31 +575,17 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         StepOutcome::Rejected
     }
 
-    /// An attempt that passed its error test: its guards at the end, whether it needs its dense
-    /// output (for events or samples), and how its nonlinear guards limit the next step; a step
-    /// that does not resolve one is rejected (`Err`).
+    /// An attempt that passed its error test: its guards at the end and whether it needs its
+    /// dense output (for events or samples), built then.
     fn examine<F: Rhs>(&mut self, cx: &Guards<'a, S>, plan: Plan, rhs: &mut F) -> Result<Look, StepOutcome> {
-        let (t0, t1, h_try) = (plan.t0, plan.t1, plan.h);
+        let (t0, t1) = (plan.t0, plan.t1);
         self.work.det.eval_end(cx, t1, &self.work.stepper);
         let for_events = self.work.det.mark_candidates(cx);
         let sample_due = self.sampler.wanted(&*self.recorder, t1);
         if for_events || sample_due {
             self.work.stepper.build_interpolant(t0, &self.work.z, rhs);
         }
-        let mut guard_factor = f64::INFINITY;
-        if for_events {
-            let control = self.work.det.check_resolution(cx, self.work.stepper.interpolant());
-            if !control.resolved && h_try > GUARD_RESOLUTION_FLOOR * t0.abs().max(1.0) {
-                // A guard not resolved by the step: shorter, as for an error estimate.
-                self.stats.rejected += 1;
-                self.h = h_try * control.factor.min(0.9);
-                return Err(StepOutcome::Rejected);
-            }
-            if control.factor.is_finite() {
-                guard_factor = control.factor.min(GUARD_GROWTH);
-            }
-        }
-        Ok(Look { for_events, sample_due, guard_factor })
+        Ok(Look { for_events, sample_due })
     }
 
     /// The events the accepted step ends with: the earliest crossings inside it, or a flow switch
@@ -592,10 +602,19 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let (t0, t1) = (plan.t0, plan.t1);
         let mut selection = if look.for_events {
             self.work.det.scan(cx, self.work.stepper.interpolant(), t1);
+            if self.work.det.exhausted && plan.h > GUARD_WALK_FLOOR * t0.abs().max(1.0) {
+                // A guard too intricate over this step for the walk's pieces: a shorter step.
+                self.work.det.forget_findings();
+                self.stats.rejected += 1;
+                self.h = 0.25 * plan.h;
+                return Err(StepOutcome::Rejected);
+            }
             if let Some(pos) = self.work.det.stuck() {
                 return Err(StepOutcome::Done(self.stuck_on_guard(cx.events()[pos])));
             }
-            if let Some(h) = self.landing.retry(&mut self.work.det, cx, self.work.stepper.interpolant(), t0) {
+            let dense = self.work.stepper.interpolant();
+            let stray = self.work.det.stray_stage(cx, &self.work.stepper, dense, t0, plan.h);
+            if let Some(h) = self.landing.retry(&mut self.work.det, cx, dense, t0, stray) {
                 self.h = h;
                 self.stats.rejected += 1;
                 return Err(StepOutcome::Rejected);
@@ -822,9 +841,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             *void |= s.is_nan();
         }
         if self.events.len() >= self.opts.max_events {
-            return StepOutcome::Done(StopReason::MaxEvents { time: self.t, count: self.events.len() });
+            return StepOutcome::Done(zeno::at_max_events(&self.events, self.t));
         }
-        if let Some(stop) = zeno::accumulating(&self.events) {
+        if let Some(stop) = self.zeno.accumulating(&self.events) {
             return StepOutcome::Done(stop);
         }
         if let Some(stop) = self.after_instant() {
@@ -926,7 +945,8 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     fn after_instant(&mut self) -> Option<StopReason> {
         self.work.det.clear_bounces();
         for &pos in &self.work.reset_onto {
-            self.work.det.pending[pos] = Pending::OnGuard;
+            let (noise, _) = self.work.det.noise0(&self.guards(), pos);
+            self.work.det.set_pending(pos, Pending::OnGuard, noise);
         }
         let evs = &self.info.modes[self.mode].events;
         for &(ev, sigma, speed_before) in self.work.fired.iter() {
@@ -943,7 +963,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             // turns around is a bounce. Stopping on the first (round 2's rule) stopped every
             // gear shift, thermostat and dose that changes its own clearance.
             if einfo.contact && on_guard && self.work.det.dg0[pos].abs() <= speed_noise {
-                self.work.det.pending[pos] = Pending::Contact;
+                self.work.det.set_pending(pos, Pending::Contact, noise + located);
                 continue;
             }
             self.work.det.note_bounce(pos, sigma, speed_before);
@@ -1143,16 +1163,38 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         // past its end, and DOP853 went on from `y = 7.2e41`.
         let ulp = t.abs().max(f64::MIN_POSITIVE).next_up() - t.abs().max(f64::MIN_POSITIVE);
         let reach = (dense.t0() + 2.0 * dense.h()).max(t + 64.0 * ulp);
+        let mut across = false;
         for _ in 0..SWITCH_SIDE_TRIES {
             dense.eval(t_post, x_post);
             let g = self.work.det.guard_now(&cx, pos, t_post, x_post);
-            if crossing.sigma * g < 0.0 || t_post >= reach {
+            across = crossing.sigma * g < 0.0;
+            if across || t_post >= reach {
                 break;
             }
             gap = if gap == 0.0 { t_post.next_up() - t_post } else { 2.0 * gap };
             t_post = (t + gap).min(reach);
         }
-        self.switch_post = Some(self.switch_post.map_or(t_post, |tp| tp.max(t_post)));
+        if !across {
+            // Not across within what the dense output holds (a step of a few spacings, landed
+            // just before the switch, resolves nothing at the scale of its own length): the far
+            // side along the flow before the switch, where only the branch matters.
+            let f_pre = &mut self.work.switch_flow.0;
+            self.sys.flow(self.mode, crossing.t_pre, x_pre, self.p, &mut f_pre[..n]);
+            for _ in 0..SWITCH_SIDE_TRIES {
+                gap = if gap == 0.0 { t.next_up() - t } else { 2.0 * gap };
+                t_post = t + gap;
+                for ((xp, x0), f) in x_post.iter_mut().zip(x_pre.iter()).zip(&f_pre[..n]) {
+                    *xp = x0 + (t_post - crossing.t_pre) * f;
+                }
+                if crossing.sigma * self.work.det.guard_now(&cx, pos, t_post, x_post) < 0.0 {
+                    break;
+                }
+            }
+        }
+        if self.switch_post.is_none_or(|tp| t_post > tp) {
+            self.switch_post = Some(t_post);
+            self.work.switch_flow.1.copy_from_slice(x_post);
+        }
         if kink {
             return;
         }
@@ -1174,9 +1216,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             return;
         }
         let n = self.n;
-        let x_post = &mut self.work.x_sides.1;
-        self.work.stepper.interpolant().eval(t_post, x_post);
-        self.work.z[..n].copy_from_slice(&x_post[..n]);
+        self.work.z[..n].copy_from_slice(&self.work.switch_flow.1[..n]);
         self.t = t_post;
     }
 

@@ -480,8 +480,9 @@ pub enum StopReason {
         /// Its name.
         name: Arc<str>,
     },
-    /// Events accumulate towards a point: a bounce too small to resolve, or intervals shrinking
-    /// geometrically to below the resolution of time.
+    /// Events accumulate towards a point (docs/language.md rule 10): a bounce too small to
+    /// resolve, intervals shrinking until what is left of them is below the accuracy of the event
+    /// times, or a record at `max_events` whose intervals shrink summably.
     Zeno {
         /// The time of the last event.
         time: f64,
@@ -489,8 +490,9 @@ pub enum StopReason {
         event: usize,
         /// How many times it fired.
         count: usize,
-        /// Geometric extrapolation of the last inter-event intervals, when they shrink.
-        accumulation: Option<f64>,
+        /// Where the events accumulate, from the decay of the intervals between them (when
+        /// enough of them shrink).
+        accumulation: Option<Accumulation>,
     },
     /// `max_events` events have fired.
     MaxEvents {
@@ -516,6 +518,49 @@ pub enum StopReason {
         /// The fault.
         error: SimError,
     },
+}
+
+/// Where a Zeno run's events accumulate, fitted to the intervals between them
+/// (docs/language.md rule 10).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Accumulation {
+    /// The estimated accumulation point.
+    pub estimate: f64,
+    /// The same fit over the latest half of the shrinking intervals, when later than the
+    /// estimate: an upper end for the accumulation point as long as the decay does not slow down.
+    pub upper: Option<f64>,
+    /// How the intervals shrink.
+    pub decay: Decay,
+}
+
+/// How the intervals between accumulating events shrink.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub enum Decay {
+    /// By a constant ratio per interval.
+    Geometric {
+        /// The ratio of successive intervals.
+        ratio: f64,
+    },
+    /// Like `(k + k0)^-exponent`.
+    Power {
+        /// The exponent (summable above 1).
+        exponent: f64,
+    },
+    /// Too little to be told (the intervals did not halve over the fit's span).
+    Unclear,
+}
+
+impl Accumulation {
+    /// ` near t = T (at most U; intervals shrinking like k^-p)`, for a message.
+    pub fn describe(&self) -> String {
+        let upper = self.upper.map(|u| format!("at most {u:.10}; ")).unwrap_or_default();
+        let decay = match self.decay {
+            Decay::Geometric { ratio } => format!("intervals shrinking geometrically, ratio {ratio:.4}"),
+            Decay::Power { exponent } => format!("intervals shrinking like k^-{exponent:.2}"),
+            Decay::Unclear => "intervals shrinking".to_string(),
+        };
+        format!(" near t = {:.10} ({upper}{decay})", self.estimate)
+    }
 }
 
 impl StopReason {
@@ -559,7 +604,7 @@ impl StopReason {
                 "Zeno behaviour: event `{}` fired {count} times, the last at t = {time}; events \
                  accumulate{} ({})",
                 event_name(*event),
-                accumulation.map(|a| format!(" near t = {a:.10}")).unwrap_or_default(),
+                accumulation.as_ref().map(Accumulation::describe).unwrap_or_default(),
                 where_(),
             ),
             StopReason::MaxEvents { time, count } => format!(

@@ -107,6 +107,7 @@ impl<St: Stepper> ShapedWork<'_, St> {
             fired: Vec::new(),
             output_jac: (vec![0.0; k * n], vec![0.0; k * m], vec![0.0; k]),
             x_sides: (vec![0.0; n], vec![0.0; n]),
+            switch_flow: (vec![0.0; n], vec![0.0; n]),
             record_buf: (vec![0.0; k], vec![0.0; nz]),
             before: (vec![0.0; n], Vec::new()),
             instant_dte: vec![0.0; m],

@@ -16,8 +16,9 @@ use super::method::stepper::{Interpolant, Rhs, Stepper};
 use super::system::HybridSystem;
 
 const EPS: f64 = f64::EPSILON;
-/// Retries of one step landing before a flow switch it crossed (each lands earlier than the last).
-const SWITCH_RETRIES: u8 = 4;
+/// Retries of one step landing before a flow switch it crossed or a stage of it strayed across
+/// (each lands earlier than the last).
+const SWITCH_RETRIES: u8 = 8;
 /// A switch this many spacings of `t` past a step that landed before it (by the guard's value
 /// over its speed) is crossed at the step's end.
 const SWITCH_NEAR: f64 = 64.0;
@@ -51,19 +52,35 @@ impl SwitchLanding {
         self.target = None;
     }
 
-    /// After a step from `t0` whose scan (`det`) found a flow switch crossed inside it: the step
-    /// size of the retry landing just before it, or `None` to go on as it is. A switch within a
-    /// resolvable distance of the start is crossed as before; the landing time must fall at each
-    /// retry (at most [`SWITCH_RETRIES`]), so this ends.
+    /// After a step from `t0` whose scan (`det`) found a flow switch crossed inside it, or one of
+    /// whose stages left a switch's side (`stray`: position, side, the time to land before it,
+    /// from `Detector::stray_stage`): the step size of the retry landing just before the earlier
+    /// of the two, or `None` to go on as it is. A switch within a resolvable distance of the
+    /// start is crossed as before; the landing time must fall at each retry (at most
+    /// [`SWITCH_RETRIES`]), so this ends.
     pub fn retry<S: HybridSystem + ?Sized, I: Interpolant>(
         &mut self,
         det: &mut Detector,
         cx: &Guards<S>,
         dense: &I,
         t0: f64,
+        stray: Option<(usize, f64, f64)>,
     ) -> Option<f64> {
-        let (pos, crossing) = det.earliest_switch(cx, dense)?;
-        let t_pre = crossing.t_pre;
+        // A switch on zero at the start that the step carries across crosses there: no retry.
+        let crossed = det
+            .earliest_switch(cx, dense)
+            .filter(|&(pos, _)| !det.crosses_at_start(cx, pos))
+            .map(|(pos, c)| (pos, c.sigma, c.t_pre));
+        let (pos, sigma, t_pre) = match (crossed, stray) {
+            (Some(a), Some(b)) => {
+                if b.2 < a.2 {
+                    b
+                } else {
+                    a
+                }
+            }
+            (a, b) => a.or(b)?,
+        };
         let resolvable = t_pre - t0 > 8.0 * EPS * t0.abs().max(f64::MIN_POSITIVE);
         let retries = match self.target {
             Some(l) if l.t_pre > t0 => {
@@ -78,7 +95,7 @@ impl SwitchLanding {
             return None;
         }
         det.forget_findings();
-        self.target = Some(Target { t_pre, retries, pos, sigma: crossing.sigma });
+        self.target = Some(Target { t_pre, retries, pos, sigma });
         Some(t_pre - t0)
     }
 
@@ -103,9 +120,8 @@ impl SwitchLanding {
             return None;
         }
         stepper.build_interpolant(t0, z, rhs);
-        det.check_resolution(cx, stepper.interpolant());
         det.scan(cx, stepper.interpolant(), t1);
-        let retry = self.retry(det, cx, stepper.interpolant(), t0);
+        let retry = self.retry(det, cx, stepper.interpolant(), t0, None);
         det.forget_findings();
         retry
     }

@@ -13,6 +13,8 @@
 
 use std::sync::Arc;
 
+use crate::interval::{Dual, Interval};
+
 /// Relative step of the default central differences (`HybridSystem::flow_jac`): the cube root
 /// of the machine epsilon balances truncation (h^2) against round-off (eps / h).
 const FD_STEP: f64 = 6.0554544523933395e-6;
@@ -64,21 +66,17 @@ pub struct EventInfo {
     /// speed `g_x f + g_t` reads (a bounce, a stop). Such an event that leaves the state on its
     /// guard with the flow carrying it through again is stuck, not a fresh crossing.
     pub contact: bool,
-    /// Whether the guard reads no state (`sin(w t^2) crosses 0`, a flow switch of
-    /// `if sin(w t) > 0.9`): its value at any time is known exactly, without the dense output,
-    /// so a step that does not resolve it can be sampled more densely instead
-    /// (`event::detect::Detector::scan`). `false` is always safe.
-    pub time_only: bool,
 }
 
 /// The shape of a guard along a trajectory, from its symbolic derivatives.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum GuardShape {
-    /// Anything else: checked at interior points of every step, and the step shortened until the
-    /// guard is resolved (see `docs/language.md`, when events fire).
+    /// Anything else: enclosed over pieces of every step by interval code
+    /// (`HybridSystem::guard_enclosure`; see `docs/language.md`, when events fire).
     Nonlinear,
-    /// `g_x` and `g_t` are constants: the guard's speed is sampled at every stage of a step.
+    /// `g_x` and `g_t` are constants: along a step's dense output the guard is a polynomial,
+    /// bounded piece by piece by its Bernstein coefficients.
     Affine,
     /// `g = c t + d(p)`: a time event, landed on exactly as a breakpoint.
     Time,
@@ -268,6 +266,31 @@ pub trait HybridSystem: Sync {
     }
     /// Partial derivatives of one guard: `gx` (n), `gp` (m), returns `g_t`.
     fn guard_grad(&self, event: usize, t: f64, x: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) -> f64;
+    /// Enclosures of event `event`'s guard and of its time derivative along a trajectory:
+    /// `g(t, x, p)` in `.v` and `g_x x' + g_t` in `.d` for every time in `t` and states in `x`
+    /// moving at rates in `dx` (one interval per state; only [`Self::guard_states`] are read),
+    /// with `scratch` for intermediate values. Event detection proves with them where a guard
+    /// cannot change sign (`event::enclose`). The default knows nothing (`ENTIRE`): detection is
+    /// then left to bisection and point values, correct but slow, fit only for hand-written
+    /// systems with affine guards, which never ask. A compiled model evaluates interval code made
+    /// from the guard's expression (`expr::Enclosure`).
+    fn guard_enclosure(
+        &self,
+        event: usize,
+        t: Interval,
+        x: &[Interval],
+        dx: &[Interval],
+        p: &[f64],
+        scratch: &mut Vec<Dual>,
+    ) -> Dual {
+        let _ = (event, t, x, dx, p, scratch);
+        Dual { v: Interval::ENTIRE, d: Interval::ENTIRE }
+    }
+    /// The states event `event`'s guard reads, ascending; `None` (the default): unknown, all.
+    fn guard_states(&self, event: usize) -> Option<&[u32]> {
+        let _ = event;
+        None
+    }
     /// Whether the enabling condition holds (true for events without one).
     fn condition(&self, event: usize, t: f64, x: &[f64], p: &[f64]) -> bool;
 

@@ -10,6 +10,7 @@ use std::process::Output;
 
 use hybc::codegen::{compile, CompileOptions};
 use hybc::gradcheck::{check, check_within, CheckOptions};
+use hybc::interval::{Dual, Interval};
 use hybc::lower::{lower, system_info};
 use hybc::sema::ParamIdx;
 use hybc::sim::{run, Direction, EventInfo, GuardShape, HybridSystem, ModeInfo, SimOptions, SystemInfo};
@@ -302,16 +303,19 @@ fn a_projectile_landing_on_a_stop_event_passes_with_its_height_within_noise() {
         assert!(c["worst"]["discrepancy"].as_f64().unwrap() < 1e-7, "{c}");
     }
     // h0 = 0 has no range: an absolute step, said in a note. Its height's difference quotient is
-    // round-off over h, far from the reported 0 in relative terms, but within the resolution.
+    // round-off over h (or exactly 0, where the three runs land with the same round-off), far
+    // from the reported 0 in relative terms, but within the resolution: never a failure.
     let h0 = param_check(&json, "h0");
     assert_eq!(at(h0, &["step"]), 1e-5);
     assert!(h0["notes"][0].as_str().unwrap().contains("p = 0 with no declared range"), "{h0}");
     let noise = h0["within_noise"].as_array().unwrap();
-    assert_eq!(noise.len(), 1, "{h0}");
-    assert_eq!(noise[0]["quantity"], "state y");
-    let gap = (at(&noise[0], &["reported"]) - at(&noise[0], &["central"])).abs();
-    assert!(gap > 0.0 && gap <= at(&noise[0], &["resolution"]), "{h0}");
-    assert!(at(&noise[0], &["resolution"]) < 1e-6, "about atol / h = 1e-7: {h0}");
+    assert!(noise.len() <= 1, "{h0}");
+    for n in noise {
+        assert_eq!(n["quantity"], "state y");
+        let gap = (at(n, &["reported"]) - at(n, &["central"])).abs();
+        assert!(gap > 0.0 && gap <= at(n, &["resolution"]), "{h0}");
+        assert!(at(n, &["resolution"]) < 1e-6, "about atol / h = 1e-7: {h0}");
+    }
     let events = &json["check_grad"]["events"];
     assert_eq!((events["compared"].as_u64(), events["difference"].is_null()), (Some(1), true), "{events}");
 }
@@ -378,15 +382,15 @@ fn a_parameter_at_the_upper_end_of_its_range_gets_a_backward_difference() {
 }
 
 /// A clock `x` with `der(x) = a` (parameter `a`, differentiated) and one event `ripple`, either
-/// way, identity reset, on the guard `sin(w x)`: crossings at `x = k pi / w`. The guard is
-/// declared `Affine` although it oscillates: the integrator trusts the declaration, samples the
-/// guard's speed at the stages with `g_x` taken as a constant (so the speed never changes sign
-/// within a step) and takes steps as long as the error control allows, which for this exact flow
-/// is long: crossings between two step ends of the same sign are missed, and which ones depends
-/// on the step sizes.
+/// way, identity reset, on the guard `sin(w x)`: crossings at `x = k pi / w`. Without its
+/// enclosures (`enclosed: false`, as a hand-written system that gives none) the detector can
+/// only sample the guard inside each step (`HybridSystem::guard_enclosure`'s default), and this
+/// exact flow takes steps as long as the error control allows: crossings between samples of the
+/// same sign are missed, and which ones depends on the step sizes.
 struct Ripple {
     info: SystemInfo,
     w: f64,
+    enclosed: bool,
 }
 
 impl Ripple {
@@ -406,14 +410,14 @@ impl Ripple {
                     has_condition: false,
                     implicit: false,
                     kink: false,
-                    guard: GuardShape::Affine,
+                    guard: GuardShape::Nonlinear,
                     contact: false,
-                    time_only: false,
                 }],
                 initial_mode: 0,
                 quadrature: Vec::new(),
             },
             w,
+            enclosed: false,
         }
     }
 }
@@ -442,6 +446,22 @@ impl HybridSystem for Ripple {
         gx[0] = self.w * (self.w * x[0]).cos();
         gp[0] = 0.0;
         0.0
+    }
+    fn guard_enclosure(
+        &self,
+        _: usize,
+        _t: Interval,
+        x: &[Interval],
+        dx: &[Interval],
+        _p: &[f64],
+        _scratch: &mut Vec<Dual>,
+    ) -> Dual {
+        if !self.enclosed {
+            return Dual { v: Interval::ENTIRE, d: Interval::ENTIRE };
+        }
+        // sin(w x), moving at w cos(w x) x'.
+        let wx = x[0].scale(self.w);
+        Dual { v: wx.sin(), d: wx.cos().scale(self.w) * dx[0] }
     }
     fn condition(&self, _event: usize, _t: f64, _x: &[f64], _p: &[f64]) -> bool {
         true
@@ -500,10 +520,10 @@ fn events_that_change_with_the_step_size_fail_the_check() {
         table.contains("gradient check FAILED: the event sequence changes with the step size"),
         "{table}"
     );
-    // The same system declared honestly (`Nonlinear`: checked inside every step, taking part in
-    // step-size control) finds every crossing and passes.
+    // The same system with its enclosures (searched by them inside every step) finds every
+    // crossing and passes.
     let mut honest = Ripple::new(2.0 * std::f64::consts::PI);
-    honest.info.events[0].guard = GuardShape::Nonlinear;
+    honest.enclosed = true;
     let nominal = run(&honest, &p, &opts).expect("runs");
     assert_eq!(nominal.events.len(), 20);
     let c = check(&honest, &p, &opts, &nominal, &CheckOptions::for_rtol(opts.rtol)).expect("checks");

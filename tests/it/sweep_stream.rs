@@ -2,7 +2,8 @@
 //! they complete, byte for byte what the in-memory sweep of hybc 0.x wrote (files in
 //! tests/data/sweep, written by the build before streaming; rewritten by `hybc sweep --threads 1`
 //! when the error norm became one per block, issue #25 item 5, which moved the values by about
-//! 1e-14), for any thread count, and with a peak
+//! 1e-14, and when Zeno became a rule on the event sequence, issue #37 item 1.3, which stops the
+//! Zeno points at fewer bounces), for any thread count, and with a peak
 //! memory that does not grow with the number of points.
 
 use crate::support::cli::hybc;

@@ -4,6 +4,8 @@
 //! over closures; knows nothing of models, steps or events.
 
 const EPS: f64 = f64::EPSILON;
+/// The smallest positive double (a subnormal): the spacing of doubles below `2^-1022`.
+const TINY: f64 = 5e-324;
 /// A Newton step on the guard's Hermite cubic at most this long (in the step's unit interval)
 /// is the last one [`hermite_root`] takes.
 const NEWTON_LAST_STEP: f64 = 1e-9;
@@ -67,8 +69,9 @@ fn illinois_until<F: FnMut(f64) -> f64>(
     let mut push = 1.0f64;
     let mut last = f64::NAN;
     for it in 0..200 {
-        let resolution = EPS * a.abs().max(b.abs());
-        if b - a <= 2.0 * resolution || b - a <= f64::MIN_POSITIVE {
+        // Adjacent doubles, subnormal ones too (whose spacing is the smallest double).
+        let resolution = (EPS * a.abs().max(b.abs())).max(TINY);
+        if b - a <= 2.0 * resolution {
             break;
         }
         // Safeguard: bisect when the secant leaves the bracket, when the bracket is too narrow
@@ -90,17 +93,23 @@ fn illinois_until<F: FnMut(f64) -> f64>(
         if it % 4 == 3 {
             width = b - a;
         }
-        let d = push * resolution;
+        // The push is counted in spacings at the trial point's scale, not the bracket's: a root
+        // 1e-200 from `a = 0` in a bracket of 1e-3 is resolved to its own spacings, not pushed
+        // 1e-19 away and crept back to in 200 iterations.
+        let (da, db) = (
+            push * (EPS * a.abs().max(secant.abs())).max(TINY),
+            push * (EPS * b.abs().max(secant.abs())).max(TINY),
+        );
         // Which end the trial point was pushed away from: -1 for `b`, 1 for `a`.
         let mut pushed = 0i8;
-        let mut c = if stalled || !(secant >= a && secant <= b) || b - a <= 2.0 * d {
+        let mut c = if stalled || !(secant >= a && secant <= b) || b - a <= da + db {
             0.5 * (a + b)
-        } else if secant - a < d {
+        } else if secant - a < da {
             pushed = 1;
-            a + d
-        } else if b - secant < d {
+            a + da
+        } else if b - secant < db {
             pushed = -1;
-            b - d
+            b - db
         } else {
             secant
         };
@@ -311,5 +320,28 @@ mod tests {
         // A curved speed (-sin, extremum of cos at pi): within the tolerance of the step.
         let t = extremum_time(2.5, -2.5f64.sin(), 3.9, -3.9f64.sin(), |t| -t.sin());
         assert!((t - std::f64::consts::PI).abs() <= EXTREMUM_TOL * 1.4, "{t}");
+    }
+}
+
+#[cfg(test)]
+mod tiny_roots {
+    /// A root 1e-200 from the bracket's start, and one subnormal: resolved to their own spacings
+    /// in a few evaluations, a subnormal one in some more (the push was counted at the bracket's scale, 1e-19, and 200
+    /// evaluations left the bracket at [8e-205, 1.7e-198]).
+    #[test]
+    fn a_root_tiny_against_its_bracket_is_found_to_its_own_spacings() {
+        for root in [1e-200, 1e-300, 5e-310, 1e-12] {
+            let mut n = 0;
+            let (pre, t) = super::illinois(0.0, -root, 1e-3, 1e-3 - root, -1.0, None, |t| {
+                n += 1;
+                t - root
+            });
+            let spacing = (4.0 * f64::EPSILON * root).max(1e-323);
+            assert!(t >= root && t - root <= spacing, "{root}: {t}");
+            assert!(pre < root && root - pre <= spacing, "{root}: {pre}");
+            // Subnormal values carry fewer digits: the secant is rougher there.
+            let most = if root < f64::MIN_POSITIVE { 40 } else { 12 };
+            assert!(n <= most, "{root}: {n} evaluations");
+        }
     }
 }

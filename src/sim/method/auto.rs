@@ -331,11 +331,11 @@ impl Stepper for Auto {
         }
     }
 
-    fn visit_interior<V: FnMut(f64, &[f64])>(&self, visit: V) {
+    fn visit_stage_states<V: FnMut(f64, &[f64])>(&self, visit: V) {
         if self.stiff {
-            self.row.visit_interior(visit)
+            self.row.visit_stage_states(visit)
         } else {
-            self.rk.visit_interior(visit)
+            self.rk.visit_stage_states(visit)
         }
     }
 
@@ -397,6 +397,13 @@ impl Interpolant for AutoDense {
             self.row.linear_form(w, coef)
         } else {
             self.rk.linear_form(w, coef)
+        }
+    }
+    fn component_form(&self, i: usize, coef: &mut [f64; CAP]) -> usize {
+        if self.stiff {
+            self.row.component_form(i, coef)
+        } else {
+            self.rk.component_form(i, coef)
         }
     }
 }

@@ -151,29 +151,41 @@ impl Interpolant for Dense {
                 }
             }
         }
-        // q = rho[nc-1]; then q = rho[k] + m_k q with m_k = (1 - s) for odd k, s for even k.
-        let mut q = [0.0; CAP];
-        q[0] = rho[nc - 1];
-        let mut len = 1;
-        for k in (1..nc - 1).rev() {
-            // Multiply q by s (shift up), and for odd k by (1 - s) = 1 - s: q - s q.
-            let mut shifted = [0.0; CAP];
-            shifted[1..=len].copy_from_slice(&q[..len]);
-            if k % 2 == 1 {
-                for (a, b) in q.iter_mut().zip(&shifted).take(len + 1) {
-                    *a -= b;
-                }
-            } else {
-                q = shifted;
-            }
-            len += 1;
-            q[0] += rho[k];
-        }
-        // Times s.
-        coef.fill(0.0);
-        coef[1..=len].copy_from_slice(&q[..len]);
-        len + 1
+        expand_nested(&rho, nc, coef)
     }
+    fn component_form(&self, i: usize, coef: &mut [f64; CAP]) -> usize {
+        let nc = self.n_coef;
+        let mut rho = [0.0; CAP];
+        rho[1..nc].copy_from_slice(&self.r[i * MAX_COEF + 1..i * MAX_COEF + nc]);
+        expand_nested(&rho, nc, coef)
+    }
+}
+
+/// The power-basis coefficients of `s (rho1 + (1-s) (rho2 + s (rho3 + (1-s) (rho4 + ...))))`
+/// (`rho[1..nc]`) into `coef`; returns their count.
+fn expand_nested(rho: &[f64; CAP], nc: usize, coef: &mut [f64; CAP]) -> usize {
+    // q = rho[nc-1]; then q = rho[k] + m_k q with m_k = (1 - s) for odd k, s for even k.
+    let mut q = [0.0; CAP];
+    q[0] = rho[nc - 1];
+    let mut len = 1;
+    for k in (1..nc - 1).rev() {
+        // Multiply q by s (shift up), and for odd k by (1 - s) = 1 - s: q - s q.
+        let mut shifted = [0.0; CAP];
+        shifted[1..=len].copy_from_slice(&q[..len]);
+        if k % 2 == 1 {
+            for (a, b) in q.iter_mut().zip(&shifted).take(len + 1) {
+                *a -= b;
+            }
+        } else {
+            q = shifted;
+        }
+        len += 1;
+        q[0] += rho[k];
+    }
+    // Times s.
+    coef.fill(0.0);
+    coef[1..=len].copy_from_slice(&q[..len]);
+    len + 1
 }
 
 #[cfg(test)]

@@ -52,9 +52,10 @@ pub struct Rk {
     pub(crate) y_new: Vec<f64>,
     pub(crate) ytmp: Vec<f64>,
     pub(crate) dense: Dense,
-    /// The stages nearest a quarter, a half and three quarters of a step, by ascending `c`: where
-    /// a guard's speed is sampled.
-    interior: Vec<usize>,
+    /// The states of the last attempt's stages `1..stage_count` (`n_states` each, stage `i` at
+    /// `(i - 1) n_states`): `Stepper::visit_stage_states`.
+    stage_x: Vec<f64>,
+    stage_count: usize,
     /// The error estimates of the last attempt (5th- and 3rd-order for DOP853).
     err5: Vec<f64>,
     err3: Vec<f64>,
@@ -97,22 +98,8 @@ impl Rk {
             y_new: vec![0.0; nz],
             ytmp: vec![0.0; nz],
             dense: Dense::new(nz),
-            interior: {
-                let inside: Vec<usize> =
-                    (1..tab.stages).filter(|&i| tab.c[i] > 0.0 && tab.c[i] < 1.0).collect();
-                let mut stages: Vec<usize> = [0.25, 0.5, 0.75]
-                    .iter()
-                    .filter_map(|&at| {
-                        inside
-                            .iter()
-                            .copied()
-                            .min_by(|&a, &b| (tab.c[a] - at).abs().total_cmp(&(tab.c[b] - at).abs()))
-                    })
-                    .collect();
-                stages.sort_by(|&a, &b| tab.c[a].total_cmp(&tab.c[b]));
-                stages.dedup();
-                stages
-            },
+            stage_x: vec![0.0; tab.all_stages * n_states],
+            stage_count: 0,
             err5: vec![0.0; n_err],
             err3: vec![0.0; n_err],
             err_prev_beta: 0.0,
@@ -180,8 +167,11 @@ impl Rk {
         rhs: &mut R,
     ) {
         let nz = self.nz;
+        let n = self.n_states;
         for i in from..to {
             self.stage_input(y, i, h);
+            self.stage_x[(i - 1) * n..i * n].copy_from_slice(&self.ytmp[..n]);
+            self.stage_count = i + 1;
             let ti = t + self.tab.c[i] * h;
             rhs.eval(ti, &self.ytmp, &mut self.k[i * nz..(i + 1) * nz]);
             self.rhs_calls += 1;
@@ -254,6 +244,9 @@ impl Stepper for Rk {
         self.eval_stages(t, y, 1, s - 1, h, rhs);
         self.stage_input(y, s - 1, h);
         self.y_new.copy_from_slice(&self.ytmp);
+        let n = self.n_states;
+        self.stage_x[(s - 2) * n..(s - 1) * n].copy_from_slice(&self.ytmp[..n]);
+        self.stage_count = s;
         let nz = self.nz;
         rhs.eval(t + h, &self.y_new, &mut self.k[(s - 1) * nz..s * nz]);
         self.rhs_calls += 1;
@@ -302,9 +295,10 @@ impl Stepper for Rk {
         self.outside
     }
 
-    fn visit_interior<V: FnMut(f64, &[f64])>(&self, mut visit: V) {
-        for &i in &self.interior {
-            visit(self.tab.c[i], &self.k[i * self.nz..(i + 1) * self.nz]);
+    fn visit_stage_states<V: FnMut(f64, &[f64])>(&self, mut visit: V) {
+        let n = self.n_states;
+        for i in 1..self.stage_count {
+            visit(self.tab.c[i], &self.stage_x[(i - 1) * n..i * n]);
         }
     }
 

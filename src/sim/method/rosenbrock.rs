@@ -37,9 +37,6 @@ const FAC_MIN: f64 = 0.2;
 const FAC_MAX: f64 = 6.0;
 /// Most dense-output rows of any method (Rodas5P's three).
 const MAX_DENSE: usize = 3;
-/// Where the derivative is sampled inside a step for the event detector's sign checks.
-const INTERIOR: [f64; 3] = [0.25, 0.5, 0.75];
-
 /// A Rosenbrock method with its controller and dense output (a [`Stepper`]).
 pub struct Rosenbrock {
     tab: &'static RowTableau,
@@ -79,9 +76,9 @@ pub struct Rosenbrock {
     /// The dense output a landing step builds (`Stepper::land`), so that the last attempt's
     /// stays.
     landed: RowDense,
-    /// Derivatives of the dense output at [`INTERIOR`], of the states only (`n` each): the event
-    /// detector reads guard speeds, which depend on the states alone.
-    interior: Vec<f64>,
+    /// The states of the last attempt's stages `1..` (`n` each, stage `i` at `(i - 1) n`):
+    /// `Stepper::visit_stage_states`.
+    stage_x: Vec<f64>,
     rhs_calls: usize,
     jac_calls: usize,
 }
@@ -124,7 +121,7 @@ impl Rosenbrock {
             err: vec![0.0; nz],
             dense: RowDense::new(nz),
             landed: RowDense::new(nz),
-            interior: vec![0.0; INTERIOR.len() * n],
+            stage_x: vec![0.0; tab.stages.saturating_sub(1) * n],
             rhs_calls: 0,
             jac_calls: 0,
         }
@@ -200,6 +197,7 @@ impl Rosenbrock {
                     [u, g],
                     |e, [u, _]| *u = y[e] + h * *u,
                 );
+                self.stage_x[(i - 1) * n..i * n].copy_from_slice(&self.u[..n]);
                 rhs.eval(t + tab.c[i] * h, &self.u, ki);
                 self.rhs_calls += 1;
                 // `+= h f_x g` on the state block and on every sensitivity column.
@@ -419,10 +417,6 @@ impl Stepper for Rosenbrock {
             }
         }
         self.dense.build(self.tab, t, h, z, &self.y_new, &self.k);
-        for (slot, &theta) in INTERIOR.iter().enumerate() {
-            let n = self.n;
-            self.dense.eval_deriv(t + theta * h, &mut self.interior[slot * n..(slot + 1) * n]);
-        }
         err
     }
 
@@ -484,9 +478,10 @@ impl Stepper for Rosenbrock {
         self.outside
     }
 
-    fn visit_interior<V: FnMut(f64, &[f64])>(&self, mut visit: V) {
-        for (slot, &theta) in INTERIOR.iter().enumerate() {
-            visit(theta, &self.interior[slot * self.n..(slot + 1) * self.n]);
+    fn visit_stage_states<V: FnMut(f64, &[f64])>(&self, mut visit: V) {
+        let n = self.n;
+        for (i, x) in self.stage_x.chunks_exact(n.max(1)).enumerate() {
+            visit(self.tab.c[i + 1], x);
         }
     }
 }
@@ -632,6 +627,20 @@ impl Interpolant for RowDense {
                 }
             }
         }
+        self.expand(delta, &rho, coef)
+    }
+    fn component_form(&self, i: usize, coef: &mut [f64; CAP]) -> usize {
+        let c = &self.coef[i * STRIDE..(i + 1) * STRIDE];
+        let mut rho = [0.0; MAX_DENSE + 1];
+        rho[..self.n_q].copy_from_slice(&c[2..2 + self.n_q]);
+        self.expand(c[1], &rho, coef)
+    }
+}
+
+impl RowDense {
+    /// The power-basis coefficients of `s (delta + (1 - s) sum_r rho_r s^r)`.
+    fn expand(&self, delta: f64, rho: &[f64; MAX_DENSE + 1], coef: &mut [f64; CAP]) -> usize {
+        let nq = self.n_q;
         coef.fill(0.0);
         for k in 0..=nq {
             coef[k + 1] = rho[k] - if k > 0 { rho[k - 1] } else { 0.0 };

@@ -143,6 +143,15 @@ pub trait Interpolant {
         }
         Poly::through(&nodes[..count], &values[..count]).write_to(coef)
     }
+    /// [`Self::linear_form`] of the single component `i` (`P_i(s) - P_i(0)`), `i` below the
+    /// number of components: what the event detector bounds a nonlinear guard's states with.
+    /// The default calls `linear_form` with a unit vector; a method with coefficients of its own
+    /// reads component `i`'s alone.
+    fn component_form(&self, i: usize, coef: &mut [f64; CAP]) -> usize {
+        let mut w = vec![0.0; i + 1];
+        w[i] = 1.0;
+        self.linear_form(&w, coef)
+    }
 }
 
 /// A time-stepping method with error control and dense output.
@@ -202,13 +211,14 @@ pub trait Stepper {
     /// running costs), and that state's index: above 1, the step would have failed the test
     /// with them in it. `(0, 0)` when none is left out.
     fn outside_error(&self) -> (f64, usize);
-    /// Calls `visit` with derivatives at a few interior points of the last attempt, in time
-    /// order: the point's position in the step (in `(0, 1)`) and the derivative there (an
-    /// approximation of the method's order, good for sampling the signs of a guard's speed). An
-    /// explicit method has them for free in its stages. The slice holds at least the states'
-    /// derivatives (its first `n` components, all that a guard's speed reads); a Rosenbrock
-    /// method computes only those.
-    fn visit_interior<V: FnMut(f64, &[f64])>(&self, visit: V);
+    /// Calls `visit` with the position in the step (`c_i`, in `[0, 1]`) and the state (the first
+    /// `n` components) of every stage of the last attempt at which the flow was evaluated, the
+    /// start point excluded (its state is the step's start), in stage order; with the stages of
+    /// its dense output when built. The integrator checks with them that no stage evaluated a
+    /// flow switch's other branch (docs/language.md, rule 2). The default visits none.
+    fn visit_stage_states<V: FnMut(f64, &[f64])>(&self, visit: V) {
+        let _ = visit;
+    }
     /// The stretches of the run each method integrated, for a stepper that switches between
     /// methods (`auto::Auto`), up to the current point `t`; `None` for a single method.
     fn segments(&self, _t: f64) -> Option<Vec<crate::sim::result::MethodSegment>> {

@@ -588,8 +588,6 @@ const CI_MODELS: usize = 300;
 /// violation not listed here and on any listed model that no longer violates, so the list stays
 /// true as they are fixed.
 const KNOWN: &[(u64, &str)] = &[
-    (226, STEPS_EXHAUSTED),
-    (260, SHIFTED_EVENT_TIME),
     (503, CHECK_RERUN_STOPS),
     (576, STOPPED_AS_ZENO),
     (619, STOPPED_AS_ZENO),
@@ -614,9 +612,6 @@ const STOPPED_AS_ZENO: &str = "a contact stopped as Zeno where the run goes on";
 /// More than `--max-steps` steps where the reference runs through (damped and stiff tops, a
 /// contact at the start): the run stops with a fault.
 const STEPS_EXHAUSTED: &str = "a run exhausts max_steps where the reference runs through";
-/// Under `--t-start 1e6` (every time shifted), DOP853 locates the third crossing of a `crosses`
-/// guard 0.029 early, where unshifted it is exact.
-const SHIFTED_EVENT_TIME: &str = "a crossing located far off under a large time shift";
 /// `hybc::gradcheck` calls a derivative wrong that agrees with the exact reference (reported 0,
 /// central difference 1.7e-5 with a resolution of 1.1e-5).
 const CHECK_FAILS_A_RIGHT_GRADIENT: &str = "the gradient check fails a derivative the reference confirms";

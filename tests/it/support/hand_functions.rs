@@ -100,7 +100,6 @@ pub fn ball_info(grad_params: Vec<usize>) -> SystemInfo {
             kink: false,
             guard: GuardShape::Affine,
             contact: true,
-            time_only: false,
         }],
         initial_mode: 0,
         quadrature: Vec::new(),

@@ -43,7 +43,6 @@ impl Ball {
             kink: false,
             guard: GuardShape::Affine,
             contact: true,
-            time_only: false,
         }];
         let mut mode_events = vec![0];
         if ceiling.is_some() {
@@ -57,7 +56,6 @@ impl Ball {
                 kink: false,
                 guard: GuardShape::Affine,
                 contact: true,
-                time_only: false,
             });
             mode_events.push(1);
         }
@@ -192,7 +190,6 @@ impl Thermostat {
             kink: false,
             guard: GuardShape::Affine,
             contact: false,
-            time_only: false,
         };
         Thermostat {
             info: SystemInfo {
@@ -305,7 +302,6 @@ impl Counter {
             kink: false,
             guard: GuardShape::Affine,
             contact: false,
-            time_only: false,
         };
         Counter {
             info: SystemInfo {
@@ -433,7 +429,6 @@ impl Oscillator {
                     kink: false,
                     guard: GuardShape::Affine,
                     contact: false,
-                    time_only: false,
                 }],
                 initial_mode: 0,
                 quadrature: Vec::new(),

@@ -1,0 +1,38 @@
+"""Two hybc builds alternated on the shipped models' sweeps, in the same minutes.
+
+    python3 benches/measure/alternate.py OLD_HYBC NEW_HYBC [ROUNDS]
+
+Run from the repository root. For each workload the builds run one after the other ROUNDS times
+(default 5); printed per workload: the median CPU time (user + system, /usr/bin/time) of each
+build and the median of the pairwise ratios new / old with their range, as a Markdown row. The
+machines here move by 3x between days: only ratios measured this way are compared.
+"""
+import subprocess, statistics, sys, re
+from pathlib import Path
+ROOT = Path(__file__).resolve().parents[2]
+M = ROOT / 'models'
+OLD, NEW = sys.argv[1], sys.argv[2]
+def first_param(m):
+    for line in (M/m).read_text().splitlines():
+        mm = re.match(r'param\s+(\w+)\s*=\s*([-0-9.eE]+)', line)
+        if mm: return mm.group(1), float(mm.group(2))
+work = {
+  'ball sweep e=0.5:0.95 x20000 grad e,h0': ['sweep','models/ball.hyb','--vary','e=0.5:0.95:20000','--grad','e,h0','--threads','1','-o','/dev/null'],
+  'ball sweep e=0.75:0.95 x100000 grad all': ['sweep','models/ball.hyb','--vary','e=0.75:0.95:100000','--grad','all','--threads','1','-o','/dev/null'],
+}
+for m in ['soft_ball.hyb','compass_gait.hyb','dosing.hyb','engine_redline.hyb','hopper.hyb','juggler.hyb','pendulum_wall.hyb','thermostat.hyb','tilted_ball.hyb','walker.hyb']:
+    p, v = first_param(m)
+    lo, hi = sorted([v*0.99, v*1.01])
+    n = 2000 if m not in ('walker.hyb','compass_gait.hyb','juggler.hyb') else 300
+    work[f'{m} sweep {p} x{n} grad all'] = ['sweep', f'models/{m}', '--vary', f'{p}={lo}:{hi}:{n}', '--grad', 'all', '--threads', '1', '-o', '/dev/null']
+rounds = int(sys.argv[3]) if len(sys.argv) > 3 else 5
+def cpu(b, args):
+    r = subprocess.run(['/usr/bin/time','-f','%U %S', b] + args, cwd=ROOT, capture_output=True, text=True)
+    u, s = r.stderr.strip().splitlines()[-1].split()
+    return float(u) + float(s)
+for name, args in work.items():
+    old, new, ratios = [], [], []
+    for _ in range(rounds):
+        o = cpu(OLD, args); n = cpu(NEW, args)
+        old.append(o); new.append(n); ratios.append(n / o)
+    print(f'| {name} | {statistics.median(old):.3f} s | {statistics.median(new):.3f} s | {statistics.median(ratios):.2f} ({min(ratios):.2f}-{max(ratios):.2f}) |', flush=True)
