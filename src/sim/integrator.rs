@@ -59,12 +59,32 @@ const COST_FLOOR: f64 = 1e-9;
 /// (relative to the distance to it): past it despite the error of its estimate, not far beyond.
 const NEXT_CROSSING_REACH: f64 = 1.5;
 /// The largest Newton correction of a landed event instant, relative to the landed step: the
-/// dense output's error moves the root by far less; more means something else went wrong, and
-/// the dense output's state is taken.
+/// dense output's error moves the root by far less where it is accurate; more (a stiff phase,
+/// where its error times the stiffness is the crossing speed's) retries the step shorter.
 const LANDING_CORRECTION: f64 = 1e-3;
+/// Landings on one event instant at most: the first, then secant steps until the instant is
+/// resolved to a few spacings of `t`.
+const LANDINGS: usize = 6;
+/// A first landing whose Newton correction is at most this fraction of the landed step is
+/// finished by that step (its error, of second order in it, is far below the tolerances).
+const LANDING_EXACT: f64 = 1e-6;
+/// Spacings of `t` within which a landed instant counts as resolved.
+const LANDING_RESOLVED: f64 = 64.0;
+/// A step whose landed instant needed a larger correction is retried this much shorter.
+const LANDING_RETRY: f64 = 0.25;
 /// Floating-point spacings of `t` a landed instant moves on at most until every guard of its
 /// group is on the crossed side.
 const LANDING_NUDGES: usize = 8;
+/// What landing on an event instant found ([`Integrator::land_on_event`]).
+enum Landing {
+    /// The instant, the state landed there.
+    Landed(f64),
+    /// Not landed: the dense output's state is taken.
+    Dense,
+    /// The dense output was off where it was read: a shorter step.
+    Retry,
+}
+
 /// Rounds of cascading events at one instant before the run stops as stuck.
 pub(crate) const MAX_CASCADE_ROUNDS: usize = 100;
 
@@ -127,6 +147,9 @@ pub(crate) struct Workspace<St: Stepper = Rk> {
     pub(crate) record_buf: (Vec<f64>, Vec<f64>),
     /// The state before a round of events at one instant, and the guards there.
     pub(crate) before: (Vec<f64>, Vec<f64>),
+    /// The state at the start of the step, for samples taken from steps retaken to end on them
+    /// after the run's state moved to an event instant.
+    pub(crate) z_start: Vec<f64>,
     /// `dt/dp` of the instant being fired (the first event's), for cascading events.
     pub(crate) instant_dte: Vec<f64>,
     /// Which sensitivities are known not to exist (NaN), for warning once about new ones.
@@ -496,7 +519,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 // Stop where the last bounce left the state (the step is not taken).
                 StepOutcome::Done(zeno::stop(&self.events))
             }
-            Selection::Nothing => self.accept(plan, look, h_next),
+            Selection::Nothing => self.accept(plan, look, h_next, &mut rhs),
             Selection::NotFinite { pos, t } => self.stop_not_finite(pos, t, look),
             Selection::Fire(t_fire) => self.cut_at_instant(t_fire, plan, look, h_next, &mut rhs),
         }
@@ -644,9 +667,15 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     }
 
     /// Nothing fired in the step: the state moves to its end.
-    fn accept(&mut self, plan: Plan, look: Look, h_next: f64) -> StepOutcome {
+    fn accept<F: Rhs>(&mut self, plan: Plan, look: Look, h_next: f64, rhs: &mut F) -> StepOutcome {
         let (t0, t1) = (plan.t0, plan.t1);
         if look.sample_due {
+            self.work.z_start.copy_from_slice(&self.work.z);
+            if self.land_samples(t0, t1, false, rhs) {
+                // The step itself again (the same step: samples do not change the run), for
+                // its end state.
+                self.work.stepper.land(t0, &self.work.z, plan.h, rhs);
+            }
             self.sample_step(t1, false);
         }
         let singular_at_start = self.work.stepper.masked() && self.start_derivative_not_finite();
@@ -687,10 +716,11 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         rhs: &mut F,
     ) -> StepOutcome {
         let (t0, t1) = (plan.t0, plan.t1);
-        if look.sample_due || self.sampler.wanted(&*self.recorder, t_fire) {
-            self.sample_step(t_fire, true);
-        }
         let singular_at_start = self.work.stepper.masked() && self.start_derivative_not_finite();
+        let sampling = look.sample_due || self.sampler.wanted(&*self.recorder, t_fire);
+        if sampling {
+            self.work.z_start.copy_from_slice(&self.work.z);
+        }
         let t_fire = if t_fire == t1 {
             // On the step's end: the step's own end state. The dense output reproduces
             // it only to round-off, and a guard found across there by the end values (an
@@ -698,12 +728,32 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             // pre-crossing side and skipped as moved back by an earlier reset.
             self.work.z.copy_from_slice(self.work.stepper.end_state());
             t_fire
-        } else if let Some(t_landed) = self.land_on_event(t0, t_fire, rhs) {
-            t_landed
         } else {
-            self.work.stepper.interpolant().eval(t_fire, &mut self.work.z);
-            t_fire
+            match self.land_on_event(t0, t_fire, t1, rhs) {
+                Landing::Landed(t_landed) => t_landed,
+                Landing::Retry if plan.h > GUARD_WALK_FLOOR * t0.abs().max(1.0) => {
+                    // The dense output was too far off where it was read (a stiff phase: its
+                    // error times the stiffness is the crossing speed's): the step does not
+                    // stand, and a shorter one reads a better dense output (docs/language.md,
+                    // rule 3). The controller has learnt from the step; the shorter size
+                    // overrides its proposal.
+                    self.work.det.forget_findings();
+                    self.stats.steps -= 1;
+                    self.stats.rejected += 1;
+                    self.h = LANDING_RETRY * plan.h;
+                    return StepOutcome::Rejected;
+                }
+                Landing::Dense | Landing::Retry => {
+                    self.work.stepper.interpolant().eval(t_fire, &mut self.work.z);
+                    t_fire
+                }
+            }
         };
+        // Samples before the instant, taken now that the step stands.
+        if sampling {
+            self.land_samples(t0, t_fire, true, rhs);
+            self.sample_step(t_fire, true);
+        }
         self.t = t_fire;
         self.landing.clear();
         if self.work.stepper.masked() {
@@ -722,40 +772,89 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// there (the latest of the group's, so that every guard has crossed), and the state and
     /// sensitivities with it to first order, `z + dt F(z)` (an error of order `dt^2`), then by
     /// floating-point spacings until every guard of the group is on its crossed side (rule 1:
-    /// the first time found there). Writes that state into `z` and returns the instant; `None`
-    /// (the caller takes the dense output's state at `t_fire`, as without landing) when landing
-    /// is off, when the group holds a touch, an event fired on its guard at the step's start or a
-    /// flow switch (their state and sides are the dense output's: `cross_switch`), when the
-    /// landed step fails its error test (it is shorter, so rarely) or when the correction is not
-    /// small against the step.
-    fn land_on_event<F: Rhs>(&mut self, t0: f64, t_fire: f64, rhs: &mut F) -> Option<f64> {
+    /// the first time found there). Writes that state into `z` and returns `Landed` with the
+    /// instant; `Dense` (the caller takes the dense output's state at `t_fire`, as without
+    /// landing) when landing is off, when the group holds a touch, an event fired on its guard at
+    /// the step's start or a flow switch (their state and sides are the dense output's:
+    /// `cross_switch`), or when the landed step fails its error test (it is shorter, so rarely);
+    /// `Retry` when the correction is not small against the step: the dense output was off by
+    /// more than one Newton step corrects where it was read, and so may be its other findings.
+    fn land_on_event<F: Rhs>(&mut self, t0: f64, t_fire: f64, t1: f64, rhs: &mut F) -> Landing {
         if t_fire <= t0 || !self.lands_on_events() {
-            return None;
+            return Landing::Dense;
         }
         let evs = &self.info.modes[self.mode].events;
         let plain = |&(ev, c): &(usize, Crossing)| !(c.touch || c.on_guard || self.info.events[ev].implicit);
         if !self.work.det.group.iter().all(plain) {
-            return None;
+            return Landing::Dense;
         }
-        let h = t_fire - t0;
-        let err = self.work.stepper.land(t0, &self.work.z, h, rhs);
-        // A NaN error (nothing finite) fails too.
-        if err.is_nan() || err > 1.0 {
-            return None;
-        }
+        self.work.z_start.copy_from_slice(&self.work.z);
         let (n, cx) = (self.n, self.guards());
-        self.work.z.copy_from_slice(self.work.stepper.end_state());
+        // Newton's step from the first landing, then secant steps through the landed guard
+        // values: in a stiff phase the flow at the landed state carries the state's error times
+        // the stiffness into the speed, the guard values do not.
+        let (mut t_land, mut dt) = (t_fire, 0.0);
+        let mut previous: Option<(f64, f64)> = None;
+        let mut crossed = false;
+        for landing in 0..LANDINGS {
+            let h = t_land - t0;
+            let err = self.work.stepper.land(t0, &self.work.z_start, h, rhs);
+            // A NaN error (nothing finite) fails too.
+            if err.is_nan() || err > 1.0 {
+                return Landing::Dense;
+            }
+            self.work.z.copy_from_slice(self.work.stepper.end_state());
+            let f = self.work.stepper.end_derivative();
+            // The latest of the group's crossings, so that every guard has crossed.
+            let (mut newton, mut g_latest) = (f64::NEG_INFINITY, 0.0);
+            crossed = true;
+            for gi in 0..self.work.det.group.len() {
+                let (ev, c) = self.work.det.group[gi];
+                let Some(pos) = evs.iter().position(|&e| e == ev) else { return Landing::Dense };
+                let (g, speed) = self.work.det.guard_and_speed(&cx, pos, t_land, &self.work.z[..n], &f[..n]);
+                crossed &= c.sigma * g <= 0.0;
+                if -g / speed > newton {
+                    (newton, g_latest) = (-g / speed, g);
+                }
+            }
+            if !newton.is_finite() {
+                return Landing::Dense;
+            }
+            if landing == 0 && newton.abs() <= LANDING_EXACT * h {
+                // The dense output was right to where one Newton step finishes the job (the
+                // explicit pairs, and most Rosenbrock landings).
+                dt = newton;
+                break;
+            }
+            dt = match previous {
+                Some((t_prev, g_prev)) if g_prev != g_latest => {
+                    -g_latest * (t_land - t_prev) / (g_latest - g_prev)
+                }
+                _ => newton,
+            };
+            let spacing = t_land.abs().next_up() - t_land.abs();
+            if landing > 0 && dt.abs() <= LANDING_RESOLVED * spacing {
+                break;
+            }
+            let next = t_land + dt;
+            if !(next > t0 && next <= t1) {
+                // The landed guards put the crossing outside the step.
+                return Landing::Retry;
+            }
+            if landing + 1 == LANDINGS {
+                break;
+            }
+            previous = Some((t_land, g_latest));
+            t_land = next;
+        }
+        // Far from where the dense output put it: so may be its other findings; the instant
+        // stands when no other guard has crossed by then.
+        let far = (t_land - t_fire).abs() > LANDING_CORRECTION * (t_fire - t0);
+        if far && self.work.det.another_crossed(&cx, t_land, &self.work.z[..n]) {
+            return Landing::Retry;
+        }
+        let (t_fire, crossed_at_landing) = (t_land, crossed);
         let f = self.work.stepper.end_derivative();
-        let mut dt = f64::NEG_INFINITY;
-        for gi in 0..self.work.det.group.len() {
-            let (ev, _) = self.work.det.group[gi];
-            let pos = evs.iter().position(|&e| e == ev)?;
-            let (g, speed) = self.work.det.guard_and_speed(&cx, pos, t_fire, &self.work.z[..n], &f[..n]);
-            dt = dt.max(-g / speed);
-        }
-        if !(dt.is_finite() && dt.abs() <= LANDING_CORRECTION * h) {
-            return None;
-        }
         let end = self.work.stepper.end_state();
         let mut t = t_fire + dt;
         for _ in 0..LANDING_NUDGES {
@@ -766,16 +865,22 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             let mut crossed = true;
             for gi in 0..self.work.det.group.len() {
                 let (ev, c) = self.work.det.group[gi];
-                let pos = evs.iter().position(|&e| e == ev)?;
+                let Some(pos) = evs.iter().position(|&e| e == ev) else { return Landing::Dense };
                 let g = self.work.det.guard_now(&cx, pos, t, &self.work.z[..n]);
                 crossed &= c.sigma * g <= 0.0;
             }
             if crossed {
-                return (t > t0).then_some(t);
+                return if t > t0 { Landing::Landed(t) } else { Landing::Dense };
             }
             t = t.next_up();
         }
-        None
+        if crossed_at_landing {
+            // The flow's extrapolation did not get across (a stiff flow at the landed state):
+            // the landed state is, a few spacings of `t` past the first time across.
+            self.work.z.copy_from_slice(self.work.stepper.end_state());
+            return Landing::Landed(t_fire);
+        }
+        Landing::Dense
     }
 
     /// Whether event instants inside a step are landed on ([`Self::land_on_event`]).
@@ -1285,6 +1390,30 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
 
     /// The samples the recorder and `SimOptions::at` want up to `t_seg_end` (before it when
     /// `before_instant`) from the dense output of the step just attempted.
+    /// Where events are landed on (the dense output less accurate than a step end: a Rosenbrock
+    /// method, an explicit pair held by stability), the times of `at` due in the step from
+    /// `(t0, z_start)` up to `t_seg_end` (before it when `before_instant`) are each taken from the
+    /// step retaken to end there (`Stepper::land`), as accurate as a step end; a retaken step
+    /// that fails its error test leaves the rest to the dense output ([`Self::sample_step`]).
+    /// Returns whether a step was retaken (the stepper's last attempt is then not the step's).
+    fn land_samples<F: Rhs>(&mut self, t0: f64, t_seg_end: f64, before_instant: bool, rhs: &mut F) -> bool {
+        if !self.sampler.due(t_seg_end, before_instant) || !self.lands_on_events() {
+            return false;
+        }
+        let mut landed = false;
+        while self.sampler.due(t_seg_end, before_instant) {
+            let Some(ts) = self.sampler.next_time().filter(|&ts| ts > t0) else { break };
+            let err = self.work.stepper.land(t0, &self.work.z_start, ts - t0, rhs);
+            landed = true;
+            if err.is_nan() || err > 1.0 {
+                break;
+            }
+            let end = self.work.stepper.end_state();
+            self.sampler.take_here(&mut self.work.output_jac, ts, self.mode, end);
+        }
+        landed
+    }
+
     fn sample_step(&mut self, t_seg_end: f64, before_instant: bool) {
         let dense = self.work.stepper.interpolant();
         self.sampler.record_dense(self.recorder, &mut self.work.record_buf, dense, self.mode, t_seg_end);

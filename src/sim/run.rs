@@ -110,6 +110,7 @@ impl<St: Stepper> ShapedWork<'_, St> {
             switch_flow: (vec![0.0; n], vec![0.0; n]),
             record_buf: (vec![0.0; k], vec![0.0; nz]),
             before: (vec![0.0; n], Vec::new()),
+            z_start: vec![0.0; nz],
             instant_dte: vec![0.0; m],
             void: vec![false; n * m],
             reset_onto: Vec::new(),

@@ -32,6 +32,11 @@ impl<'a, S: HybridSystem + ?Sized> Sampler<'a, S> {
         Sampler { sys, p, at, taken: Samples::with_capacity(shape, at.len()), shape }
     }
 
+    /// The next time of `at` not yet taken.
+    pub fn next_time(&self) -> Option<f64> {
+        self.at.get(self.taken.len()).copied()
+    }
+
     /// Whether the next time of `at` is at most `t` (before `t` when `strict`).
     pub fn due(&self, t: f64, strict: bool) -> bool {
         self.at.get(self.taken.len()).is_some_and(|&ts| ts < t || (!strict && ts == t))

@@ -611,6 +611,17 @@ impl Detector {
         (g, dot(&self.gx, f) + gt)
     }
 
+    /// Whether a guard of the mode outside the selected group has crossed (by its direction)
+    /// between the step's start and the state `x` at `t`: an instant landed far from where the
+    /// dense output put it stands only when no other event's crossing came before it.
+    pub fn another_crossed<S: HybridSystem + ?Sized>(&mut self, cx: &Guards<S>, t: f64, x: &[f64]) -> bool {
+        cx.eval(t, x, &mut self.gtmp);
+        cx.events().iter().enumerate().any(|(pos, &ev)| {
+            !self.group.iter().any(|&(e, _)| e == ev)
+                && crossing_sign(cx.info.events[ev].direction, self.g0[pos], self.gtmp[pos]).is_some()
+        })
+    }
+
     /// One guard of the mode at an explicit state.
     pub fn guard_now<S: HybridSystem + ?Sized>(
         &mut self,
@@ -727,7 +738,10 @@ impl Detector {
         }
         self.pieces.start(s_from, 1.0);
         while let Some((a, b, depth)) = self.pieces.next() {
-            let mut split = 0.5 * (a + b);
+            // Halving, unless an affine guard's extremum gives a better place (a nonlinear guard's
+            // pieces split three ways around their middle left the running cost of
+            // `tests/it/detection.rs` 2% off: not understood yet, so they halve).
+            let mut split = f64::NAN;
             let e = if shape == GuardShape::Nonlinear {
                 self.enclose_piece(cx, ev, dense, a, b)
             } else {

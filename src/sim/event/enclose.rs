@@ -22,6 +22,9 @@ pub(crate) const MIN_WIDTH: f64 = 1.0 / (1u64 << 40) as f64;
 pub(crate) const MAX_DEPTH: u8 = 200;
 /// Splits at an estimate (uneven) at most this deep; halvings below.
 const UNEVEN_DEPTH: u8 = 24;
+/// A split at an estimate keeps this fraction of the piece on either side of it as a part of its
+/// own ([`Pieces::split_at`]).
+const AROUND: f64 = 1.0 / 256.0;
 /// Pieces a guard's walk over one step examines at most; beyond, the step is retried shorter.
 /// A walk to one tangency at [`MAX_DEPTH`] takes about 4 per level.
 pub(crate) const MAX_PIECES: usize = 2048;
@@ -205,20 +208,30 @@ impl Pieces {
     /// 1024th of the piece from its ends (so that every split shrinks both parts): both parts are examined, the
     /// earlier first. Returns `false` (nothing split) when the piece is narrower than
     /// [`MIN_WIDTH`], at [`MAX_DEPTH`], or the walk is exhausted.
+    ///
+    /// At an estimate (an extremum's), the piece is cut in three instead, the middle part
+    /// [`AROUND`] of the piece on either side of it: the extremum inside a part short enough for
+    /// its value to be clear of zero, the outer parts monotone, where cutting at the estimate
+    /// itself left the extremum at an end of both parts, neither monotone, each split again
+    /// (a ball's step over its apex took four pieces more).
     pub fn split_at(&mut self, a: f64, b: f64, m: f64, depth: u8) -> bool {
         let w = b - a;
         // Uneven splits only for the first levels, so that halvings reach `MIN_WIDTH` well
         // within `MAX_DEPTH` whatever the estimates.
-        let m = if m.is_nan() || depth >= UNEVEN_DEPTH {
-            0.5 * (a + b)
-        } else {
-            m.clamp(a + w / 1024.0, b - w / 1024.0)
-        };
+        let uneven = !m.is_nan() && depth < UNEVEN_DEPTH;
+        let m = if uneven { m.clamp(a + w / 1024.0, b - w / 1024.0) } else { 0.5 * (a + b) };
         if w <= MIN_WIDTH || depth >= MAX_DEPTH || self.exhausted() || !(m > a && m < b) {
             return false;
         }
-        self.stack.push((m, b, depth + 1));
-        self.stack.push((a, m, depth + 1));
+        let (lo, hi) = (m - AROUND * w, m + AROUND * w);
+        if uneven && lo > a && hi < b {
+            self.stack.push((hi, b, depth + 1));
+            self.stack.push((lo, hi, depth + 1));
+            self.stack.push((a, lo, depth + 1));
+        } else {
+            self.stack.push((m, b, depth + 1));
+            self.stack.push((a, m, depth + 1));
+        }
         true
     }
 
@@ -291,5 +304,12 @@ mod tests {
         let (a, b, d) = p.next().unwrap();
         assert!(p.split_at(a, b, 1e-9, d));
         assert_eq!(p.next().map(|(a, b, _)| (a, b)), Some((0.0, 1.0 / 1024.0)));
+        // At an estimate inside: three parts in time order, the middle one around it, covering
+        // the piece.
+        p.start(0.0, 1.0);
+        let (a, b, d) = p.next().unwrap();
+        assert!(p.split_at(a, b, 0.5, d));
+        let order: Vec<(f64, f64)> = std::iter::from_fn(|| p.next().map(|(a, b, _)| (a, b))).collect();
+        assert_eq!(order, [(0.0, 0.5 - AROUND), (0.5 - AROUND, 0.5 + AROUND), (0.5 + AROUND, 1.0)]);
     }
 }
