@@ -594,24 +594,21 @@ const KNOWN: &[(u64, &str)] = &[
     (653, CHECK_RERUN_STOPS),
     (736, STOPPED_AS_ZENO),
     (749, CHECK_FAILS_A_RIGHT_GRADIENT),
-    (753, STEPS_EXHAUSTED),
-    (779, STEPS_EXHAUSTED),
-    (849, STEPS_EXHAUSTED),
-    (884, STEPS_EXHAUSTED),
+    (779, STIFF_TOP_SHIFTED),
     (863, STOPPED_AS_ZENO),
     (899, STOPPED_AS_ZENO),
     (901, STOPPED_AS_ZENO),
     (952, STOPPED_AS_ZENO),
-    (1003, STEPS_EXHAUSTED),
 ];
 
 /// A contact stopped as Zeno ("a bounce too small to resolve") after one or two events, where
 /// the reference runs on: resets that move the guard clearly off zero (`x := x + k`, a product
 /// guard's sign flipped) and bounces, at the start and later.
 const STOPPED_AS_ZENO: &str = "a contact stopped as Zeno where the run goes on";
-/// More than `--max-steps` steps where the reference runs through (damped and stiff tops, a
-/// contact at the start): the run stops with a fault.
-const STEPS_EXHAUSTED: &str = "a run exhausts max_steps where the reference runs through";
+/// A stiff top (`- 1000 x0`) with a flow switch and a time event, under `--t-start 1e6`, `auto`
+/// with every gradient: the final state 1.3e-4 off (12,640 tolerances), right unshifted and
+/// under every other method (it exhausted `max_steps` before the detection by enclosure).
+const STIFF_TOP_SHIFTED: &str = "a stiff top off under a time shift with auto and gradients";
 /// `hybc::gradcheck` calls a derivative wrong that agrees with the exact reference (reported 0,
 /// central difference 1.7e-5 with a resolution of 1.1e-5).
 const CHECK_FAILS_A_RIGHT_GRADIENT: &str = "the gradient check fails a derivative the reference confirms";
