@@ -301,6 +301,20 @@ fn diff_unary(s: &mut ExprStore, op: UnaryOp, id: ExprId, a: ExprId, da: ExprId)
     }
 }
 
+/// A power's exponent term `term` (`a^b ln(a) b'`), taken where `b' != 0` and 0 elsewhere: for
+/// `a <= 0`, `ln(a)` is not finite, and `NaN * 0` would poison a derivative that is well defined
+/// where the exponent is locally constant. Where `b'` is a constant, `term` as it is.
+fn where_exponent_moves(s: &mut ExprStore, term: ExprId, db: ExprId) -> ExprId {
+    if s.const_value(db).is_some() {
+        return term;
+    }
+    let zero = s.zero();
+    let below = s.lt(db, zero);
+    let above = s.lt(zero, db);
+    let moves = s.or(below, above);
+    s.select(moves, term, zero)
+}
+
 /// `d op(a, b)` given `da`, `db`; `id` is the node `op(a, b)` itself.
 fn diff_binary(
     s: &mut ExprStore,
@@ -330,10 +344,17 @@ fn diff_binary(
                 let f = scale(s, c, p);
                 prod(s, f, da)
             }
-            (Some(_), None) => {
+            (Some(c), None) => {
+                // (c^b)' = c^b ln(c) b': for c <= 0, ln(c) is not finite, and the term exists
+                // only where the exponent moves (`where_exponent_moves`).
                 let ln = s.unary(UnaryOp::Log, a);
                 let f = prod(s, id, ln);
-                prod(s, f, db)
+                let term = prod(s, f, db);
+                if c > 0.0 {
+                    term
+                } else {
+                    where_exponent_moves(s, term, db)
+                }
             }
             (None, None) => {
                 // (a^b)' = b a^(b-1) a' + a^b ln(a) b'. The second term exists only where the
@@ -350,15 +371,7 @@ fn diff_binary(
                 let ln = s.unary(UnaryOp::Log, a);
                 let moving = prod(s, id, ln);
                 let exponent_term = prod(s, moving, db);
-                let exponent_term = if s.const_value(db).is_some() {
-                    exponent_term
-                } else {
-                    let zero = s.zero();
-                    let below = s.lt(db, zero);
-                    let above = s.lt(zero, db);
-                    let moves = s.or(below, above);
-                    s.select(moves, exponent_term, zero)
-                };
+                let exponent_term = where_exponent_moves(s, exponent_term, db);
                 s.add(base_term, exponent_term)
             }
         },
