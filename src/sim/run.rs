@@ -112,6 +112,7 @@ impl<St: Stepper> ShapedWork<'_, St> {
             before: (vec![0.0; n], Vec::new()),
             z_start: vec![0.0; nz],
             instant_dte: vec![0.0; m],
+            landed_velocity: (Vec::new(), Vec::new()),
             void: vec![false; n * m],
             reset_onto: Vec::new(),
             reset_onto_guard: Vec::new(),

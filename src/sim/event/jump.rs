@@ -95,6 +95,11 @@ pub(crate) struct Jump {
     rt: Vec<f64>,
     f_minus: Vec<f64>,
     f_plus: Vec<f64>,
+    /// The trajectory's velocity before the event where it was measured
+    /// (`Integrator::landed_velocity`), with the time, mode and state it holds for: it replaces
+    /// `f-` in the crossing speed and in the total derivative, not in the velocity jump.
+    velocity: Vec<f64>,
+    velocity_at: Option<(f64, usize, Vec<f64>)>,
     x_plus: Vec<f64>,
     s_plus: Vec<f64>,
     v: Vec<f64>,
@@ -135,6 +140,8 @@ impl Jump {
             rt: vec![0.0; n],
             f_minus: vec![0.0; n],
             f_plus: vec![0.0; n],
+            velocity: vec![0.0; n],
+            velocity_at: None,
             x_plus: vec![0.0; n],
             s_plus: vec![0.0; n * m],
             v: vec![0.0; n],
@@ -143,6 +150,34 @@ impl Jump {
             dte: vec![0.0; m],
             total: vec![0.0; n * m],
         }
+    }
+
+    /// The trajectory's velocity `v` at `(t, mode, x)`, measured along the computed trajectory:
+    /// an event applied there takes its crossing speed from it instead of from the flow at `x`.
+    /// In a stiff phase the flow carries the state's error times the stiffness, which can be the
+    /// size of a slow crossing's speed; the velocity jump `R_x f- + R_t - f+` keeps the flows on
+    /// both sides, whose errors cancel where the reset and the flow leave the motion unchanged.
+    pub fn set_velocity(&mut self, t: f64, mode: usize, x: &[f64], v: &[f64]) {
+        self.velocity.copy_from_slice(v);
+        match &mut self.velocity_at {
+            Some((t_at, mode_at, x_at)) => {
+                (*t_at, *mode_at) = (t, mode);
+                x_at.copy_from_slice(x);
+            }
+            None => self.velocity_at = Some((t, mode, x.to_vec())),
+        }
+    }
+
+    /// Forgets the velocity of [`Self::set_velocity`].
+    pub fn clear_velocity(&mut self) {
+        if let Some((t_at, _, _)) = &mut self.velocity_at {
+            *t_at = f64::NAN;
+        }
+    }
+
+    /// Whether the velocity of [`Self::set_velocity`] holds at `(t, mode, x)`.
+    fn velocity_holds(&self, t: f64, mode: usize, x: &[f64]) -> bool {
+        matches!(&self.velocity_at, Some((t_at, mode_at, x_at)) if *t_at == t && *mode_at == mode && x_at[..] == x[..])
     }
 
     /// Applies event `ev` at time `t` to `x` and `s` in place, switching from `mode_old` to
@@ -167,16 +202,18 @@ impl Jump {
     ) -> JumpOutcome {
         let (n, m) = (self.n, self.m);
         sys.flow(mode_old, t, x, p, &mut self.f_minus);
+        let measured = self.velocity_holds(t, mode_old, x);
         let outcome = match given {
             Some((dte, _)) => {
                 self.dte.copy_from_slice(dte);
                 // The event's own crossing speed, for the record and the bounce rule; its time
                 // gradient is the instant's.
                 let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
-                let denominator = dot(&self.gx, &self.f_minus) + gt;
+                let velocity = if measured { &self.velocity } else { &self.f_minus };
+                let denominator = dot(&self.gx, velocity) + gt;
                 JumpOutcome { denominator, conditioning: 0.0, grazing: false, margin: None, resolution: 0.0 }
             }
-            None => self.event_time_gradient(sys, ev, t, x, s, p, context),
+            None => self.event_time_gradient(sys, ev, t, x, s, p, context, measured),
         };
         sys.reset(ev, t, x, p, &mut self.x_plus);
         self.reset_jacobian(sys, ev, t, x, p);
@@ -196,7 +233,7 @@ impl Jump {
                 let rs = row_dot(i, sj);
                 self.s_plus[j * n + i] = rs + self.rp[j * n + i] + times_nonzero(self.v[i], self.dte[j]);
                 if want_total {
-                    let rf = row_dot(i, &self.f_minus);
+                    let rf = row_dot(i, if measured { &self.velocity } else { &self.f_minus });
                     self.total[j * n + i] =
                         rs + self.rp[j * n + i] + times_nonzero(rf + self.rt[i], self.dte[j]);
                 }
@@ -265,7 +302,7 @@ impl Jump {
     ) -> JumpOutcome {
         let n = self.n;
         sys.flow(mode, t_pre, x_pre, p, &mut self.f_minus);
-        let outcome = self.event_time_gradient(sys, ev, t, x, s, p, context);
+        let outcome = self.event_time_gradient(sys, ev, t, x, s, p, context, false);
         sys.flow(mode, t_post, x_post, p, &mut self.f_plus);
         if outcome.grazing
             && sys.info().events[ev].guard == GuardShape::Affine
@@ -299,10 +336,11 @@ impl Jump {
         outcome
     }
 
-    /// The crossing speed `d = g_x f- + g_t` (with `f-` already in `f_minus`), its conditioning,
-    /// and `dt_e/dp` into `dte`: NaN where it does not exist (a grazing crossing, or a missing
-    /// derivative in `S` that the guard reads), 0 where nothing moves the time (`g_x S + g_p` is
-    /// exactly 0 for that parameter, grazing or not).
+    /// The crossing speed `d = g_x f- + g_t` (with `f-` already in `f_minus`, or the measured
+    /// velocity when `measured`), its conditioning, and `dt_e/dp` into `dte`: NaN where it does
+    /// not exist (a grazing crossing, or a missing derivative in `S` that the guard reads), 0
+    /// where nothing moves the time (`g_x S + g_p` is exactly 0 for that parameter, grazing or
+    /// not).
     #[allow(clippy::too_many_arguments)]
     fn event_time_gradient<S: HybridSystem + ?Sized>(
         &mut self,
@@ -313,10 +351,12 @@ impl Jump {
         s: &[f64],
         p: &[f64],
         context: CrossingContext,
+        measured: bool,
     ) -> JumpOutcome {
         let n = self.n;
         let gt = sys.guard_grad(ev, t, x, p, &mut self.gx, &mut self.gp);
-        let d = dot(&self.gx, &self.f_minus) + gt;
+        let velocity = if measured { &self.velocity } else { &self.f_minus };
+        let d = dot(&self.gx, velocity) + gt;
         let accuracy = self
             .gx
             .iter()
@@ -324,7 +364,7 @@ impl Jump {
             .map(|(g, x)| g.abs() * (context.atol + context.rtol * x.abs()))
             .sum::<f64>()
             + round_off(&self.gx, x, gt, t);
-        let speed_noise = round_off(&self.gx, &self.f_minus, gt, 1.0);
+        let speed_noise = round_off(&self.gx, velocity, gt, 1.0);
         let mut curvature = 0.0f64;
         if let Some((t0, d0, t1, d1)) = context.step {
             if t > t0 {
