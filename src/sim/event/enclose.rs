@@ -22,6 +22,9 @@ pub(crate) const MIN_WIDTH: f64 = 1.0 / (1u64 << 40) as f64;
 pub(crate) const MAX_DEPTH: u8 = 200;
 /// Splits at an estimate (uneven) at most this deep; halvings below.
 const UNEVEN_DEPTH: u8 = 24;
+/// A split at an estimate is kept this fraction of the piece from its ends (`2^-20`), so that
+/// every split shrinks both parts ([`Pieces::split_at`]).
+const EDGE: f64 = 1.0 / (1u64 << 20) as f64;
 /// A split at an estimate keeps this fraction of the piece on either side of it as a part of its
 /// own ([`Pieces::split_at`]).
 const AROUND: f64 = 1.0 / 256.0;
@@ -204,13 +207,14 @@ impl Pieces {
         self.examined >= MAX_PIECES
     }
 
-    /// Splits `[a, b]` at `m` (NaN, or below `UNEVEN_DEPTH` splits deep: its middle), kept a
-    /// 1024th of the piece from its ends (so that every split shrinks both parts): both parts are examined, the
+    /// Splits `[a, b]` at `m` (NaN, or below `UNEVEN_DEPTH` splits deep: its middle), kept
+    /// [`EDGE`] of the piece from its ends (so that every split shrinks both parts): both parts are examined, the
     /// earlier first. Returns `false` (nothing split) when the piece is narrower than
     /// [`MIN_WIDTH`], at [`MAX_DEPTH`], or the walk is exhausted.
     ///
     /// At an estimate (an extremum's), the piece is cut in three instead, the middle part
-    /// [`AROUND`] of the piece on either side of it: the extremum inside a part short enough for
+    /// [`AROUND`] of the piece on either side of it (at most half the distance to the nearer
+    /// end): the extremum inside a part short enough for
     /// its value to be clear of zero, the outer parts monotone, where cutting at the estimate
     /// itself left the extremum at an end of both parts, neither monotone, each split again
     /// (a ball's step over its apex took four pieces more).
@@ -219,11 +223,15 @@ impl Pieces {
         // Uneven splits only for the first levels, so that halvings reach `MIN_WIDTH` well
         // within `MAX_DEPTH` whatever the estimates.
         let uneven = !m.is_nan() && depth < UNEVEN_DEPTH;
-        let m = if uneven { m.clamp(a + w / 1024.0, b - w / 1024.0) } else { 0.5 * (a + b) };
+        let m = if uneven { m.clamp(a + w * EDGE, b - w * EDGE) } else { 0.5 * (a + b) };
         if w <= MIN_WIDTH || depth >= MAX_DEPTH || self.exhausted() || !(m > a && m < b) {
             return false;
         }
-        let (lo, hi) = (m - AROUND * w, m + AROUND * w);
+        // The part around the estimate: AROUND of the piece, or half the distance to the nearer
+        // end where that is shorter (an extremum near a piece's end, a tiny bounce at a long
+        // step's start, is then cut out in one split, not after a split at the clamp).
+        let around = (AROUND * w).min(0.5 * (m - a)).min(0.5 * (b - m));
+        let (lo, hi) = (m - around, m + around);
         if uneven && lo > a && hi < b {
             self.stack.push((hi, b, depth + 1));
             self.stack.push((lo, hi, depth + 1));
@@ -299,11 +307,20 @@ mod tests {
         assert_eq!(order, [(0.0, 0.25), (0.25, 0.5), (0.5, 1.0)]);
         assert!(!p.split_at(0.0, 1.0, f64::NAN, MAX_DEPTH));
         assert!(!p.split_at(0.5, 0.5 + MIN_WIDTH, f64::NAN, 3));
-        // An uneven split at a point near an end keeps a 1024th on that side.
+        // An uneven split at a point near an end keeps EDGE on that side, the part around it
+        // half the distance to the end on either side.
         p.start(0.0, 1.0);
         let (a, b, d) = p.next().unwrap();
         assert!(p.split_at(a, b, 1e-9, d));
-        assert_eq!(p.next().map(|(a, b, _)| (a, b)), Some((0.0, 1.0 / 1024.0)));
+        let order: Vec<(f64, f64)> = std::iter::from_fn(|| p.next().map(|(a, b, _)| (a, b))).collect();
+        assert_eq!(order, [(0.0, 0.5 * EDGE), (0.5 * EDGE, 1.5 * EDGE), (1.5 * EDGE, 1.0)]);
+        // Near an end but farther than EDGE: cut out at the estimate, in three.
+        p.start(0.0, 1.0);
+        let (a, b, d) = p.next().unwrap();
+        assert!(p.split_at(a, b, 1e-4, d));
+        let order: Vec<(f64, f64)> = std::iter::from_fn(|| p.next().map(|(a, b, _)| (a, b))).collect();
+        let (lo, hi) = (1e-4 - 0.5e-4, 1e-4 + 0.5e-4);
+        assert_eq!(order, [(0.0, lo), (lo, hi), (hi, 1.0)]);
         // At an estimate inside: three parts in time order, the middle one around it, covering
         // the piece.
         p.start(0.0, 1.0);
