@@ -59,7 +59,8 @@ impl FitRequest<'_> {
             .collect::<Result<Vec<_>, _>>()?;
         let mut sigma_known = false;
         if let Some((text, file)) = self.data {
-            let data = data::parse_data(text, file, &info).map_err(FitFailure::Data)?;
+            let span = (self.sim.t_start, self.sim.t_end);
+            let data = data::parse_data(text, file, &info, span).map_err(FitFailure::Data)?;
             sigma_known = data.sigma_known;
             targets.extend(data.targets);
         }
