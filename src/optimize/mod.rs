@@ -66,8 +66,9 @@ pub struct OptimizeOptions {
     /// request for the point it asked for last (served from a cache), so a solve makes at most
     /// this many runs.
     pub max_iter: usize,
-    /// Converged when the projected Lagrangian gradient, relative to its largest term, is at most
-    /// this (and every constraint is met to its tolerance).
+    /// Converged when the projected Lagrangian gradient is at most this times the gradient scale
+    /// (`Kkt::scale`: the objective's gradient at the start and the Lagrangian's terms at the end)
+    /// and every constraint is met to its tolerance.
     pub kkt_tol: f64,
     /// The optimiser may stop when a step changes every parameter by less than this, relatively.
     pub xtol: f64,
@@ -451,6 +452,7 @@ fn local<S: HybridSystem>(
         Err(r) => return failed(r.to_string(), "not started", 1),
     };
     let tolerances = constraint_tolerances(layout, &first.values, &problem.sim);
+    let start_gradient = first.point.gradient.clone();
     let program = Program {
         bounds: problem.bounds.iter().map(|b| (b.lower, b.upper)).collect(),
         n_eq: layout.n_eq,
@@ -510,7 +512,7 @@ fn local<S: HybridSystem>(
     };
     // A variable the verdict counts as held (`kkt::held`: on its bound to round-off) is put on
     // it, so that the report and the `set:` list say 0 where the box holds a thrust at 0.
-    let sides = kkt::held(&end.x, &program.bounds);
+    let sides = kkt::held(&end.x, &x0, &program.bounds);
     for ((v, &(lo, hi)), side) in end.x.iter_mut().zip(&program.bounds).zip(sides) {
         match side {
             -1 => *v = lo,
@@ -553,7 +555,15 @@ fn local<S: HybridSystem>(
         }
     };
     let tolerances = constraint_tolerances(layout, &evaluated.values, &problem.sim);
-    let kkt = kkt::measure(&end.x, &program.bounds, &evaluated.point, layout.n_eq, &tolerances);
+    let kkt = kkt::measure(
+        &end.x,
+        &x0,
+        &program.bounds,
+        &evaluated.point,
+        layout.n_eq,
+        &tolerances,
+        &start_gradient,
+    );
     result.verdict = verdict(&kkt, opts, &end, &result.trials, &evaluated.events);
     result.values = evaluated.values;
     result.kkt = Some(kkt);

@@ -67,9 +67,10 @@ impl OptimizeReport {
         let measures = k
             .map(|k| {
                 format!(
-                    "KKT stationarity {:.1e} (tolerance {:.0e}), largest constraint violation {} ({:.2} of its tolerance)",
+                    "KKT stationarity {:.1e} (tolerance {:.0e}, of the gradient scale {}), largest constraint violation {} ({:.2} of its tolerance)",
                     k.stationarity,
                     self.options.kkt_tol,
+                    short(k.scale),
                     short(k.violation),
                     k.violation_ratio
                 )
@@ -354,6 +355,7 @@ impl OptimizeReport {
             "solver_status": r.status,
             "kkt": {
                 "stationarity": r.kkt.as_ref().map(|k| number_json(k.stationarity)),
+                "scale": r.kkt.as_ref().map(|k| number_json(k.scale)),
                 "tolerance": self.options.kkt_tol,
                 "violation": r.kkt.as_ref().map(|k| number_json(k.violation)),
                 "violation_ratio": r.kkt.as_ref().map(|k| number_json(k.violation_ratio)),

@@ -26,7 +26,7 @@ const E_STAR: f64 = 2.0;
 const Y_STAR: f64 = 0.1;
 
 /// (e, h0) of the branch with `n` bounces before T, rising or falling at T.
-fn branch(n: i32, rising: bool) -> (f64, f64) {
+pub(crate) fn branch(n: i32, rising: bool) -> (f64, f64) {
     let w = (2.0 * E_STAR).sqrt();
     let root = (w * w - 2.0 * G * Y_STAR).sqrt();
     let tau = if rising { (w - root) / G } else { (w + root) / G };
