@@ -35,6 +35,12 @@ pub struct Kkt {
     pub violation_ratio: f64,
     /// Largest violation of a constraint, in its own units.
     pub violation: f64,
+    /// Whether the violation cannot fall within the box to first order: the gradient of
+    /// `phi = sum_i v_i^2 / 2` (`v_i` a constraint's violation: `c_i` for an equality,
+    /// `max(c_i, 0)` for an inequality), projected on the box as the Lagrangian's is, is at most
+    /// 1e-6 of its largest term `|v_i grad c_i|_inf`. With a constraint not met, the point is
+    /// then a local minimum of the violation: no move nearby meets the constraints better.
+    pub violation_stationary: bool,
 }
 
 /// Measures the KKT conditions at `x` from the point's gradients. `n_eq` constraints are
@@ -99,7 +105,30 @@ pub fn measure(
     }
     let projected = project(&residual, &at_bound);
     let stationarity = if scale > 0.0 { projected / scale } else { 0.0 };
-    Kkt { multipliers, active, at_bound, stationarity, scale, violation_ratio, violation }
+    // The violation's own descent: `grad phi = sum_i v_i grad c_i`, projected on the box.
+    let mut phi_gradient = vec![0.0; n];
+    let mut phi_scale: f64 = 0.0;
+    for (i, row) in point.jacobian.iter().enumerate() {
+        let c = point.constraints[i];
+        let v = if i < n_eq { c } else { c.max(0.0) };
+        if v != 0.0 {
+            let term: Vec<f64> = row.iter().map(|d| v * d).collect();
+            phi_scale = phi_scale.max(inf_norm(&term));
+            phi_gradient.iter_mut().zip(&term).for_each(|(r, t)| *r += t);
+        }
+    }
+    let phi_projected = project(&phi_gradient, &at_bound);
+    let violation_stationary = phi_projected <= VIOLATION_STATIONARY * phi_scale;
+    Kkt {
+        multipliers,
+        active,
+        at_bound,
+        stationarity,
+        scale,
+        violation_ratio,
+        violation,
+        violation_stationary,
+    }
 }
 
 /// Per variable: -1 held at its lower bound, 1 at its upper, 0 free. SLSQP clips to the box only
@@ -125,6 +154,10 @@ pub(super) fn held(x: &[f64], x0: &[f64], bounds: &[(f64, f64)]) -> Vec<i8> {
         })
         .collect()
 }
+
+/// How far the violation's projected gradient may be from 0, relative to its largest term, for
+/// the point to count as a local minimum of the violation.
+const VIOLATION_STATIONARY: f64 = 1e-6;
 
 /// `|P g|_inf`: the gradient `g` projected on the box (at a lower bound only its negative part
 /// counts, at an upper bound its positive part: a descent direction must point into the box).
@@ -226,6 +259,21 @@ mod tests {
         let gradient = a.iter().zip(u).map(|(a, u)| 2.0 * r * a + 2.0 * lam * u).collect();
         let objective = r * r + lam * u.iter().map(|u| u * u).sum::<f64>();
         SmoothPoint { objective, gradient, constraints: Vec::new(), jacobian: Vec::new() }
+    }
+
+    #[test]
+    fn a_violation_held_by_a_bound_is_a_local_minimum_of_the_violation_and_one_that_can_fall_is_not() {
+        // touchdown#1 >= 0.5 as 0.5 - t(h0) <= 0 with dt/dh0 > 0: at the upper bound h0 = 1 the
+        // violation would fall only by raising h0, which the box forbids.
+        let p = point(&[1.0], &[0.048], &[&[-0.23]]);
+        let k = at_start(&[1.0], &[(0.1, 1.0)], &p, 0, &[5e-9]);
+        assert!(k.violation_ratio > 1.0 && k.violation_stationary);
+        // Inside the box it can fall: not stationary.
+        let k = at_start(&[0.5], &[(0.1, 1.0)], &p, 0, &[5e-9]);
+        assert!(!k.violation_stationary);
+        // An equality missed on either side is the same: c = 0.38 with dc/de = 4 inside the box.
+        let k = at_start(&[0.87], &[(0.0, 1.0)], &point(&[1.0], &[-0.38], &[&[4.0]]), 1, &[3.5e-8]);
+        assert!(!k.violation_stationary);
     }
 
     #[test]
