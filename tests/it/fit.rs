@@ -646,6 +646,20 @@ fn a_data_file_that_names_nothing_or_holds_no_number_is_refused_with_its_line() 
 }
 
 #[test]
+fn a_target_at_a_time_the_run_does_not_reach_is_refused_with_its_cause() {
+    let out = hybc(&["fit", "models/ball.hyb", "--free", "e", "--target", "y@3=0.1"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("`y@3=0.1`: time 3 is after t_end = 2.5: the run goes from t_start = 0 to t_end = 2.5"),
+        "{err}"
+    );
+    // The same target in a run that reaches it is a fit: y(3) = 0.1 with e free.
+    let out = hybc(&["fit", "models/ball.hyb", "--free", "e", "--target", "y@3=0.1", "--t-end", "3"]);
+    assert_ne!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+#[test]
 fn a_data_file_with_a_byte_order_mark_reads_as_the_same_file_without() {
     // Spreadsheets start a UTF-8 CSV with U+FEFF; it is no part of the first column's name.
     let text = "time,conc\n3,1.5\n5,1.8\n9,2.1\n";

@@ -57,6 +57,16 @@ impl FitRequest<'_> {
             .iter()
             .map(|t| Target::parse(t, &info).map_err(FitFailure::Target))
             .collect::<Result<Vec<_>, _>>()?;
+        // A value at a time the run does not reach is refused here, with its cause, not by the run.
+        for (target, text) in targets.iter().zip(self.targets) {
+            if let Some(t) = target.observable.sample_time() {
+                crate::api::options::sample_times_within(&[t], self.sim.t_start, self.sim.t_end, "")
+                    .map_err(|reason| {
+                        let reason = reason.trim_start_matches(": ").to_string();
+                        FitFailure::Target(TargetError::TimeOutside { text: text.clone(), reason })
+                    })?;
+            }
+        }
         let mut sigma_known = false;
         if let Some((text, file)) = self.data {
             let span = (self.sim.t_start, self.sim.t_end);
