@@ -92,8 +92,8 @@ impl SimKeywords {
         self.overrides.apply(&model.sim_options(), Spelling::Keyword).map_err(value_error)
     }
 
-    /// [`Self::options`] with the sample times of `at=` (`hybc run --at`); the run checks their
-    /// order and range.
+    /// [`Self::options`] with the sample times of `at=` (`hybc run --at`), their order and range
+    /// checked by the library against the run's span.
     pub fn options_at(&self, model: &hybc::Model, at: Option<Vec<f64>>) -> PyResult<SimOptions> {
         let overrides = SimOverrides { at, ..self.overrides.clone() };
         overrides.apply(&model.sim_options(), Spelling::Keyword).map_err(value_error)

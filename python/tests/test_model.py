@@ -333,8 +333,10 @@ def test_values_at_times_match_the_ball_between_bounces(ball):
     assert s["reached"].all() if isinstance(s["reached"], np.ndarray) else all(s["reached"])
     assert (s["near_event"] == -1).all()
     assert ball.simulate().samples is None
-    with pytest.raises(Exception, match="sample time"):
+    with pytest.raises(Exception, match="at: the times must ascend, but 0.2 comes after 0.5"):
         ball.simulate(at=[0.5, 0.2])
+    with pytest.raises(Exception, match="at: time 3 is after t_end = 2.5"):
+        ball.simulate(at=[3.0])
 
 
 def test_simulation_keywords_are_one_set_with_one_check(ball):

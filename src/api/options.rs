@@ -67,8 +67,8 @@ pub struct SimOverrides {
     pub land_events: Option<bool>,
     /// Library only (tests and measurements): no front end exposes it.
     pub linear_solver: Option<LinearSolver>,
-    /// The sample times (`hybc run --at`, `simulate(at=...)`); their order and range are checked
-    /// by the run, against its span.
+    /// The sample times (`hybc run --at`, `simulate(at=...)`): ascending, within the run's span
+    /// (checked by `apply`, against the span it sets).
     pub at: Option<Vec<f64>>,
 }
 
@@ -134,7 +134,10 @@ impl SimOverrides {
                     format!("{}: {} times, at most {MAX_SAMPLED_ROWS:.0}", spelling.of("at"), times.len());
                 return Err(refuse("at")(message));
             }
-            Some(times) => times.clone(),
+            Some(times) => {
+                sample_times_within(times, t_start, t_end, &spelling.of("at")).map_err(refuse("at"))?;
+                times.clone()
+            }
         };
         Ok(SimOptions {
             t_start,
@@ -154,6 +157,30 @@ impl SimOverrides {
             at,
         })
     }
+}
+
+/// `Ok` if `times` ascend (repeats allowed) within `[t_start, t_end]`; else the refusal naming
+/// the first time at fault and why: before `t_start`, after `t_end`, or before the time ahead of
+/// it. `name` is the option as the front end spells it.
+pub fn sample_times_within(times: &[f64], t_start: f64, t_end: f64, name: &str) -> Result<(), String> {
+    let span = format!("the run goes from t_start = {t_start} to t_end = {t_end}");
+    let mut previous: Option<f64> = None;
+    for &t in times {
+        if !t.is_finite() {
+            return Err(format!("{name}: time {t} is not a finite number"));
+        }
+        if t < t_start {
+            return Err(format!("{name}: time {t} is before t_start = {t_start}: {span}"));
+        }
+        if t > t_end {
+            return Err(format!("{name}: time {t} is after t_end = {t_end}: {span}"));
+        }
+        if let Some(p) = previous.filter(|&p| t < p) {
+            return Err(format!("{name}: the times must ascend, but {t} comes after {p}"));
+        }
+        previous = Some(t);
+    }
+    Ok(())
 }
 
 /// The method named `name` (`auto`, `dopri5`, `dop853`, `rodas5p`, `rodas4`: the command line's
@@ -239,6 +266,18 @@ mod tests {
     }
 
     #[test]
+    fn sample_times_on_the_spans_ends_and_repeated_are_taken() {
+        let base = SimOptions { t_start: -1.0, t_end: 2.5, ..SimOptions::default() };
+        let at = vec![-1.0, 0.0, 0.0, 2.5];
+        let applied =
+            SimOverrides { at: Some(at.clone()), ..Default::default() }.apply(&base, Spelling::Flag);
+        assert_eq!(applied.map(|o| o.at), Ok(at));
+        // Just past either end is refused.
+        assert!(sample_times_within(&[2.5 + 1e-15 * 4.0], -1.0, 2.5, "--at").is_err());
+        assert!(sample_times_within(&[-1.0 - 1e-15], -1.0, 2.5, "--at").is_err());
+    }
+
+    #[test]
     fn no_overrides_leave_the_base_as_it_is() {
         let base = SimOptions { t_end: 2.5, rtol: 1e-6, land_events: Some(false), ..SimOptions::default() };
         assert_eq!(SimOverrides::default().apply(&base, Spelling::Flag), Ok(base));
@@ -307,6 +346,21 @@ mod tests {
                 SimOverrides { at: Some(vec![0.0; 1_000_001]), ..Default::default() },
                 "at",
                 "--at: 1000001 times, at most 1000000",
+            ),
+            (
+                SimOverrides { at: Some(vec![1.0, 3.0]), t_end: Some(2.5), ..Default::default() },
+                "at",
+                "--at: time 3 is after t_end = 2.5: the run goes from t_start = 0 to t_end = 2.5",
+            ),
+            (
+                SimOverrides { at: Some(vec![-1.0]), t_end: Some(2.5), ..Default::default() },
+                "at",
+                "--at: time -1 is before t_start = 0: the run goes from t_start = 0 to t_end = 2.5",
+            ),
+            (
+                SimOverrides { at: Some(vec![2.0, 1.0]), t_end: Some(2.5), ..Default::default() },
+                "at",
+                "--at: the times must ascend, but 1 comes after 2",
             ),
         ];
         for (overrides, option, message) in cases {

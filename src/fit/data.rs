@@ -111,6 +111,24 @@ pub enum DataError {
         /// The most a fit takes.
         cap: usize,
     },
+    /// A measurement's time outside the run's span: no run reaches it.
+    #[error("{file}:{line}: time {t} is {side} = {bound}: the run goes from t_start = {t_start} to t_end = {t_end}")]
+    TimeOutside {
+        /// The file's name, as messages give it.
+        file: String,
+        /// The line (1-based, the header line 1).
+        line: usize,
+        /// The time.
+        t: f64,
+        /// `before t_start` or `after t_end`.
+        side: &'static str,
+        /// The end it is past.
+        bound: f64,
+        /// The run's start.
+        t_start: f64,
+        /// The run's end.
+        t_end: f64,
+    },
     /// A file whose value cells are all empty.
     #[error("{file}: no measurements (every value cell is empty)")]
     Nothing {
@@ -134,8 +152,12 @@ pub struct Data {
 }
 
 /// The measurements of `text` (a CSV file's contents, named `file` in messages) as targets:
-/// see [`Data`]; refused with the line and column at fault.
-pub fn parse_data(text: &str, file: &str, info: &SystemInfo) -> Result<Data, DataError> {
+/// see [`Data`]; refused with the line and column at fault. Every time must lie within the run's
+/// span `(t_start, t_end)`. A leading UTF-8 byte-order mark (as spreadsheets write one) is not
+/// part of the first column's name; any other invisible character in a name is shown as
+/// `<U+XXXX>` in the messages.
+pub fn parse_data(text: &str, file: &str, info: &SystemInfo, span: (f64, f64)) -> Result<Data, DataError> {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
     let Some((_, header)) = lines.next() else {
         return Err(DataError::Empty { file: file.to_string() });
@@ -144,7 +166,7 @@ pub fn parse_data(text: &str, file: &str, info: &SystemInfo) -> Result<Data, Dat
     let time = columns
         .iter()
         .position(|c| *c == "time")
-        .ok_or_else(|| DataError::NoTime { file: file.to_string(), columns: columns.join(", ") })?;
+        .ok_or_else(|| DataError::NoTime { file: file.to_string(), columns: shown(&columns.join(", ")) })?;
     // Per column: what it holds.
     enum Column {
         Time,
@@ -154,13 +176,13 @@ pub fn parse_data(text: &str, file: &str, info: &SystemInfo) -> Result<Data, Dat
     let mut kinds: Vec<Column> = Vec::with_capacity(columns.len());
     for (c, name) in columns.iter().enumerate() {
         if columns[..c].contains(name) {
-            return Err(DataError::Repeated { file: file.to_string(), name: name.to_string() });
+            return Err(DataError::Repeated { file: file.to_string(), name: shown(name) });
         }
         if c == time {
             kinds.push(Column::Time);
         } else if let Some(of) = name.strip_prefix("sigma_") {
             if !columns.contains(&of) {
-                return Err(DataError::LoneSigma { file: file.to_string(), name: of.to_string() });
+                return Err(DataError::LoneSigma { file: file.to_string(), name: shown(of) });
             }
             kinds.push(Column::Sigma);
         } else {
@@ -197,6 +219,20 @@ pub fn parse_data(text: &str, file: &str, info: &SystemInfo) -> Result<Data, Dat
             return Err(DataError::NoTimeValue { file: file.to_string(), line });
         }
         let t = number(line, "time", cells[time])?;
+        let (t_start, t_end) = span;
+        if t < t_start || t > t_end {
+            let (side, bound) =
+                if t < t_start { ("before t_start", t_start) } else { ("after t_end", t_end) };
+            return Err(DataError::TimeOutside {
+                file: file.to_string(),
+                line,
+                t,
+                side,
+                bound,
+                t_start,
+                t_end,
+            });
+        }
         for (c, kind) in kinds.iter().enumerate() {
             let Column::Value { output, index, sigma } = *kind else { continue };
             if cells[c].is_empty() {
@@ -229,6 +265,12 @@ pub fn parse_data(text: &str, file: &str, info: &SystemInfo) -> Result<Data, Dat
     Ok(Data { targets, sigma_known })
 }
 
+/// `text` with every character a terminal would not show as itself written `<U+XXXX>`.
+fn shown(text: &str) -> String {
+    use crate::syntax::chars::{escaped, is_invisible};
+    text.chars().map(|c| if is_invisible(c) { escaped(c) } else { c.to_string() }).collect()
+}
+
 fn unknown(file: &str, name: &str, info: &SystemInfo) -> DataError {
     let outputs: Vec<&str> = info.output_names.iter().map(String::as_str).collect();
     let states: Vec<&str> = info.state_names.iter().map(String::as_str).collect();
@@ -238,7 +280,7 @@ fn unknown(file: &str, name: &str, info: &SystemInfo) -> DataError {
     let list = |v: &[&str]| if v.is_empty() { "none".to_string() } else { v.join(", ") };
     DataError::UnknownColumn {
         file: file.to_string(),
-        name: name.to_string(),
+        name: shown(name),
         hint,
         outputs: list(&outputs),
         states: list(&states),

@@ -127,6 +127,15 @@ pub enum TargetError {
         /// The target as written.
         text: String,
     },
+    /// A `NAME@TIME` whose time the run does not reach (`reason` says why: before `t_start`,
+    /// after `t_end`).
+    #[error("`{text}`: {reason}")]
+    TimeOutside {
+        /// The target as written.
+        text: String,
+        /// Why: `time 3 is after t_end = 2.5: the run goes from ...`.
+        reason: String,
+    },
     /// A goal that is not a finite number.
     #[error("`{text}` is not a finite number")]
     NotANumber {

@@ -22,6 +22,7 @@
 //! shards, merged). A whole problem from text, for the CLI and Python, is the door's
 //! `OptimizeRequest` (`api/request/optimize.rs`).
 
+mod curvature;
 mod evaluate;
 mod kkt;
 pub mod report;
@@ -30,6 +31,7 @@ mod slsqp;
 pub mod solver;
 mod spec;
 
+pub use curvature::Descent;
 pub use kkt::Kkt;
 pub use shards::merge_shards;
 pub use slsqp::Slsqp;
@@ -66,8 +68,9 @@ pub struct OptimizeOptions {
     /// request for the point it asked for last (served from a cache), so a solve makes at most
     /// this many runs.
     pub max_iter: usize,
-    /// Converged when the projected Lagrangian gradient, relative to its largest term, is at most
-    /// this (and every constraint is met to its tolerance).
+    /// Converged when the projected Lagrangian gradient is at most this times the gradient scale
+    /// (`Kkt::scale`: the objective's gradient at the start and the Lagrangian's terms at the end)
+    /// and every constraint is met to its tolerance.
     pub kkt_tol: f64,
     /// The optimiser may stop when a step changes every parameter by less than this, relatively.
     pub xtol: f64,
@@ -152,6 +155,15 @@ pub enum Verdict {
     Infeasible,
     /// Feasible, but the Lagrangian's gradient does not vanish to `kkt_tol`.
     Stalled,
+    /// The KKT conditions hold, but the point is no minimum: the Lagrangian's curvature is
+    /// negative along a direction the bounds and active constraints leave free, and values along
+    /// it confirm the descent (a maximum or a saddle; `curvature.rs`).
+    NotAMinimum {
+        /// The negative curvature, in the variables scaled by their scales.
+        curvature: f64,
+        /// How much lower the Lagrangian is a thousandth of the scales away along it.
+        drop: f64,
+    },
     /// The starting point cannot be evaluated.
     StartFailed {
         /// Why it cannot be evaluated.
@@ -169,6 +181,7 @@ impl Verdict {
             Verdict::RunsFailing { .. } => "runs_failing",
             Verdict::Infeasible => "infeasible",
             Verdict::Stalled => "stalled",
+            Verdict::NotAMinimum { .. } => "not_a_minimum",
             Verdict::StartFailed { .. } => "start_failed",
         }
     }
@@ -196,8 +209,14 @@ pub struct LocalResult {
     pub status: String,
     /// The optimiser's evaluations, one run each.
     pub trials: Vec<Trial>,
-    /// Simulation runs in all: the evaluations, and one or two at the end for the report.
+    /// Simulation runs in all: the evaluations, one or two at the end for the report, and the
+    /// second-order check's (`probe_runs`).
     pub runs: usize,
+    /// The runs of the second-order check at a stationary end (`curvature.rs`).
+    pub probe_runs: usize,
+    /// How many times the optimiser asked for a point with a non-finite coordinate: no run is
+    /// made there, the optimiser is told the point failed, and its search has broken down.
+    pub non_finite: usize,
     /// The runs whose event sequence differed from the previous one's.
     pub changes: Vec<SequenceChange>,
     /// The end's run (events, final state, warnings), when it could be run.
@@ -437,6 +456,8 @@ fn local<S: HybridSystem>(
         verdict: Verdict::StartFailed { message },
         status: status.to_string(),
         runs,
+        probe_runs: 0,
+        non_finite: 0,
         trials: Vec::new(),
         changes: Vec::new(),
         run: None,
@@ -451,6 +472,7 @@ fn local<S: HybridSystem>(
         Err(r) => return failed(r.to_string(), "not started", 1),
     };
     let tolerances = constraint_tolerances(layout, &first.values, &problem.sim);
+    let start_gradient = first.point.gradient.clone();
     let program = Program {
         bounds: problem.bounds.iter().map(|b| (b.lower, b.upper)).collect(),
         n_eq: layout.n_eq,
@@ -464,8 +486,14 @@ fn local<S: HybridSystem>(
     let mut changes: Vec<SequenceChange> = Vec::new();
     let mut previous: Option<Vec<usize>> = None;
     let mut last: Option<(Vec<f64>, Result<Evaluated, Rejection>)> = None;
+    let mut non_finite = 0;
     let mut end = {
         let mut evaluate_at = |x: &[f64]| -> Option<SmoothPoint> {
+            // No run at a point that is not one: the optimiser is told it failed.
+            if x.iter().any(|v| !v.is_finite()) {
+                non_finite += 1;
+                return None;
+            }
             let run = trials.len();
             let outcome = if run == 0 {
                 Ok(first.clone())
@@ -510,7 +538,7 @@ fn local<S: HybridSystem>(
     };
     // A variable the verdict counts as held (`kkt::held`: on its bound to round-off) is put on
     // it, so that the report and the `set:` list say 0 where the box holds a thrust at 0.
-    let sides = kkt::held(&end.x, &program.bounds);
+    let sides = kkt::held(&end.x, &x0, &program.bounds);
     for ((v, &(lo, hi)), side) in end.x.iter_mut().zip(&program.bounds).zip(sides) {
         match side {
             -1 => *v = lo,
@@ -540,6 +568,8 @@ fn local<S: HybridSystem>(
         verdict: Verdict::Stalled,
         status: end.status.clone(),
         runs: trials.len() + extra_runs,
+        probe_runs: 0,
+        non_finite,
         trials,
         changes,
         cusp_notes: run.as_ref().map(cusp_notes).unwrap_or_default(),
@@ -553,8 +583,37 @@ fn local<S: HybridSystem>(
         }
     };
     let tolerances = constraint_tolerances(layout, &evaluated.values, &problem.sim);
-    let kkt = kkt::measure(&end.x, &program.bounds, &evaluated.point, layout.n_eq, &tolerances);
-    result.verdict = verdict(&kkt, opts, &end, &result.trials, &evaluated.events);
+    let kkt = kkt::measure(
+        &end.x,
+        &x0,
+        &program.bounds,
+        &evaluated.point,
+        layout.n_eq,
+        &tolerances,
+        &start_gradient,
+    );
+    result.verdict = verdict(&kkt, opts, &end, &result.trials, &evaluated.events, non_finite);
+    if result.verdict == Verdict::Converged {
+        // Stationary: a minimum, or a maximum or saddle? (`curvature.rs`)
+        let mut at = |x: &[f64]| {
+            evaluate::evaluate(&mut simulator, info, layout, &with_free(x)).ok().map(|e| (e.point, e.events))
+        };
+        let probe = curvature::probe(
+            &end.x,
+            &x0,
+            &program.bounds,
+            &evaluated.point,
+            &evaluated.events,
+            &kkt,
+            problem.sim.rtol,
+            &mut at,
+        );
+        result.probe_runs = probe.runs;
+        result.runs += probe.runs;
+        if let Some(d) = probe.descent {
+            result.verdict = Verdict::NotAMinimum { curvature: d.curvature, drop: d.drop };
+        }
+    }
     result.values = evaluated.values;
     result.kkt = Some(kkt);
     result
@@ -574,12 +633,21 @@ fn violation(point: &SmoothPoint, n_eq: usize) -> f64 {
 /// stops short: the optimiser's last line search.
 const RECENT_RUNS: usize = 10;
 
+/// The verdict on a solve's end, first match wins:
+/// 1. converged: every constraint met to its tolerance and stationary to `kkt_tol` (then the
+///    caller's second-order check may still find it no minimum);
+/// 2. stalled at a cusp: a recent run on another event sequence;
+/// 3. infeasible, when a constraint is not met and either the violation cannot fall within the
+///    box (`Kkt::violation_stationary`: a local minimum of the violation) or the optimiser's
+///    search broke down (it asked for a non-finite point) or it stopped on its own;
+/// 4. max iterations; 5. runs failing nearby; 6. stalled.
 fn verdict(
     kkt: &Kkt,
     opts: &OptimizeOptions,
     end: &solver::SolverEnd,
     trials: &[Trial],
     events: &[usize],
+    non_finite: usize,
 ) -> Verdict {
     if kkt.violation_ratio <= 1.0 && kkt.stationarity <= opts.kkt_tol {
         return Verdict::Converged;
@@ -593,7 +661,10 @@ fn verdict(
     {
         return Verdict::StalledAtCusp { run: t.run };
     }
-    if end.out_of_evals {
+    if kkt.violation_ratio > 1.0 && (kkt.violation_stationary || non_finite > 0) {
+        return Verdict::Infeasible;
+    }
+    if end.out_of_evals && non_finite == 0 {
         return Verdict::MaxIterations;
     }
     if let Some(t) = recent.iter().rev().find(|t| t.failure.is_some()) {
@@ -681,4 +752,62 @@ pub(crate) fn group_optima<E: PartialEq>(ends: &[End<'_, E>], bounds: &[Bounds])
         }
     }
     groups
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn kkt(stationarity: f64, violation_ratio: f64, violation_stationary: bool) -> Kkt {
+        Kkt {
+            multipliers: vec![0.0],
+            active: vec![true],
+            at_bound: vec![1],
+            stationarity,
+            scale: 1.0,
+            violation_ratio,
+            violation: violation_ratio * 1e-8,
+            violation_stationary,
+        }
+    }
+
+    fn end(out_of_evals: bool) -> solver::SolverEnd {
+        solver::SolverEnd { x: vec![1.0], status: "MaxEvalReached".into(), out_of_evals }
+    }
+
+    fn trial(run: usize) -> Trial {
+        Trial {
+            run,
+            free: vec![1.0],
+            objective: Some(1.0),
+            violation: Some(0.05),
+            events: Some(4),
+            new_sequence: false,
+            failure: None,
+        }
+    }
+
+    #[test]
+    fn a_violation_no_move_lowers_or_a_broken_search_is_infeasible_not_max_iterations() {
+        let opts = OptimizeOptions::default();
+        let trials = [trial(0)];
+        let v = |k: &Kkt, out: bool, non_finite: usize| {
+            verdict(k, &opts, &end(out), &trials, &[0; 4], non_finite)
+        };
+        // Met and stationary: converged, however the optimiser stopped.
+        assert_eq!(v(&kkt(1e-9, 0.5, true), true, 0), Verdict::Converged);
+        // Not met, and the violation cannot fall within the box: infeasible even out of evaluations.
+        assert_eq!(v(&kkt(1.0, 1e6, true), true, 0), Verdict::Infeasible);
+        // Not met, the violation could fall, the evaluations spent: max iterations ...
+        assert_eq!(v(&kkt(1.0, 1e6, false), true, 0), Verdict::MaxIterations);
+        // ... unless they were spent asking for non-finite points: the search broke down.
+        assert_eq!(v(&kkt(1.0, 1e6, false), true, 187), Verdict::Infeasible);
+        // Met but not stationary when the search broke down: stalled, not max iterations.
+        assert_eq!(v(&kkt(1.0, 0.5, true), true, 187), Verdict::Stalled);
+        // A run on another piece nearby still comes first.
+        let mut across = vec![trial(0), trial(1)];
+        across[1].events = Some(3);
+        let k = kkt(1.0, 1e6, true);
+        assert_eq!(verdict(&k, &opts, &end(true), &across, &[0; 4], 0), Verdict::StalledAtCusp { run: 1 });
+    }
 }

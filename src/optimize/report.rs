@@ -67,33 +67,56 @@ impl OptimizeReport {
         let measures = k
             .map(|k| {
                 format!(
-                    "KKT stationarity {:.1e} (tolerance {:.0e}), largest constraint violation {} ({:.2} of its tolerance)",
+                    "KKT stationarity {:.1e} (tolerance {:.0e}, of the gradient scale {}), largest constraint violation {} ({:.2} of its tolerance)",
                     k.stationarity,
                     self.options.kkt_tol,
+                    short(k.scale),
                     short(k.violation),
                     k.violation_ratio
                 )
             })
             .unwrap_or_default();
         let runs = r.trials.len();
+        // The optimiser asked for a non-finite point: its search broke down there.
+        let broke_down = if r.non_finite > 0 {
+            format!(
+                "; the optimiser's search broke down: after {runs} run(s) it asked {} time(s) for a point with a non-finite coordinate, where no run is made",
+                r.non_finite
+            )
+        } else {
+            String::new()
+        };
         match &r.verdict {
             Verdict::Converged => {
                 format!("converged after {runs} evaluations ({}: {}): {measures}", self.result.solver, r.status)
             },
-            Verdict::MaxIterations => format!("did not converge: the optimiser used up its --max-iter evaluations ({runs} runs); {measures}"),
+            Verdict::MaxIterations => format!("did not converge: the optimiser used up its --max-iter evaluations ({runs} runs){broke_down}; {measures}"),
             Verdict::StalledAtCusp { run } => format!(
-                "did not converge: stalled at a cusp: run {run} nearby has another event sequence ({} events at the end), so the problem is not smooth where the optimiser stopped; {measures}; try another start or --starts",
+                "did not converge: stalled at a cusp: run {run} nearby has another event sequence ({} events at the end), so the problem is not smooth where the optimiser stopped{broke_down}; {measures}; try another start or --starts",
                 r.events().len()
             ),
             Verdict::RunsFailing { message } => {
-                format!("did not converge: runs near the end failed ({message}); {measures}")
+                format!("did not converge: runs near the end failed ({message}){broke_down}; {measures}")
             }
-            Verdict::Infeasible => format!(
-                "did not converge: infeasible: a constraint is not met to its tolerance where the optimiser stopped ({}); {measures}",
-                r.status
+            Verdict::Infeasible => {
+                let why = match k {
+                    Some(k) if k.violation_stationary => {
+                        "; no move within the bounds lowers the violation (its gradient is held by the bounds or vanishes): the constraints cannot be met near here"
+                    }
+                    _ => "",
+                };
+                format!(
+                    "did not converge: infeasible: a constraint is not met to its tolerance where the optimiser stopped ({}){why}{broke_down}; {measures}",
+                    r.status
+                )
+            }
+            Verdict::NotAMinimum { curvature, drop } => format!(
+                "did not converge: not a minimum: the KKT conditions hold, but the curvature along a direction the bounds and constraints leave free is negative ({}, in the variables' scales), and a step of 1e-3 of the scales along it lowers the objective (its Lagrangian) by {}: a maximum or a saddle; {measures}; try another start or --starts",
+                short(*curvature),
+                short(*drop)
             ),
             Verdict::Stalled => format!(
-                "did not converge: stalled: the optimiser stopped ({}) where the KKT conditions do not hold; {measures}",
+                "did not converge: stalled: the optimiser stopped ({}) where the KKT conditions do not hold{broke_down}; {measures}",
                 r.status
             ),
             Verdict::StartFailed { message } => format!("cannot evaluate the start: {message}"),
@@ -180,11 +203,21 @@ impl OptimizeReport {
         }
         let events = self.event_names(&r.events());
         let _ = writeln!(out, "\nevents at the end: {} ({})", events.len(), summarize(&events));
-        if r.cusp_notes.is_empty() {
-            let _ = writeln!(
-                out,
-                "no event at a breakpoint, at t_end or near grazing: the end lies inside one smooth piece"
-            );
+        match (&r.verdict, r.cusp_notes.is_empty()) {
+            // The end's own run is smooth, but a run next to it is on another piece.
+            (Verdict::StalledAtCusp { run }, true) => {
+                let _ = writeln!(
+                    out,
+                    "no event at a breakpoint, at t_end or near grazing in the end's own run, but run {run} next to it has another event sequence: the end lies at the edge of its smooth piece"
+                );
+            }
+            (_, true) => {
+                let _ = writeln!(
+                    out,
+                    "no event at a breakpoint, at t_end or near grazing: the end lies inside one smooth piece"
+                );
+            }
+            _ => {}
         }
         for note in &r.cusp_notes {
             let _ = writeln!(out, "cusp: {note}");
@@ -237,9 +270,15 @@ impl OptimizeReport {
         }
         let _ = writeln!(out, "\nset: {}", self.set_arguments(r));
         let evaluations: usize = self.result.locals.iter().map(|l| l.trials.len()).sum();
+        let probes: usize = self.result.locals.iter().map(|l| l.probe_runs).sum();
+        let rest = if probes > 0 {
+            format!("{probes} to check the curvature at stationary ends, the rest to report the ends")
+        } else {
+            "the rest to report the ends".to_string()
+        };
         let _ = writeln!(
             out,
-            "{} runs ({evaluations} evaluations, the rest to report the ends), compile {:.2} ms, optimize {:.2} ms",
+            "{} runs ({evaluations} evaluations, {rest}), compile {:.2} ms, optimize {:.2} ms",
             self.result.runs(),
             self.compile_seconds * 1e3,
             self.optimize_seconds * 1e3
@@ -258,6 +297,8 @@ impl OptimizeReport {
             "status": l.status,
             "evaluations": l.trials.len(),
             "runs": l.runs,
+            "probe_runs": l.probe_runs,
+            "non_finite_requests": l.non_finite,
             "events": self.event_names(&l.events()),
             "stationarity": l.kkt.as_ref().map(|k| number_json(k.stationarity)),
             "violation": l.kkt.as_ref().map(|k| number_json(k.violation)),
@@ -354,6 +395,7 @@ impl OptimizeReport {
             "solver_status": r.status,
             "kkt": {
                 "stationarity": r.kkt.as_ref().map(|k| number_json(k.stationarity)),
+                "scale": r.kkt.as_ref().map(|k| number_json(k.scale)),
                 "tolerance": self.options.kkt_tol,
                 "violation": r.kkt.as_ref().map(|k| number_json(k.violation)),
                 "violation_ratio": r.kkt.as_ref().map(|k| number_json(k.violation_ratio)),

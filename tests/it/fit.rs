@@ -627,6 +627,15 @@ fn a_data_file_that_names_nothing_or_holds_no_number_is_refused_with_its_line() 
         ("time,conc,sigma_conc\n1,2,0\n", ":2: column `sigma_conc`: a standard deviation must be positive"),
         ("time,conc\n1,2,3\n", ":2: expected 2 cells"),
         ("time,conc\n1,\n", "no measurements"),
+        // A time the run does not reach (dosing runs from 0 to 12), named with its line and the span.
+        (
+            "time,conc\n1,2\n13,1\n",
+            ":3: time 13 is after t_end = 12: the run goes from t_start = 0 to t_end = 12",
+        ),
+        ("time,conc\n-1,2\n", ":2: time -1 is before t_start = 0"),
+        // An invisible character in a name is shown.
+        ("time,con\u{200b}c\n1,2\n", ":1: column `con<U+200B>c` is not an output or a state"),
+        ("\u{feff}t,conc\n1,2\n", ":1: no `time` column in the header (columns: t, conc)"),
     ] {
         let path = data_file("bad.csv", text);
         let out = hybc(&["fit", "models/dosing.hyb", "--free", "ka", "--data", path.to_str().unwrap()]);
@@ -634,6 +643,44 @@ fn a_data_file_that_names_nothing_or_holds_no_number_is_refused_with_its_line() 
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(err.contains(needle), "{text}: {err}");
     }
+}
+
+#[test]
+fn a_target_at_a_time_the_run_does_not_reach_is_refused_with_its_cause() {
+    let out = hybc(&["fit", "models/ball.hyb", "--free", "e", "--target", "y@3=0.1"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("`y@3=0.1`: time 3 is after t_end = 2.5: the run goes from t_start = 0 to t_end = 2.5"),
+        "{err}"
+    );
+    // The same target in a run that reaches it is a fit: y(3) = 0.1 with e free.
+    let out = hybc(&["fit", "models/ball.hyb", "--free", "e", "--target", "y@3=0.1", "--t-end", "3"]);
+    assert_ne!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+#[test]
+fn a_data_file_with_a_byte_order_mark_reads_as_the_same_file_without() {
+    // Spreadsheets start a UTF-8 CSV with U+FEFF; it is no part of the first column's name.
+    let text = "time,conc\n3,1.5\n5,1.8\n9,2.1\n";
+    let plain = data_file("plain.csv", text);
+    let marked = data_file("marked.csv", &format!("\u{feff}{text}"));
+    let fit = |path: &std::path::Path| {
+        let out = hybc(&[
+            "fit",
+            "models/dosing.hyb",
+            "--free",
+            "ka",
+            "--data",
+            path.to_str().unwrap(),
+            "--format",
+            "json",
+        ]);
+        assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+        let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+        v["params"].clone()
+    };
+    assert_eq!(fit(&marked), fit(&plain));
 }
 
 /// The soft floor tends to the hard reset: the damping ratio that loses the energy of a hard

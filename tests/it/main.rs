@@ -35,6 +35,7 @@ mod layers;
 mod limits;
 mod optimize;
 mod optimize_problems;
+mod optimize_verdicts;
 mod periodic;
 mod plot;
 mod quadrature;

@@ -26,7 +26,7 @@ const E_STAR: f64 = 2.0;
 const Y_STAR: f64 = 0.1;
 
 /// (e, h0) of the branch with `n` bounces before T, rising or falling at T.
-fn branch(n: i32, rising: bool) -> (f64, f64) {
+pub(crate) fn branch(n: i32, rising: bool) -> (f64, f64) {
     let w = (2.0 * E_STAR).sqrt();
     let root = (w * w - 2.0 * G * Y_STAR).sqrt();
     let tau = if rising { (w - root) / G } else { (w + root) / G };
@@ -392,6 +392,14 @@ fn cli_refuses_bad_input_with_usage_errors_and_reports_non_convergence() {
     assert!(err.contains("leaves its declared range"), "{err}");
     let out = hybc(&["optimize", "models/ball.hyb", "--free", "hh0", "--minimize", "h0"]);
     assert_eq!(out.status.code(), Some(2));
+    // A value at a time the run (0 to 2.5) does not reach, named with its cause (it was the run's
+    // "sample time 3 is not in order", exit 3).
+    let (code, err) = case(&["--minimize", "y@3"]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("--minimize: `y@3`: time 3 is after t_end = 2.5"), "{err}");
+    let (code, err) = case(&["--minimize", "e", "--subject-to", "y@-1:2:4 >= 0"]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("--subject-to: `y@-1:2:4 >= 0`: time -1 is before t_start = 0"), "{err}");
     // Three runs are not enough: exit 4 with the reason.
     let (code, err) = case(&[
         "--minimize",

@@ -143,6 +143,28 @@ fn sample_times_out_of_order_or_outside_the_run_are_refused() {
 }
 
 #[test]
+fn the_cli_names_why_a_sample_time_is_refused() {
+    // The ball runs from 0 to 2.5: a time past either end, or out of order, is named with its
+    // cause (not "not in order" for all three); the span's own ends are taken.
+    for (at, needle) in [
+        ("--at=3", "--at: time 3 is after t_end = 2.5: the run goes from t_start = 0 to t_end = 2.5"),
+        ("--at=-1", "--at: time -1 is before t_start = 0: the run goes from t_start = 0 to t_end = 2.5"),
+        ("--at=2,1", "--at: the times must ascend, but 1 comes after 2"),
+    ] {
+        let out = hybc(&["run", "models/ball.hyb", at]);
+        assert_eq!(out.status.code(), Some(2), "{at}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(needle), "{at}: {err}");
+        assert!(!err.contains("not in order"), "{at}: {err}");
+    }
+    let out = hybc(&["run", "models/ball.hyb", "--at=0,2.5", "--t-end", "2.5"]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    // --t-end moves the span the times are checked against.
+    let out = hybc(&["run", "models/ball.hyb", "--at=3", "--t-end", "3.5"]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+#[test]
 fn the_cli_writes_samples_to_the_table_json_and_csv_alike() {
     let dir = std::env::temp_dir().join(format!("hybc-samples-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();

@@ -57,9 +57,20 @@ impl FitRequest<'_> {
             .iter()
             .map(|t| Target::parse(t, &info).map_err(FitFailure::Target))
             .collect::<Result<Vec<_>, _>>()?;
+        // A value at a time the run does not reach is refused here, with its cause, not by the run.
+        for (target, text) in targets.iter().zip(self.targets) {
+            if let Some(t) = target.observable.sample_time() {
+                crate::api::options::sample_times_within(&[t], self.sim.t_start, self.sim.t_end, "")
+                    .map_err(|reason| {
+                        let reason = reason.trim_start_matches(": ").to_string();
+                        FitFailure::Target(TargetError::TimeOutside { text: text.clone(), reason })
+                    })?;
+            }
+        }
         let mut sigma_known = false;
         if let Some((text, file)) = self.data {
-            let data = data::parse_data(text, file, &info).map_err(FitFailure::Data)?;
+            let span = (self.sim.t_start, self.sim.t_end);
+            let data = data::parse_data(text, file, &info, span).map_err(FitFailure::Data)?;
             sigma_known = data.sigma_known;
             targets.extend(data.targets);
         }

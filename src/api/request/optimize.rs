@@ -89,10 +89,22 @@ impl OptimizeRequest<'_> {
         let info = compiled.info().clone();
         let objective =
             Quantity::parse(self.minimize, &info).map_err(|e| OptimizeFailure::Objective(e.to_string()))?;
+        // A value at a time the run does not reach is refused here, with its cause, not by the run.
+        let (t_start, t_end) = (self.sim.t_start, self.sim.t_end);
+        let within = |q: &Quantity, text: &str| match q {
+            Quantity::Observable(o) => o.sample_time().map_or(Ok(()), |t| {
+                crate::api::options::sample_times_within(&[t], t_start, t_end, &format!("`{}`", text.trim()))
+            }),
+            Quantity::Param(_) => Ok(()),
+        };
+        within(&objective, self.minimize).map_err(OptimizeFailure::Objective)?;
         let mut constraints = Vec::new();
         for text in self.subject_to {
             let parsed =
                 parse_constraint(text, &info).map_err(|e| OptimizeFailure::Constraint(e.to_string()))?;
+            for c in &parsed {
+                within(&c.quantity, text).map_err(OptimizeFailure::Constraint)?;
+            }
             constraints.extend(parsed);
             crate::limits::count("constraints in all", constraints.len(), 0, crate::limits::MAX_CONSTRAINTS)
                 .map_err(|e| OptimizeFailure::Constraint(e.to_string()))?;
