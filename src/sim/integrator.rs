@@ -898,6 +898,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             self.landed_velocity(t0, t_fire, t_fire, rhs);
             return Landing::Landed(t_fire);
         }
+        if far {
+            // The landed guards never got across, and put the instant far from where the dense
+            // output did: its crossing there is the dense output's error (Rodas4 at c = 0.4999
+            // fired a crossing the trajectory never makes); a shorter step reads a better one.
+            return Landing::Retry;
+        }
         Landing::Dense
     }
 

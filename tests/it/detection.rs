@@ -256,6 +256,58 @@ fn events_in_a_stiff_phase_are_as_accurate_as_the_step_ends() {
 }
 
 #[test]
+fn thresholds_near_a_stiff_tracking_s_tops_cross_exactly_four_times_with_or_without_gradients() {
+    // The same tracking at stiffness 1e6 against thresholds ever nearer its tops (crossing
+    // speeds 0.07 down to 0.003): four crossings each, with gradients (their error control
+    // changes the steps) and without. Rodas4 at c = 0.4999 with gradients fired a fifth at
+    // t = 7.774, where its 0.79-long step's dense output crossed and the trajectory does not
+    // (the landed guards put the instant at 7.834 and never got across: the step is retried).
+    let (pi, tau) = (std::f64::consts::PI, std::f64::consts::TAU);
+    for c in [0.49, 0.499, 0.4999, 0.49995, 0.49999] {
+        let text = format!(
+            "model stiffev\nparam c = {c}\nstate x = 0\nder(x) = -1e6 * (x - 0.5 * sin(t))\n\
+             event near when x crosses c\nsimulate t_end = 10, rtol = 1e-8, atol = 1e-10\n"
+        );
+        let base = (c / 0.5f64).asin();
+        let exact: Vec<(f64, f64)> = [base, pi - base, base + tau, 3.0 * pi - base]
+            .iter()
+            .map(|&guess| {
+                let mut t: f64 = guess;
+                for _ in 0..50 {
+                    let (x, dx) = tracking(1e6, t);
+                    t -= (x - c) / dx;
+                }
+                (t, tracking(1e6, t).1)
+            })
+            .collect();
+        for method in [Method::Rodas5p, Method::Rodas4, Method::Auto] {
+            for grad in [&["c"][..], &[][..]] {
+                let r = run(&text, grad, |o| o.method = method);
+                let at = format!("c = {c}, {method:?}, grad {grad:?}");
+                assert_eq!(r.events().len(), 4, "{at}: {:?}", crate::support::runs::times(&r));
+                for (k, &(t, speed)) in exact.iter().enumerate() {
+                    // The guard's accuracy at the tolerances over the crossing speed, ten times.
+                    let accuracy = (1e-10 + 1e-8 * c) / speed.abs();
+                    let got = r.events()[k].time;
+                    assert!((got - t).abs() < 10.0 * accuracy, "{at}: event {k} at {got}, exact {t}");
+                    if !grad.is_empty() {
+                        // dt/dc = 1 / x'(t_e); x' moves by x'' (0.5) per unit of the time's
+                        // error: twice that, relative.
+                        let d = r.devent_time(k, "c").expect("a time gradient");
+                        let tol = 2.0 * accuracy * 0.5 / speed.abs() + 1e-6;
+                        assert!(
+                            (d * speed - 1.0).abs() < tol,
+                            "{at}: event {k} dt/dc {d}, exact {}",
+                            1.0 / speed
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
 fn samples_in_a_stiff_phase_are_as_accurate_as_the_step_ends_and_change_no_step() {
     // The same tracking at stiffness 1e6, amplitude a: x = a x_p / 0.5, dx/da = x / a. Read off
     // a Rosenbrock dense output, x(1.55) was 3,600 tolerances off; each time is now taken from
