@@ -527,6 +527,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         // Only a step that stands counts: one retried to land before a flow switch it straddled
         // carried the other branch's error.
         self.note_cost_error(plan.t0);
+        if !matches!(selection, Selection::Nothing) {
+            // The step is cut at an instant: what jumps there is read off its dense output.
+            self.work.stepper.complete_interpolant(plan.t0, &self.work.z, &mut rhs);
+        }
         match selection {
             Selection::Nothing if self.work.det.penetrated().is_some() => {
                 // Stop where the last bounce left the state (the step is not taken).
@@ -618,8 +622,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         self.work.det.eval_end(cx, t1, &self.work.stepper);
         let for_events = self.work.det.mark_candidates(cx);
         let sample_due = self.sampler.wanted(&*self.recorder, t1);
-        if for_events || sample_due {
+        if sample_due {
             self.work.stepper.build_interpolant(t0, &self.work.z, rhs);
+        } else if for_events {
+            // The states' part first: most steps with a candidate guard fire nothing, and only
+            // a step cut at an instant reads the sensitivities there (`complete_interpolant`).
+            self.work.stepper.build_states_interpolant(t0, &self.work.z, rhs);
         }
         Ok(Look { for_events, sample_due })
     }

@@ -30,6 +30,11 @@ impl<S: HybridSystem + ?Sized> Rhs for ModeRhs<'_, S> {
         self.sys.flow_sens(self.mode, t, x, s, self.p, dx, ds);
     }
 
+    #[inline(always)]
+    fn eval_states(&mut self, t: f64, z: &[f64], dz: &mut [f64]) {
+        self.sys.flow(self.mode, t, &z[..self.n], self.p, &mut dz[..self.n]);
+    }
+
     fn jacobian(&mut self, t: f64, z: &[f64], fx: &mut [f64], ft: &mut [f64]) {
         let (x, s) = z.split_at(self.n);
         let (ftx, fts) = ft.split_at_mut(self.n);

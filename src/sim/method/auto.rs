@@ -290,6 +290,22 @@ impl Stepper for Auto {
         }
     }
 
+    fn build_states_interpolant<R: Rhs>(&mut self, t0: f64, z: &[f64], rhs: &mut R) {
+        if !self.stiff {
+            self.rk.build_states_interpolant(t0, z, rhs);
+            std::mem::swap(&mut self.rk.dense, &mut self.dense.rk);
+        }
+    }
+
+    fn complete_interpolant<R: Rhs>(&mut self, t0: f64, z: &[f64], rhs: &mut R) {
+        if !self.stiff {
+            // The explicit pair's dense output lives in `dense.rk` since it was built.
+            std::mem::swap(&mut self.rk.dense, &mut self.dense.rk);
+            self.rk.complete_interpolant(t0, z, rhs);
+            std::mem::swap(&mut self.rk.dense, &mut self.dense.rk);
+        }
+    }
+
     fn interpolant(&self) -> &AutoDense {
         &self.dense
     }

@@ -29,18 +29,35 @@ pub struct Dense {
     r: Vec<f64>,
     /// One correction vector before it is spread into `r`.
     row: Vec<f64>,
+    /// The components built (the first `valid`): all of them, or the states alone
+    /// (`Stepper::build_states_interpolant`) until the rest is built.
+    valid: usize,
 }
 
 impl Dense {
     pub(crate) fn new(nz: usize) -> Dense {
         // Until the first build the interpolant is the zero constant, never an out-of-range read.
-        Dense { t0: 0.0, h: 0.0, nz, n_coef: 1, r: vec![0.0; MAX_COEF * nz], row: vec![0.0; nz] }
+        Dense { t0: 0.0, h: 0.0, nz, n_coef: 1, r: vec![0.0; MAX_COEF * nz], row: vec![0.0; nz], valid: nz }
     }
 
     /// Builds the interpolant of a step of size `h` from `(t0, y0)` to `y1` with the stage
-    /// derivatives `k` (all of them, DOP853's three extra stages included).
-    pub(crate) fn build(&mut self, tab: &Tableau, t0: f64, h: f64, y0: &[f64], y1: &[f64], k: &[f64]) {
+    /// derivatives `k` (all of them, DOP853's three extra stages included), for its first `upto`
+    /// components (`nz` for all: the others are then not to be read).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn build(
+        &mut self,
+        tab: &Tableau,
+        t0: f64,
+        h: f64,
+        y0: &[f64],
+        y1: &[f64],
+        k: &[f64],
+        upto: usize,
+    ) {
         let nz = self.nz;
+        let upto = upto.min(nz);
+        self.valid = upto;
+        let (y0, y1) = (&y0[..upto], &y1[..upto]);
         self.t0 = t0;
         self.h = h;
         self.n_coef = match tab.dense {
@@ -56,8 +73,8 @@ impl Dense {
             r[..4].copy_from_slice(&[y0, ydiff, bspl, ydiff - h * f1 - bspl]);
         }
         for (row, d) in tab.d.iter().enumerate() {
-            centred_sum(k, nz, d, &mut self.row);
-            for (r, v) in self.r.chunks_exact_mut(MAX_COEF).zip(&self.row) {
+            centred_sum(k, nz, d, &mut self.row[..upto]);
+            for (r, v) in self.r.chunks_exact_mut(MAX_COEF).zip(&self.row[..upto]) {
                 r[4 + row] = h * v;
             }
         }
@@ -79,6 +96,9 @@ impl Dense {
     /// half as long (the root searches evaluate the interpolant several times per event, and each
     /// evaluation waited on seven multiply-adds in a row).
     pub fn eval(&self, t: f64, out: &mut [f64]) {
+        // A dense output built for the states alone is completed before the rest is read: an
+        // invariant of the integrator, checked (a stale sensitivity would be a silent error).
+        assert!(out.len() <= self.valid, "the dense output read past the components built");
         let s = self.unit_time(t);
         let s1 = 1.0 - s;
         let u = s * s1;
@@ -99,6 +119,7 @@ impl Dense {
     /// derivative of [`Self::eval`]'s form, with `u' = 1 - 2 s` and `(r_k + (1-s) r_{k+1})' =
     /// -r_{k+1}`.
     pub fn eval_deriv(&self, t: f64, out: &mut [f64]) {
+        assert!(out.len() <= self.valid, "the dense output read past the components built");
         if self.h == 0.0 {
             out.fill(0.0);
             return;

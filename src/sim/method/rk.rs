@@ -52,6 +52,13 @@ pub struct Rk {
     pub(crate) y_new: Vec<f64>,
     pub(crate) ytmp: Vec<f64>,
     pub(crate) dense: Dense,
+    /// The dense output was built for the states alone (`Stepper::build_states_interpolant`),
+    /// from the attempt numbered so: its extra stages' sensitivity blocks are not computed yet.
+    partial: Option<u64>,
+    /// Attempts so far (a dense output is completed from its own attempt's stages only).
+    attempts: u64,
+    /// Scratch: one stage's whole right-hand side, for completing a dense output.
+    k_whole: Vec<f64>,
     /// The states of the last attempt's stages `1..stage_count` (`n_states` each, stage `i` at
     /// `(i - 1) n_states`): `Stepper::visit_stage_states`.
     stage_x: Vec<f64>,
@@ -98,6 +105,9 @@ impl Rk {
             y_new: vec![0.0; nz],
             ytmp: vec![0.0; nz],
             dense: Dense::new(nz),
+            partial: None,
+            attempts: 0,
+            k_whole: vec![0.0; nz],
             stage_x: vec![0.0; tab.all_stages * n_states],
             stage_count: 0,
             err5: vec![0.0; n_err],
@@ -240,6 +250,7 @@ impl Stepper for Rk {
     fn attempt<R: Rhs>(&mut self, t: f64, y: &[f64], h: f64, rhs: &mut R) -> f64 {
         let s = self.tab.stages;
         self.h = h;
+        self.attempts += 1;
         // The last stage's input is y + h sum b_j k_j = y_new (its row equals b).
         self.eval_stages(t, y, 1, s - 1, h, rhs);
         self.stage_input(y, s - 1, h);
@@ -276,7 +287,45 @@ impl Stepper for Rk {
         if tab.all_stages > tab.stages {
             self.eval_stages(t0, y, tab.stages, tab.all_stages, self.h, rhs);
         }
-        self.dense.build(tab, t0, self.h, y, &self.y_new, &self.k);
+        self.dense.build(tab, t0, self.h, y, &self.y_new, &self.k, self.nz);
+        self.partial = None;
+    }
+
+    /// DOP853's three extra stages for the states alone (`Rhs::eval_states`), and the dense
+    /// output of the states: the event detector reads nothing else, and with sensitivities the
+    /// extra stages' sensitivity blocks were most of the cost of a dense output built on every
+    /// step (the pendulum's sweep with every gradient: 170M of 582M instructions).
+    fn build_states_interpolant<R: Rhs>(&mut self, t0: f64, y: &[f64], rhs: &mut R) {
+        let (tab, n, nz) = (self.tab, self.n_states, self.nz);
+        if n == nz || tab.all_stages == tab.stages {
+            return self.build_interpolant(t0, y, rhs);
+        }
+        let h = self.h;
+        for i in tab.stages..tab.all_stages {
+            stage_sum(&self.k, nz, &tab.a[i], h, |c| y[c], &mut self.ytmp[..n]);
+            self.stage_x[(i - 1) * n..i * n].copy_from_slice(&self.ytmp[..n]);
+            self.stage_count = i + 1;
+            rhs.eval_states(t0 + tab.c[i] * h, &self.ytmp, &mut self.k[i * nz..(i + 1) * nz]);
+            self.rhs_calls += 1;
+        }
+        self.dense.build(tab, t0, h, y, &self.y_new, &self.k, n);
+        self.partial = Some(self.attempts);
+    }
+
+    /// The extra stages' sensitivity blocks, from the states' stage inputs already computed
+    /// (the states' blocks of `k` stay as they were, so the states' dense output does not move
+    /// by a rounding), then the whole dense output.
+    fn complete_interpolant<R: Rhs>(&mut self, t0: f64, y: &[f64], rhs: &mut R) {
+        let Some(attempt) = self.partial.take() else { return };
+        assert_eq!(attempt, self.attempts, "a dense output completed from another attempt's stages");
+        let (tab, n, nz, h) = (self.tab, self.n_states, self.nz, self.h);
+        for i in tab.stages..tab.all_stages {
+            stage_sum(&self.k, nz, &tab.a[i], h, |c| y[c], &mut self.ytmp);
+            rhs.eval(t0 + tab.c[i] * h, &self.ytmp, &mut self.k_whole);
+            self.rhs_calls += 1;
+            self.k[i * nz + n..(i + 1) * nz].copy_from_slice(&self.k_whole[n..]);
+        }
+        self.dense.build(tab, t0, h, y, &self.y_new, &self.k, nz);
     }
 
     fn interpolant(&self) -> &Dense {

@@ -93,6 +93,13 @@ pub trait Rhs {
         }
     }
 
+    /// The flow alone: `dz[..n] = f(t, z[..n])` for the `n` states (`n` the system's). The
+    /// default evaluates the whole right-hand side (what it writes past the states is not
+    /// read); a system with a kernel of the flow alone spares the sensitivities' part.
+    fn eval_states(&mut self, t: f64, z: &[f64], dz: &mut [f64]) {
+        self.eval(t, z, dz)
+    }
+
     /// Makes [`Self::jacobian`] and [`Self::sens_coupling`] ready; `false` when they cannot be
     /// had. A stepper that switches to an implicit method mid-run (`auto::Auto`) calls it first:
     /// the compiled model then compiles its Jacobian kernels on the first switch, not before.
@@ -198,6 +205,16 @@ pub trait Stepper {
     fn shrink(&self, err: f64) -> f64;
     /// Builds the dense output of the last attempt, which started at `(t0, z)`.
     fn build_interpolant<R: Rhs>(&mut self, t0: f64, z: &[f64], rhs: &mut R);
+    /// Builds the dense output of the last attempt for the states alone, what the event
+    /// detector reads: [`Self::complete_interpolant`] adds the sensitivities' part before
+    /// anything reads it (an evaluation of more components panics until then). By default the
+    /// whole of it.
+    fn build_states_interpolant<R: Rhs>(&mut self, t0: f64, z: &[f64], rhs: &mut R) {
+        self.build_interpolant(t0, z, rhs)
+    }
+    /// Completes a dense output [`Self::build_states_interpolant`] built for the states alone,
+    /// from the same attempt's stages (nothing when it is whole).
+    fn complete_interpolant<R: Rhs>(&mut self, _t0: f64, _z: &[f64], _rhs: &mut R) {}
     /// The dense output built last.
     fn interpolant(&self) -> &Self::Interpolant;
     /// Moves to the end of the last attempt: writes its end state into `z`.
