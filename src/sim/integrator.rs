@@ -622,11 +622,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         self.work.det.eval_end(cx, t1, &self.work.stepper);
         let for_events = self.work.det.mark_candidates(cx);
         let sample_due = self.sampler.wanted(&*self.recorder, t1);
-        if sample_due {
+        if sample_due || (for_events && self.work.det.crossing_certain(cx)) {
             self.work.stepper.build_interpolant(t0, &self.work.z, rhs);
         } else if for_events {
-            // The states' part first: most steps with a candidate guard fire nothing, and only
-            // a step cut at an instant reads the sensitivities there (`complete_interpolant`).
+            // The states' part first: most steps with a candidate guard and no crossing between
+            // their ends fire nothing, and only a step cut at an instant reads the sensitivities
+            // there (`complete_interpolant`).
             self.work.stepper.build_states_interpolant(t0, &self.work.z, rhs);
         }
         Ok(Look { for_events, sample_due })

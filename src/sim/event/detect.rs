@@ -596,6 +596,15 @@ impl Detector {
         !self.candidates.is_empty()
     }
 
+    /// Whether a candidate guard (`mark_candidates`) is across in its direction between the
+    /// step's ends: a crossing inside the step is then certain, not merely possible.
+    pub fn crossing_certain<S: HybridSystem + ?Sized>(&self, cx: &Guards<S>) -> bool {
+        self.candidates.iter().any(|&pos| {
+            let ev = cx.events()[pos];
+            crossing_sign(cx.info.events[ev].direction, self.g0[pos], self.g1[pos]).is_some()
+        })
+    }
+
     /// The guard of event `ev` (at `pos` in `mode`) and its speed `g_x f + g_t` at an explicit
     /// state `x` with flow `f`.
     pub fn guard_and_speed<S: HybridSystem + ?Sized>(

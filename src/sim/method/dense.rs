@@ -80,6 +80,12 @@ impl Dense {
         }
     }
 
+    /// Declares only the first `valid` components readable (the others were summed along, for
+    /// speed, from stages that are not theirs).
+    pub(crate) fn restrict(&mut self, valid: usize) {
+        self.valid = self.valid.min(valid);
+    }
+
     /// `s = (t - t0) / h`, zero before the first build.
     fn unit_time(&self, t: f64) -> f64 {
         if self.h != 0.0 {

@@ -301,14 +301,18 @@ impl Stepper for Rk {
             return self.build_interpolant(t0, y, rhs);
         }
         let h = self.h;
+        // The sums run over whole blocks of four components (`sums.rs`: a block costs about what
+        // one component does alone); what they give past the states is not read.
+        let upto = n.div_ceil(4).saturating_mul(4).min(nz);
         for i in tab.stages..tab.all_stages {
-            stage_sum(&self.k, nz, &tab.a[i], h, |c| y[c], &mut self.ytmp[..n]);
+            stage_sum(&self.k, nz, &tab.a[i], h, |c| y[c], &mut self.ytmp[..upto]);
             self.stage_x[(i - 1) * n..i * n].copy_from_slice(&self.ytmp[..n]);
             self.stage_count = i + 1;
             rhs.eval_states(t0 + tab.c[i] * h, &self.ytmp, &mut self.k[i * nz..(i + 1) * nz]);
             self.rhs_calls += 1;
         }
-        self.dense.build(tab, t0, h, y, &self.y_new, &self.k, n);
+        self.dense.build(tab, t0, h, y, &self.y_new, &self.k, upto);
+        self.dense.restrict(n);
         self.partial = Some(self.attempts);
     }
 
