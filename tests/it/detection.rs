@@ -199,6 +199,24 @@ fn tracking(l: f64, t: f64) -> (f64, f64) {
     (k * (l * t.sin() - t.cos()), k * (l * t.cos() + t.sin()))
 }
 
+/// The four times in `[0, 10]` where the tracking at stiffness 1e6 crosses `c` near its tops
+/// (Newton's method from the crossings of `0.5 sin t`), with its speed there.
+fn tracking_crossings(c: f64) -> Vec<(f64, f64)> {
+    let base = (c / 0.5f64).asin();
+    let (pi, tau) = (std::f64::consts::PI, std::f64::consts::TAU);
+    [base, pi - base, base + tau, 3.0 * pi - base]
+        .iter()
+        .map(|&guess| {
+            let mut t: f64 = guess;
+            for _ in 0..50 {
+                let (x, dx) = tracking(1e6, t);
+                t -= (x - c) / dx;
+            }
+            (t, tracking(1e6, t).1)
+        })
+        .collect()
+}
+
 #[test]
 fn events_in_a_stiff_phase_are_as_accurate_as_the_step_ends() {
     // x tracks 0.5 sin t with stiffness 1e6 and crosses c = 0.49995 near the tops, at speed
@@ -211,17 +229,8 @@ fn events_in_a_stiff_phase_are_as_accurate_as_the_step_ends() {
     let c = 0.49995;
     let base = (c / 0.5f64).asin();
     let (pi, tau) = (std::f64::consts::PI, std::f64::consts::TAU);
-    let exact: Vec<(f64, f64)> = [base, pi - base, base + tau, 3.0 * pi - base]
-        .iter()
-        .map(|&guess| {
-            let mut t: f64 = guess;
-            for _ in 0..50 {
-                let (x, dx) = tracking(1e6, t);
-                t -= (x - c) / dx;
-            }
-            (t, 1.0 / tracking(1e6, t).1)
-        })
-        .collect();
+    let exact: Vec<(f64, f64)> =
+        tracking_crossings(c).into_iter().map(|(t, speed)| (t, 1.0 / speed)).collect();
     for method in [Method::Rodas5p, Method::Rodas4, Method::Auto] {
         let r = run(text, &["c"], |o| o.method = method);
         assert_eq!(r.events().len(), exact.len(), "{method:?}: {:?}", crate::support::runs::times(&r));
@@ -262,24 +271,12 @@ fn thresholds_near_a_stiff_tracking_s_tops_cross_exactly_four_times_with_or_with
     // changes the steps) and without. Rodas4 at c = 0.4999 with gradients fired a fifth at
     // t = 7.774, where its 0.79-long step's dense output crossed and the trajectory does not
     // (the landed guards put the instant at 7.834 and never got across: the step is retried).
-    let (pi, tau) = (std::f64::consts::PI, std::f64::consts::TAU);
     for c in [0.49, 0.499, 0.4999, 0.49995, 0.49999] {
         let text = format!(
             "model stiffev\nparam c = {c}\nstate x = 0\nder(x) = -1e6 * (x - 0.5 * sin(t))\n\
              event near when x crosses c\nsimulate t_end = 10, rtol = 1e-8, atol = 1e-10\n"
         );
-        let base = (c / 0.5f64).asin();
-        let exact: Vec<(f64, f64)> = [base, pi - base, base + tau, 3.0 * pi - base]
-            .iter()
-            .map(|&guess| {
-                let mut t: f64 = guess;
-                for _ in 0..50 {
-                    let (x, dx) = tracking(1e6, t);
-                    t -= (x - c) / dx;
-                }
-                (t, tracking(1e6, t).1)
-            })
-            .collect();
+        let exact = tracking_crossings(c);
         for method in [Method::Rodas5p, Method::Rodas4, Method::Auto] {
             for grad in [&["c"][..], &[][..]] {
                 let r = run(&text, grad, |o| o.method = method);
