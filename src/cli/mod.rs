@@ -61,6 +61,9 @@ pub const EXIT_SIM_STOPPED: u8 = 3;
 /// The command ran but its goal was not met: `hybc run --check-grad` found a derivative that
 /// disagrees with its central difference, or `hybc fit` did not converge.
 pub const EXIT_GOAL_NOT_MET: u8 = 4;
+/// `hybc run --check-grad` failed nothing but could not judge a derivative: its finite
+/// differences neither confirm nor refute it.
+pub const EXIT_CANNOT_JUDGE: u8 = 5;
 
 /// Runs the command line: parses the arguments, runs the command, returns its exit code.
 pub fn main() -> ExitCode {

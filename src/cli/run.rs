@@ -9,8 +9,8 @@ use clap::ValueEnum;
 use super::options::{parameter_values, parse_param_list, positive, SimFlags};
 use super::trajectory::{self, StreamingTrajectory};
 use super::{compile_model, error_chain, load_model, output, usage_error, ModelArg};
-use super::{EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
-use crate::gradcheck::CheckOptions;
+use super::{EXIT_CANNOT_JUDGE, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
+use crate::gradcheck::{CheckOptions, Verdict};
 use crate::report::RunReport;
 use crate::sim::{SimOptions, TrajectoryRequest};
 use crate::{Compiled, GradCheckRequest, Model, Params, Spelling};
@@ -24,7 +24,9 @@ enum Format {
 #[derive(Debug, clap::Args)]
 #[command(after_help = "Exit codes: 0 success; 1 the model has errors; 2 a usage error; 3 the run \
                         stopped early (Zeno behaviour or a runtime fault); 4 --check-grad found a \
-                        derivative outside --check-tol or events that change with the step size.")]
+                        derivative outside --check-tol or events that change with the step size; 5 \
+                        --check-grad cannot judge a derivative (its differences neither confirm nor \
+                        refute it) and nothing failed.")]
 pub struct RunArgs {
     #[command(flatten)]
     model: ModelArg,
@@ -66,7 +68,9 @@ pub struct RunArgs {
     /// compiled model at p +/- h, h = 1e-5 |p| per parameter (one-sided at a declared bound), and
     /// the events against a re-run at a tenth of the tolerances with steps of at most span/10000;
     /// exit code 4 when a derivative disagrees by more than --check-tol and more than the
-    /// differences resolve, or when the events change with the step size. Changed event
+    /// differences resolve, or when the events change with the step size; 5 when nothing fails
+    /// but a derivative could not be judged (its differences at h, h/2, .. neither converge to
+    /// it nor away from it). Changed event
     /// sequences between p - h and p + h are reported as cusps, grazing events skipped.
     #[arg(long, requires = "grad")]
     check_grad: bool,
@@ -215,7 +219,11 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         return Ok(ExitCode::from(EXIT_SIM_STOPPED));
     }
     Ok(match check {
-        Some(check) if !check.passed() => ExitCode::from(EXIT_GOAL_NOT_MET),
+        Some(check) => match check.verdict() {
+            Verdict::Passed => ExitCode::SUCCESS,
+            Verdict::Failed => ExitCode::from(EXIT_GOAL_NOT_MET),
+            Verdict::CannotJudge => ExitCode::from(EXIT_CANNOT_JUDGE),
+        },
         _ => ExitCode::SUCCESS,
     })
 }

@@ -24,7 +24,9 @@
 //!   different steps; and when one run took other steps, the second difference
 //!   `|Q_0 - 2 Q_1 + Q_2|` of the three values (that jump plus `h^2 Q''`), or the tolerance if
 //!   smaller. A difference `sum_i w_i Q_i` (the weights above, over `h`) then resolves a
-//!   derivative only to `r = sum_i |w_i| noise_i`, about `noise / h`. A reported derivative `d`
+//!   derivative only to `r = sum_i |w_i| noise_i + drift`, about `noise / h`, where the drift
+//!   `(floor + rtol |Q|) / scale` is the derivative of the run's own error, which moves with `p`
+//!   on the parameter's scale (`|p|`, [`Stencil::scale`]) even where the steps are the same. A reported derivative `d`
 //!   whose difference `c` is within `r` of it never fails, `|d - c| <= r` says nothing about `d`;
 //!   when its relative discrepancy is above the tolerance it is listed as within noise. Example: a
 //!   projectile's height at the stop event where it lands is ~1e-15 (round-off), its difference
@@ -35,12 +37,32 @@
 //! - **Discrepancy**: `|d - c| / max(|d|, |c|)`. A derivative fails when its discrepancy is above
 //!   the tolerance and `|d - c| > r`, unless the truncation rule below clears it; a non-finite
 //!   difference of a finite derivative always fails.
-//! - **Truncation** ([`Truncated`]): a parameter with a derivative that would fail is differenced
-//!   again at `h / 2`. A derivative whose difference error shrank to at most 0.4 of its error at
-//!   `h` (same side; `h^2` gives 0.25) and whose Richardson extrapolation `c2 + (c2 - c1) / 3` is
-//!   within the tolerance of it disagrees only by the difference's truncation: near grazing or
-//!   with a fast wiggle in a guard, `h^2 Q''' / 6` is large although `d` is exact. A wrong
-//!   derivative is as far from both differences, and still fails.
+//! - **Halving** ([`Truncated`], [`Unjudged`]): a derivative that would fail at step `h` is not
+//!   failed yet: its parameter is differenced again at `h / 2`, `h / 4`, .. (two runs each, at
+//!   most [`MAX_HALVINGS`] times, only while something is undecided), and each such derivative is
+//!   judged by the sequence (`compare::judge`). An estimate of the derivative is the finest
+//!   difference once two successive ones agree within their noise, or Richardson's
+//!   `c_k + (c_k - c_(k-1)) / 3` once the last three change by the ratios of an `h^2` error (3 to
+//!   5.5: the stencils are second order), uncertain by its own change from the level before. It
+//!   agrees when it is within the tolerance of the reported value with that uncertainty added
+//!   (near grazing, or with a fast wiggle in a guard, `h^2 Q''' / 6` is large although the
+//!   derivative is exact: listed as truncation); it disagrees when it is farther with the
+//!   uncertainty taken off (a failure). When the sequence decides neither before the step would
+//!   cross a cusp, round-off wins (the resolution, growing as `1 / h`, exceeds the tolerance), or
+//!   the halvings run out, the check **cannot judge** the derivative: a third verdict, never
+//!   FAILED for a gradient the differences could not check, never PASSED for one they could not
+//!   confirm.
+//! - **Tolerance** ([`Tightened`]): the run's error is a smooth function of `p` where the steps
+//!   are the same, so it has a derivative, and every difference contains it; halving `h` does not
+//!   remove it. Where it is all there is (a derivative exactly 0 whose parameter moves only where
+//!   the steps fall: `d(gut)/dke` in the dosing model, a constant torque's window `Tu` in the
+//!   compass gait, differenced to 1e-6 at rtol 1e-6), the halvings find a disagreement that is
+//!   the integration's. So what they leave disagreeing or undecided is differenced once more at
+//!   `h` with tolerances [`TOLERANCE_TEST`] times tighter (three runs), and the estimate moves by
+//!   what that changed. A disagreement that shrinks to a tenth or less of itself, or to within
+//!   the tolerance, is the integration's (listed as integration error, not failed); one that keeps
+//!   half or more of itself is a wrong derivative (a wrong derivative's disagreement does not
+//!   depend on the tolerances); in between, or without an estimate, the check cannot judge it.
 //! - **Naming**: a failure names the derivative, `dt(touchdown#2)/de` (the second firing of
 //!   `touchdown`) or `d(energy)/dh0`, with the reported and the differenced values.
 //! - **Event sequence** (`sequence.rs`): the system is re-run at `p` with a tenth of `rtol` and
@@ -70,6 +92,7 @@ use serde::Serialize;
 
 use crate::sim::{HybridSystem, Runner, SimError, SimOptions, SimResult, TrajectoryRequest};
 
+use compare::Judgement;
 pub use sequence::{rerun_options, EventCheck, STEPS_PER_SPAN, TIGHTER};
 pub use stencil::{stencil, Difference, Stencil};
 
@@ -123,18 +146,82 @@ pub struct Comparison {
 /// A derivative whose difference at step `h` disagrees only by the difference's own truncation
 /// error. Near a grazing crossing (a ceiling the apex comes near) or with a fast wiggle in a guard,
 /// the quantity's higher derivatives are large, so `h^2 Q''' / 6` exceeds the tolerance although
-/// the reported derivative is exact. Halving the step (two more runs) tells the cases apart: a
-/// truncation error shrinks about fourfold and Richardson's `c2 + (c2 - c1) / 3` removes it, a
-/// wrong derivative stays as far from either difference.
+/// the reported derivative is exact. Halving the step tells the cases apart: a truncation error
+/// shrinks about fourfold per halving and Richardson's `c2 + (c2 - c1) / 3` removes it, a wrong
+/// derivative stays as far from the differences (module documentation, Halving).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Truncated {
     /// The comparison at step `h`.
     pub comparison: Comparison,
     /// The difference at step `h / 2`.
     pub half_step: f64,
-    /// `half_step + (half_step - central) / 3`: the difference with its `h^2` term removed.
+    /// The estimate the agreement rests on: the extrapolation of the last differences, or the
+    /// finest difference itself once successive ones agree within their noise.
     pub extrapolated: f64,
+    /// The differences at `h, h / 2, h / 4, ..` up to the one that decided.
+    pub differences: Vec<f64>,
 }
+
+/// A derivative whose disagreement with its differences is the integration error's: the
+/// difference moves towards it when the tolerances are tightened (module documentation,
+/// Tolerance). A derivative that is exactly 0 (a parameter that only moves where the steps fall,
+/// such as the window of a constant input) differences to the drift of the run's error with `p`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Tightened {
+    /// The comparison at step `h`.
+    pub comparison: Comparison,
+    /// The differences at `h, h / 2, ..` at the run's tolerances.
+    pub differences: Vec<f64>,
+    /// The difference at `h` at the tighter tolerances.
+    pub tight: f64,
+    /// The estimate of the derivative moved by what tightening changed.
+    pub estimate: f64,
+    /// The tighter relative tolerance (the absolute one in proportion).
+    pub rtol: f64,
+}
+
+/// A derivative the differences could not judge: above the tolerance at step `h`, and neither
+/// confirmed nor refuted by the differences at smaller steps (module documentation, Halving).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Unjudged {
+    /// The comparison at step `h`.
+    pub comparison: Comparison,
+    /// The differences at `h, h / 2, h / 4, ..` that were taken.
+    pub differences: Vec<f64>,
+    /// Why the sequence stopped: a cusp, round-off, or the halvings ran out.
+    pub reason: String,
+}
+
+/// The outcome of a gradient check, in one word.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    /// Every compared derivative agrees with its differences (or within their noise), and the
+    /// events do not change with the step size.
+    Passed,
+    /// A derivative disagrees by more than the tolerance and what the differences resolve, or
+    /// the events change with the step size.
+    Failed,
+    /// Nothing failed, but some derivative could be neither confirmed nor refuted
+    /// ([`Unjudged`]).
+    CannotJudge,
+}
+
+impl Verdict {
+    /// The word in tables and messages: `passed`, `FAILED`, `cannot judge`.
+    pub fn word(self) -> &'static str {
+        match self {
+            Verdict::Passed => "passed",
+            Verdict::Failed => "FAILED",
+            Verdict::CannotJudge => "cannot judge",
+        }
+    }
+}
+
+/// The most halvings of a parameter's step the check takes to judge a derivative that would fail
+/// at `h` (two runs each): at `h / 64` an `h^2` error has shrunk 4096-fold, and round-off
+/// (`~1 / h`) usually wins before.
+pub const MAX_HALVINGS: usize = 6;
 
 /// Where the event sequences of the three runs of a difference part.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -168,11 +255,18 @@ pub struct ParamCheck {
     /// Comparisons whose discrepancy is above the tolerance but within what the differences
     /// resolve: they do not fail.
     pub within_noise: Vec<Comparison>,
-    /// Comparisons above the tolerance at step `h` whose difference at `h / 2` moved towards the
-    /// reported value as a truncation error does (`~h^2`), and whose extrapolation agrees with
-    /// it: they do not fail ([`Truncated`]).
+    /// Comparisons above the tolerance at step `h` whose differences at smaller steps converge
+    /// to the reported value as a truncation error does (`~h^2`): they do not fail
+    /// ([`Truncated`]).
     pub truncated: Vec<Truncated>,
-    /// Every comparison made at step `h` (for the refinement at `h / 2`; not reported).
+    /// Comparisons whose disagreement shrinks with the tolerances: the integration's error, not
+    /// the derivative's ([`Tightened`]); they do not fail.
+    pub tightened: Vec<Tightened>,
+    /// Comparisons above the tolerance at step `h` that neither the differences at smaller steps
+    /// nor the tolerance test could confirm or refute: they do not fail, and the check cannot
+    /// judge them ([`Unjudged`]).
+    pub cannot_judge: Vec<Unjudged>,
+    /// Every comparison made at step `h` (for the halvings; not reported).
     #[serde(skip)]
     pub(crate) all: Vec<Comparison>,
     /// Where the event sequences of the difference's runs part, if they do.
@@ -204,7 +298,19 @@ impl GradCheck {
     /// Whether every compared derivative is within the tolerance or within noise, and the events
     /// do not change with the step size (cusps and skipped quantities do not fail a check).
     pub fn passed(&self) -> bool {
-        self.failures().next().is_none() && self.events.is_consistent()
+        self.verdict() == Verdict::Passed
+    }
+
+    /// Failed when a derivative disagrees or the events change with the step size; else cannot
+    /// judge when some derivative could not be judged; else passed.
+    pub fn verdict(&self) -> Verdict {
+        if self.failures().next().is_some() || !self.events.is_consistent() {
+            Verdict::Failed
+        } else if self.params.iter().any(|c| !c.cannot_judge.is_empty()) {
+            Verdict::CannotJudge
+        } else {
+            Verdict::Passed
+        }
     }
 
     /// The parameters whose worst discrepancy exceeds the tolerance.
@@ -255,6 +361,8 @@ pub fn check_within(
             worst: None,
             within_noise: Vec::new(),
             truncated: Vec::new(),
+            tightened: Vec::new(),
+            cannot_judge: Vec::new(),
             all: Vec::new(),
             cusp: None,
             notes: Vec::new(),
@@ -290,34 +398,232 @@ pub fn check_within(
         }
         .compare(runs);
         if param_check.worst_discrepancy() > check.tol && param_check.cusp.is_none() {
-            // A failure at h: the same differences at h / 2 tell a truncation error from a wrong
-            // derivative ([`Truncated`]).
-            if let Ok(half) = stencil_fn(p[param], range, check.rel_step / 2.0) {
-                let mut perturbed: [Option<SimResult>; 3] = [None, None, None];
-                for (i, slot) in perturbed.iter_mut().enumerate() {
-                    if i != half.nominal {
-                        let mut q = p.to_vec();
-                        q[param] = half.points[i];
-                        *slot = Some(simulator.run(&q)?);
-                    }
-                }
-                let runs: [&SimResult; 3] = std::array::from_fn(|i| perturbed[i].as_ref().unwrap_or(nominal));
-                let mut refined = ParamCheck { all: Vec::new(), ..param_check.clone() };
-                compare::Differences {
-                    info,
-                    j,
-                    stencil: &half,
-                    opts: &opts,
-                    tol: check.tol,
-                    out: &mut refined,
-                }
-                .compare(runs);
-                if refined.cusp.is_none() {
-                    compare::refine(&mut param_check, &refined.all, check.tol);
-                }
-            }
+            // A failure at h: the differences at h / 2, h / 4, .. tell a truncation error from a
+            // wrong derivative, or say they cannot.
+            let setup = Halving { sys, info, j, p, param, range, opts: &opts, check, nominal };
+            setup.judge(&mut param_check, &mut simulator)?;
         }
         params.push(param_check);
     }
     Ok(GradCheck { options: *check, params, events })
+}
+
+/// How much tighter the tolerances of the tolerance test are (module documentation, Tolerance).
+pub const TOLERANCE_TEST: f64 = 100.0;
+
+/// One parameter's halvings and tolerance test (module documentation, Halving and Tolerance):
+/// what they need besides the runs.
+struct Halving<'a, S: HybridSystem + ?Sized> {
+    sys: &'a S,
+    info: &'a crate::sim::SystemInfo,
+    /// Column of the parameter among the gradient parameters, and its index among all.
+    j: usize,
+    param: usize,
+    p: &'a [f64],
+    range: Option<(f64, f64)>,
+    opts: &'a SimOptions,
+    check: &'a CheckOptions,
+    nominal: &'a SimResult,
+}
+
+/// A comparison the halvings left undecided or found disagreeing, before the tolerance test.
+struct Undecided {
+    comparison: Comparison,
+    /// (difference, resolution) at `h, h / 2, ..`.
+    seq: Vec<(f64, f64)>,
+    /// The halvings' estimate, if they reached one (then it disagrees).
+    estimate: Option<f64>,
+}
+
+impl<S: HybridSystem + ?Sized> Halving<'_, S> {
+    /// The comparisons of `stencil`'s runs (`None` where the events differ between them: a cusp).
+    fn level(
+        &self,
+        out: &ParamCheck,
+        stencil: &Stencil,
+        simulator: &mut Runner<&S>,
+        opts: &SimOptions,
+    ) -> Result<Option<Vec<Comparison>>, SimError> {
+        let mut perturbed: [Option<SimResult>; 3] = [None, None, None];
+        let nominal = if opts.rtol == self.opts.rtol { None } else { Some(simulator.run(self.p)?) };
+        for (i, slot) in perturbed.iter_mut().enumerate() {
+            if i != stencil.nominal {
+                let mut q = self.p.to_vec();
+                q[self.param] = stencil.points[i];
+                *slot = Some(simulator.run(&q)?);
+            }
+        }
+        let nominal = nominal.as_ref().unwrap_or(self.nominal);
+        let runs: [&SimResult; 3] = std::array::from_fn(|i| perturbed[i].as_ref().unwrap_or(nominal));
+        let mut level = ParamCheck { all: Vec::new(), cusp: None, ..out.clone() };
+        compare::Differences {
+            info: self.info,
+            j: self.j,
+            stencil,
+            opts,
+            tol: self.check.tol,
+            out: &mut level,
+        }
+        .compare(runs);
+        Ok(level.cusp.is_none().then_some(level.all))
+    }
+
+    /// Judges every comparison of `out` above the tolerance at `h` and not within noise: by its
+    /// differences at `h / 2`, `h / 4`, .. until each agrees ([`Truncated`]), disagrees, or
+    /// cannot be decided; then what did not agree by the tolerance test
+    /// ([`Tightened`] where the disagreement is the integration's, [`Unjudged`] where the test
+    /// cannot tell). `out.worst` is then the worst of what agreed at `h` and what disagrees.
+    fn judge(&self, out: &mut ParamCheck, simulator: &mut Runner<&S>) -> Result<(), SimError> {
+        let tol = self.check.tol;
+        let noisy: Vec<String> = out.within_noise.iter().map(|c| c.derivative.clone()).collect();
+        let mut open: Vec<Undecided> = out
+            .all
+            .iter()
+            .filter(|c| c.discrepancy > tol && !noisy.contains(&c.derivative))
+            .map(|c| Undecided {
+                comparison: c.clone(),
+                seq: vec![(c.central, c.resolution)],
+                estimate: None,
+            })
+            .collect();
+        let mut decided: Vec<Undecided> = Vec::new();
+        let mut stopped = format!("{MAX_HALVINGS} halvings of the step did not decide");
+        for k in 1..=MAX_HALVINGS {
+            let stencil =
+                match stencil_fn(self.p[self.param], self.range, self.check.rel_step / 2f64.powi(k as i32)) {
+                    Ok(s) => s,
+                    Err(reason) => {
+                        stopped = format!("at h / 2^{k}: {reason}");
+                        break;
+                    }
+                };
+            let Some(level) = self.level(out, &stencil, simulator, self.opts)? else {
+                stopped = format!("the difference at h / 2^{k} crosses a cusp (its runs' events differ)");
+                break;
+            };
+            for mut u in std::mem::take(&mut open) {
+                if let Some(finer) = level.iter().find(|f| f.derivative == u.comparison.derivative) {
+                    u.seq.push((finer.central, finer.resolution));
+                }
+                match compare::judge(u.comparison.reported, &u.seq, tol) {
+                    Judgement::Agrees { estimate } => out.truncated.push(Truncated {
+                        comparison: u.comparison,
+                        half_step: u.seq[1].0,
+                        extrapolated: estimate,
+                        differences: u.seq.iter().map(|s| s.0).collect(),
+                    }),
+                    Judgement::Disagrees { estimate } => {
+                        decided.push(Undecided { estimate: Some(estimate), ..u })
+                    }
+                    Judgement::Open => open.push(u),
+                }
+            }
+            if open.is_empty() {
+                break;
+            }
+            // Round-off wins: every open difference resolves no better than the tolerance, and
+            // halving again only doubles its noise.
+            let hopeless = |u: &Undecided| {
+                let (ck, rk) = u.seq[u.seq.len() - 1];
+                rk > tol * u.comparison.reported.abs().max(ck.abs())
+            };
+            if open.iter().all(hopeless) {
+                stopped = format!(
+                    "round-off wins at h / 2^{k}: the differences resolve no better than the tolerance"
+                );
+                break;
+            }
+        }
+        let disagree = self.tolerance_test(out, decided, open, &stopped)?;
+        // The worst of what counts: comparisons that agreed at h, and those that disagree.
+        out.worst = out
+            .all
+            .iter()
+            .filter(|c| !noisy.contains(&c.derivative))
+            .filter(|c| c.discrepancy <= tol || disagree.contains(&c.derivative))
+            .max_by(|a, b| a.discrepancy.total_cmp(&b.discrepancy))
+            .cloned();
+        Ok(())
+    }
+
+    /// The tolerance test of what the halvings found disagreeing (`disagreeing`) or left open
+    /// (`open`, stopped for `stopped`): the difference at `h` again with tolerances
+    /// [`TOLERANCE_TEST`] times tighter. Its change moves the halvings' estimate (or, for an open
+    /// one, the difference at `h`) by what the integration error contributed. A disagreement that
+    /// shrinks to a tenth or less, or to within the tolerance, is the integration's
+    /// ([`Tightened`]); one that keeps at least half of itself confirms a disagreement; anything
+    /// else cannot be judged. Returns the derivatives that disagree.
+    fn tolerance_test(
+        &self,
+        out: &mut ParamCheck,
+        disagreeing: Vec<Undecided>,
+        open: Vec<Undecided>,
+        stopped: &str,
+    ) -> Result<Vec<String>, SimError> {
+        let mut disagree = Vec::new();
+        if disagreeing.is_empty() && open.is_empty() {
+            return Ok(disagree);
+        }
+        let tol = self.check.tol;
+        let rtol = (self.opts.rtol / TOLERANCE_TEST).max(crate::sim::MIN_RTOL);
+        let tight_opts =
+            SimOptions { rtol, atol: self.opts.atol * rtol / self.opts.rtol, ..self.opts.clone() };
+        let tight = if rtol < self.opts.rtol {
+            let stencil = stencil_fn(self.p[self.param], self.range, self.check.rel_step)
+                .expect("the stencil at h was made before");
+            let mut tight_runner = Runner::new(self.sys, &tight_opts)?;
+            self.level(out, &stencil, &mut tight_runner, &tight_opts)?
+        } else {
+            None
+        };
+        for u in disagreeing.into_iter().chain(open) {
+            let reported = u.comparison.reported;
+            let differences: Vec<f64> = u.seq.iter().map(|s| s.0).collect();
+            let tight_c =
+                tight.as_ref().and_then(|t| t.iter().find(|c| c.derivative == u.comparison.derivative));
+            let Some(tight_c) = tight_c else {
+                // No tolerance test (a cusp at the tighter tolerances, or none tighter exists): the
+                // halvings' judgement stands.
+                match u.estimate {
+                    Some(_) => disagree.push(u.comparison.derivative.clone()),
+                    None => out.cannot_judge.push(Unjudged {
+                        comparison: u.comparison,
+                        differences,
+                        reason: stopped.to_string(),
+                    }),
+                }
+                continue;
+            };
+            let estimate = u.estimate.unwrap_or(u.comparison.central);
+            let shifted = estimate + (tight_c.central - u.comparison.central);
+            let (gap, tight_gap) = ((reported - estimate).abs(), (reported - shifted).abs());
+            let within = tight_gap <= tol * reported.abs().max(shifted.abs());
+            if within || tight_gap <= 0.1 * gap {
+                out.tightened.push(Tightened {
+                    comparison: u.comparison,
+                    differences,
+                    tight: tight_c.central,
+                    estimate: shifted,
+                    rtol,
+                });
+            } else if u.estimate.is_some() && tight_gap >= 0.5 * gap {
+                disagree.push(u.comparison.derivative.clone());
+            } else {
+                let reason = if u.estimate.is_some() {
+                    format!(
+                        "the disagreement moves with the tolerance ({} at rtol {rtol:.0e}) but neither vanishes \
+                         nor stays",
+                        crate::report::num(shifted)
+                    )
+                } else {
+                    format!(
+                        "{stopped}; at rtol {rtol:.0e} the difference is {}",
+                        crate::report::num(tight_c.central)
+                    )
+                };
+                out.cannot_judge.push(Unjudged { comparison: u.comparison, differences, reason });
+            }
+        }
+        Ok(disagree)
+    }
 }

@@ -12,6 +12,7 @@ impl GradCheck {
     pub fn to_json(&self) -> serde_json::Value {
         let mut value = serde_json::json!(self);
         value["passed"] = self.passed().into();
+        value["verdict"] = serde_json::json!(self.verdict());
         value
     }
 
@@ -32,7 +33,13 @@ impl GradCheck {
             "parameter", "h", "stencil", "checked", "discrepancy", "reported", "difference"
         );
         for c in &self.params {
-            let flag = if c.worst_discrepancy() > tol { "  FAILED" } else { "" };
+            let flag = if c.worst_discrepancy() > tol {
+                "  FAILED"
+            } else if !c.cannot_judge.is_empty() {
+                "  cannot judge"
+            } else {
+                ""
+            };
             let head =
                 format!("  {:<12}  {:>8.1e}  {:<8}  {:>7}", c.name, c.step, c.difference.name(), c.checked);
             let _ = match &c.worst {
@@ -67,14 +74,40 @@ impl GradCheck {
                 let w = &t.comparison;
                 let _ = writeln!(
                     out,
-                    "  truncation ({}): {}: reported {}, difference {} at h and {} at h/2, extrapolated {}: \
-                     the difference's own truncation error (it shrinks as h^2), not a wrong derivative",
+                    "  truncation ({}): {}: reported {}, differences {}, estimate {}: the difference's own \
+                     truncation error (it shrinks as h^2), not a wrong derivative",
                     c.name,
                     w.derivative,
                     num(w.reported),
-                    num(w.central),
-                    num(t.half_step),
+                    sequence(&t.differences),
                     num(t.extrapolated)
+                );
+            }
+            for t in &c.tightened {
+                let w = &t.comparison;
+                let _ = writeln!(
+                    out,
+                    "  integration error ({}): {}: reported {}, differences {}; at rtol {:.0e} the difference \
+                     at h is {}, estimate {}: the disagreement shrinks with the tolerances, not a wrong derivative",
+                    c.name,
+                    w.derivative,
+                    num(w.reported),
+                    sequence(&t.differences),
+                    t.rtol,
+                    num(t.tight),
+                    num(t.estimate)
+                );
+            }
+            for u in &c.cannot_judge {
+                let w = &u.comparison;
+                let _ = writeln!(
+                    out,
+                    "  cannot judge ({}): {}: reported {}, differences {}: {}",
+                    c.name,
+                    w.derivative,
+                    num(w.reported),
+                    sequence(&u.differences),
+                    u.reason
                 );
             }
             if let Some(cusp) = &c.cusp {
@@ -126,8 +159,22 @@ impl GradCheck {
                 )
             })
             .collect();
-        if failed.is_empty() && e.is_consistent() {
+        let unjudged: Vec<&str> = self
+            .params
+            .iter()
+            .flat_map(|c| &c.cannot_judge)
+            .map(|u| u.comparison.derivative.as_str())
+            .collect();
+        if failed.is_empty() && e.is_consistent() && unjudged.is_empty() {
             let _ = writeln!(out, "gradient check passed");
+        } else if failed.is_empty() && e.is_consistent() {
+            let _ = writeln!(
+                out,
+                "gradient check cannot judge {}: the differences neither confirm nor refute {}; nothing \
+                 disagrees",
+                unjudged.join(", "),
+                if unjudged.len() == 1 { "it" } else { "them" }
+            );
         } else {
             let mut parts = Vec::new();
             if !e.is_consistent() {
@@ -140,4 +187,15 @@ impl GradCheck {
         }
         out
     }
+}
+
+/// Differences at `h, h/2, ..` as `a (h), b (h/2), c (h/4)`.
+fn sequence(values: &[f64]) -> String {
+    let step = |k: usize| if k == 0 { "h".to_string() } else { format!("h/{}", 1u64 << k) };
+    values
+        .iter()
+        .enumerate()
+        .map(|(k, v)| format!("{} ({})", num(*v), step(k)))
+        .collect::<Vec<_>>()
+        .join(", ")
 }

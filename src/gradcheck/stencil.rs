@@ -60,6 +60,9 @@ pub struct Stencil {
     pub weights: [f64; 3],
     /// Which of the points is `p`.
     pub nominal: usize,
+    /// The parameter's own scale: `|p|`, or the width of its range (or 1) for `p = 0`. The step
+    /// is `rel_step` times it; a tolerance-sized error that moves with `p` moves on this scale.
+    pub scale: f64,
     /// Something the user should know about the step (`p = 0` with no range, `p` outside its
     /// range).
     pub note: Option<String>,
@@ -115,6 +118,7 @@ pub fn stencil(p: f64, range: Option<(f64, f64)>, rel_step: f64) -> Result<Stenc
         points: offsets.map(|o| p + o * h),
         weights: weights.map(|w| w / h),
         nominal: offsets.iter().position(|&o| o == 0.0).expect("every stencil holds p"),
+        scale,
         note,
     })
 }
