@@ -81,6 +81,7 @@ fn unary_wrapper(op: UnaryOp) -> Option<UnaryFn> {
 fn binary_wrapper(op: BinaryOp) -> Option<BinaryFn> {
     let f: BinaryFn = match op {
         BinaryOp::Pow => hybc_pow,
+        BinaryOp::PowLog => hybc_pow_log,
         BinaryOp::Atan2 => hybc_atan2,
         BinaryOp::Hypot => hybc_hypot,
         // Cranelift's fmin/fmax propagate NaN and order -0 below +0 (IEEE minimum/maximum);
@@ -121,7 +122,8 @@ unary_wrappers! {
 }
 
 binary_wrappers! {
-    hybc_pow => Pow, hybc_atan2 => Atan2, hybc_hypot => Hypot, hybc_min => Min, hybc_max => Max,
+    hybc_pow => Pow, hybc_pow_log => PowLog, hybc_atan2 => Atan2, hybc_hypot => Hypot, hybc_min => Min,
+    hybc_max => Max,
 }
 
 #[cfg(test)]

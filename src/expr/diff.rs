@@ -344,17 +344,19 @@ fn diff_binary(
                 let f = scale(s, c, p);
                 prod(s, f, da)
             }
-            (Some(c), None) => {
-                // (c^b)' = c^b ln(c) b': for c <= 0, ln(c) is not finite, and the term exists
-                // only where the exponent moves (`where_exponent_moves`).
+            (Some(c), None) if c > 0.0 => {
+                // (c^b)' = c^b ln(c) b', ln(c) a constant.
                 let ln = s.unary(UnaryOp::Log, a);
                 let f = prod(s, id, ln);
+                prod(s, f, db)
+            }
+            (Some(_), None) => {
+                // (c^b)' = c^b ln(c) b' with its limit at c = 0 (0 for b > 0: `pow_log`); for
+                // c < 0, ln(c) is NaN, and the term exists only where the exponent moves
+                // (`where_exponent_moves`).
+                let f = s.pow_log(a, b);
                 let term = prod(s, f, db);
-                if c > 0.0 {
-                    term
-                } else {
-                    where_exponent_moves(s, term, db)
-                }
+                where_exponent_moves(s, term, db)
             }
             (None, None) => {
                 // (a^b)' = b a^(b-1) a' + a^b ln(a) b'. The second term exists only where the
@@ -362,19 +364,48 @@ fn diff_binary(
                 // that is well defined (x^select(.., 0, ..) at a point where the exponent is
                 // locally constant). So it is taken where b' != 0 and is 0 elsewhere; where b'
                 // is structurally 0 it vanishes altogether. The first term, unlike
-                // a^b * b a'/a, stays finite at a = 0 for b >= 1.
+                // a^b * b a'/a, stays finite at a = 0 for b >= 1. The exponent's factor
+                // a^b ln(a) is `pow_log`, which has its limit 0 at a = 0 for b > 0 (where
+                // a^b * ln(a) would be 0 * -inf = NaN: `der(y) = x^p` from x = 0).
                 let one = s.one();
                 let b_minus_1 = s.sub(b, one);
                 let power = s.pow(a, b_minus_1);
                 let slope = prod(s, b, power);
                 let base_term = prod(s, slope, da);
-                let ln = s.unary(UnaryOp::Log, a);
-                let moving = prod(s, id, ln);
+                let moving = s.pow_log(a, b);
                 let exponent_term = prod(s, moving, db);
                 let exponent_term = where_exponent_moves(s, exponent_term, db);
                 s.add(base_term, exponent_term)
             }
         },
+        BinaryOp::PowLog => {
+            // (a^b ln a)' = (b a^(b-1) ln a + a^(b-1)) a' + a^b ln(a)^2 b', every factor with its
+            // limit at a = 0: a^(b-1) ln a is pow_log(a, b - 1), and a^b ln(a)^2 is
+            // pow_log(a, b / 2)^2 (equal for a > 0; 0 at a = 0 for b > 0, +inf for b <= 0, as
+            // the limits are).
+            let one = s.one();
+            let b_minus_1 = s.sub(b, one);
+            let base_term = if s.const_value(da) == Some(0.0) {
+                s.zero()
+            } else {
+                let lower = s.pow_log(a, b_minus_1);
+                let scaled = prod(s, b, lower);
+                let power = s.pow(a, b_minus_1);
+                let slope = s.add(scaled, power);
+                prod(s, slope, da)
+            };
+            let exponent_term = if s.const_value(db) == Some(0.0) {
+                s.zero()
+            } else {
+                let half = s.constant(0.5);
+                let half_b = prod(s, b, half);
+                let root = s.pow_log(a, half_b);
+                let square = s.powi(root, 2.0);
+                let term = prod(s, square, db);
+                where_exponent_moves(s, term, db)
+            };
+            s.add(base_term, exponent_term)
+        }
         BinaryOp::Atan2 => {
             // atan2(y, x)' = (x y' - y x') / (x^2 + y^2), with y = a, x = b.
             let l = prod(s, b, da);

@@ -474,10 +474,11 @@ impl<'a> Printer<'a> {
             BinaryOp::Le => infix("<=", P_CMP, P_SUM, P_SUM),
             BinaryOp::And => infix("and", P_AND, P_AND, P_NOT),
             BinaryOp::Or => infix("or", P_OR, P_OR, P_AND),
-            BinaryOp::Atan2 | BinaryOp::Hypot | BinaryOp::Min | BinaryOp::Max => {
+            BinaryOp::Atan2 | BinaryOp::Hypot | BinaryOp::Min | BinaryOp::Max | BinaryOp::PowLog => {
                 let name = match op {
                     BinaryOp::Atan2 => "atan2",
                     BinaryOp::Hypot => "hypot",
+                    BinaryOp::PowLog => "pow_log",
                     BinaryOp::Min => "min",
                     _ => "max",
                 };

@@ -162,6 +162,7 @@ fn binary(op: BinaryOp, a: Dual, b: Dual) -> Dual {
             Dual { v: q, d: (a.d - q * b.d) / b.v }
         }
         BinaryOp::Pow => pow(a, b),
+        BinaryOp::PowLog => pow_log(a, b),
         BinaryOp::Atan2 => {
             // d atan2(y, x) = (x y' - y x') / (x^2 + y^2).
             let num = b.v * a.d - a.v * b.d;
@@ -224,6 +225,20 @@ fn pow(a: Dual, b: Dual) -> Dual {
         v * (b.d * a.v.ln() + b.v * a.d / a.v)
     };
     Dual { v, d }
+}
+
+/// `a^b ln(a)` over a box where `a > 0` as the product it is there; where `a` may be 0 or
+/// negative, anything (the limit at 0 and NaN below it are not enclosed: differentiation makes
+/// this operation, and a guard, which is not differentiated with respect to parameters before it
+/// is enclosed, never holds it).
+fn pow_log(a: Dual, b: Dual) -> Dual {
+    if a.v.lo > 0.0 {
+        let l = Dual { v: a.v.ln(), d: a.d / a.v };
+        let p = pow(a, b);
+        Dual { v: p.v * l.v, d: p.d * l.v + p.v * l.d }
+    } else {
+        Dual { v: Interval::ENTIRE, d: Interval::ENTIRE }
+    }
 }
 
 fn select(c: Dual, a: Dual, b: Dual) -> Dual {

@@ -48,7 +48,11 @@ pub fn apply_binary(op: BinaryOp, a: f64, b: f64) -> f64 {
         BinaryOp::Div => a / b,
         BinaryOp::Pow if b == 2.0 => a * a,
         BinaryOp::Pow => a.powf(b),
-        BinaryOp::Atan2 => a.atan2(b),
+        BinaryOp::PowLog => pow_log(a, b),
+        // `a + 0.0` is `+0.0` for either zero: the simplifier treats the two zeros as one value
+        // (`0 * y` is `0` whatever the sign of `y`), so atan2 must not tell them apart either
+        // (`atan2(-0.0, -1)` would be `-pi`, `atan2(0.0, -1)` is `pi`).
+        BinaryOp::Atan2 => (a + 0.0).atan2(b),
         BinaryOp::Hypot => a.hypot(b),
         BinaryOp::Min => a.min(b),
         BinaryOp::Max => a.max(b),
@@ -56,6 +60,23 @@ pub fn apply_binary(op: BinaryOp, a: f64, b: f64) -> f64 {
         BinaryOp::Le => bool_value(a <= b),
         BinaryOp::And => bool_value(a != 0.0 && b != 0.0),
         BinaryOp::Or => bool_value(a != 0.0 || b != 0.0),
+    }
+}
+
+/// `a^b ln(a)` ([`BinaryOp::PowLog`]), with its limits at `a = 0` (either zero): 0 for `b > 0`,
+/// since `a^b` vanishes faster than `ln(a)` grows, and `-inf` for `b <= 0`; NaN for a NaN `b`.
+/// Elsewhere the product as it stands (NaN for `a < 0`, where `ln` is).
+pub fn pow_log(a: f64, b: f64) -> f64 {
+    if a == 0.0 {
+        if b > 0.0 {
+            0.0
+        } else if b.is_nan() {
+            f64::NAN
+        } else {
+            f64::NEG_INFINITY
+        }
+    } else {
+        a.powf(b) * a.ln()
     }
 }
 

@@ -30,7 +30,7 @@ pub fn finite_at_finite_inputs(store: &ExprStore, root: ExprId) -> bool {
             BinaryOp::Pow => {
                 store.node(b).as_const().is_some_and(|e| e >= 0.0 && e.fract() == 0.0 && e <= 64.0)
             }
-            BinaryOp::Div => false,
+            BinaryOp::Div | BinaryOp::PowLog => false,
             _ => true,
         },
     })

@@ -62,6 +62,10 @@ pub enum BinaryOp {
     Div,
     /// `a ^ b`.
     Pow,
+    /// `a^b ln(a)`, the derivative of `a^b` with respect to its exponent, with its limits where
+    /// `a = 0`: 0 for `b > 0` (`x^p ln x -> 0`), `-inf` for `b <= 0`. Made by differentiation
+    /// only (`hybc derive` prints it as `pow_log(a, b)`); a model cannot write it.
+    PowLog,
     /// `atan2(a, b)`.
     Atan2,
     /// `hypot(a, b)`.
@@ -104,11 +108,12 @@ impl UnaryOp {
 
 impl BinaryOp {
     /// Every binary operation, for tables and exhaustive tests.
-    pub const ALL: [BinaryOp; 12] = [
+    pub const ALL: [BinaryOp; 13] = [
         BinaryOp::Add,
         BinaryOp::Mul,
         BinaryOp::Div,
         BinaryOp::Pow,
+        BinaryOp::PowLog,
         BinaryOp::Atan2,
         BinaryOp::Hypot,
         BinaryOp::Min,

@@ -127,6 +127,11 @@ impl ExprStore {
         self.binary(BinaryOp::Pow, a, b)
     }
 
+    /// `a^b ln(a)` with its limits at `a = 0` ([`BinaryOp::PowLog`]), simplified.
+    pub fn pow_log(&mut self, a: ExprId, b: ExprId) -> ExprId {
+        self.binary(BinaryOp::PowLog, a, b)
+    }
+
     /// `a ^ c` for a constant exponent.
     pub fn powi(&mut self, a: ExprId, c: f64) -> ExprId {
         let c = self.constant(c);
@@ -271,6 +276,15 @@ impl ExprStore {
                 }
                 if cb == Some(0.0) || ca == Some(1.0) {
                     return self.one();
+                }
+            }
+            BinaryOp::PowLog => {
+                // a^0 ln(a) = ln(a), -inf at a = 0 as the limit says; 1^b ln(1) = 0.
+                if cb == Some(0.0) {
+                    return self.unary(UnaryOp::Log, a);
+                }
+                if ca == Some(1.0) {
+                    return self.zero();
                 }
             }
             BinaryOp::Min | BinaryOp::Max if a == b => return a,

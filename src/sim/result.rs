@@ -174,6 +174,12 @@ impl SimError {
             SimError::TooManySteps { t, max_steps, mode, state } => {
                 format!("more than {max_steps} steps {}", at(*t, *mode, state))
             }
+            SimError::NonFinite { t, mode, state } if state.iter().all(|v| v.is_finite()) => format!(
+                "every step attempted from a finite state gave values that are not finite {}: the flow (or, \
+                 under a Rosenbrock method, its Jacobian: `der(y) = sqrt(x)` at x = 0) is not finite just \
+                 there or beyond",
+                at(*t, *mode, state)
+            ),
             SimError::NonFinite { t, mode, state } => format!("non-finite state {}", at(*t, *mode, state)),
             SimError::GuardNotFinite { event, t, mode, state } => format!(
                 "the guard of event `{event}` stops being finite {}: whether it crosses zero beyond that cannot be told",

@@ -25,7 +25,7 @@ enum Tree {
 
 const UNARY: [UnaryOp; 16] = UnaryOp::ALL;
 
-const BINARY: [BinaryOp; 12] = BinaryOp::ALL;
+const BINARY: [BinaryOp; 13] = BinaryOp::ALL;
 
 fn tree() -> impl Strategy<Value = Tree> {
     let leaf = prop_oneof![

@@ -54,7 +54,9 @@ fn derivative_rules() {
         ("(* 0.5 (^ x 2))", dx, "x"),
         ("(^ 2 x)", dx, "0.6931471805599453 * 2^x"),
         ("(^ x y)", dx, "y * x^(y - 1)"),
-        ("(^ x y)", dy, "x^y * log(x)"),
+        // The exponent's derivative with its limit at x = 0 (`pow_log`): 0 for y > 0.
+        ("(^ x y)", dy, "pow_log(x, y)"),
+        ("(^ 0 x)", dx, "pow_log(0, x)"),
         ("(sin x)", dx, "cos(x)"),
         ("(cos x)", dx, "-sin(x)"),
         ("(tan x)", dx, "1 / cos(x)^2"),

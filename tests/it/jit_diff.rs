@@ -12,7 +12,7 @@ use proptest::prelude::*;
 
 const UNARY: [UnaryOp; 16] = UnaryOp::ALL;
 
-const BINARY: [BinaryOp; 12] = BinaryOp::ALL;
+const BINARY: [BinaryOp; 13] = BinaryOp::ALL;
 
 /// Values where the semantics of the ops differ most: signed zeros, infinities, NaN, and the
 /// boolean values.

@@ -108,12 +108,15 @@ fn a_model_of_running_costs_alone_keeps_its_error_test() {
 fn a_smooth_running_cost_is_resolved_by_the_states_steps_and_not_warned_about() {
     // The other side of the warning: a cost whose integrand is a smooth function of the states
     // (x^2 on the decay with its kicks) is accurate from the states' steps alone, to the
-    // tolerances, with its gradient, and no warning is given.
+    // tolerances, and no warning is given. Without gradients it takes exactly their steps; with
+    // them its sensitivities' own error test may reject a step or two where they start from 0
+    // (atol is their scale there): 19 against 20 accepted here, with 2 rejected.
     let with_cost = BASE
         .replace("der(x) = -k * x\n", "der(x) = -k * x\nstate cost = 0\nder(cost) = x^2\noutput c = cost\n");
+    assert_eq!(steps(BASE, &[]).0, steps(&with_cost, &[]).0);
     let (plain, _) = steps(BASE, &["k"]);
     let (costed, run) = steps(&with_cost, &["k"]);
-    assert_eq!(plain, costed);
+    assert!(plain <= costed && costed <= plain + 4, "{plain} vs {costed}");
     assert!(cost_warnings(&run).is_empty(), "{:?}", cost_warnings(&run));
     let reference = steps_with(
         &with_cost.replace("rtol = 1e-8, atol = 1e-10", "rtol = 1e-12, atol = 1e-14"),
@@ -122,6 +125,8 @@ fn a_smooth_running_cost_is_resolved_by_the_states_steps_and_not_warned_about() 
     )
     .1;
     let (got, want) = (run.output("c").unwrap(), reference.output("c").unwrap());
+    assert!((got - want).abs() < 1e-7 * want, "{got} vs {want}");
+    let (got, want) = (run.doutput("c", "k").unwrap(), reference.doutput("c", "k").unwrap());
     assert!((got - want).abs() < 1e-7 * want, "{got} vs {want}");
 }
 

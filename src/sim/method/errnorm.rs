@@ -56,12 +56,14 @@ impl<'e> BlockNorm<'e> {
             self.close(with3);
         }
         if !self.excluded.is_empty() && self.excluded[i + self.block - self.next_end] {
-            // Out of the test, but its error is measured as a block of its own would be (the
-            // states' values only: a cost's sensitivities follow its value).
-            if let Some((r5, r3)) = r.filter(|_| self.next_end == self.block) {
+            // Out of the test, but its error is measured as a block of its own would be, its
+            // sensitivities' as well: they need not follow its value (`der(y) = x^p` from
+            // x = 0: the value's integrand is smooth enough for the steps, dy/dp's, x^p ln x, is
+            // not, and at p = 1 dy/dp came out 4e-5 off at rtol 1e-8 with the value exact).
+            if let Some((r5, r3)) = r {
                 let e = if with3 { hairer(r5 * r5, r3 * r3, 1.0) } else { r5.abs() };
                 if e > self.outside.0 {
-                    self.outside = (e, i);
+                    self.outside = (e, i % self.block);
                 }
             }
             return;
@@ -149,8 +151,14 @@ mod tests {
         for (i, r) in [1.0, 100.0, 3.0, 100.0].into_iter().enumerate() {
             b.add(i, Some((r, 0.0)), false);
         }
-        // The excluded state's own error is kept aside (first block only), not in the norm.
+        // The excluded state's own error is kept aside, not in the norm.
         assert_eq!(b.outside(), (100.0, 1));
         assert_eq!(b.finish(false), 3.0);
+        // Its sensitivities' too, named by the state.
+        let mut b = BlockNorm::new(2, &[false, true]);
+        for (i, r) in [1.0, 2.0, 3.0, 50.0].into_iter().enumerate() {
+            b.add(i, Some((r, 0.0)), false);
+        }
+        assert_eq!(b.outside(), (50.0, 1));
     }
 }

@@ -216,8 +216,9 @@ impl Rosenbrock {
                     *v = if i > 0 { g + tab.gamma * k } else { tab.gamma * k };
                 }
                 rhs.sens_coupling(t, &self.xv, y, &mut self.dir);
-                for (r, d) in rs.iter_mut().zip(&self.dir) {
-                    *r += h * d;
+                for (r, d) in rs.iter_mut().zip(&mut self.dir) {
+                    finite_or_zero(d);
+                    *r += h * *d;
                 }
                 let cols = rs.len() / n;
                 if !self.lin.solve(rs, cols) {
@@ -323,6 +324,19 @@ fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
     }
 }
 
+/// A second-order term of the sensitivities' stages (the coupling `f_xx[s, v] + f_xp v`, the
+/// sensitivities' `F_t`) that is not finite is left out: 0. Such a term is the method's, not the
+/// derivative's: `der(y) = x^p` from x = 0 at p = 1 has `f_xp = 1 + ln x`, -inf there, while
+/// the sensitivities' own flow `f_x s + f_p` and dy/dp = -1/(p+1)^2 are finite. Without it that
+/// stage is a W-method's (an inexact Jacobian), which the step's error estimate judges. A
+/// derivative that does not exist shows in the sensitivities' flow itself, which this leaves
+/// alone.
+fn finite_or_zero(v: &mut f64) {
+    if !v.is_finite() {
+        *v = 0.0;
+    }
+}
+
 fn all_finite(v: &[f64]) -> bool {
     v.iter().all(|x| x.is_finite())
 }
@@ -393,12 +407,15 @@ impl Stepper for Rosenbrock {
             }
             self.jac_calls += 1;
             self.jac_fresh = true;
-            // The state block's Jacobian must be finite for `W`'s LU; a sensitivity part of
-            // `F_t` that is not finite only spoils the sensitivities (masked below).
+            // The state block's Jacobian must be finite for `W`'s LU.
             if !all_finite(&self.lin.fx) || !all_finite(&self.ft[..n]) {
                 self.masked = false;
                 return f64::INFINITY;
             }
+            // The sensitivities' part of `F_t` (`f_xt s + f_pt`) is the method's own second-order
+            // term, as the coupling is (`stages`): where it is not finite at a point where the
+            // flow is, it is left out (see `finite_or_zero`).
+            self.ft[n..].iter_mut().for_each(finite_or_zero);
         }
         self.masked = false;
         if !self.stages(t, z, h, rhs) || !all_finite(&self.y_new[..self.n]) {
