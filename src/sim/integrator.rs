@@ -24,6 +24,7 @@ use super::options::SimOptions;
 use super::recorder::{Point, PointKind, Recorder};
 use super::result::{
     EndCusp, EventRecord, FinalState, MethodSegment, SimError, SimResult, SimStats, SimWarning, StopReason,
+    VoidCause,
 };
 use super::samples::{output_sens, OutputJac, Sampler};
 use super::switch_landing::SwitchLanding;
@@ -288,7 +289,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             return it;
         }
         let t0 = it.t;
-        it.note_new_voids(t0);
+        it.note_new_voids(t0, VoidCause::NotFinite);
         it.add_time_events();
         it.h = it.restart();
         // A reused detector may remember bounces of an earlier run.
@@ -700,12 +701,15 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             }
             self.sample_step(t1, false);
         }
-        let singular_at_start = self.work.stepper.masked() && self.start_derivative_not_finite();
+        let at_start = if self.work.stepper.masked() { self.start_derivative_singularity() } else { None };
         self.work.stepper.accept(&mut self.work.z);
         self.t = t1;
         self.landing.clear();
         if self.work.stepper.masked() {
-            self.note_new_voids(if singular_at_start { t0 } else { t1 });
+            match at_start {
+                Some(cause) => self.note_new_voids(t0, cause),
+                None => self.note_new_voids(t1, VoidCause::NotFinite),
+            }
         }
         self.work.det.advance();
         self.record(PointKind::Step);
@@ -738,7 +742,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         rhs: &mut F,
     ) -> StepOutcome {
         let (t0, t1) = (plan.t0, plan.t1);
-        let singular_at_start = self.work.stepper.masked() && self.start_derivative_not_finite();
+        let at_start = if self.work.stepper.masked() { self.start_derivative_singularity() } else { None };
         let sampling = look.sample_due || self.sampler.wanted(&*self.recorder, t_fire);
         if sampling {
             self.work.z_start.copy_from_slice(&self.work.z);
@@ -779,7 +783,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         self.t = t_fire;
         self.landing.clear();
         if self.work.stepper.masked() {
-            self.note_new_voids(if singular_at_start { t0 } else { t_fire });
+            match at_start {
+                Some(cause) => self.note_new_voids(t0, cause),
+                None => self.note_new_voids(t_fire, VoidCause::NotFinite),
+            }
         }
         self.record(PointKind::BeforeEvents);
         self.fire_instant(h_next)
@@ -1425,17 +1432,25 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     }
 
     /// Whether the derivative at the step's start has sensitivities that are not finite where the
-    /// sensitivities themselves are: the flow's derivative is singular right there.
-    fn start_derivative_not_finite(&self) -> bool {
+    /// sensitivities themselves are (the flow's derivative is singular right there), and how:
+    /// infinite, or indeterminate (NaN: `0 / 0`, `inf - inf`) where any is.
+    fn start_derivative_singularity(&self) -> Option<VoidCause> {
         let n = self.n;
         let k0 = &self.work.stepper.start_derivative()[n..];
-        k0.iter().zip(&self.work.z[n..]).any(|(d, s)| !d.is_finite() && s.is_finite())
+        let singular = k0.iter().zip(&self.work.z[n..]).filter(|(d, s)| !d.is_finite() && s.is_finite());
+        singular.map(|(d, _)| d.is_nan()).reduce(|a, b| a || b).map(|indeterminate| {
+            if indeterminate {
+                VoidCause::Indeterminate
+            } else {
+                VoidCause::Infinite
+            }
+        })
     }
 
     /// Sensitivities that are not finite at a finite state, and not yet known to be missing:
     /// derivatives that do not exist (NaN from here on), with one warning naming the first and
     /// the time `t` from which they are missing.
-    fn note_new_voids(&mut self, t: f64) {
+    fn note_new_voids(&mut self, t: f64, cause: VoidCause) {
         let n = self.n;
         let mut first: Option<usize> = None;
         let mut count = 0;
@@ -1457,6 +1472,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 state: self.info.state_names[i].as_str().into(),
                 param: param.as_str().into(),
                 count,
+                cause,
             });
         }
     }

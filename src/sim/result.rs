@@ -295,6 +295,8 @@ pub enum SimWarning {
         param: Arc<str>,
         /// How many derivatives stopped existing there.
         count: usize,
+        /// What the flow's derivative is there, where it is known.
+        cause: VoidCause,
     },
     /// The run starts strictly on the crossed side of a directional guard (the ball below its
     /// floor): the event fires only after the guard has gone back to its pre-crossing side, which
@@ -409,14 +411,48 @@ impl fmt::Display for SimWarning {
                  it under the error test",
                 if *steps == 1 { "" } else { "s" }
             ),
-            SimWarning::NotDifferentiable { time, state, param, count } => write!(
-                f,
-                "d{state}/d{param}{} does not exist from t = {time} on: the flow's derivative is not \
-                 finite at the state there",
-                if *count > 1 { format!(" (and {} other derivatives)", count - 1) } else { String::new() }
-            ),
+            SimWarning::NotDifferentiable { time, state, param, count, cause } => {
+                let others = if *count > 1 {
+                    format!(" (and {} other derivatives)", count - 1)
+                } else {
+                    String::new()
+                };
+                match cause {
+                    VoidCause::Indeterminate => write!(
+                        f,
+                        "d{state}/d{param}{others} is withheld from t = {time} on: the flow's derivative is \
+                         indeterminate at the state there (0/0 or inf - inf, NaN); it may have a finite \
+                         limit, which hybc does not take"
+                    ),
+                    VoidCause::Infinite => write!(
+                        f,
+                        "d{state}/d{param}{others} does not exist from t = {time} on: the flow's derivative is \
+                         infinite at the state there"
+                    ),
+                    VoidCause::NotFinite => write!(
+                        f,
+                        "d{state}/d{param}{others} does not exist from t = {time} on: the flow's derivative is \
+                         not finite at the state there"
+                    ),
+                }
+            }
         }
     }
+}
+
+/// Why a sensitivity stopped being finite at a finite state ([`SimWarning::NotDifferentiable`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum VoidCause {
+    /// The flow's derivative is infinite at the state (`ln x` at `x = 0`): the derivative does
+    /// not exist.
+    Infinite,
+    /// The flow's derivative is NaN at the state (`x / sqrt(p x)` at `x = 0`): an indeterminate
+    /// form whose limit may be finite; hybc withholds the derivative without saying it does not
+    /// exist.
+    Indeterminate,
+    /// Found inside a step or at the start, where which of the two is not told.
+    NotFinite,
 }
 
 /// One fired event.
