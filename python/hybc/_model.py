@@ -352,9 +352,10 @@ class Model:
         ``section`` fires (``"EVENT"``, or ``"EVENT#K"`` for its K-th firing), solved for by Newton's
         method over the parameters ``free`` (a vector's name for every element) from ``params``
         (their start and the other parameters' values). Returns the dict of ``hybc periodic --format
-        json``: ``fixed_point``, ``params`` (the free ones), ``period``, ``multipliers`` (``[re, im]``
-        pairs, largest first), ``trivial``, ``stable``, ``orbit``, ``monodromy``, ``iterations``,
-        ``residuals``, ``events``.
+        json``: ``found``, ``fixed_point``, ``params`` (the free ones), ``period``, ``multipliers``
+        (``[re, im]`` pairs, largest first), ``trivial``, ``stable``, ``stability`` (``"stable"``,
+        ``"unstable"`` or ``"borderline"``), ``neutral_band``, ``orbit``, ``monodromy``,
+        ``iterations``, ``residuals``, ``events``, ``verification``.
 
         - ``max_iter``: the most Newton iterations (one run each); ``tol``: converged when every
           state returns within ``tol (1 + |x0|)`` of its initial value.
