@@ -352,32 +352,41 @@ class Model:
         ``section`` fires (``"EVENT"``, or ``"EVENT#K"`` for its K-th firing), solved for by Newton's
         method over the parameters ``free`` (a vector's name for every element) from ``params``
         (their start and the other parameters' values). Returns the dict of ``hybc periodic --format
-        json``: ``fixed_point``, ``params`` (the free ones), ``period``, ``multipliers`` (``[re, im]``
-        pairs, largest first), ``trivial``, ``stable``, ``orbit``, ``monodromy``, ``iterations``,
-        ``residuals``, ``events``.
+        json``: ``found``, ``fixed_point``, ``params`` (the free ones), ``period``, ``multipliers``
+        (``[re, im]`` pairs, largest first), ``trivial``, ``stable``, ``stability`` (``"stable"``,
+        ``"unstable"`` or ``"borderline"``), ``neutral_band``, ``orbit``, ``monodromy``,
+        ``iterations``, ``residuals``, ``events``, ``verification``.
 
         - ``max_iter``: the most Newton iterations (one run each); ``tol``: converged when every
           state returns within ``tol (1 + |x0|)`` of its initial value.
         - ``options``: the keywords of :meth:`simulate` (``t_end``, ``rtol``, ...).
 
         An unknown section or free parameter raises ``ValueError`` (``hybc.ParameterError`` for a
-        name); no orbit found (a run that misses the section, Newton not converging, a Jacobian that
-        is not finite) raises ``RuntimeError`` with the words of ``hybc periodic``.
+        name); no orbit found (a run that misses the section, Newton not converging, its point not
+        coming back in a run of the model, a Jacobian that is not finite) raises ``RuntimeError``
+        with the words of ``hybc periodic``, whose ``report`` is the dict ``hybc periodic --format
+        json`` prints then (``found`` false, the ``reason``).
         """
         if not isinstance(section, str):
             raise TypeError(f"section: expected an event name, found {section!r}")
         vectors = dict(self._native.vectors)
         free = _expand_names(_names(free, "free"), vectors)
         _check_counts({"max_iter": max_iter, **options})
-        report = _hybc.periodic_report(
-            self._native,
-            section,
-            free,
-            _param_dict(_expand_vectors(params, vectors)),
-            int(max_iter),
-            float(tol),
-            **options,
-        )
+        try:
+            report = _hybc.periodic_report(
+                self._native,
+                section,
+                free,
+                _param_dict(_expand_vectors(params, vectors)),
+                int(max_iter),
+                float(tol),
+                **options,
+            )
+        except RuntimeError as e:
+            # A search that found nothing: the dict `hybc periodic --format json` prints then.
+            if isinstance(getattr(e, "report", None), str):
+                e.report = json.loads(e.report)
+            raise
         return json.loads(report)
 
     def sobol_design(

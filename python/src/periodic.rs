@@ -46,7 +46,7 @@ pub fn periodic_report(
         tol: crate::options::positive("tol", tol)?,
     };
     let request = PeriodicRequest { section, firing, search };
-    match py.detach(move || request.run(&inner)) {
+    match py.detach(|| request.run(&inner)) {
         Ok(report) => Ok(report.to_json().to_string()),
         Err(Error::Periodic(
             e @ (PeriodicError::NoSection { .. }
@@ -54,9 +54,16 @@ pub fn periodic_report(
             | PeriodicError::BadFiring { .. }
             | PeriodicError::BadSection { .. }),
         )) => Err(PyValueError::new_err(format!("section/free: {e}"))),
-        // No orbit found: the run missed the section, Newton did not converge, the Jacobian is
-        // not finite (`hybc periodic` exits 3 or 4).
-        Err(Error::Periodic(e)) => Err(PyRuntimeError::new_err(e.to_string())),
+        // No orbit found: the run missed the section, Newton did not converge, its point failed
+        // the check by a run of the model, the Jacobian is not finite (`hybc periodic` exits 3 or
+        // 4). The error carries the JSON `hybc periodic --format json` prints then, as `report`.
+        Err(e @ Error::Periodic(_)) => {
+            let err = PyRuntimeError::new_err(e.to_string());
+            if let Some(json) = request.failure_json(&inner, &e) {
+                err.value(py).setattr("report", json.to_string())?;
+            }
+            Err(err)
+        }
         Err(e) => Err(errors::to_py(e)),
     }
 }

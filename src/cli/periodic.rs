@@ -17,8 +17,13 @@ enum Format {
 }
 
 #[derive(Debug, clap::Args)]
-#[command(after_help = "Exit codes: 0 a fixed point found; 1 the model has errors; 2 a usage error; 3 a \
-                        run did not reach the section; 4 no fixed point found (Newton did not converge).")]
+#[command(
+    after_help = "Exit codes: 0 a fixed point found (stable or not); 1 the model has errors; 2 a usage \
+                        error; 3 a run did not reach the section, or the return map's Jacobian is not finite; \
+                        4 no fixed point found (Newton did not converge, or a run of the model from its point \
+                        does not come back to it). With --format json a search that found nothing prints an \
+                        object too, with found: false and the reason."
+)]
 pub struct PeriodicArgs {
     #[command(flatten)]
     model: ModelArg,
@@ -68,25 +73,30 @@ fn solve(model: &Model, args: &PeriodicArgs) -> Result<ExitCode, String> {
         tol: positive("--tol", args.tol)?,
     };
     let request = PeriodicRequest { section, firing, search };
+    let print = |json: &serde_json::Value| super::print_out(&format!("{json}\n"));
     match request.run(model) {
         Ok(report) => {
-            let text = match args.format {
-                Format::Table => report.to_table(),
-                Format::Json => format!("{}\n", report.to_json()),
-            };
-            super::print_out(&text);
+            match args.format {
+                Format::Table => super::print_out(&report.to_table()),
+                Format::Json => print(&report.to_json()),
+            }
             Ok(ExitCode::SUCCESS)
         }
         Err(Error::Periodic(
             e @ (PeriodicError::NoSection { .. } | PeriodicError::NoFree | PeriodicError::BadFiring { .. }),
         )) => Err(format!("--section/--free: {e}")),
-        Err(e @ Error::Periodic(PeriodicError::NotConverged { .. })) => {
-            eprintln!("error: {e}");
-            Ok(ExitCode::from(EXIT_GOAL_NOT_MET))
-        }
         Err(e) => {
             eprintln!("error: {}", error_chain(&e));
-            Ok(ExitCode::from(EXIT_SIM_STOPPED))
+            if let (Format::Json, Some(json)) = (args.format, request.failure_json(model, &e)) {
+                print(&json);
+            }
+            // No fixed point: Newton did not converge, or its point failed the check by a run of
+            // the model; the others are runs that did not get there.
+            let goal_not_met = matches!(
+                e,
+                Error::Periodic(PeriodicError::NotConverged { .. } | PeriodicError::NotVerified { .. })
+            );
+            Ok(ExitCode::from(if goal_not_met { EXIT_GOAL_NOT_MET } else { EXIT_SIM_STOPPED }))
         }
     }
 }

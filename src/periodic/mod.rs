@@ -13,9 +13,14 @@
 //! value (the identity as the initial sensitivities), so every derivative is the compiled
 //! model's own.
 //!
-//! Code map: `section` (the two models, derived from the checked model: sema in, sema out),
-//! this file (Newton on the return map over any two systems, the multipliers), `report`
-//! (`PeriodicReport`: table, JSON). The door's `PeriodicRequest` (`api/request/periodic.rs`)
+//! A fixed point is verified before it is reported: a run of the model as written (the section
+//! no `stop`, its firings counted as they come) from the fixed point must come back to it
+//! after the section's K-th firing, within the same tolerance (`verify`).
+//!
+//! Code map: `section` (the three models, derived from the checked model: sema in, sema out),
+//! this file (Newton on the return map over any systems), `verdict` (the multipliers, the
+//! stability verdict, the verification run), `report` (`PeriodicReport`: table, JSON; the JSON
+//! of a search that found nothing). The door's `PeriodicRequest` (`api/request/periodic.rs`)
 //! compiles the section's models and runs [`find`] on them. Knows runs and their results; no
 //! compiler, no IO.
 
@@ -26,15 +31,13 @@ use crate::sim::{HybridSystem, Runner, SimOptions, SimResult, StopReason};
 
 mod report;
 mod section;
+mod verdict;
 
-pub use report::PeriodicReport;
-pub use section::{parse_section, section_models, Section, SectionModels, MAX_FIRING};
-
-/// Multipliers of at most this magnitude are the section's trivial ones: a perturbation along
-/// the flow reaches the section at another time but at the same point, and the state right after
-/// a reset lies on the reset's image; both map to zero exactly, so their multipliers are zero to
-/// round-off. They take no part in the stability verdict.
-pub const TRIVIAL_MULTIPLIER: f64 = 1e-8;
+pub use report::{failure_json, PeriodicReport};
+pub use section::{
+    parse_section, returns_after, section_models, Section, SectionModels, MAX_FIRING, START_WINDOW,
+};
+pub use verdict::{multipliers, Stability, Verification, NEUTRAL_BAND, TRIVIAL_MULTIPLIER};
 
 /// How to search for the orbit: what the user asks.
 #[derive(Clone, Debug)]
@@ -68,12 +71,32 @@ pub struct PeriodicResult {
     pub orbit: Vec<usize>,
     /// Eigenvalues of the monodromy matrix as `(re, im)`, by decreasing magnitude.
     pub multipliers: Vec<(f64, f64)>,
-    /// Whether every multiplier above [`TRIVIAL_MULTIPLIER`] lies strictly inside the unit circle.
+    /// The verdict on the multipliers above [`TRIVIAL_MULTIPLIER`]: inside the unit circle,
+    /// outside it, or on it to within `neutral_band`.
+    pub stability: Stability,
+    /// How close to 1 a multiplier's magnitude is taken as 1: [`NEUTRAL_BAND`] times the runs'
+    /// `rtol`.
+    pub neutral_band: f64,
+    /// Whether the verdict is [`Stability::Stable`].
     pub stable: bool,
     /// The largest `|x(section) - x0|` component after each Newton iterate (the start first).
     pub residuals: Vec<f64>,
     /// The events fired on the orbit, the section last.
     pub events: usize,
+    /// The run of the model as written from the fixed point that verified it.
+    pub verification: Verification,
+}
+
+/// Where a search that found no orbit ended: the last iterate's parameters and the residuals so
+/// far (the JSON of a failed search reports them).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Attempt {
+    /// The Newton steps made before it ended.
+    pub iterations: usize,
+    /// All parameter values of the last iterate (the free ones as Newton left them).
+    pub params: Vec<f64>,
+    /// The largest `|x(section) - x0|` component after each iterate that reached the section.
+    pub residuals: Vec<f64>,
 }
 
 /// Why no periodic orbit was found, or the question was refused.
@@ -114,6 +137,8 @@ pub enum PeriodicError {
         section: String,
         /// How the run ended instead.
         how: String,
+        /// Where the search was.
+        attempt: Attempt,
     },
     #[error(
         "no fixed point found: after {iterations} Newton iterations the run returns {residual:e} away from its \
@@ -127,58 +152,105 @@ pub enum PeriodicError {
         residual: f64,
         /// The tolerance.
         tol: f64,
+        /// Where the search was.
+        attempt: Attempt,
     },
     /// The return map's Jacobian with respect to the free parameters is not finite.
     #[error("the return map's Jacobian with respect to the free parameters is not finite")]
-    Singular,
+    Singular {
+        /// Where the search was.
+        attempt: Attempt,
+    },
+    /// Newton's iterate returned within the tolerance, but a run of the model as written from it
+    /// did not: it is not reported as a fixed point.
+    #[error("no fixed point found: the return map closed within tolerance, but {how}")]
+    NotVerified {
+        /// What the verifying run did.
+        how: String,
+        /// Its largest `|x - x0|` component after the section's K-th firing, when it got there.
+        residual: Option<f64>,
+        /// Where the search was (the iterate that failed the check).
+        attempt: Attempt,
+    },
 }
 
-/// One run of the return map from `x0`: the state right after the section, the monodromy
-/// matrix, the period and the number of events.
+impl PeriodicError {
+    /// Where the search was, for the errors of a search that ran (`None` for a refusal).
+    pub fn attempt(&self) -> Option<&Attempt> {
+        match self {
+            PeriodicError::Missed { attempt, .. }
+            | PeriodicError::NotConverged { attempt, .. }
+            | PeriodicError::Singular { attempt }
+            | PeriodicError::NotVerified { attempt, .. } => Some(attempt),
+            _ => None,
+        }
+    }
+
+    /// The JSON's `reason` for a search that found no orbit (`None` for a refusal).
+    pub fn reason(&self) -> Option<&'static str> {
+        Some(match self {
+            PeriodicError::Missed { .. } => "missed_section",
+            PeriodicError::NotConverged { .. } => "not_converged",
+            PeriodicError::Singular { .. } => "jacobian_not_finite",
+            PeriodicError::NotVerified { .. } => "not_verified",
+            _ => return None,
+        })
+    }
+}
+
+/// One run of the return map: the state right after the section, the monodromy matrix, the
+/// period and the number of events; or how it missed the section.
+struct Return {
+    x1: Vec<f64>,
+    monodromy: Option<DMatrix<f64>>,
+    period: f64,
+    events: usize,
+}
+
+/// One run of the return map from `x0` (`Err`: how it missed the section).
 fn return_map<M: HybridSystem>(
     sim: &mut Runner<&M>,
     params: &[f64],
     x0: &[f64],
     section: usize,
-    name: &str,
-) -> Result<(Vec<f64>, DMatrix<f64>, f64, usize), PeriodicError> {
+) -> Result<Return, String> {
     let n = x0.len();
     let mut p = params.to_vec();
     p.extend_from_slice(x0);
-    let missed = |how: String| PeriodicError::Missed { section: name.to_string(), how };
-    let r: SimResult = sim.run(&p).map_err(|e| missed(e.to_string()))?;
+    let r: SimResult = sim.run(&p).map_err(|e| e.to_string())?;
     match &r.stopped_by {
         StopReason::Event { event, .. } if *event == section => {}
-        StopReason::Event { name: other, .. } => {
-            return Err(missed(format!("the stop event `{other}` fired first")))
-        }
+        StopReason::Event { name: other, .. } => return Err(format!("the stop event `{other}` fired first")),
         StopReason::TEnd => {
-            return Err(missed(format!(
-                "the run reached t_end = {} first (raise --t-end)",
-                sim.options().t_end
-            )))
+            return Err(format!("the run reached t_end = {} first (raise --t-end)", sim.options().t_end))
         }
-        other => return Err(missed(format!("the run stopped early ({})", other.name()))),
+        other => return Err(format!("the run stopped early ({})", other.name())),
     }
     let f = &r.final_state;
-    let d = f.dstate_total.as_ref().ok_or(PeriodicError::Singular)?;
     // Column j of `d` is the derivative with respect to x0_j.
-    let m = DMatrix::from_fn(n, n, |i, j| d[j * n + i]);
-    if m.iter().any(|v| !v.is_finite()) {
-        return Err(PeriodicError::Singular);
-    }
-    Ok((f.state.clone(), m, f.time - sim.options().t_start, r.events.len()))
+    let monodromy = f
+        .dstate_total
+        .as_ref()
+        .map(|d| DMatrix::from_fn(n, n, |i, j| d[j * n + i]))
+        .filter(|m| m.iter().all(|v| v.is_finite()));
+    Ok(Return {
+        x1: f.state.clone(),
+        monodromy,
+        period: f.time - sim.options().t_start,
+        events: r.events.len(),
+    })
 }
 
 /// Finds the periodic orbit `search` asks for through `section`, and its multipliers. `initial`
-/// is the section's
-/// stopping model compiled with the free parameters as its gradient parameters (its initial
-/// state and sensitivities start each iterate), `map` the seeded model compiled with the seeds as
-/// its gradient parameters (a run of it is the return map, its total derivatives the monodromy
-/// matrix).
-pub fn find<S: HybridSystem, M: HybridSystem>(
+/// is the section's stopping model compiled with the free parameters as its gradient parameters
+/// (its initial state and sensitivities start each iterate), `map` the seeded model compiled
+/// with the seeds as its gradient parameters (a run of it is the return map, its total
+/// derivatives the monodromy matrix), `verify` the verifying model compiled the same way (a run
+/// of it from the fixed point verifies it).
+pub fn find<S: HybridSystem, M: HybridSystem, V: HybridSystem>(
     initial: &S,
     map: &M,
+    verify: &V,
     section: &Section,
     search: &Search,
 ) -> Result<PeriodicResult, PeriodicError> {
@@ -188,37 +260,49 @@ pub fn find<S: HybridSystem, M: HybridSystem>(
     }
     let (n, orbit) = (section.n_states, section.orbit.clone());
     let k_orbit = orbit.len();
-    let mut sim = Runner::new(map, &problem.sim)
-        .map_err(|e| PeriodicError::Missed { section: section.name.clone(), how: e.to_string() })?;
     let mut params = problem.params.clone();
+    let mut residuals = Vec::new();
+    let missed = |how: String, iterations: usize, params: &[f64], residuals: &[f64]| PeriodicError::Missed {
+        section: section.name.clone(),
+        how,
+        attempt: Attempt { iterations, params: params.to_vec(), residuals: residuals.to_vec() },
+    };
+    let mut sim =
+        Runner::new(map, &problem.sim).map_err(|e| missed(e.to_string(), 0, &params, &residuals))?;
     let n_all = initial.info().n_states();
     let (mut x0, mut x0p) = (vec![0.0; n_all], vec![0.0; n_all * problem.free.len()]);
-    let mut residuals = Vec::new();
     for iteration in 0..=problem.max_iter {
         initial.initial_state(&params, &mut x0);
-        let (x1, m, period, events) = return_map(&mut sim, &params, &x0, section.index, &section.name)?;
+        let back = return_map(&mut sim, &params, &x0, section.index)
+            .map_err(|how| missed(how, iteration, &params, &residuals))?;
         // The counter (if any) and the quadrature states are no part of the orbit.
+        let r: Vec<f64> = orbit.iter().map(|&i| back.x1[i] - x0[i]).collect();
+        residuals.push(r.iter().map(|v| v.abs()).fold(0.0, f64::max));
+        let attempt =
+            || Attempt { iterations: iteration, params: params.clone(), residuals: residuals.clone() };
+        let m = back.monodromy.ok_or_else(|| PeriodicError::Singular { attempt: attempt() })?;
         let m = DMatrix::from_fn(k_orbit, k_orbit, |i, j| m[(orbit[i], orbit[j])]);
-        let r: Vec<f64> = orbit.iter().map(|&i| x1[i] - x0[i]).collect();
-        let worst = r.iter().map(|v| v.abs()).fold(0.0, f64::max);
-        residuals.push(worst);
         if r.iter().zip(&orbit).all(|(ri, &i)| ri.abs() <= problem.tol * (1.0 + x0[i].abs())) {
+            let verification = verdict::verify(verify, &params, &x0, back.period, section, problem).map_err(
+                |(how, residual)| PeriodicError::NotVerified { how, residual, attempt: attempt() },
+            )?;
             let multipliers = multipliers(&m);
-            let stable = multipliers.iter().all(|&(re, im)| {
-                let size = re.hypot(im);
-                size <= TRIVIAL_MULTIPLIER || size < 1.0
-            });
+            let neutral_band = NEUTRAL_BAND * problem.sim.rtol;
+            let stability = Stability::of(&multipliers, neutral_band);
             x0.truncate(n);
             return Ok(PeriodicResult {
                 params,
                 fixed_point: x0,
-                period,
+                period: back.period,
                 monodromy: m,
                 orbit,
                 multipliers,
-                stable,
+                stable: stability == Stability::Stable,
+                stability,
+                neutral_band,
                 residuals,
-                events,
+                events: back.events,
+                verification,
             });
         }
         if iteration == problem.max_iter {
@@ -232,10 +316,10 @@ pub fn find<S: HybridSystem, M: HybridSystem>(
         let jac = (&m - DMatrix::identity(k_orbit, k_orbit)) * &x0p;
         let step =
             jac.svd(true, true).solve(&nalgebra::DVector::from_vec(r.iter().map(|v| -v).collect()), 1e-14);
-        let step = step.map_err(|_| PeriodicError::Singular)?;
-        if step.iter().any(|v| !v.is_finite()) {
-            return Err(PeriodicError::Singular);
-        }
+        let step = step
+            .ok()
+            .filter(|s| s.iter().all(|v| v.is_finite()))
+            .ok_or_else(|| PeriodicError::Singular { attempt: attempt() })?;
         for (p, d) in problem.free.iter().zip(step.iter()) {
             params[p.0 as usize] += d;
         }
@@ -244,12 +328,6 @@ pub fn find<S: HybridSystem, M: HybridSystem>(
         iterations: problem.max_iter,
         residual: residuals.last().copied().unwrap_or(f64::NAN),
         tol: problem.tol,
+        attempt: Attempt { iterations: problem.max_iter, params, residuals },
     })
-}
-
-/// The eigenvalues of `m` as `(re, im)`, by decreasing magnitude (a complex pair stays together).
-pub fn multipliers(m: &DMatrix<f64>) -> Vec<(f64, f64)> {
-    let mut values: Vec<(f64, f64)> = m.complex_eigenvalues().iter().map(|c| (c.re, c.im)).collect();
-    values.sort_by(|a, b| b.0.hypot(b.1).total_cmp(&a.0.hypot(a.1)).then(b.1.total_cmp(&a.1)));
-    values
 }

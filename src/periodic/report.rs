@@ -1,11 +1,12 @@
-//! A periodic orbit with names attached: the table `hybc periodic` prints and its JSON object
-//! (field names are a contract, docs/periodic.md). No IO.
+//! A periodic orbit with names attached: the table `hybc periodic` prints and its JSON object,
+//! and the JSON object of a search that found none (field names are a contract,
+//! docs/periodic.md). No IO.
 
 use std::fmt::Write as _;
 
 use serde_json::{json, Value};
 
-use super::{PeriodicResult, TRIVIAL_MULTIPLIER};
+use super::{PeriodicError, PeriodicResult, Stability, TRIVIAL_MULTIPLIER};
 use crate::report::num;
 use crate::sema::ParamIdx;
 
@@ -58,17 +59,21 @@ impl PeriodicReport {
             "model": self.model,
             "section": self.section,
             "firing": self.firing,
+            "found": true,
             "fixed_point": states,
             "params": free,
             "period": r.period,
             "multipliers": r.multipliers.iter().map(|&(re, im)| [re, im]).collect::<Vec<_>>(),
             "trivial": r.multipliers.iter().filter(|&&z| trivial(z)).count(),
             "stable": r.stable,
+            "stability": r.stability.name(),
+            "neutral_band": r.neutral_band,
             "orbit": orbit,
             "monodromy": rows,
             "iterations": r.residuals.len() - 1,
             "residuals": r.residuals,
             "events": r.events,
+            "verification": {"residual": r.verification.residual, "period": r.verification.period},
         })
     }
 
@@ -94,6 +99,12 @@ impl PeriodicReport {
             let _ = writeln!(out, "  {:<14}  {:>20}{note}", s, num(*v));
         }
         let _ = writeln!(out, "\nperiod: {}   events per period: {}", num(r.period), r.events);
+        let _ = writeln!(
+            out,
+            "verified: a run of the model from it is back after {} (residual {:.1e})",
+            self.section_label(),
+            r.verification.residual
+        );
         let _ =
             writeln!(out, "\nFloquet multipliers (eigenvalues of the monodromy matrix, saltation included):");
         for &(re, im) in &r.multipliers {
@@ -105,15 +116,53 @@ impl PeriodicReport {
             let note = if trivial((re, im)) { "  (trivial: the section's)" } else { "" };
             let _ = writeln!(out, "  {z:<40}  |z| = {}{note}", num(re.hypot(im)));
         }
-        let _ = writeln!(
-            out,
-            "\n{}",
-            if r.stable {
-                "stable: every non-trivial multiplier lies inside the unit circle"
-            } else {
-                "unstable: a non-trivial multiplier lies on or outside the unit circle"
-            }
-        );
+        let verdict = match r.stability {
+            Stability::Stable => "stable: every non-trivial multiplier lies inside the unit circle".to_string(),
+            Stability::Unstable => "unstable: a non-trivial multiplier lies outside the unit circle".to_string(),
+            Stability::Borderline => format!(
+                "borderline: a non-trivial multiplier lies on the unit circle (|z| within {:.0e} of 1, 1000 rtol); \
+                 the multipliers cannot decide stability",
+                r.neutral_band
+            ),
+        };
+        let _ = writeln!(out, "\n{verdict}");
         out
     }
+}
+
+/// The JSON object `hybc periodic --format json` prints when the search found no orbit (`None`
+/// for a refusal of the question, which is a usage error): `found: false`, the `reason`, the
+/// `message`, and where the search ended (the free parameters of its last iterate, the Newton
+/// iterations made, the residuals so far).
+pub fn failure_json(
+    model: &str,
+    section: &str,
+    firing: usize,
+    params: &[String],
+    free: &[ParamIdx],
+    error: &PeriodicError,
+) -> Option<Value> {
+    let (reason, attempt) = (error.reason()?, error.attempt()?);
+    let values: serde_json::Map<_, _> = free
+        .iter()
+        .filter_map(|p| {
+            let i = p.0 as usize;
+            Some((params.get(i)?.clone(), json!(attempt.params.get(i)?)))
+        })
+        .collect();
+    let mut out = json!({
+        "model": model,
+        "section": section,
+        "firing": firing,
+        "found": false,
+        "reason": reason,
+        "message": error.to_string(),
+        "params": values,
+        "iterations": attempt.iterations,
+        "residuals": attempt.residuals,
+    });
+    if let PeriodicError::NotVerified { residual, .. } = error {
+        out["verification"] = json!({ "residual": residual });
+    }
+    Some(out)
 }

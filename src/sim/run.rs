@@ -14,7 +14,7 @@ use super::method::stepper::Stepper;
 use super::method::tableau::{DOP853, DOPRI5};
 use super::options::{Method, SimOptions, TrajectoryRequest};
 use super::recorder::{Recorder, TrajectoryRecorder};
-use super::result::{SimError, SimResult, StopReason};
+use super::result::{EventRecord, SimError, SimResult, StopReason};
 use super::system::{HybridSystem, SystemInfo};
 
 /// The smallest relative tolerance accepted: ten times the spacing of floating-point numbers
@@ -72,6 +72,33 @@ impl<S: HybridSystem + ?Sized, R: Recorder> Driver<'_, S, R> {
             Driver::Explicit(it) => it.step(),
             Driver::Rosenbrock(it) => it.step(),
             Driver::Auto(it) => it.step(),
+        }
+    }
+
+    /// [`Integrator::t`].
+    pub fn t(&self) -> f64 {
+        match self {
+            Driver::Explicit(it) => it.t(),
+            Driver::Rosenbrock(it) => it.t(),
+            Driver::Auto(it) => it.t(),
+        }
+    }
+
+    /// [`Integrator::state`].
+    pub fn state(&self) -> &[f64] {
+        match self {
+            Driver::Explicit(it) => it.state(),
+            Driver::Rosenbrock(it) => it.state(),
+            Driver::Auto(it) => it.state(),
+        }
+    }
+
+    /// [`Integrator::events`].
+    pub fn events(&self) -> &[EventRecord] {
+        match self {
+            Driver::Explicit(it) => it.events(),
+            Driver::Rosenbrock(it) => it.events(),
+            Driver::Auto(it) => it.events(),
         }
     }
 

@@ -2,7 +2,7 @@
 //! fixed point of the heel-strike return map, and its Floquet multipliers against an independent
 //! computation: central differences of the return map, run by run.
 
-use hybc::periodic::{PeriodicResult, Search};
+use hybc::periodic::{PeriodicError, PeriodicResult, Search, Stability};
 use hybc::{Model, PeriodicRequest};
 
 use crate::event_edges::WALKER;
@@ -221,4 +221,222 @@ fn the_cli_finds_the_gait_on_a_second_slope_and_prints_the_json_contract() {
     ]);
     assert_eq!(out.status.code(), Some(3), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(String::from_utf8_lossy(&out.stderr).contains("does not reach the section"));
+}
+
+// The orbits of tests/data/periodic/: closed forms through every firing, the start on the
+// section's guard, the verification of a fixed point, and the stability verdict on both sides.
+
+/// A search of the model at `path` through `section` over `free`, from its defaults with `set`
+/// over them, at the model's own options.
+fn search(path: &str, section: &str, free: &[&str], set: &[(&str, f64)]) -> (Model, PeriodicRequest) {
+    let model = Model::from_file(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(path)).unwrap();
+    let mut params = model.params();
+    for (name, value) in set {
+        params.set(name, *value).unwrap();
+    }
+    let free = free.iter().map(|n| model.param_index(n).unwrap()).collect();
+    let (section, firing) = hybc::periodic::parse_section(section).unwrap();
+    let search =
+        Search { free, params: params.values().to_vec(), sim: model.sim_options(), max_iter: 30, tol: 1e-10 };
+    (model.clone(), PeriodicRequest { section, firing, search })
+}
+
+const KICKED: &str = "tests/data/periodic/kicked.hyb";
+
+/// The kicked oscillator's period between two kicks and its velocity's factor over it, at
+/// damping `c`.
+fn kicked_form(c: f64) -> (f64, f64) {
+    let period = 2.0 * std::f64::consts::PI / (1.0 - c * c / 4.0).sqrt();
+    (period, (-c * period / 2.0).exp())
+}
+
+#[test]
+fn the_kicked_oscillator_closes_through_every_kick_at_its_closed_form() {
+    // Started right after a kick, (0, v0): the run sits on the kick's guard moving across, and
+    // the kick at t = 0 is not a return (it is the one the state is right after). Through the
+    // K-th kick the orbit is the one-kick orbit K times: v0 = -k / (1 - rho), the period K T,
+    // multipliers rho^K and 0. Before the section's copies were ordered, `kick#2` closed at the
+    // first kick with the kick applied twice (v0 = -2 / (1 - rho) = -4.27, period T): exit 0 on
+    // a point a run of the model does not come back to.
+    let (period, rho) = kicked_form(0.2);
+    let v_star = -1.0 / (1.0 - rho);
+    for firing in 1..=3 {
+        let section = format!("kick#{firing}");
+        let r = find(&search(KICKED, &section, &["v0"], &[("v0", -2.0)])).expect("the orbit");
+        let k = firing as f64;
+        assert!((r.fixed_point[1] - v_star).abs() < 1e-10, "{section}: {:?}", r.fixed_point);
+        assert_eq!(r.fixed_point[0], 0.0);
+        assert!((r.period - k * period).abs() < 1e-10 * k, "{section}: {}", r.period);
+        assert_eq!(r.events, firing, "{section}: one kick a period");
+        assert_eq!(r.multipliers.len(), 2);
+        assert!(
+            (r.multipliers[0].0 - rho.powi(firing as i32)).abs() < 1e-10,
+            "{section}: {:?}",
+            r.multipliers
+        );
+        assert_eq!(r.multipliers[0].1, 0.0);
+        assert!(r.multipliers[1].0.hypot(r.multipliers[1].1) <= hybc::periodic::TRIVIAL_MULTIPLIER);
+        assert_eq!(r.stability, Stability::Stable);
+        // The run of the model as written from the fixed point came back to it.
+        assert!(r.verification.residual <= 1e-10 * (1.0 + v_star.abs()), "{:?}", r.verification);
+        assert!((r.verification.period - r.period).abs() < 1e-12 * r.period, "{:?}", r.verification);
+    }
+    // Both states free, from off the section (x0 = 0.5): the same orbit, x0 = 0 to round-off.
+    let r = find(&search(KICKED, "kick#2", &["x0", "v0"], &[("x0", 0.5), ("v0", -2.0)])).expect("the orbit");
+    assert!(
+        r.fixed_point[0].abs() < 1e-12 && (r.fixed_point[1] - v_star).abs() < 1e-10,
+        "{:?}",
+        r.fixed_point
+    );
+    assert!((r.period - 2.0 * period).abs() < 1e-9, "{}", r.period);
+}
+
+#[test]
+fn the_stability_verdict_is_stable_unstable_or_borderline_at_exact_multipliers() {
+    // Negative damping with a kick that brakes (k < 0): v0 = -k / (1 - rho) < 0, rho > 1.
+    let (_, rho) = kicked_form(-0.2);
+    let r =
+        find(&search(KICKED, "kick", &["v0"], &[("c", -0.2), ("k", -1.0), ("v0", -1.0)])).expect("the orbit");
+    assert!((r.fixed_point[1] - 1.0 / (1.0 - rho)).abs() < 1e-10, "{:?}", r.fixed_point);
+    assert!((r.multipliers[0].0 - rho).abs() < 1e-10 && rho > 1.8, "{:?} vs {rho}", r.multipliers);
+    assert_eq!((r.stability, r.stable), (Stability::Unstable, false));
+    // Undamped and unkicked: every (0, v0) is a periodic orbit, the velocity's multiplier is 1
+    // exactly (a neutral direction), computed to round-off: borderline, not stable or unstable
+    // by the round-off's sign.
+    let r = find(&search(KICKED, "kick", &["v0"], &[("c", 0.0), ("k", 0.0)])).expect("the orbit");
+    assert_eq!(r.residuals.len(), 1, "the start is a fixed point");
+    assert!((r.multipliers[0].0 - 1.0).abs() < 1e-12, "{:?}", r.multipliers);
+    assert_eq!((r.stability, r.stable), (Stability::Borderline, false));
+    assert_eq!(r.neutral_band, 1000.0 * 1e-12);
+    // Damping of 1e-6: rho = 1 - 3.2e-6. At rtol 1e-12 (band 1e-9) that is stable; at rtol 1e-8
+    // (band 1e-5) the multipliers cannot tell it from 1.
+    let (_, rho) = kicked_form(1e-6);
+    let mut tight = search(KICKED, "kick", &["v0"], &[("c", 1e-6), ("k", 1e-6), ("v0", -0.3)]);
+    let r = find(&tight).expect("the orbit");
+    assert!((r.multipliers[0].0 - rho).abs() < 1e-10, "{:?} vs {rho}", r.multipliers);
+    assert_eq!(r.stability, Stability::Stable);
+    tight.1.search.sim.rtol = 1e-8;
+    tight.1.search.sim.atol = 1e-10;
+    tight.1.search.tol = 1e-8;
+    let r = find(&tight).expect("the orbit");
+    assert!((r.multipliers[0].0 - rho).abs() < 1e-7, "{:?} vs {rho}", r.multipliers);
+    assert_eq!(r.stability, Stability::Borderline);
+}
+
+#[test]
+fn a_fixed_point_a_run_of_the_model_does_not_come_back_to_is_refused() {
+    // A brake that the kick's reset sets off: `v <= -2` crossed by the kick (rho v0 = -1.14 to
+    // -2.14), a cascade at the kick's instant. The return map stops right after `kick` and closes
+    // at v0 = -1 / (1 - rho) = -2.136; a run of the model from there starts across the brake's
+    // guard (no firing: rule 5), kicks at T and brakes at the same instant, and is back at
+    // 0.5 v0, not at v0. Newton converges on the map; the point is refused (exit 4 at the
+    // command line), with where the search ended.
+    let (_, rho) = kicked_form(0.2);
+    let v_star = -1.0 / (1.0 - rho);
+    let with = |event: &str| -> Model {
+        let text =
+            std::fs::read_to_string(KICKED).unwrap().replace("simulate", &format!("{event}\n\nsimulate"));
+        Model::parse(&text).unwrap()
+    };
+    let (_, request) = search(KICKED, "kick", &["v0"], &[]);
+    let error = request.run(&with("event brake when v <= -2 {\n    v := 0.5 * v\n}")).unwrap_err();
+    let message = error.to_string();
+    assert!(
+        message.contains(
+            "no fixed point found: the return map closed within tolerance, but a run of the model from it returns"
+        ),
+        "{message}"
+    );
+    let hybc::Error::Periodic(e @ PeriodicError::NotVerified { residual: Some(residual), attempt, .. }) =
+        &error
+    else {
+        panic!("{error:?}")
+    };
+    assert!((residual - 0.5 * v_star.abs()).abs() < 1e-9, "{residual} vs {}", 0.5 * v_star.abs());
+    assert!((attempt.params[3] - v_star).abs() < 1e-10, "{:?}", attempt.params);
+    assert_eq!(e.reason(), Some("not_verified"));
+    // A drag on the kick's guard, declared after it, fires at the same instants: right after
+    // every kick, and at the start, where the state right after a kick sits on its guard (rule
+    // 5). The map from (0, v0) drags, flows, kicks: v0 = 0.5 rho v0 - 1. The run of the model
+    // is back after the kick's instant at the state it had after its start (both dragged): a
+    // true orbit, verified.
+    let r = request.run(&with("event drag when x <= 0 {\n    v := 0.5 * v\n}")).expect("the orbit").result;
+    let v_drag = -1.0 / (1.0 - 0.5 * rho);
+    assert!((r.fixed_point[1] - v_drag).abs() < 1e-10, "{:?} vs {v_drag}", r.fixed_point);
+    assert!(r.verification.residual < 1e-10, "{:?}", r.verification);
+    assert!((r.multipliers[0].0 - 0.5 * rho).abs() < 1e-10, "{:?}", r.multipliers);
+    assert_eq!(r.events, 2, "the drag at the start and the kick");
+    // Neither: the plain kicked oscillator is verified.
+    assert!(find(&search(KICKED, "kick", &["v0"], &[])).is_ok());
+}
+
+#[test]
+fn a_bounce_on_a_vibrating_table_closes_at_every_hit_and_every_second_hit() {
+    // `--section hit#2` said the run "does not reach the section" (the section's stopping copy,
+    // judged after the counted hit at the first hit, reversed the ball again and it fell through
+    // the table). The orbit: v* = g pi / w, cos(ph*) = v* (1 - e) / ((1 + e) A w), hits every
+    // 0.64 s; the complex pair of multipliers has modulus e (e^2 through two hits).
+    let (g, e, a, w) = (9.81, 0.8, 0.05, 2.0 * std::f64::consts::PI / 0.64);
+    let v_star = g * std::f64::consts::PI / w;
+    let ph_star = (v_star * (1.0 - e) / ((1.0 + e) * a * w)).acos();
+    let table = "tests/data/periodic/table.hyb";
+    let one = find(&search(table, "hit", &["v0", "ph0"], &[])).expect("one hit");
+    let two = find(&search(table, "hit#2", &["v0", "ph0"], &[])).expect("two hits");
+    for (r, k) in [(&one, 1), (&two, 2)] {
+        let want = [a * ph_star.sin(), v_star, ph_star];
+        for (got, want) in r.fixed_point.iter().zip(want) {
+            assert!((got - want).abs() < 1e-9, "hit#{k}: {:?} vs {want}", r.fixed_point);
+        }
+        assert!((r.period - 0.64 * k as f64).abs() < 1e-10, "hit#{k}: {}", r.period);
+        assert_eq!(r.events, 2 * k, "a hit and a wrap of the phase a period");
+        let modulus = e.powi(k as i32);
+        for &(re, im) in &r.multipliers[..2] {
+            assert!((re.hypot(im) - modulus).abs() < 1e-9 && im != 0.0, "hit#{k}: {:?}", r.multipliers);
+        }
+        assert_eq!(r.stability, Stability::Stable);
+    }
+    let squared = &one.monodromy * &one.monodromy;
+    for (i, j) in (0..3).flat_map(|i| (0..3).map(move |j| (i, j))) {
+        assert!((two.monodromy[(i, j)] - squared[(i, j)]).abs() < 1e-8, "M2[{i}][{j}]");
+    }
+}
+
+#[test]
+fn a_bounce_on_a_floor_closes_at_every_hit_with_a_neutral_multiplier() {
+    // e = 1: the start (0, 3.2) is an orbit; through K hits its period is 2 K v0 / g. `hit#2`
+    // missed the section before (stopped as Zeno: the copy reversed the ball back down).
+    let bounce = "tests/data/periodic/bounce.hyb";
+    for firing in 1..=3 {
+        let section = format!("hit#{firing}");
+        let r = find(&search(bounce, &section, &["v0"], &[])).expect("the orbit");
+        assert_eq!(r.residuals.len(), 1, "{section}: the start is a fixed point");
+        assert_eq!(r.fixed_point, vec![0.0, 3.2]);
+        assert!((r.period - firing as f64 * 2.0 * 3.2 / 9.81).abs() < 1e-12, "{section}: {}", r.period);
+        assert!((r.multipliers[0].0 - 1.0).abs() < 1e-12, "{section}: {:?}", r.multipliers);
+        assert_eq!(r.stability, Stability::Borderline);
+    }
+}
+
+#[test]
+fn an_apex_section_started_at_the_apex_is_a_whole_bounce_never_a_zero_length_orbit() {
+    // Dropped from its apex (y0 = 1, v0 = 0), the run starts on the apex guard moving across: the
+    // apex there is not a return, so the orbit is the bounce back to it, period 2 sqrt(2 / g),
+    // not 0. Started rising (v0 = 0.1), Newton drives v0 to 0 from above, where the apex comes
+    // 1e-20 after the start: that firing is inside the start window too (the orbit reported
+    // before was that one, period 7.4e-20).
+    let bounce = "tests/data/periodic/bounce.hyb";
+    let whole = 2.0 * (2.0f64 / 9.81).sqrt();
+    for v0 in [0.0, 0.1, -0.1] {
+        let r = find(&search(bounce, "apex", &["y0", "v0"], &[("y0", 1.0), ("v0", v0)])).expect("the orbit");
+        assert!((r.period - whole).abs() < 1e-9, "v0 = {v0}: period {}", r.period);
+        assert!(
+            (r.fixed_point[0] - 1.0).abs() < 1e-9 && r.fixed_point[1].abs() < 1e-12,
+            "{:?}",
+            r.fixed_point
+        );
+        assert_eq!(r.events, 2, "the hit and the apex");
+    }
+    // The window: 1e-9 past the start, or 1e-9 of it at |t_start| > 1.
+    assert_eq!(hybc::periodic::returns_after(0.0), 1e-9);
+    assert!((hybc::periodic::returns_after(-1e6) - (-1e6 + 1e-3)).abs() < 1e-9);
 }

@@ -1,8 +1,9 @@
 //! A periodic orbit as a user asks for it (`hybc periodic`, Python's `Model.periodic`): the
 //! section event and its firing, the free parameters that set the initial state, their start,
-//! the options. The door compiles the section's two models (`periodic::section_models`: the
-//! return map with the section a `stop`, and that with one parameter per initial state) and runs
-//! Newton on them (`periodic::find`, the core), so `periodic/` knows no compiler.
+//! the options. The door compiles the section's models (`periodic::section_models`: the return
+//! map with the section a `stop`, that with one parameter per initial state, and the model as
+//! written seeded the same way, which verifies the fixed point) and runs Newton on them
+//! (`periodic::find`, the core), so `periodic/` knows no compiler.
 
 use crate::api::{Compiled, Error, Model};
 use crate::periodic::{self, PeriodicError, PeriodicReport, Search};
@@ -25,7 +26,7 @@ impl PeriodicRequest {
     /// Finds the orbit of `model` (its section's models compiled here, by the door).
     pub fn run(&self, model: &Model) -> Result<PeriodicReport, Error> {
         let checked = model.checked();
-        let derived = periodic::section_models(checked, &self.section, self.firing)?;
+        let derived = periodic::section_models(checked, &self.section, self.firing, self.search.sim.t_start)?;
         if self.search.free.is_empty() {
             return Err(PeriodicError::NoFree.into());
         }
@@ -37,7 +38,9 @@ impl PeriodicRequest {
         };
         let initial = compile(derived.stopping, &self.search.free)?;
         let map = compile(derived.seeded, &derived.seeds)?;
-        let result = periodic::find(initial.system(), map.system(), &derived.section, &self.search)?;
+        let verify = compile(derived.verifying, &derived.seeds)?;
+        let result =
+            periodic::find(initial.system(), map.system(), verify.system(), &derived.section, &self.search)?;
         Ok(PeriodicReport {
             model: model.name().to_string(),
             section: self.section.clone(),
@@ -47,5 +50,14 @@ impl PeriodicRequest {
             states: checked.states.iter().map(|s| s.name.clone()).collect(),
             result,
         })
+    }
+
+    /// The JSON object of a search of `model` that ended in `error` without an orbit (what
+    /// `hybc periodic --format json` prints then, and Python's `RuntimeError` carries); `None`
+    /// for a refusal of the question.
+    pub fn failure_json(&self, model: &Model, error: &Error) -> Option<serde_json::Value> {
+        let Error::Periodic(e) = error else { return None };
+        let params: Vec<String> = model.checked().params.iter().map(|p| p.name.clone()).collect();
+        periodic::failure_json(model.name(), &self.section, self.firing, &params, &self.search.free, e)
     }
 }
