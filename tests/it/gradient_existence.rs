@@ -287,3 +287,35 @@ fn an_indeterminate_flow_derivative_is_withheld_not_said_not_to_exist() {
     assert!(said.contains("dy/dp is withheld from t = 0 on"), "{said}");
     assert!(said.contains("it may have a finite limit") && !said.contains("does not exist"), "{said}");
 }
+
+#[test]
+fn a_near_grazing_margin_is_the_extremums_distance_and_a_graze_has_no_gradient() {
+    // The three verdicts of a crossing near its guard's extremum (ARCHITECTURE.md, Grazing), each
+    // at its closed form: the guard y - H peaks at apex - H (= the overshoot) when v = 0.
+    // Near-grazing (at rtol 1e-10, kappa = g delta / d^2 between 1e-4 and 1e-2 for overshoots
+    // from about 4e-7 down to 4e-9): the gradient is kept, and the margin is that distance (to
+    // the accuracy of the curvature estimate from the step's data).
+    for overshoot in [1e-7, 3e-8] {
+        let r = ceiling_run(overshoot);
+        let ev = &r.events()[0];
+        assert!(!ev.grazing, "{overshoot}: {ev:?}");
+        let margin = ev.margin.unwrap_or_else(|| panic!("{overshoot}: no margin: {ev:?}"));
+        assert_relative_eq!(margin, overshoot, max_relative = 1e-3);
+        let warned = r.warnings().iter().any(|w| matches!(w, SimWarning::NearGrazing { .. }));
+        assert!(warned, "{:?}", r.warnings());
+        // The kept gradient is exact: t_c solves v0 t - g t^2 / 2 = H, dt/dH = 1 / (v0 - g t_c).
+        assert_relative_eq!(
+            r.devent_time(0, "H").unwrap(),
+            1.0 / (4.0 - 9.81 * ev.time),
+            max_relative = 1e-6
+        );
+    }
+    // Grazing: a nanometre below the apex, the crossing is not resolved by the tolerances, and
+    // no time gradient is given (nor any later derivative).
+    let r = ceiling_run(1e-9);
+    let ev = &r.events()[0];
+    assert!(ev.grazing, "{ev:?}");
+    assert_eq!(r.devent_time(0, "H"), None);
+    assert_eq!(r.dstate("y", "H"), None);
+    assert!(r.warnings().iter().any(|w| matches!(w, SimWarning::Grazing { .. })));
+}
