@@ -1177,7 +1177,13 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 self.work.det.set_pending(pos, Pending::Contact, noise + located);
                 continue;
             }
-            self.work.det.note_bounce(pos, sigma, speed_before);
+            // Only a reset that turns the guard around on zero bounces in the sense of rule 6: one
+            // that puts the guard clearly on its crossed side (`x := -0.85` onto `x <= -0.649`)
+            // leaves it there to come back by the flow, as a run starting there does (rule 5), and
+            // its way back, however long, is no bounce too small to resolve.
+            if on_guard {
+                self.work.det.note_bounce(pos, sigma, speed_before);
+            }
         }
         None
     }

@@ -96,6 +96,39 @@ fn a_ball_dropped_from_the_floor_is_stuck_not_falling_through() {
 }
 
 #[test]
+fn a_reset_below_the_floor_turning_back_comes_up_and_fires_again_but_one_on_the_floor_bounces() {
+    // Rule 6's bounce is a reset that turns the guard around on zero. This one turns it around a
+    // whole unit below (`x := -1` onto `x <= 0`, then rising at speed 1): x comes back up through
+    // 0 a second later, which is no crossing of `x <= 0` (the guard goes back to its
+    // pre-crossing side), turns at 1 and falls to 0 again. Events at 1 (low), 3 (high), 4 (low),
+    // 6 (high). It was stopped as Zeno, "a bounce too small to resolve", at t = 1: the first
+    // step after the reset ended with x still below 0.
+    let text = "model shuttle\nparam c = 1\nstate x = c\nevent low when x <= 0 -> up {\n    x := -1\n}\n\
+                event high when x >= 1 -> down {\n}\ninitial mode down {\n    der(x) = -1\n}\n\
+                mode up {\n    der(x) = 1\n}\n";
+    let r = run(text, &["c"], |o| o.t_end = 6.5);
+    assert!(r.is_complete(), "{:?}", r.stopped_by());
+    let got = times(&r);
+    assert_eq!(got.len(), 4, "{got:?}");
+    for (t, want) in got.iter().zip([1.0, 3.0, 4.0, 6.0]) {
+        assert_relative_eq!(*t, want, max_relative = 1e-12);
+    }
+    // The first low fires at t = c and the reset forgets x: every later time moves with it.
+    for k in 0..4 {
+        assert_relative_eq!(r.devent_time(k, "c").unwrap(), 1.0, max_relative = 1e-12);
+    }
+    // The other side: a ball whose reset leaves it on the floor (`y := 0`, `v := -v`) bounces
+    // as any ball does, a whole flight 2 v / g after the first touchdown.
+    let on_floor = BALL.replace("v := -e * v", "y := 0\n    v := -v");
+    let r = run(&on_floor, &["h0"], |o| o.t_end = 1.5);
+    assert!(r.is_complete(), "{:?}", r.stopped_by());
+    let got = times(&r);
+    let (g, t1) = (9.81_f64, (2.0 / 9.81_f64).sqrt());
+    assert_eq!(got.len(), 2, "{got:?}");
+    assert_relative_eq!(got[1], t1 + 2.0 * (2.0 * g).sqrt() / g, max_relative = 1e-9);
+}
+
+#[test]
 fn a_perfectly_inelastic_ball_stays_at_the_floor() {
     // v := 0 leaves the ball on its guard with gravity carrying it through: stuck at the first
     // touchdown, t = sqrt(2 h0 / g), never below the floor.
@@ -318,6 +351,10 @@ fn a_relative_tolerance_below_double_precision_is_refused_as_unattainable() {
 /// Every test above, to run with each Rosenbrock method (`support::runs::with_method`): the
 /// tests that choose their method themselves keep it.
 const ALL: &[(&str, fn())] = &[
+    (
+        "a_reset_below_the_floor_turning_back_comes_up_and_fires_again_but_one_on_the_floor_bounces",
+        a_reset_below_the_floor_turning_back_comes_up_and_fires_again_but_one_on_the_floor_bounces,
+    ),
     (
         "a_guard_crossing_zero_many_times_in_one_step_is_seen_every_time",
         a_guard_crossing_zero_many_times_in_one_step_is_seen_every_time,

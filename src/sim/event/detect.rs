@@ -524,7 +524,8 @@ impl Detector {
 
     /// Records that the event at `pos` (in the current mode) just fired from the side of sign
     /// `sigma` and its reset turned the guard speed around from `speed_before`, when the guard
-    /// is not yet strictly back on that side (`g0`, `dg0` hold the post-event values).
+    /// is not yet strictly back on that side (`g0`, `dg0` hold the post-event values). The caller
+    /// calls it only for a guard the reset left on zero (within its round-off).
     pub fn note_bounce(&mut self, pos: usize, sigma: f64, speed_before: f64) {
         let reversed = self.dg0[pos] * speed_before < 0.0;
         if reversed && sigma * self.g0[pos] <= 0.0 {

@@ -587,23 +587,8 @@ const CI_MODELS: usize = 300;
 /// --test it relations -- --nocapture`). They belong to the event issue; the test fails on any
 /// violation not listed here and on any listed model that no longer violates, so the list stays
 /// true as they are fixed.
-const KNOWN: &[(u64, &str)] = &[
-    (503, CHECK_RERUN_STOPS),
-    (576, STOPPED_AS_ZENO),
-    (619, STOPPED_AS_ZENO),
-    (653, CHECK_RERUN_STOPS),
-    (736, STOPPED_AS_ZENO),
-    (779, STIFF_TOP_SHIFTED),
-    (863, STOPPED_AS_ZENO),
-    (899, STOPPED_AS_ZENO),
-    (901, STOPPED_AS_ZENO),
-    (952, STOPPED_AS_ZENO),
-];
+const KNOWN: &[(u64, &str)] = &[(779, STIFF_TOP_SHIFTED)];
 
-/// A contact stopped as Zeno ("a bounce too small to resolve") after one or two events, where
-/// the reference runs on: resets that move the guard clearly off zero (`x := x + k`, a product
-/// guard's sign flipped) and bounces, at the start and later.
-const STOPPED_AS_ZENO: &str = "a contact stopped as Zeno where the run goes on";
 /// A stiff top (`- 1000 x0`) with a flow switch and a time event, under `--t-start 1e6`, `auto`
 /// with every gradient: the final state 1.3e-4 off (12,640 tolerances), right unshifted. The
 /// cause is the time grid, not the run: its 2578 events each fire at the first floating-point
@@ -612,8 +597,6 @@ const STOPPED_AS_ZENO: &str = "a contact stopped as Zeno where the run goes on";
 /// 1e-12) at shifts 0 and 1e6 differ by 6.9e-5 themselves. The relation needs a tolerance that
 /// holds the grid's resolution (the events' speeds times the spacing of `t`).
 const STIFF_TOP_SHIFTED: &str = "a stiff top off under a time shift: the time grid's resolution at t = 1e6";
-/// The gradient check's re-run at a small `h_max` stops as Zeno where the run it checks went on.
-const CHECK_RERUN_STOPS: &str = "the gradient check's re-run stops as Zeno";
 
 #[test]
 fn generated_models_keep_every_relation_under_every_stepper() {
