@@ -145,8 +145,9 @@ pub(crate) struct Workspace<St: Stepper = Rk> {
     pub(crate) breakpoints: Breakpoints,
     /// The integrated vector `[x, S]`.
     pub(crate) z: Vec<f64>,
-    /// The events of the last group that fired: id, pre-crossing sign, crossing speed.
-    pub(crate) fired: Vec<(usize, f64, f64)>,
+    /// The events of the last group that fired: id, pre-crossing sign, crossing speed, and the
+    /// guard's accuracy at the tolerances there (0 for an event that took another's instant).
+    pub(crate) fired: Vec<(usize, f64, f64, f64)>,
     /// The output Jacobians `y_x`, `y_p`, `y_t` at the final state.
     pub(crate) output_jac: OutputJac,
     /// The states on either side of a flow switch.
@@ -1160,7 +1161,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             self.work.det.set_pending(pos, Pending::OnGuard, noise);
         }
         let evs = &self.info.modes[self.mode].events;
-        for &(ev, sigma, speed_before) in self.work.fired.iter() {
+        for &(ev, sigma, speed_before, accuracy) in self.work.fired.iter() {
             let Some(pos) = evs.iter().position(|&e| e == ev) else { continue };
             let einfo = &self.info.events[ev];
             // Within round-off, or within what locating the crossing to adjacent floats leaves
@@ -1180,8 +1181,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             // Only a reset that turns the guard around on zero bounces in the sense of rule 6: one
             // that puts the guard clearly on its crossed side (`x := -0.85` onto `x <= -0.649`)
             // leaves it there to come back by the flow, as a run starting there does (rule 5), and
-            // its way back, however long, is no bounce too small to resolve.
-            if on_guard {
+            // its way back, however long, is no bounce too small to resolve. On zero is within
+            // what the located state is known to: round-off and the guard's accuracy at the
+            // tolerances (a landed step's state is off the guard by its own error).
+            if self.work.det.g0[pos].abs() <= noise + located + accuracy {
                 self.work.det.note_bounce(pos, sigma, speed_before);
             }
         }
@@ -1328,7 +1331,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 resolution: out.resolution,
             });
             self.stats.events += 1;
-            self.work.fired.push((ev, crossing.sigma, out.denominator));
+            self.work.fired.push((
+                ev,
+                crossing.sigma,
+                out.denominator,
+                (out.resolution * out.denominator).abs(),
+            ));
             self.mode = mode_after;
             if einfo.is_stop {
                 self.stop_total = Some((self.work.jump.total.clone(), self.work.jump.dte.clone()));
