@@ -46,6 +46,7 @@ pub mod periodic;
 #[cfg(feature = "plot")]
 pub mod plot;
 pub mod report;
+pub mod sbml;
 pub mod sema;
 pub mod sim;
 pub mod sobol;
