@@ -180,6 +180,13 @@ pub fn simulate(import: &hybc::sbml::Import, settings: &Settings, results: &str)
         Ok(r) => r,
         Err(e) => return Outcome::Error(format!("run: {e}")),
     };
+    // The importer's only `stop`: a delayed event triggered again while its execution is
+    // pending, which SBML queues and hybc's translation does not hold.
+    if let hybc::StopReason::Event { name, .. } = run.stopped_by() {
+        return Outcome::Refused(format!(
+            "`{name}`: a second execution of a delayed event pending (hybc holds one)"
+        ));
+    }
     if !run.is_complete() {
         return Outcome::Error(format!("the run stopped early: {:?}", run.stopped_by()));
     }

@@ -6,10 +6,16 @@
 //! with `initialValue="false"` that holds at the start fires there: one more event at `t >= 0`
 //! enabled by the whole trigger. Constant priorities order the events (hybc fires simultaneous
 //! events in declaration order).
+//!
+//! A delayed event is scheduled rather than executed: its trigger's events set a state
+//! `e_due := t + delay` (and, with `useValuesFromTriggerTime`, states holding the assigned
+//! values), and an event `t >= e_due` executes the assignments and sets `e_due` back to
+//! [`IDLE`]. One execution can be pending per event: a trigger that fires again while one is
+//! pending (SBML queues a second) stops the run at an event `e_queued`, never dropping it
+//! silently. A non-persistent trigger that turns false while pending cancels the execution.
 
 use super::math::{fold, Math, Op};
-use super::print;
-use super::translate::{has_jump, Storage, Tr};
+use super::translate::{has_jump, Kind, Storage, Tr};
 
 /// `m` with the byte offsets cleared, so that equal atoms compare equal.
 fn strip(m: &Math) -> Math {
@@ -69,8 +75,87 @@ fn with_atom(m: &Math, atom: &Math, value: bool) -> Math {
     fold(&go(m, atom, value))
 }
 
-/// The hybc events of the model's SBML events, as lines of text.
-pub(super) fn events(tr: &mut Tr<'_, '_, '_>) -> Option<Vec<String>> {
+/// The time of no pending execution: far beyond any simulated time, so `t >= e_due` never
+/// crosses; not so far that a guard's round-off (16 eps |e_due|) or an enclosure near it
+/// overflows.
+pub(super) const IDLE: &str = "1e30";
+
+/// What a trigger's events need: their guard's sides, direction, and enabling condition.
+struct Crossing {
+    a: Math,
+    b: Math,
+    up: bool,
+    enable: Math,
+}
+
+/// The crossings at which `f` turns to `want` (true: the trigger fires; false: it stops holding),
+/// each enabled where it does.
+fn crossings(f: &Math, found: &[Math], want: bool) -> Vec<Crossing> {
+    let mut out = Vec::new();
+    for atom in found {
+        let Math::Apply(op, args, _) = atom else { continue };
+        for rising in [true, false] {
+            let after = with_atom(f, atom, rising);
+            let before = with_atom(f, atom, !rising);
+            let (after, before) = if want { (after, before) } else { (not(after), not(before)) };
+            let mut enable = fold(&Math::Apply(Op::And, vec![after, not(before)], 0));
+            if enable == Math::Bool(false) {
+                continue;
+            }
+            // `a > b` turns true as `a - b` rises through 0, `a < b` as it falls.
+            let up = matches!(op, Op::Gt | Op::Geq) == rising;
+            // Crossing onto the atom's inclusive side (`a >= b` rising, `a > b` falling): at the
+            // start on a zero guard the atom already has its new value, so SBML compares it
+            // with `initialValue` and fires there only through the `_start` event.
+            if matches!(op, Op::Geq | Op::Leq) == rising {
+                let later = Math::Apply(Op::Gt, vec![Math::Time, Math::Num(0.0)], 0);
+                enable = fold(&Math::Apply(Op::And, vec![later, enable], 0));
+            }
+            out.push(Crossing { a: args[0].clone(), b: args[1].clone(), up, enable });
+        }
+    }
+    out
+}
+
+fn not(m: Math) -> Math {
+    fold(&Math::Apply(Op::Not, vec![m], 0))
+}
+
+/// What the events add to the model: event lines, and the states (with their flows) that
+/// delayed events keep.
+pub(super) struct Translated {
+    pub events: Vec<String>,
+    pub states: Vec<String>,
+    pub ders: Vec<String>,
+}
+
+/// The `if` part of an event for `enable` (with `extra`, a condition text, and-ed to it).
+fn enabling(
+    tr: &mut Tr<'_, '_, '_>,
+    enable: &Math,
+    extra: Option<&str>,
+    node: roxmltree::Node<'_, '_>,
+) -> Option<String> {
+    let mut parts = Vec::new();
+    if *enable != Math::Bool(true) {
+        let text = tr.condition(enable, node)?;
+        // `or` binds loosest: a condition with one at its top is parenthesised before `and`.
+        parts.push(if extra.is_some() && text.contains(" or ") { format!("({text})") } else { text });
+    }
+    parts.extend(extra.map(str::to_string));
+    Some(if parts.is_empty() { String::new() } else { format!(" if {}", parts.join(" and ")) })
+}
+
+fn block(lines: &[String]) -> String {
+    if lines.is_empty() {
+        String::new()
+    } else {
+        format!(" {{\n{}\n}}", lines.iter().map(|l| format!("    {l}")).collect::<Vec<_>>().join("\n"))
+    }
+}
+
+/// The hybc events of the model's SBML events.
+pub(super) fn events(tr: &mut Tr<'_, '_, '_>) -> Option<Translated> {
     let sbml = tr.sbml;
     let mut order: Vec<(usize, Option<f64>)> = Vec::new();
     for (i, e) in sbml.events.iter().enumerate() {
@@ -95,100 +180,129 @@ pub(super) fn events(tr: &mut Tr<'_, '_, '_>) -> Option<Vec<String>> {
         (None, Some(_)) => std::cmp::Ordering::Greater,
         (None, None) => std::cmp::Ordering::Equal,
     });
-    let mut lines = Vec::new();
+    let mut out = Translated { events: Vec::new(), states: Vec::new(), ders: Vec::new() };
     for (i, _) in order {
         let e = &sbml.events[i];
-        if let Some((node, _)) = &e.delay {
-            tr.refuse(*node, "event delays are not translated yet");
+        let node = e.trigger_node;
+        let mut found = Vec::new();
+        if let Err(reason) = atoms(&e.trigger, &mut found) {
+            tr.refuse(node, reason);
             continue;
         }
         let base = match &e.id {
             Some(id) => tr.names.sbml(id),
             None => tr.names.fresh("event"),
         };
-        let mut resets = Vec::new();
+        // Each assignment: its target's name, its value, and (a concentration kept as an
+        // amount) the compartment size it is multiplied by after the event.
+        let mut assigns: Vec<(String, Math, Option<Math>, roxmltree::Node<'_, '_>)> = Vec::new();
         for a in &e.assignments {
             let Some(sym) = tr.syms.get(&a.variable) else { continue };
-            let (name, storage, kind) = (sym.name.clone(), sym.storage.clone(), sym.kind);
-            let (target, value) = match storage {
-                Storage::Amount(amount) => {
-                    // A concentration set: the amount is the new concentration times the
-                    // compartment's size after the event (set by this event too, or unchanged).
-                    let super::translate::Kind::Species(k) = kind else { continue };
+            match (&sym.storage, sym.kind) {
+                (Storage::Amount(amount), Kind::Species(k)) => {
                     let c = &sbml.species[k].compartment;
                     let size = e
                         .assignments
                         .iter()
                         .find(|b| &b.variable == c)
                         .map_or(Math::Ci(c.clone()), |b| b.math.clone());
-                    (amount, Math::Apply(Op::Times, vec![a.math.clone(), size], 0))
+                    assigns.push((amount.clone(), a.math.clone(), Some(size), a.node));
                 }
-                _ => (name, a.math.clone()),
-            };
-            let text = tr.dynamic(&value, a.node, None)?;
-            resets.push(format!("    {target} := {text}"));
-        }
-        let block = if resets.is_empty() { String::new() } else { format!(" {{\n{}\n}}", resets.join("\n")) };
-        let mut found = Vec::new();
-        if let Err(reason) = atoms(&e.trigger, &mut found) {
-            tr.refuse(e.trigger_node, reason);
-            continue;
-        }
-        let mut first = true;
-        for atom in &found {
-            let Math::Apply(op, args, _) = atom else { continue };
-            for rising in [true, false] {
-                let enable = fold(&Math::Apply(
-                    Op::And,
-                    vec![
-                        with_atom(&e.trigger, atom, rising),
-                        Math::Apply(Op::Not, vec![with_atom(&e.trigger, atom, !rising)], 0),
-                    ],
-                    0,
-                ));
-                if enable == Math::Bool(false) {
-                    continue;
-                }
-                // `a > b` turns true as `a - b` rises through 0, `a < b` as it falls.
-                let up = matches!(op, Op::Gt | Op::Geq) == rising;
-                let a = tr.dynamic(&args[0], e.trigger_node, None)?;
-                let b = tr.dynamic(&args[1], e.trigger_node, None)?;
-                let name = if first { base.clone() } else { tr.names.fresh(&base) };
-                first = false;
-                // Crossing onto the atom's inclusive side (`a >= b` rising, `a > b` falling): at the
-                // start on a zero guard the atom already has its new value, so SBML compares it
-                // with `initialValue` and fires there only through the `_start` event below.
-                let inclusive = matches!(op, Op::Geq | Op::Leq) == rising;
-                let enable = if inclusive {
-                    let later = Math::Apply(Op::Gt, vec![Math::Time, Math::Num(0.0)], 0);
-                    fold(&Math::Apply(Op::And, vec![later, enable], 0))
-                } else {
-                    enable
-                };
-                let cond = if enable == Math::Bool(true) {
-                    String::new()
-                } else {
-                    format!(" if {}", tr.condition(&enable, e.trigger_node)?)
-                };
-                lines
-                    .push(format!("event {name} when {a} {} {b}{cond}{block}", if up { ">=" } else { "<=" }));
+                _ => assigns.push((sym.name.clone(), a.math.clone(), None, a.node)),
             }
+        }
+        let times = |v: Math, size: &Option<Math>| match size {
+            Some(s) => Math::Apply(Op::Times, vec![v, s.clone()], 0),
+            None => v,
+        };
+        // What the trigger's events do (execute, or schedule), and the pending test.
+        let mut at_trigger = Vec::new();
+        let mut pending = None;
+        if let Some((dnode, delay)) = &e.delay {
+            let due = tr.names.fresh(&format!("{base}_due"));
+            out.states
+                .push(format!("state {due} = {IDLE}  # when `{base}` executes ({IDLE}: nothing pending)"));
+            out.ders.push(format!("der({due}) = 0"));
+            let d = tr.dynamic(delay, *dnode, None)?;
+            at_trigger.push(format!("{due} := t + {d}"));
+            let mut exec = Vec::new();
+            // The held values' names, read by the executing event's assignments.
+            let mut held_names = std::collections::HashMap::new();
+            for (k, (target, value, size, anode)) in assigns.iter().enumerate() {
+                let value = if e.use_trigger_values {
+                    let held = tr.names.fresh(&format!("{base}_value{}", k + 1));
+                    out.states.push(format!(
+                        "state {held} = 0  # `{target}` as `{base}` computed it when triggered"
+                    ));
+                    out.ders.push(format!("der({held}) = 0"));
+                    let v = tr.dynamic(value, *anode, None)?;
+                    at_trigger.push(format!("{held} := {v}"));
+                    held_names.insert(held.clone(), held.clone());
+                    Math::Ci(held)
+                } else {
+                    value.clone()
+                };
+                let v = tr.dynamic(&times(value, size), *anode, Some(&held_names))?;
+                exec.push(format!("{target} := {v}"));
+            }
+            exec.push(format!("{due} := {IDLE}"));
+            let name = tr.names.fresh(&format!("{base}_exec"));
+            out.events.push(format!("# `{base}` executes its delayed assignments"));
+            out.events.push(format!("event {name} when t >= {due}{}", block(&exec)));
+            if !e.persistent {
+                // A non-persistent trigger that stops holding cancels the pending execution.
+                for c in crossings(&e.trigger, &found, false) {
+                    let a = tr.dynamic(&c.a, node, None)?;
+                    let b = tr.dynamic(&c.b, node, None)?;
+                    let cond = enabling(tr, &c.enable, Some(&format!("{due} < {IDLE}")), node)?;
+                    let name = tr.names.fresh(&format!("{base}_cancel"));
+                    out.events.push(format!(
+                        "event {name} when {a} {} {b}{cond}{}",
+                        if c.up { ">=" } else { "<=" },
+                        block(&[format!("{due} := {IDLE}")])
+                    ));
+                }
+            }
+            pending = Some(due);
+        } else {
+            for (target, value, size, anode) in &assigns {
+                let v = tr.dynamic(&times(value.clone(), size), *anode, None)?;
+                at_trigger.push(format!("{target} := {v}"));
+            }
+        }
+        let idle = pending.as_ref().map(|due| format!("{due} > {IDLE} / 2"));
+        let busy = pending.as_ref().map(|due| format!("{due} < {IDLE} / 2"));
+        let mut first = true;
+        for c in crossings(&e.trigger, &found, true) {
+            let a = tr.dynamic(&c.a, node, None)?;
+            let b = tr.dynamic(&c.b, node, None)?;
+            let op = if c.up { ">=" } else { "<=" };
+            let name = if first { base.clone() } else { tr.names.fresh(&base) };
+            first = false;
+            // The second-execution test first: events at one instant are judged in declaration
+            // order, each on the state the ones before it left, and the scheduling event below
+            // makes its own execution pending.
+            if busy.is_some() {
+                let cond = enabling(tr, &c.enable, busy.as_deref(), node)?;
+                let queued = tr.names.fresh(&format!("{base}_queued"));
+                out.events.push(format!(
+                    "# `{base}` fires again before its pending execution: SBML queues a second one, hybc holds one\nevent {queued} when {a} {op} {b}{cond} {{\n    stop\n}}"
+                ));
+            }
+            let cond = enabling(tr, &c.enable, idle.as_deref(), node)?;
+            out.events.push(format!("event {name} when {a} {op} {b}{cond}{}", block(&at_trigger)));
         }
         if !e.initial_value {
             let holds = fold(&e.trigger);
             if holds != Math::Bool(false) {
                 let name = tr.names.fresh(&format!("{base}_start"));
-                let cond = if holds == Math::Bool(true) {
-                    String::new()
-                } else {
-                    format!(" if {}", tr.condition(&holds, e.trigger_node)?)
-                };
-                lines.push(format!(
-                    "# `{base}` holds at the start with initialValue=\"false\": it fires at t = 0\nevent {name} when t >= 0{cond}{block}"
+                let cond = enabling(tr, &holds, None, node)?;
+                out.events.push(format!(
+                    "# `{base}` holds at the start with initialValue=\"false\": it fires at t = 0"
                 ));
+                out.events.push(format!("event {name} when t >= 0{cond}{}", block(&at_trigger)));
             }
         }
-        let _ = print::MAX_TEXT;
     }
-    Some(lines)
+    Some(out)
 }

@@ -87,8 +87,10 @@ pub(super) struct Event<'a, 'i> {
     pub trigger: Math,
     pub trigger_node: Node<'a, 'i>,
     pub initial_value: bool,
+    pub persistent: bool,
     pub delay: Option<(Node<'a, 'i>, Math)>,
     pub priority: Option<(Node<'a, 'i>, Math)>,
+    pub use_trigger_values: bool,
     pub assignments: Vec<Assignment<'a, 'i>>,
 }
 
@@ -363,9 +365,11 @@ pub(super) fn read<'a, 'i>(xml: &'a Xml<'i>, out: &mut Vec<Refusal>) -> Option<S
             id: e.attribute("id").map(str::to_string),
             trigger,
             trigger_node,
-            // Level 2 has no such attribute: its triggers behave as `initialValue="true"` (the
-            // conversion to Level 3 writes it so).
+            // Level 2 has neither trigger attribute: its triggers behave as
+            // `initialValue="true"`, `persistent="true"` (the conversion to Level 3 writes so).
             initial_value: flag(trigger_node, "initialValue").unwrap_or(true),
+            persistent: flag(trigger_node, "persistent").unwrap_or(true),
+            use_trigger_values: flag(e, "useValuesFromTriggerTime").unwrap_or(true),
             delay,
             priority,
             assignments,

@@ -611,7 +611,8 @@ fn write(tr: &mut Tr<'_, '_, '_>) -> Option<String> {
         };
         ders.push((id.clone(), target, text));
     }
-    let events = super::events::events(tr)?;
+    let translated = super::events::events(tr)?;
+    let events = translated.events;
     // Flows that `rateOf` reads are `let`s (printed after the events: they may ask for more).
     let mut der_lines = Vec::new();
     for (id, target, text) in ders {
@@ -701,6 +702,8 @@ fn write(tr: &mut Tr<'_, '_, '_>) -> Option<String> {
     section("Parameters (constant compartments, species and parameters)", &params);
     section("Constants computed from parameters (initial assignments)", &consts);
     section("Initial values read by other initial values", &init_lines);
+    state_lines.extend(translated.states);
+    der_lines.extend(translated.ders);
     if state_lines.is_empty() {
         // hybc integrates at least one state; a model of rules alone gets one that stays 0.
         let name = tr.names.fresh("no_states");
