@@ -1318,11 +1318,13 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// A stop event fired on input knots where the flow jumps, in the mode it was met in: the
     /// final derivatives with respect to a parameter that moves the stop and the knots apart
     /// differ on the two sides (the flow the stop's motion carries the state along is either
-    /// side's), and do not exist.
+    /// side's), and do not exist, nor does the stop's time derivative unless it is a time event's
+    /// (the same on both sides).
     fn stop_at_knots(&mut self, first: usize) {
         if !self.work.knots.old.jumps || self.events.len() <= first {
             return;
         }
+        let time_event = self.info.events[self.events[first].event].guard == GuardShape::Time;
         let (n, knots) = (self.n, &self.work.knots);
         let mut voided = false;
         for j in 0..self.m {
@@ -1334,9 +1336,11 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             self.work.z[n + j * n..n + (j + 1) * n].fill(f64::NAN);
             if let Some((total, dte)) = &mut self.stop_total {
                 total[j * n..(j + 1) * n].fill(f64::NAN);
-                dte[j] = f64::NAN;
+                if !time_event {
+                    dte[j] = f64::NAN;
+                }
             }
-            if let Some(dtime) = &mut self.events[first].dtime {
+            if let Some(dtime) = self.events[first].dtime.as_mut().filter(|_| !time_event) {
                 dtime[j] = f64::NAN;
             }
         }

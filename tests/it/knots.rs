@@ -284,3 +284,26 @@ fn a_window_without_length_stops_the_run_naming_the_input() {
     let r = run(src, &[], &[], 1.0, Method::Dopri5);
     assert_eq!(r.stopped_by(), &StopReason::TEnd);
 }
+
+#[test]
+fn a_stop_on_a_pwc_knot_keeps_its_time_derivative_and_loses_the_total_that_differs() {
+    // x' = pwc(t, 0, 1, r), stopped at t = T. On the knot (T = 0.5) the final x moves with T at
+    // r0 on one side and r1 on the other: no derivative; the stop's time derivative is 1 on both
+    // sides, and x's with respect to r0 (0.5) does not depend on the order.
+    let src =
+        "model halt\nparam r[2] = 1 in [0.1, 10]\nparam T = 0.5\nstate x = 0\nder(x) = pwc(t, 0, 1, r)\n\
+               event end when t >= T {\n    stop\n}\nsimulate rtol = 1e-10, atol = 1e-12\n";
+    for method in METHODS {
+        let on = run(src, &["T", "r[0]"], &[("r", &[1.0, 2.0])], 2.0, method);
+        close(on.final_time(), 0.5, 1e-15, "stop time");
+        close(on.devent_time(0, "T").expect("dt/dT"), 1.0, 1e-12, "dt/dT");
+        assert_eq!(on.dstate_total("x", "T"), None, "{method:?}: r0 on one side, r1 on the other");
+        close(on.dstate_total("x", "r[0]").expect("dx/dr0"), 0.5, 1e-12, "dx/dr0");
+        assert_eq!(at_knot_warnings(&on), 1, "{method:?}: {:?}", on.warnings());
+        for (t_stop, rate) in [(0.3, 1.0), (0.7, 2.0)] {
+            let off = run(src, &["T", "r[0]"], &[("r", &[1.0, 2.0]), ("T", &[t_stop])], 2.0, method);
+            close(off.dstate_total("x", "T").expect("dx/dT"), rate, 1e-12, "dx/dT off the knot");
+            assert!(off.warnings().is_empty(), "{method:?}: {:?}", off.warnings());
+        }
+    }
+}
