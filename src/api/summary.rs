@@ -115,7 +115,7 @@ fn summary(model: &sema::Model) -> String {
                     model.vectors.iter().find(|v| v.first == input.first).map_or("?", |v| v.name.as_str());
                 let what = match input.kind {
                     sema::InputKind::Pwl => "kinks: steps land on them",
-                    sema::InputKind::Pwc => "jumps: located like flow switches",
+                    sema::InputKind::Pwc => "jumps: steps land on them, the gradients jump there",
                 };
                 let knots = input.knots();
                 let _ = writeln!(

@@ -66,6 +66,18 @@ impl Breakpoints {
         }
     }
 
+    /// The first breakpoint of `mode` strictly after `t`, as [`Self::next_after`] but consuming
+    /// nothing: a step that ends at `t` has not crossed the knots there yet.
+    pub fn peek_after(&self, t: f64, mode: usize) -> f64 {
+        let later = |times: &[f64]| times.iter().copied().find(|&b| b > t);
+        let time = later(&self.times[self.next..]).unwrap_or(self.times[self.times.len() - 1]);
+        let knot = match (self.knots.get(mode), self.knot_next.get(mode)) {
+            (Some(knots), Some(&next)) => knots[next..].iter().map(|k| k.0).find(|&k| k > t),
+            _ => None,
+        };
+        knot.map_or(time, |k| k.min(time))
+    }
+
     /// The first knot of `mode` strictly after `t`; the ones at or before `t` are consumed.
     pub fn knot_after(&mut self, t: f64, mode: usize) -> Option<f64> {
         let (knots, next) = (self.knots.get(mode)?, self.knot_next.get_mut(mode)?);
@@ -138,5 +150,35 @@ pub(crate) fn near_breakpoints(
                 margin,
             });
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn knots_are_a_queue_per_mode_and_a_step_ending_on_one_leaves_it_to_be_crossed() {
+        let mut b = Breakpoints::default();
+        b.reset(10.0, 2);
+        b.add(5.0);
+        for (t, set) in [(3.0, 0), (1.0, 0), (2.0, 1), (2.0, 0)] {
+            b.add_knot(0, t, set);
+        }
+        b.add_knot(1, 4.0, 2);
+        b.sort();
+        // Each mode sees its own knots among the shared times.
+        assert_eq!(b.next_after(0.0, 0), 1.0);
+        assert_eq!(b.next_after(0.0, 1), 4.0);
+        // A step that ended on the knot at 1 has not crossed it: looking ahead consumes nothing.
+        assert_eq!(b.peek_after(1.0, 0), 2.0);
+        assert_eq!(b.knots_at(1.0, 0), &[(1.0, 0)]);
+        // The next step from 1 passes it; two knot sets at one time are met together.
+        assert_eq!(b.next_after(1.0, 0), 2.0);
+        assert_eq!(b.knots_at(2.0, 0), &[(2.0, 0), (2.0, 1)]);
+        assert_eq!(b.next_after(3.0, 0), 5.0);
+        assert!(b.knots_at(3.5, 0).is_empty());
+        assert_eq!(b.next_after(5.0, 0), 10.0);
+        assert_eq!(b.next_after(12.0, 1), 10.0);
     }
 }

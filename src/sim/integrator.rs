@@ -731,7 +731,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             Selection::Nothing
         };
         let nothing = matches!(selection, Selection::Nothing) && plan.lands;
-        if nothing && self.landing.cross_at_landing(&mut self.work.det, cx, &mut self.work.breakpoints, t1) {
+        if nothing && self.landing.cross_at_landing(&mut self.work.det, cx, &self.work.breakpoints, t1) {
             if !(look.for_events || look.sample_due) {
                 self.work.stepper.build_interpolant(t0, &self.work.z, rhs);
             }
