@@ -688,6 +688,7 @@ fn cusp_notes(run: &SimResult) -> Vec<String> {
                     | SimWarning::NearGrazing { .. }
                     | SimWarning::NearBreakpoint { .. }
                     | SimWarning::ResetOntoGuard { .. }
+                    | SimWarning::EventAtKnot { .. }
             )
         })
         .map(|w| w.to_string())

@@ -28,6 +28,7 @@
 mod breakpoints;
 mod event;
 mod integrator;
+mod knots;
 mod linalg;
 mod method;
 mod mode_rhs;

@@ -31,6 +31,7 @@ mod jit_diff;
 mod jit_errors;
 mod jit_models;
 mod juggler;
+mod knots;
 mod layers;
 mod limits;
 mod optimize;
