@@ -34,6 +34,7 @@ mod juggler;
 mod layers;
 mod limits;
 mod optimize;
+mod optimize_many;
 mod optimize_problems;
 mod optimize_verdicts;
 mod periodic;
