@@ -10,9 +10,9 @@ use super::solver::LocalSolver;
 /// With bounds only and more free variables than this, `auto` picks L-BFGS-B. SLSQP's dense
 /// quasi-Newton matrix and its least-squares subproblem cost `O(n^2)` memory and `O(n^3)` work per
 /// iteration, L-BFGS-B `O(m n)` of both; on knot controls L-BFGS-B also took fewer runs from 10
-/// knots on, and SLSQP stopped short of the verdict's stationarity (`stalled`) from 25 on
-/// (docs/performance.md, "Optimisation over many knots"). Below the count SLSQP stays, the solver
-/// the shipped problems of a few parameters are tested with.
+/// knots on, and SLSQP stopped short of the verdict's stationarity from 25 knots on with bounds
+/// active, 50 without (docs/performance.md, "Optimisation over many knots"). Below the count
+/// SLSQP stays, the solver the shipped problems of a few parameters are tested with.
 pub const LBFGSB_ABOVE: usize = 20;
 
 /// A solver as the user names it.
