@@ -95,8 +95,6 @@ impl LocalSolver for Lbfgsb {
             if stationary <= AIM * program.gtol * scale {
                 return end(&x, "GtolReached", false);
             }
-            // Past the verdict's tolerance: the objective's and the step's tests may end the tail.
-            let tail = stationary <= program.gtol * scale;
             if runs.spent() {
                 return end(&x, "MaxEvalReached", true);
             }
@@ -125,6 +123,10 @@ impl LocalSolver for Lbfgsb {
                     let small_f = f - f_new <= program.ftol_rel * f.abs().max(f_new.abs());
                     memory.push(s, y);
                     (x, f, g) = (x_new, f_new, g_new);
+                    // At a point that meets the verdict's tolerance, the objective's and the
+                    // step's tests may end the tail.
+                    let tail =
+                        projected_gradient(&x, &g, bounds) <= program.gtol * start_scale.max(inf_norm(&g));
                     if small_f && tail {
                         return end(&x, "FtolReached", false);
                     }
@@ -302,6 +304,36 @@ mod tests {
             approx::assert_relative_eq!(*v, 1.0, max_relative = 1e-8);
         }
         assert!(runs < 200, "{runs} runs");
+    }
+
+    #[test]
+    fn the_objectives_test_ends_a_solve_only_where_the_gradient_meets_the_tolerance() {
+        // f = 1e6 + sum_i c_i (x_i - 1)^2 / 2, curvatures 1 down to 1e-4, from 0: the objective
+        // improves by less than 1e-12 of itself while the gradient is still far above 1e-6 of
+        // the start's (1), as a control of many knots does.
+        let n = 20;
+        let c: Vec<f64> = (0..n).map(|i| 10f64.powf(-4.0 * i as f64 / (n - 1) as f64)).collect();
+        let mut seen: Vec<(f64, f64)> = Vec::new();
+        let mut f = |x: &[f64]| {
+            let gradient: Vec<f64> = x.iter().zip(&c).map(|(x, c)| c * (x - 1.0)).collect();
+            let objective = 1e6 + x.iter().zip(&c).map(|(x, c)| 0.5 * c * (x - 1.0).powi(2)).sum::<f64>();
+            seen.push((objective, inf_norm(&gradient)));
+            Some(SmoothPoint { objective, gradient, constraints: Vec::new(), jacobian: Vec::new() })
+        };
+        let mut p = program(vec![(f64::NEG_INFINITY, f64::INFINITY); n]);
+        (p.ftol_rel, p.xtol_rel, p.gtol) = (1e-12, 1e-10, 1e-6);
+        let end = Lbfgsb.solve(&p, &vec![0.0; n], &mut f);
+        let g_end = end.x.iter().zip(&c).map(|(x, c)| (c * (x - 1.0)).abs()).fold(0.0, f64::max);
+        assert!(g_end <= 1e-6, "{} with gradient {g_end:e}", end.status);
+        // The objective had settled earlier: a new best by less than 1e-12 of it, with the
+        // gradient above the tolerance, where a test of the objective alone would have stopped.
+        let mut best = f64::INFINITY;
+        let settled = seen.iter().any(|&(v, g)| {
+            let witness = v < best && best - v <= 1e-12 * v && g > 1e-6;
+            best = best.min(v);
+            witness
+        });
+        assert!(settled, "{seen:?}");
     }
 
     #[test]
