@@ -86,7 +86,7 @@ def test_the_solver_keyword_picks_and_refuses_as_the_cli_flag_does():
     assert r["optimum"] == cli("ball.hyb", args)["optimum"] == {"h0": 0.5}
     assert model.optimize(["h0"], "h0", bounds={"h0": (0.5, 2)})["solver"] == "SLSQP"
     # General constraints need SLSQP; an unknown word and a count above the cap are refused.
-    with pytest.raises(ValueError, match="solver: lbfgsb takes bounds only, and the problem has 1 general"):
+    with pytest.raises(ValueError, match="solver: lbfgsb takes bounds only, not general constraints: use slsqp"):
         model.optimize(["h0", "e"], "h0", ["energy = 2"], solver="lbfgsb")
     with pytest.raises(ValueError, match="solver: expected auto, slsqp or lbfgsb, found `bfgs`"):
         model.optimize(["h0"], "h0", solver="bfgs")

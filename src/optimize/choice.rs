@@ -53,9 +53,11 @@ impl SolverChoice {
     pub fn pick(self, free: usize, constraints: usize) -> Result<&'static dyn LocalSolver, String> {
         match self {
             SolverChoice::Slsqp => Ok(&Slsqp),
-            SolverChoice::Lbfgsb if constraints > 0 => Err(format!(
-                "lbfgsb takes bounds only, and the problem has {constraints} general constraint(s): use slsqp (or auto, which picks it for constraints)"
-            )),
+            // Not their count: the front ends check before a path constraint is expanded.
+            SolverChoice::Lbfgsb if constraints > 0 => Err(
+                "lbfgsb takes bounds only, not general constraints: use slsqp (or auto, which picks it for constraints)"
+                    .to_string(),
+            ),
             SolverChoice::Lbfgsb => Ok(&Lbfgsb),
             SolverChoice::Auto if constraints == 0 && free > LBFGSB_ABOVE => Ok(&Lbfgsb),
             SolverChoice::Auto => Ok(&Slsqp),
@@ -88,7 +90,7 @@ mod tests {
         assert_eq!(SolverChoice::Slsqp.pick(5000, 0).map(|s| s.name()), Ok("SLSQP"));
         assert_eq!(SolverChoice::Lbfgsb.pick(2, 0).map(|s| s.name()), Ok("L-BFGS-B"));
         let refused = SolverChoice::Lbfgsb.pick(2, 3).map(|s| s.name()).unwrap_err();
-        assert!(refused.starts_with("lbfgsb takes bounds only, and the problem has 3"), "{refused}");
+        assert!(refused.starts_with("lbfgsb takes bounds only, not general constraints"), "{refused}");
     }
 
     #[test]

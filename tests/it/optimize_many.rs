@@ -192,7 +192,7 @@ fn the_solver_flag_picks_and_the_report_names_the_solver_that_ran() {
     assert_eq!(code, Some(2), "{out}");
     assert!(
         err.contains(
-            "--solver: lbfgsb takes bounds only, and the problem has 1 general constraint(s): use slsqp"
+            "--solver: lbfgsb takes bounds only, not general constraints: use slsqp (or auto, which picks it for constraints)"
         ),
         "{err}"
     );
