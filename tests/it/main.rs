@@ -35,6 +35,7 @@ mod knots;
 mod layers;
 mod limits;
 mod optimize;
+mod optimize_many;
 mod optimize_problems;
 mod optimize_verdicts;
 mod periodic;
