@@ -17,6 +17,7 @@ use super::event::detect::{clear_side, moves_across, Crossing, Detector, Pending
 use super::event::guards::Guards;
 use super::event::jump::{dot_nonzero, same, CrossingContext, Jump, JumpOutcome};
 use super::event::zeno;
+use super::fp_mode::IeeeArithmetic;
 use super::knots::Knots;
 use super::method::rk::Rk;
 use super::method::stepper::{Interpolant, Rhs, Stepper};
@@ -256,6 +257,8 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         work: &'a mut Workspace<St>,
         recorder: &'a mut R,
     ) -> Self {
+        // Every entry of a run computes in IEEE arithmetic, whatever mode the caller's thread is in.
+        let _ieee = IeeeArithmetic::enter();
         let info = sys.info();
         let (n, m) = (info.n_states(), info.n_grad());
         work.stepper.reset();
@@ -482,6 +485,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
 
     /// Attempts one step and says what happened.
     pub fn step(&mut self) -> StepOutcome {
+        let _ieee = IeeeArithmetic::enter();
         if let Some(stop) = &self.done {
             return StepOutcome::Done(stop.clone());
         }
@@ -1858,6 +1862,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// and the outputs' (chained through the output Jacobians), warnings, statistics. The
     /// trajectory is the recorder's to give.
     pub fn finish(mut self, stopped_by: StopReason) -> SimResult {
+        let _ieee = IeeeArithmetic::enter();
         self.sampler.take_here(&mut self.work.output_jac, self.t, self.mode, &self.work.z[..]);
         let samples = self.sampler.finish(&self.events);
         let (n, m, k) = (self.n, self.m, self.info.n_outputs());

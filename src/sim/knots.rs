@@ -27,34 +27,46 @@ pub(crate) fn first_time_past(s: impl Fn(f64) -> f64, k: f64, rising: bool, esti
     if !estimate.is_finite() {
         return None;
     }
-    let spacing = |t: f64| t.abs().next_up() - t.abs();
-    // A bracket `lo` (earlier side) < `hi` (later side).
+    // Zero only where subnormals flush (a run holds IEEE arithmetic, `fp_mode.rs`; the search
+    // is bounded whatever the mode all the same).
+    let spacing = |t: f64| (t.abs().next_up() - t.abs()).max(f64::MIN_POSITIVE);
+    // A bracket `lo` (earlier side) < `hi` (later side): the doubling reaches an infinite time
+    // within SEARCH_STEPS from any start, as the bisection resolves any finite bracket.
     let (mut lo, mut hi) = if later(estimate) {
         let mut gap = spacing(estimate);
-        loop {
+        let mut bracket = None;
+        for _ in 0..SEARCH_STEPS {
             let lo = estimate - gap;
             if !lo.is_finite() {
                 return None;
             }
             if !later(lo) {
-                break (lo, estimate);
+                bracket = Some((lo, estimate));
+                break;
             }
             gap *= 2.0;
         }
+        bracket?
     } else {
         let mut gap = spacing(estimate);
-        loop {
+        let mut bracket = None;
+        for _ in 0..SEARCH_STEPS {
             let hi = estimate + gap;
             if !hi.is_finite() {
                 return None;
             }
             if later(hi) {
-                break (estimate, hi);
+                bracket = Some((estimate, hi));
+                break;
             }
             gap *= 2.0;
         }
+        bracket?
     };
-    while lo.next_up() < hi {
+    for _ in 0..SEARCH_STEPS {
+        if lo.next_up() >= hi {
+            break;
+        }
         let mid = lo + 0.5 * (hi - lo);
         let mid = if mid <= lo || mid >= hi { lo.next_up() } else { mid };
         if later(mid) {
@@ -65,6 +77,10 @@ pub(crate) fn first_time_past(s: impl Fn(f64) -> f64, k: f64, rising: bool, esti
     }
     Some(hi)
 }
+
+/// More than the doublings from the least spacing to overflow (about 2,100), and than the
+/// halvings from the widest finite bracket to adjacent floats.
+const SEARCH_STEPS: usize = 4096;
 
 /// What the knots of a run need: scratch for their jumps, and the knot sets that cannot be
 /// timed.

@@ -307,3 +307,44 @@ fn a_stop_on_a_pwc_knot_keeps_its_time_derivative_and_loses_the_total_that_diffe
         }
     }
 }
+
+/// The thread's floating-point control word with subnormals flushed to zero, as XLA runs its
+/// threads (a `hybc.jax` call arrives that way).
+#[cfg(target_arch = "x86_64")]
+fn flush_subnormals_on_this_thread() {
+    let mut csr: u32 = 0;
+    // SAFETY: stores then loads MXCSR through a live local, setting its flush-to-zero (15) and
+    // denormals-are-zero (6) bits; the thread ends right after the run that needs them.
+    unsafe {
+        std::arch::asm!("stmxcsr [{}]", in(reg) &mut csr, options(nostack));
+        csr |= (1 << 15) | (1 << 6);
+        std::arch::asm!("ldmxcsr [{}]", in(reg) &csr, options(nostack));
+    }
+    assert_eq!(std::hint::black_box(f64::MIN_POSITIVE) / std::hint::black_box(4.0), 0.0, "flushing");
+}
+
+/// The hang a JAX call found: a `pwl` knot at `t = 0` is searched from a spacing of `t` that
+/// is `0` where subnormals flush, and the search never moved. A run holds IEEE arithmetic
+/// whatever the caller's mode (src/sim/fp_mode.rs): the same bits as from an IEEE thread.
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn a_run_from_a_thread_that_flushes_subnormals_is_bit_for_bit_an_ieee_threads() {
+    let src = "model ramp\nparam u[5] = 0\nparam c = 1\nstate x = 0\nder(x) = c * pwl(t, 0, 1, u)\n";
+    let set: &[(&str, &[f64])] = &[("u", &[0.5, -1.0, 2.0, 3.0, -0.25]), ("c", &[2.0])];
+    let bits = |r: &hybc::Run| {
+        let f = &r.result().final_state;
+        f.state.iter().chain(f.dstate.iter().flatten()).map(|v| v.to_bits()).collect::<Vec<_>>()
+    };
+    for method in METHODS {
+        let ieee = run(src, &["u", "c"], set, 1.0, method);
+        let flushed = std::thread::spawn(move || {
+            flush_subnormals_on_this_thread();
+            bits(&run(src, &["u", "c"], set, 1.0, method))
+        })
+        .join()
+        .expect("the run ends");
+        assert_eq!(flushed, bits(&ieee), "{method:?}");
+        // x(1) = c * trapezoid(u), weights (1, 2, 2, 2, 1) / 8.
+        close(ieee.result().final_state.state[0], 2.0625, 1e-12, "x(1)");
+    }
+}
