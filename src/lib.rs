@@ -23,8 +23,9 @@
 //! Cargo features: `cli` (the `hybc` command: clap, indicatif; implies `plot`) and `plot` (SVG and
 //! PNG figures: plotters), both on by default. Without them the library needs neither.
 
-// All `unsafe` is in `codegen` (calling the JIT's code) and in `sim::method::sums`, the stage
-// sums (a CPU feature dispatch and checked-once block loads); each allows it where it stands.
+// All `unsafe` is in `codegen` (calling the JIT's code), in `sim::method::sums`, the stage sums
+// (a CPU feature dispatch and checked-once block loads), and in `sim::fp_mode` (the
+// floating-point control register); each allows it where it stands.
 #![deny(unsafe_code)]
 // Every public item says what it is: the library is used from outside (the CLI, Python, tests).
 #![warn(missing_docs)]

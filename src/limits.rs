@@ -43,9 +43,13 @@ pub const MAX_STARTS: usize = 10_000;
 /// `(3 n + 2 m) n + (n + 2 m)(n + 1)` doubles for `n` free parameters and `m` constraints (an
 /// equality is two inequalities for the crate), so with [`MAX_OPTIMIZE_FREE`] about 130 MB.
 pub const MAX_CONSTRAINTS: usize = 2_000;
-/// Free parameters of one optimisation (`hybc optimize --free`): see [`MAX_CONSTRAINTS`]; a
-/// vector parameter counts each element.
+/// Free parameters of one optimisation by SLSQP (`hybc optimize --free`, the solver for general
+/// constraints): see [`MAX_CONSTRAINTS`]; a vector parameter counts each element.
 pub const MAX_OPTIMIZE_FREE: usize = 1_000;
+/// Free parameters of one optimisation by L-BFGS-B (bounds only): its memory is `2 m n` doubles
+/// for `m = 10` correction pairs (16 MB at this cap) and a few vectors of `n`; the report keeps
+/// each run's point, `8 n` bytes a run (0.8 MB at this cap).
+pub const MAX_OPTIMIZE_FREE_LBFGSB: usize = 100_000;
 
 /// A count outside its allowed range: `{what}: at least {min}, found {value}` or
 /// `{what}: at most {max}, found {value}`, `what` naming the flag or keyword.

@@ -49,6 +49,8 @@ impl RunStatus {
             match warning {
                 SimWarning::Grazing { .. } => return RunStatus::Grazing,
                 SimWarning::SwitchAtEvent { .. }
+                | SimWarning::EventAtKnot { .. }
+                | SimWarning::KnotsApart { .. }
                 | SimWarning::NotDifferentiable { .. }
                 | SimWarning::ResetOntoGuard { .. } => status = RunStatus::NotDifferentiable,
                 SimWarning::NearGrazing { .. }

@@ -270,6 +270,7 @@ class Model:
         kkt_tol: float = 1e-6,
         xtol: float = 1e-10,
         ftol: float = 1e-12,
+        solver: str = "auto",
         **options: Any,
     ) -> dict[str, Any]:
         """Minimises ``minimize`` over the parameters ``free`` subject to the constraints
@@ -289,19 +290,24 @@ class Model:
         - ``params``: the start of the free parameters and the values of the others;
           ``starts - 1`` more starts are drawn (``seed``) within the bounds, run on ``threads``
           (:func:`hybc.dask.optimize` runs them on a Dask cluster, with the same report).
+        - ``solver``: ``"slsqp"`` (general constraints, at most 1000 free parameters),
+          ``"lbfgsb"`` (bounds only, at most 100000), ``"auto"`` (L-BFGS-B for bounds only above
+          20 free parameters, else SLSQP); the report's ``solver`` says which ran.
         - ``options``: the keywords of :meth:`simulate` (``t_end``, ``rtol``, ...).
 
         A problem that does not converge returns its report with ``converged`` False and the
         ``reason``; names or constraints the model refuses raise ``ValueError``.
         """
         problem = self._optimize_problem(
-            free, minimize, subject_to, bounds, params, starts, seed, threads, max_iter, kkt_tol, xtol, ftol, options
+            free, minimize, subject_to, bounds, params, starts, seed, threads, max_iter, kkt_tol, xtol, ftol, solver,
+            options,
         )
         report = json.loads(_hybc.optimize_report(self._native, *problem.args, **problem.options))
         return self._with_run(report, problem)
 
     def _optimize_problem(
-        self, free, minimize, subject_to, bounds, params, starts, seed, threads, max_iter, kkt_tol, xtol, ftol, options
+        self, free, minimize, subject_to, bounds, params, starts, seed, threads, max_iter, kkt_tol, xtol, ftol, solver,
+        options,
     ) -> "_OptimizeProblem":
         """The checked arguments of ``_hybc.optimize_report`` (shared with ``hybc.dask.optimize``)."""
         vectors = dict(self._native.vectors)
@@ -329,6 +335,7 @@ class Model:
             int(starts),
             int(seed),
             int(threads),
+            str(solver),
         )
         return _OptimizeProblem(free, boxes, args, dict(options))
 

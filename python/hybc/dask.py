@@ -171,6 +171,7 @@ def optimize(
     kkt_tol: float = 1e-6,
     xtol: float = 1e-10,
     ftol: float = 1e-12,
+    solver: str = "auto",
     **options: Any,
 ) -> dict[str, Any]:
     """:meth:`hybc.Model.optimize` with its ``starts`` on a Dask cluster, with the same report
@@ -185,7 +186,7 @@ def optimize(
 
     client = client if client is not None else default_client()
     problem = model._optimize_problem(
-        free, minimize, subject_to, bounds, params, starts, seed, 1, max_iter, kkt_tol, xtol, ftol, options
+        free, minimize, subject_to, bounds, params, starts, seed, 1, max_iter, kkt_tol, xtol, ftol, solver, options
     )
     if shards is None:
         shards = sum(client.nthreads().values()) or 1

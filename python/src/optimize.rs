@@ -8,7 +8,7 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use hybc::optimize::OptimizeOptions;
+use hybc::optimize::{OptimizeOptions, SolverChoice};
 use hybc::{Error, OptimizeFailure, OptimizeRequest};
 
 use crate::errors::{self, ParameterError};
@@ -21,7 +21,7 @@ use crate::options::SimKeywords;
 #[pyo3(signature = (
     model, free, minimize, subject_to, bounds, params,
     max_iter, kkt_tol, xtol, ftol, starts, seed, threads,
-    shard = None, **sim))]
+    solver = "auto", shard = None, **sim))]
 #[allow(clippy::too_many_arguments)]
 pub fn optimize_report(
     py: Python<'_>,
@@ -38,6 +38,7 @@ pub fn optimize_report(
     starts: usize,
     seed: u64,
     threads: usize,
+    solver: &str,
     shard: Option<(usize, usize)>,
     sim: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<String> {
@@ -55,7 +56,8 @@ pub fn optimize_report(
     for (name, v) in [("kkt_tol", kkt_tol), ("xtol", xtol), ("ftol", ftol)] {
         crate::options::positive(name, v)?;
     }
-    let boxes = free_boxes(&model, &free, bounds)?;
+    let choice = SolverChoice::parse(solver).map_err(|e| PyValueError::new_err(format!("solver: {e}")))?;
+    let boxes = free_boxes(&model, &free, bounds, choice, subject_to.len())?;
     let start = model.param_values(params)?.values().to_vec();
     let compiled = model.compiled(py, &free)?;
     if let Some((first, last)) = shard {
@@ -74,6 +76,7 @@ pub fn optimize_report(
             start,
             sim,
             options,
+            solver: choice,
         };
         request.run(&compiled, None)
     });
@@ -85,26 +88,35 @@ pub fn optimize_report(
         Err(Error::Optimize(OptimizeFailure::Constraint(e))) => {
             Err(PyValueError::new_err(format!("subject_to: {e}")))
         }
+        Err(Error::Optimize(OptimizeFailure::Solver(e))) => {
+            Err(PyValueError::new_err(format!("solver: {e}")))
+        }
         Err(Error::Optimize(OptimizeFailure::Refused(e))) => Err(PyRuntimeError::new_err(e.to_string())),
         Err(e) => Err(errors::to_py(e)),
     }
 }
 
-/// The box of every free parameter: declared ranges narrowed by `bounds`.
+/// The box of every free parameter: declared ranges narrowed by `bounds`. The free parameters
+/// are counted against the cap of the solver `choice` runs with `constraints` constraints, and
+/// `lbfgsb` with constraints is refused, before anything is compiled (as `hybc optimize` does).
 fn free_boxes(
     model: &Model,
     free: &[String],
     bounds: Option<HashMap<String, (f64, f64)>>,
+    choice: SolverChoice,
+    constraints: usize,
 ) -> PyResult<Vec<hybc::fit::Bounds>> {
     let inner = model.inner();
     let free_idx = inner.param_list(free).map_err(|e| errors::to_py(e.into()))?;
+    let (cap, solver) = choice.cap(constraints > 0);
     hybc::limits::count(
-        "free (parameters, vector elements counted)",
+        &format!("free (parameters, vector elements counted; the cap of {solver})"),
         free_idx.len(),
         1,
-        hybc::limits::MAX_OPTIMIZE_FREE,
+        cap,
     )
     .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    choice.pick(free_idx.len(), constraints).map_err(|e| PyValueError::new_err(format!("solver: {e}")))?;
     let mut narrow: Vec<(String, f64, f64)> =
         bounds.unwrap_or_default().into_iter().map(|(name, (lo, hi))| (name, lo, hi)).collect();
     narrow.sort_by(|a, b| a.0.cmp(&b.0));
@@ -121,7 +133,8 @@ pub fn optimize_merge(
     bounds: Option<HashMap<String, (f64, f64)>>,
     reports: Vec<String>,
 ) -> PyResult<String> {
-    let boxes = free_boxes(&model, &free, bounds)?;
+    // The shards ran; the merge only needs the boxes (no solver picks here: the widest cap).
+    let boxes = free_boxes(&model, &free, bounds, SolverChoice::Lbfgsb, 0)?;
     let shards = reports
         .iter()
         .map(|r| serde_json::from_str(r).map_err(|e| PyValueError::new_err(format!("reports: {e}"))))

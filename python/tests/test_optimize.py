@@ -74,3 +74,22 @@ def test_bad_problems_are_refused_with_the_cli_words():
         model.optimize(["nope"], "h0")
     with pytest.raises(ValueError, match="starts"):
         model.optimize(["e"], "e", starts=0)
+
+
+def test_the_solver_keyword_picks_and_refuses_as_the_cli_flag_does():
+    model = hybc.Model.from_file(MODELS / "ball.hyb")
+    # Bounds alone: L-BFGS-B when asked (SLSQP for one parameter under auto), to the same end as
+    # the CLI's, h0 held at its lower bound.
+    args = ["--free", "h0", "--minimize", "h0", "--bounds", "h0=0.5:2", "--solver", "lbfgsb"]
+    r = model.optimize(["h0"], "h0", bounds={"h0": (0.5, 2)}, solver="lbfgsb")
+    assert r["converged"] and r["solver"] == "L-BFGS-B", r["message"]
+    assert r["optimum"] == cli("ball.hyb", args)["optimum"] == {"h0": 0.5}
+    assert model.optimize(["h0"], "h0", bounds={"h0": (0.5, 2)})["solver"] == "SLSQP"
+    # General constraints need SLSQP; an unknown word and a count above the cap are refused.
+    with pytest.raises(ValueError, match="solver: lbfgsb takes bounds only, not general constraints: use slsqp"):
+        model.optimize(["h0", "e"], "h0", ["energy = 2"], solver="lbfgsb")
+    with pytest.raises(ValueError, match="solver: expected auto, slsqp or lbfgsb, found `bfgs`"):
+        model.optimize(["h0"], "h0", solver="bfgs")
+    big = hybc.Model("model big\nparam u[1001] = 0 in [-1, 1]\nstate x = 0\nder(x) = u[0]\noutput y = x\n")
+    with pytest.raises(ValueError, match=r"the cap of SLSQP\): at most 1000, found 1001"):
+        big.optimize(["u"], "y", ["y <= 1"])

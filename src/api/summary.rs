@@ -96,7 +96,7 @@ fn summary(model: &sema::Model) -> String {
             let _ = writeln!(out, "    stop");
         }
     }
-    let switches: Vec<_> = model.events.iter().filter(|e| e.implicit && e.knot.is_none()).collect();
+    let switches: Vec<_> = model.events.iter().filter(|e| e.implicit).collect();
     if !switches.is_empty() {
         let _ = writeln!(
             out,
@@ -107,32 +107,27 @@ fn summary(model: &sema::Model) -> String {
         }
     }
     // An input's knots are one line per input and mode (an input may have thousands).
-    let knots: Vec<_> = model.events.iter().filter_map(|e| Some((e, e.knot.as_ref()?))).collect();
-    if !knots.is_empty() {
+    if model.modes.iter().any(|m| !m.inputs.is_empty()) {
         let _ = writeln!(out, "input knots (integrator breakpoints)");
-        let mut start = 0;
-        while start < knots.len() {
-            let (ev, first) = knots[start];
-            let same = |&(e, k): &(&sema::Event, &sema::Knot)| {
-                e.owner == ev.owner && k.position == first.position && k.kind == first.kind
-            };
-            let run = knots[start..].iter().take_while(|e| same(e)).count();
-            let last = knots[start + run - 1].1;
-            let mode = ev.owner.map_or("?", |m| model.modes[m.0 as usize].name.as_str());
-            let what = match first.kind {
-                sema::InputKind::Pwl => "kinks: steps land on them",
-                sema::InputKind::Pwc => "jumps: located like flow switches",
-            };
-            let _ = writeln!(
-                out,
-                "  {}(t, .., {}) in mode {mode}: knots {} .. {} at {} = k ({what})",
-                first.kind.name(),
-                first.vector,
-                first.k,
-                last.k,
-                show.show(&first.position),
-            );
-            start += run;
+        for mode in &model.modes {
+            for input in &mode.inputs {
+                let vector =
+                    model.vectors.iter().find(|v| v.first == input.first).map_or("?", |v| v.name.as_str());
+                let what = match input.kind {
+                    sema::InputKind::Pwl => "kinks: steps land on them",
+                    sema::InputKind::Pwc => "jumps: steps land on them, the gradients jump there",
+                };
+                let knots = input.knots();
+                let _ = writeln!(
+                    out,
+                    "  {}(t, .., {vector}) in mode {}: knots {} .. {} at {} = k ({what})",
+                    input.kind.name(),
+                    mode.name,
+                    knots.start,
+                    knots.end.saturating_sub(1),
+                    show.show(&input.position()),
+                );
+            }
         }
     }
     let _ = writeln!(out, "outputs");

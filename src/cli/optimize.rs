@@ -11,7 +11,7 @@ use super::options::{at_most, parameter_values, parse_param_list, positive, sim_
 use super::{compile_model, load_model, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
 use crate::fit::Bounds;
 use crate::optimize::report::OptimizeReport;
-use crate::optimize::{self, OptimizeOptions, Verdict};
+use crate::optimize::{self, OptimizeOptions, SolverChoice, Verdict};
 use crate::sema::ParamIdx;
 use crate::sim::{SimOptions, TrajectoryRequest};
 use crate::{Error, Model, OptimizeFailure, OptimizeRequest};
@@ -20,6 +20,24 @@ use crate::{Error, Model, OptimizeFailure, OptimizeRequest};
 enum Format {
     Table,
     Json,
+}
+
+/// `--solver`: the library's `SolverChoice` words.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum SolverArg {
+    Auto,
+    Slsqp,
+    Lbfgsb,
+}
+
+impl From<SolverArg> for SolverChoice {
+    fn from(arg: SolverArg) -> SolverChoice {
+        match arg {
+            SolverArg::Auto => SolverChoice::Auto,
+            SolverArg::Slsqp => SolverChoice::Slsqp,
+            SolverArg::Lbfgsb => SolverChoice::Lbfgsb,
+        }
+    }
 }
 
 #[derive(Debug, clap::Args)]
@@ -63,6 +81,11 @@ pub struct OptimizeArgs {
     /// The optimiser may stop when a step changes the objective by less than this, relatively.
     #[arg(long, default_value_t = OptimizeOptions::default().ftol)]
     ftol: f64,
+    /// The local solver: `slsqp` (general constraints, at most 1000 free parameters), `lbfgsb`
+    /// (bounds only, at most 100000), `auto` (L-BFGS-B for bounds only above 20 free parameters,
+    /// else SLSQP).
+    #[arg(long, value_enum, default_value = "auto")]
+    solver: SolverArg,
     /// Starting points: the given one, then N - 1 drawn uniformly within the bounds.
     #[arg(long, default_value_t = 1)]
     starts: usize,
@@ -133,7 +156,11 @@ fn optimize_model(model: &Model, args: &OptimizeArgs) -> Result<ExitCode, String
     if free.is_empty() {
         return Err("--free: name at least one parameter to optimise".to_string());
     }
-    at_most("--free (parameters, vector elements counted)", free.len(), crate::limits::MAX_OPTIMIZE_FREE)?;
+    // Checked before compiling: a count above the cap of the solver that would run is refused at once.
+    let choice = SolverChoice::from(args.solver);
+    let (cap, solver) = choice.cap(!args.subject_to.is_empty());
+    at_most(&format!("--free (parameters, vector elements counted; the cap of {solver})"), free.len(), cap)?;
+    choice.pick(free.len(), args.subject_to.len()).map_err(|e| format!("--solver: {e}"))?;
     let start = parameter_values(model, &args.set)?.values().to_vec();
     let sim = sim_options(model, &args.sim)?;
     let options = options(args)?;
@@ -158,11 +185,13 @@ fn optimize_model(model: &Model, args: &OptimizeArgs) -> Result<ExitCode, String
         start,
         sim: sim.clone(),
         options,
+        solver: choice,
     };
     let report = match request.run(&compiled, progress) {
         Ok(report) => report,
         Err(Error::Optimize(OptimizeFailure::Objective(e))) => return Err(format!("--minimize: {e}")),
         Err(Error::Optimize(OptimizeFailure::Constraint(e))) => return Err(format!("--subject-to: {e}")),
+        Err(Error::Optimize(OptimizeFailure::Solver(e))) => return Err(format!("--solver: {e}")),
         Err(e) => return Err(super::error_chain(&e)),
     };
     if report.result.locals.iter().all(|l| matches!(l.verdict, Verdict::StartFailed { .. })) {

@@ -515,6 +515,24 @@ impl HybridSystem for CompiledModel {
         self.enclosures.get(event).map(Enclosure::states)
     }
 
+    fn knot_position(&self, set: usize, t: f64, p: &[f64]) -> f64 {
+        self.kernels
+            .knot_position
+            .get(set)
+            .and_then(|k| k.call(t, &[], &[], p, [&mut [], &mut [], &mut []]))
+            .unwrap_or(f64::NAN)
+    }
+
+    fn knot_position_grad(&self, set: usize, t: f64, p: &[f64], sp: &mut [f64]) -> f64 {
+        match self.kernels.knot_grad.get(set) {
+            Some(k) => k.call(t, &[], &[], p, [sp, &mut [], &mut []]).unwrap_or(f64::NAN),
+            None => {
+                poison([sp, &mut [], &mut []]);
+                f64::NAN
+            }
+        }
+    }
+
     fn condition(&self, event: usize, t: f64, x: &[f64], p: &[f64]) -> bool {
         match self.kernels.condition.get(event) {
             // Same rule as `Select`: any value other than 0.0 (NaN included) is true.

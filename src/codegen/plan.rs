@@ -205,6 +205,10 @@ pub(crate) struct ModelKernels<K> {
     pub condition: Vec<Option<K>>,
     pub reset: Vec<K>,
     pub reset_jac: Vec<K>,
+    /// Per knot set (`SystemInfo::knots`): the knot position, returned, and its gradient with
+    /// its rate returned.
+    pub knot_position: Vec<K>,
+    pub knot_grad: Vec<K>,
     pub init: K,
     pub init_sens: K,
     pub outputs: K,
@@ -225,6 +229,8 @@ impl<K> ModelKernels<K> {
             .chain(self.condition.iter().flatten())
             .chain(&self.reset)
             .chain(&self.reset_jac)
+            .chain(&self.knot_position)
+            .chain(&self.knot_grad)
             .chain([&self.init, &self.init_sens, &self.outputs, &self.output_jac])
     }
 
@@ -239,6 +245,8 @@ impl<K> ModelKernels<K> {
             .chain(self.condition.iter_mut().flatten())
             .chain(&mut self.reset)
             .chain(&mut self.reset_jac)
+            .chain(&mut self.knot_position)
+            .chain(&mut self.knot_grad)
             .chain([&mut self.init, &mut self.init_sens, &mut self.outputs, &mut self.output_jac])
     }
 
@@ -252,6 +260,8 @@ impl<K> ModelKernels<K> {
         let guard_grad = all(&self.guard_grad)?;
         let reset = all(&self.reset)?;
         let reset_jac = all(&self.reset_jac)?;
+        let knot_position = all(&self.knot_position)?;
+        let knot_grad = all(&self.knot_grad)?;
         let condition = self
             .condition
             .iter()
@@ -266,6 +276,8 @@ impl<K> ModelKernels<K> {
             condition,
             reset,
             reset_jac,
+            knot_position,
+            knot_grad,
             init: f(&self.init)?,
             init_sens: f(&self.init_sens)?,
             outputs: f(&self.outputs)?,
@@ -303,6 +315,8 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
         condition: Vec::new(),
         reset: Vec::new(),
         reset_jac: Vec::new(),
+        knot_position: Vec::new(),
+        knot_grad: Vec::new(),
         init: KernelPlan::new("init".into(), dims.lens(0, 0, [n, 0, 0])),
         init_sens: KernelPlan::new("init_sens".into(), dims.lens(0, 0, [n * m, 0, 0])),
         outputs: KernelPlan::new("outputs".into(), dims.lens(n, 0, [dims.n_outputs, 0, 0])),
@@ -419,6 +433,22 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
         plan.reset_jac.push(rj);
     }
 
+    // The knots' kernels read the time and the parameters alone.
+    for (k, knot) in funcs.knots.iter().enumerate() {
+        let mut position = KernelPlan::new(format!("knots{k}_position"), dims.lens(0, 0, [0; N_OUTS]));
+        position.ret = Some(knot.position);
+        let mut grad = KernelPlan::new(format!("knots{k}_grad"), dims.lens(0, 0, [m, 0, 0]));
+        grad.prefill[0] = true;
+        for &(param, e) in &knot.position_p.entries {
+            if let Some(c) = dims.grad_col[param as usize] {
+                grad.write(0, c, Term::Expr(e))?;
+            }
+        }
+        grad.ret = Some(knot.position_t);
+        plan.knot_position.push(position);
+        plan.knot_grad.push(grad);
+    }
+
     for (i, &e) in funcs.init.iter().enumerate() {
         plan.init.write(0, i, Term::Expr(e))?;
     }
@@ -485,6 +515,7 @@ fn check_shape(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Dims, Codege
     count("modes", info.modes.len(), funcs.modes.len())?;
     count("events", n_events, funcs.events.len())?;
     count("outputs", n_outputs, funcs.outputs.len())?;
+    count("knot sets", info.knots.len(), funcs.knots.len())?;
     count("initial state", n, funcs.init.len())?;
 
     let mut grad_col = vec![None; n_params];
@@ -524,6 +555,9 @@ fn check_shape(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Dims, Codege
         check_mat(&format!("event {idx} reset_x"), &ev.reset_x, n, n)?;
         check_mat(&format!("event {idx} reset_p"), &ev.reset_p, n, n_params)?;
         check_vec(&format!("event {idx} reset_t"), &ev.reset_t, n)?;
+    }
+    for (idx, knot) in funcs.knots.iter().enumerate() {
+        check_vec(&format!("knot set {idx} position_p"), &knot.position_p, n_params)?;
     }
     check_mat("init_p", &funcs.init_p, n, n_params)?;
     check_mat("output_x", &funcs.output_x, n_outputs, n)?;

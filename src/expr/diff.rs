@@ -158,8 +158,12 @@ fn diff_lookup(s: &mut ExprStore, l: Lookup, pos: ExprId, dpos: ExprId, wrt: Var
 }
 
 /// `d Lookup(l, pos) / d u[j]` at a fixed position, matching `apply_lookup` piece by piece:
-/// - `Pwl`: the hat `max(0, 1 - |clamp(pos, 0, len - 1) - j|)` (`1 - w` at the segment's left
-///   knot, `w` at its right one, 0 elsewhere);
+/// - `Pwl`: the hat over knot `j`, `pos - (j - 1)` on the segment `[j - 1, j)` and `j + 1 - pos`
+///   on `[j, j + 1)` (`w` at a segment's right knot, `1 - w` at its left one), 1 before the first
+///   knot for `u[0]` and from the last one on for `u[len - 1]`, else 0: each piece selected by
+///   the segment the value reads (`pos` in `[k, k + 1)`), so that its rate at a knot is the
+///   later segment's, the side the value takes (a hat written with `abs` and `max` has rate 0 at
+///   its peak, and a Rosenbrock step starting on a knot reads the sensitivities' rate there);
 /// - `Pwc`: 1 on knot `j`'s interval (`[j, j + 1)`, the first open to the left and the last to
 ///   the right), else 0;
 /// - `PwlSlope`: +1 on the segment ending at knot `j`, -1 on the one starting there.
@@ -168,13 +172,57 @@ fn element_weight(s: &mut ExprStore, l: Lookup, pos: ExprId, j: u32) -> ExprId {
     let jf = f64::from(j);
     match l.kind {
         LookupKind::Pwl => {
-            let (zero, one, top, at) = (s.zero(), s.one(), s.constant(last), s.constant(jf));
-            let lo = s.binary(BinaryOp::Max, pos, zero);
-            let clamped = s.binary(BinaryOp::Min, lo, top);
-            let off = s.sub(clamped, at);
-            let dist = s.unary(UnaryOp::Abs, off);
-            let hat = s.sub(one, dist);
-            s.binary(BinaryOp::Max, hat, zero)
+            // Segment `k` as the value reads it: `[k, k + 1)`, the first also everything before
+            // the first knot and the last everything from the last knot on.
+            let segment = |s: &mut ExprStore, k: f64| {
+                let after = if k == 0.0 {
+                    s.one()
+                } else {
+                    let start = s.constant(k);
+                    s.le(start, pos)
+                };
+                let before = if k + 1.0 >= last {
+                    s.one()
+                } else {
+                    let end = s.constant(k + 1.0);
+                    s.lt(pos, end)
+                };
+                s.and(after, before)
+            };
+            // `w = pos - k` on segment `k`, held at 0 before the first knot and at 1 from the
+            // last one on, as `apply_lookup` clamps it.
+            let weight = |s: &mut ExprStore, k: f64| {
+                let start = s.constant(k);
+                let mut w = s.sub(pos, start);
+                if k == 0.0 {
+                    let (zero, before) = (s.zero(), s.constant(0.0));
+                    let early = s.lt(pos, before);
+                    w = s.select(early, zero, w);
+                }
+                if k + 1.0 >= last {
+                    let (one, top) = (s.one(), s.constant(last));
+                    let late = s.le(top, pos);
+                    w = s.select(late, one, w);
+                }
+                w
+            };
+            let zero = s.zero();
+            // `w` on the segment ending at knot `j`, `1 - w` on the one starting there.
+            let rising = if j >= 1 {
+                let (region, w) = (segment(s, jf - 1.0), weight(s, jf - 1.0));
+                s.select(region, w, zero)
+            } else {
+                zero
+            };
+            let falling = if j + 1 < l.len {
+                let (region, w) = (segment(s, jf), weight(s, jf));
+                let one = s.one();
+                let rest = s.sub(one, w);
+                s.select(region, rest, zero)
+            } else {
+                zero
+            };
+            s.add(rising, falling)
         }
         LookupKind::Pwc => {
             let (start, end) = (s.constant(jf), s.constant(jf + 1.0));

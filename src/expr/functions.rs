@@ -64,6 +64,20 @@ pub struct EventFunctions {
     pub reset_t: SparseVec,
 }
 
+/// The knots of an input a mode's flows read (`sim::KnotSet`): its knot position `s(t, p)`,
+/// affine in `t`, with knot `k` where `s = k`. The integrator computes the knots' times from it
+/// when a run starts, and their motion `dt_k/dp = -s_p / s_t` where a `pwc` knot jumps.
+#[derive(Clone, Debug, PartialEq)]
+pub struct KnotFunctions {
+    /// `s(t, p)`: the node the input's value reads (hash-consing), so that the knots' times and
+    /// the value agree on the side of every knot to the last bit.
+    pub position: ExprId,
+    /// `ds/dp`.
+    pub position_p: SparseVec,
+    /// `ds/dt` (a function of the parameters alone).
+    pub position_t: ExprId,
+}
+
 /// Everything hybc compiles for one model, sharing one store.
 #[derive(Clone, Debug)]
 pub struct ModelFunctions {
@@ -77,6 +91,9 @@ pub struct ModelFunctions {
     pub modes: Vec<ModeFunctions>,
     /// Indexed by `EventIdx`.
     pub events: Vec<EventFunctions>,
+    /// The modes' input knots, in the order of `sim::SystemInfo::knots` (mode by mode, each
+    /// mode's inputs in `sema::Mode::inputs`' order).
+    pub knots: Vec<KnotFunctions>,
     /// Initial state `x0(p)`, one per state.
     pub init: Vec<ExprId>,
     /// `dx0_i/dp_j`: n_states x n_params.

@@ -66,6 +66,13 @@ struct EventKernels {
     enclosure: Enclosure,
 }
 
+/// The knot position of one knot set, and (arrays: sp, [s_t]) its gradient.
+#[derive(Clone, Debug)]
+struct KnotKernels {
+    position: Tape,
+    grad: Kernel,
+}
+
 /// Runs a model's functions with the reference evaluator.
 #[derive(Clone, Debug)]
 pub struct Interpreter {
@@ -74,6 +81,7 @@ pub struct Interpreter {
     init_sens: Kernel,
     modes: Vec<ModeKernels>,
     events: Vec<EventKernels>,
+    knots: Vec<KnotKernels>,
     outputs: Tape,
     /// Arrays: yx, yp, yt.
     output_jac: Kernel,
@@ -170,6 +178,17 @@ impl Interpreter {
             })
             .collect();
 
+        let knots = funcs
+            .knots
+            .iter()
+            .map(|knot| {
+                let mut parts: Vec<_> =
+                    knot.position_p.entries.iter().filter_map(|&(k, e)| col(k).map(|j| (0, j, e))).collect();
+                parts.push((1, 0, knot.position_t));
+                KnotKernels { position: Tape::new(store, &[knot.position]), grad: Kernel::new(store, parts) }
+            })
+            .collect();
+
         let mut yparts = x_parts(0, &funcs.output_x);
         yparts.extend(p_parts(1, &funcs.output_p, n_out));
         yparts.extend(v_parts(2, &funcs.output_t));
@@ -179,6 +198,7 @@ impl Interpreter {
             init_sens: Kernel::new(store, p_parts(0, &funcs.init_p, n)),
             modes,
             events,
+            knots,
             outputs: Tape::new(store, &funcs.outputs),
             output_jac: Kernel::new(store, yparts),
             info,
@@ -273,6 +293,22 @@ impl HybridSystem for Interpreter {
 
     fn guard_states(&self, event: usize) -> Option<&[u32]> {
         self.events.get(event).map(|e| e.enclosure.states())
+    }
+
+    fn knot_position(&self, set: usize, t: f64, p: &[f64]) -> f64 {
+        let mut s = [f64::NAN];
+        if let Some(k) = self.knots.get(set) {
+            k.position.eval_into(t, &[], p, &mut Vec::new(), &mut s);
+        }
+        s[0]
+    }
+
+    fn knot_position_grad(&self, set: usize, t: f64, p: &[f64], sp: &mut [f64]) -> f64 {
+        let mut st = [f64::NAN];
+        if let Some(k) = self.knots.get(set) {
+            k.grad.run(t, &[], p, &mut [sp, &mut st]);
+        }
+        st[0]
     }
 
     fn condition(&self, event: usize, t: f64, x: &[f64], p: &[f64]) -> bool {

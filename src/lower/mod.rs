@@ -20,8 +20,8 @@ use std::collections::HashMap;
 
 use crate::expr::eval::reachable;
 use crate::expr::{
-    BinaryOp, Differentiator, EventFunctions, ExprId, ExprStore, Lookup, LookupKind, ModeFunctions,
-    ModelFunctions, Node, SparseMat, SparseVec, UnaryOp, Var,
+    BinaryOp, Differentiator, EventFunctions, ExprId, ExprStore, KnotFunctions, Lookup, LookupKind,
+    ModeFunctions, ModelFunctions, Node, SparseMat, SparseVec, UnaryOp, Var,
 };
 use crate::sema::{self, BinOp, CmpOp, Cond, Expr, Func, InputKind, Model, SharedDef};
 use crate::sim::{self, SystemInfo};
@@ -76,6 +76,22 @@ pub fn lower(model: &Model) -> ModelFunctions {
         })
         .collect();
 
+    // Each mode's input knots: the position the input's value reads (the same node), and its
+    // derivatives, from which the integrator times the knots and moves them with the parameters.
+    let knots = model
+        .modes
+        .iter()
+        .flat_map(|mode| &mode.inputs)
+        .map(|input| {
+            let position = cx.expr(&input.position());
+            KnotFunctions {
+                position_p: cx.gradient(position, Jac::Params),
+                position_t: cx.diff.diff(&mut cx.store, position, Var::Time),
+                position,
+            }
+        })
+        .collect();
+
     let outputs: Vec<ExprId> = model.outputs.iter().map(|o| cx.expr(&o.expr)).collect();
     let output_x = cx.jacobian(&outputs, Jac::States);
     let output_p = cx.jacobian(&outputs, Jac::Params);
@@ -87,6 +103,7 @@ pub fn lower(model: &Model) -> ModelFunctions {
         n_params,
         modes,
         events,
+        knots,
         init,
         init_p,
         outputs,
@@ -127,11 +144,26 @@ pub fn system_info(model: &Model, grad_params: &[sema::ParamIdx]) -> SystemInfo 
                 is_stop: e.is_stop,
                 has_condition: e.condition.is_some(),
                 implicit: e.implicit,
-                kink: e.is_kink(),
                 // Filled from the lowered functions by `classify_events` (the compiled model and
                 // the interpreter call it); until then the cautious defaults.
                 guard: sim::GuardShape::Nonlinear,
                 contact: false,
+            })
+            .collect(),
+        knots: model
+            .modes
+            .iter()
+            .enumerate()
+            .flat_map(|(m, mode)| mode.inputs.iter().map(move |input| (m, input)))
+            .map(|(m, input)| {
+                let vector =
+                    model.vectors.iter().find(|v| v.first == input.first).map_or("?", |v| v.name.as_str());
+                sim::KnotSet {
+                    name: format!("{}(t, .., {vector})", input.kind.name()).into(),
+                    mode: m,
+                    jumps: input.kind == InputKind::Pwc,
+                    knots: input.knots(),
+                }
             })
             .collect(),
         initial_mode: model.initial_mode.0 as usize,

@@ -36,7 +36,12 @@ pub fn derive_report(
     r.param_columns(&mut init, "x0", &funcs.init_p);
     r.emit(&mut out, init, "");
 
+    // The knot sets are numbered mode by mode (`lower`'s order).
+    let mut knot_sets = 0;
     for (m, mode_fns) in funcs.modes.iter().enumerate() {
+        let inputs = model.modes.get(m).map_or(&[][..], |x| x.inputs.as_slice());
+        let first_set = knot_sets;
+        knot_sets += inputs.len();
         if mode.is_some_and(|only| only.0 as usize != m) {
             continue;
         }
@@ -53,6 +58,9 @@ pub fn derive_report(
             if event.owner == Some(ModeId(m as u16)) {
                 r.event(&mut out, e, "  ");
             }
+        }
+        for (k, input) in inputs.iter().enumerate() {
+            r.knots(&mut out, first_set + k, input, "  ");
         }
     }
 
@@ -232,6 +240,35 @@ impl Reporter<'_> {
         if !fns.reset_t.entries.is_empty() {
             block.vector("R_t", dense(&fns.reset_t, n));
         }
+        self.emit(out, block, indent);
+    }
+
+    /// The knots of `input` (knot set `set`): its knot position `s`, knot `k` where `s = k`, with
+    /// its derivatives (the knots' motion is `-s_p / s_t`).
+    fn knots(&self, out: &mut String, set: usize, input: &sema::Input, indent: &str) {
+        let Some(fns) = self.funcs.knots.get(set) else {
+            return;
+        };
+        let vector =
+            self.model.vectors.iter().find(|v| v.first == input.first).map_or("?", |v| v.name.as_str());
+        let knots = input.knots();
+        let what = match input.kind {
+            sema::InputKind::Pwl => "kinks",
+            sema::InputKind::Pwc => "jumps",
+        };
+        let title = format!(
+            "knots of {}(t, .., {vector}): s = k, k = {} .. {} ({what})",
+            input.kind.name(),
+            knots.start,
+            knots.end.saturating_sub(1)
+        );
+        let mut block = Block::new(&title);
+        block.scalar("s", Some(fns.position));
+        for &p in self.wrt {
+            let entry = fns.position_p.entries.iter().find(|&&(k, _)| k == p.0).map(|&(_, d)| d);
+            block.scalar(&format!("s_{}", self.param_name(p)), entry);
+        }
+        block.scalar("s_t", Some(fns.position_t));
         self.emit(out, block, indent);
     }
 

@@ -32,6 +32,7 @@ fn ball() -> Model {
             name: "main".into(),
             flows: vec![v.clone(), Expr::Neg(b(g.clone()))],
             events: vec![EventIdx(0)],
+            inputs: vec![],
             span,
         }],
         initial_mode: ModeId(0),
@@ -46,7 +47,6 @@ fn ball() -> Model {
             owner: None,
             span,
             implicit: false,
-            knot: None,
         }],
         outputs: vec![Output {
             name: "energy".into(),

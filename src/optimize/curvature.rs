@@ -120,19 +120,34 @@ pub fn probe(
     let s = scales(x, x0, bounds);
     // The null space of the active constraints' gradients over the free variables, scaled.
     let active: Vec<usize> = (0..end.constraints.len()).filter(|&i| kkt.active[i]).collect();
+    // `None`: no active constraint, every free direction, the identity (never formed: with the
+    // many variables L-BFGS-B takes it would be their count squared).
     let z = if active.is_empty() {
-        DMatrix::identity(free.len(), free.len())
+        None
     } else {
         let a =
             DMatrix::from_fn(active.len(), free.len(), |r, c| end.jacobian[active[r]][free[c]] * s[free[c]]);
         let eigen = (a.transpose() * &a).symmetric_eigen();
         let largest = eigen.eigenvalues.amax();
         let null: Vec<usize> = (0..free.len()).filter(|&k| eigen.eigenvalues[k] <= 1e-12 * largest).collect();
-        DMatrix::from_fn(free.len(), null.len(), |r, c| eigen.eigenvectors[(r, null[c])])
+        Some(DMatrix::from_fn(free.len(), null.len(), |r, c| eigen.eigenvectors[(r, null[c])]))
     };
-    if z.ncols() == 0 {
+    let z_cols = z.as_ref().map_or(free.len(), |z| z.ncols());
+    if z_cols == 0 {
         return probe;
     }
+    let z_times = |q: &DVector<f64>| -> Vec<f64> {
+        match &z {
+            Some(z) => (z * q).iter().copied().collect(),
+            None => q.iter().copied().collect(),
+        }
+    };
+    let z_t_times = |v: DVector<f64>| -> DVector<f64> {
+        match &z {
+            Some(z) => z.transpose() * v,
+            None => v,
+        }
+    };
     let (l_end, g_end) = lagrangian(end, &kkt.multipliers);
     let inside = |y: &[f64]| y.iter().zip(bounds).all(|(&v, &(lo, hi))| v >= lo && v <= hi && v.is_finite());
     let along = |direction: &[f64], t: f64| -> Vec<f64> {
@@ -144,22 +159,22 @@ pub fn probe(
     };
     // H d along each direction, in scaled variables. A direction whose run gives no evidence is
     // left out (and ends a Krylov sequence, which needs every product).
-    let krylov = z.ncols() > MAX_DIRECTIONS;
+    let krylov = z_cols > MAX_DIRECTIONS;
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let mut next: Option<DVector<f64>> = krylov.then(|| {
-        let q = DVector::from_fn(z.ncols(), |_, _| (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64 - 0.5);
+        let q = DVector::from_fn(z_cols, |_, _| (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64 - 0.5);
         q.normalize()
     });
     let mut basis: Vec<DVector<f64>> = Vec::new();
     let mut directions: Vec<Vec<f64>> = Vec::new();
     let mut hd: Vec<Vec<f64>> = Vec::new();
-    for j in 0..z.ncols().min(MAX_DIRECTIONS) {
+    for j in 0..z_cols.min(MAX_DIRECTIONS) {
         let q = match next.take() {
             Some(q) => q,
             None if krylov => break,
-            None => DVector::from_fn(z.ncols(), |r, _| if r == j { 1.0 } else { 0.0 }),
+            None => DVector::from_fn(z_cols, |r, _| if r == j { 1.0 } else { 0.0 }),
         };
-        let direction: Vec<f64> = (&z * &q).iter().copied().collect();
+        let direction: Vec<f64> = z_times(&q);
         let Some(sign) = [1.0, -1.0].into_iter().find(|&sg| inside(&along(&direction, sg * STEP))) else {
             continue;
         };
@@ -173,7 +188,7 @@ pub fn probe(
         if krylov {
             // The next direction: Z^T H d, orthogonalised twice against the basis so far.
             basis.push(q);
-            let mut w = z.transpose() * DVector::from_column_slice(&product);
+            let mut w = z_t_times(DVector::from_column_slice(&product));
             for _ in 0..2 {
                 for b in &basis {
                     w -= b * b.dot(&w);

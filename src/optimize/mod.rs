@@ -6,8 +6,9 @@
 //! run's sensitivities.
 //!
 //! The problem is only piecewise smooth: where the sequence of events changes, values jump or
-//! kink. The optimiser (behind the `solver` seam; `slsqp` is the one shipped) sees a smooth
-//! program and a failed run as an infinite objective; the verdict is ours (`kkt`): converged only
+//! kink. The optimiser (behind the `solver` seam: `slsqp` for general constraints, `lbfgsb` for
+//! bounds only and many variables, `choice` picks) sees a smooth program and a failed run as a
+//! point to step back from; the verdict is ours (`kkt`): converged only
 //! where the KKT conditions hold to a stated tolerance at the point returned. Every run whose
 //! event sequence differs from the previous run's is logged, and the optimum's own run is
 //! searched for the flags that make a gradient hold only locally (an event at a breakpoint or at
@@ -17,22 +18,26 @@
 //!
 //! One entry point for every front end: [`optimize`] takes the problem and options and returns an
 //! [`OptimizeResult`]. Code map: `spec` (objective and constraints from text), `evaluate` (one
-//! run -> program values and gradients), `solver` (the seam), `slsqp` (the optimiser), `kkt`
-//! (the verdict), `report` (table and JSON), `shards` (the report of a multi-start run in
-//! shards, merged). A whole problem from text, for the CLI and Python, is the door's
+//! run -> program values and gradients), `solver` (the seam), `slsqp` and `lbfgsb` (the
+//! optimisers), `choice` (which one runs), `kkt` (the verdict), `curvature` (the minimum check),
+//! `report` (table and JSON), `shards` (the report of a multi-start run in shards, merged). A whole problem from text, for the CLI and Python, is the door's
 //! `OptimizeRequest` (`api/request/optimize.rs`).
 
+mod choice;
 mod curvature;
 mod evaluate;
 mod kkt;
+mod lbfgsb;
 pub mod report;
 mod shards;
 mod slsqp;
 pub mod solver;
 mod spec;
 
+pub use choice::{SolverChoice, LBFGSB_ABOVE};
 pub use curvature::Descent;
 pub use kkt::Kkt;
+pub use lbfgsb::Lbfgsb;
 pub use shards::merge_shards;
 pub use slsqp::Slsqp;
 pub use spec::{parse_constraint, Constraint, Quantity, Sense, SpecError};
@@ -308,14 +313,25 @@ pub enum OptimizeError {
     #[error("at least one start")]
     NoStarts,
     #[error(
-        "{free} free parameters and {constraints} constraints: at most {} and {} (the optimiser's dense workspace)",
-        crate::limits::MAX_OPTIMIZE_FREE,
+        "{free} free parameters and {constraints} constraints: {solver} takes at most {max_free} and {} (its workspace)",
         crate::limits::MAX_CONSTRAINTS
     )]
-    /// More free parameters or constraints than the optimiser's dense workspace takes.
+    /// More free parameters or constraints than the optimiser's workspace takes.
     TooLarge {
         /// The free parameters.
         free: usize,
+        /// The constraints.
+        constraints: usize,
+        /// The optimiser.
+        solver: &'static str,
+        /// The most free parameters it takes.
+        max_free: usize,
+    },
+    /// General constraints handed to an optimiser for bounds only.
+    #[error("{solver} takes bounds only, and the problem has {constraints} constraint(s): use SLSQP")]
+    BoundsOnly {
+        /// The optimiser.
+        solver: &'static str,
         /// The constraints.
         constraints: usize,
     },
@@ -355,11 +371,20 @@ pub fn optimize<S: HybridSystem + Sync>(
     if opts.starts == 0 {
         return Err(OptimizeError::NoStarts);
     }
-    // The optimiser's dense workspace grows as (parameters + constraints)^2.
-    if free.len() > crate::limits::MAX_OPTIMIZE_FREE
-        || problem.constraints.len() > crate::limits::MAX_CONSTRAINTS
-    {
-        return Err(OptimizeError::TooLarge { free: free.len(), constraints: problem.constraints.len() });
+    // SLSQP's dense workspace grows as (parameters + constraints)^2, L-BFGS-B's as parameters.
+    if free.len() > solver.max_free() || problem.constraints.len() > crate::limits::MAX_CONSTRAINTS {
+        return Err(OptimizeError::TooLarge {
+            free: free.len(),
+            constraints: problem.constraints.len(),
+            solver: solver.name(),
+            max_free: solver.max_free(),
+        });
+    }
+    if !solver.takes_constraints() && !problem.constraints.is_empty() {
+        return Err(OptimizeError::BoundsOnly {
+            solver: solver.name(),
+            constraints: problem.constraints.len(),
+        });
     }
     for (&j, b) in free.iter().zip(&problem.bounds) {
         let value = problem.start[j];
@@ -481,6 +506,7 @@ fn local<S: HybridSystem>(
         max_evals: opts.max_iter,
         xtol_rel: opts.xtol,
         ftol_rel: opts.ftol,
+        gtol: opts.kkt_tol,
     };
     let mut trials: Vec<Trial> = Vec::new();
     let mut changes: Vec<SequenceChange> = Vec::new();
@@ -688,6 +714,7 @@ fn cusp_notes(run: &SimResult) -> Vec<String> {
                     | SimWarning::NearGrazing { .. }
                     | SimWarning::NearBreakpoint { .. }
                     | SimWarning::ResetOntoGuard { .. }
+                    | SimWarning::EventAtKnot { .. }
             )
         })
         .map(|w| w.to_string())

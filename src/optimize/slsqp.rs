@@ -52,6 +52,14 @@ impl LocalSolver for Slsqp {
         "SLSQP"
     }
 
+    fn max_free(&self) -> usize {
+        crate::limits::MAX_OPTIMIZE_FREE
+    }
+
+    fn takes_constraints(&self) -> bool {
+        true
+    }
+
     fn solve(&self, program: &Program, x0: &[f64], evaluate: &mut Evaluate<'_>) -> SolverEnd {
         let cache = RefCell::new(Cache { evaluate, x: Vec::new(), point: None, evaluated: false });
         let objective = |x: &[f64], gradient: Option<&mut [f64]>, _: &mut ()| -> f64 {

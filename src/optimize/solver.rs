@@ -1,7 +1,8 @@
 //! The seam between hybc and a constrained optimiser: a smooth nonlinear program handed over as
 //! one evaluation function (objective, constraints and their exact gradients at a point, or
 //! nothing when the run fails), and what the optimiser says when it stops. An optimiser is a
-//! [`LocalSolver`]; `slsqp` is the one shipped. The verdict (converged or not) is not the
+//! [`LocalSolver`]: `slsqp` (general constraints, up to a thousand variables) and `lbfgsb` (bounds
+//! only, up to a hundred thousand); `choice` picks one. The verdict (converged or not) is not the
 //! optimiser's: `kkt` checks the point it returns.
 
 /// Objective, constraints and gradients at one point. Constraints are `c_i(x) = 0` for the first
@@ -36,6 +37,10 @@ pub struct Program {
     pub xtol_rel: f64,
     /// Stop when a step changes the objective by less than this, relatively.
     pub ftol_rel: f64,
+    /// The verdict's stationarity tolerance (`--kkt-tol`): an optimiser that measures the
+    /// projected gradient may stop once it is below this times the gradient scale (the largest
+    /// `|grad f|` at the start or at the point), as the verdict measures it for bounds alone.
+    pub gtol: f64,
 }
 
 /// Why an optimiser stopped, in its own terms.
@@ -56,6 +61,10 @@ pub type Evaluate<'e> = dyn FnMut(&[f64]) -> Option<SmoothPoint> + 'e;
 pub trait LocalSolver: Sync {
     /// Its name in reports.
     fn name(&self) -> &'static str;
+    /// The most free variables its workspace takes (`limits`).
+    fn max_free(&self) -> usize;
+    /// Whether it takes general constraints (else bounds only).
+    fn takes_constraints(&self) -> bool;
     /// Minimises from `x0` (inside the bounds).
     fn solve(&self, program: &Program, x0: &[f64], evaluate: &mut Evaluate<'_>) -> SolverEnd;
 }

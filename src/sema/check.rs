@@ -411,7 +411,7 @@ impl<'a> Checker<'a> {
                 }
             }
         }
-        Mode { name: name.to_string(), flows, events: Vec::new(), span }
+        Mode { name: name.to_string(), flows, events: Vec::new(), inputs: Vec::new(), span }
     }
 
     fn expect_state(&mut self, name: &ast::Ident, scope: ScopeId) -> Option<StateIdx> {
@@ -500,7 +500,6 @@ impl<'a> Checker<'a> {
             owner: pe.owner,
             span: d.name.span,
             implicit: false,
-            knot: None,
         }
     }
 

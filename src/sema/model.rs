@@ -24,7 +24,7 @@ pub struct ModeId(pub u16);
 pub struct EventIdx(pub u32);
 
 /// A model that parsed and checked: every name resolved to an index, every `let` shared, the
-/// flow switches and input knots added as implicit events.
+/// flow switches added as implicit events and each mode's input knots listed (`Mode::inputs`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Model {
     /// The `model NAME` line's name.
@@ -117,6 +117,9 @@ pub struct Mode {
     pub flows: Vec<Expr>,
     /// Events that can fire in this mode (its own and the top-level ones), ascending.
     pub events: Vec<EventIdx>,
+    /// The inputs (`pwl`, `pwc`) its flows read, without repeats, in the order first read: their
+    /// knots are the mode's breakpoints (`switches`), times known when a run starts.
+    pub inputs: Vec<Input>,
     /// Where it is declared in the source.
     pub span: Span,
 }
@@ -156,30 +159,6 @@ pub struct Event {
     /// Not declared but implied by a discontinuous flow (see `switches`): located and jumped
     /// over like an event, never reported as one.
     pub implicit: bool,
-    /// The input knot this implicit event is (see `switches`), if it is one.
-    pub knot: Option<Knot>,
-}
-
-impl Event {
-    /// An implicit event where the flow only kinks (a knot of a `pwl` input): landed on, as a
-    /// breakpoint, but nothing jumps there.
-    pub fn is_kink(&self) -> bool {
-        self.knot.as_ref().is_some_and(|k| k.kind == InputKind::Pwl)
-    }
-}
-
-/// Knot `k` of an input of vector `vector` read in a mode's flows: where its knot position
-/// `position` (`Input::position`) equals `k`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Knot {
-    /// The input's kind (`pwl` or `pwc`).
-    pub kind: InputKind,
-    /// The knot's number, from 0.
-    pub k: u32,
-    /// The knot position (`Input::position`).
-    pub position: Expr,
-    /// The input's vector's name.
-    pub vector: String,
 }
 
 /// An output.

@@ -10,21 +10,23 @@
 //!
 //! `min`, `max` and `abs` are continuous: their kinks change no sensitivity and need no event.
 //!
-//! Inputs (`pwl`, `pwc`) in a mode's flows add one implicit event per knot, guard `s - k` on the
-//! input's knot position `s` (`Input::position`), which is a time event: its time
-//! `t0 + k (t1 - t0) / spacings` is a breakpoint computed from the parameters at the run's start.
-//! A `pwc` knot is a flow switch (the flow jumps there, and a knot that moves with a parameter
-//! moves the sensitivities by `(f- - f+) dt_k/dp`); a `pwl` knot is a kink (`Event::kink`): the
-//! steps land on it so that none straddles it, and nothing jumps.
+//! Inputs (`pwl`, `pwc`) in a mode's flows are not events: their knots are listed with the mode
+//! (`Mode::inputs`), and the integrator keeps their times, computed from the parameters when a
+//! run starts, as a queue of breakpoints (`sim::breakpoints`). A `pwc` knot is a flow switch at a
+//! time known in advance (the flow jumps there, and a knot that moves with a parameter moves the
+//! sensitivities by `(f- - f+) dt_k/dp`); a `pwl` knot is a kink: the steps land on it so that
+//! none straddles it, and nothing jumps. Nothing per knot is made here, so a control of 10,000
+//! knots costs the model what one of 10 does.
 
 use std::convert::Infallible;
 use std::ops::ControlFlow;
 
-use super::model::{Direction, Event, EventIdx, Expr, Func, Input, InputKind, Knot, ModeId, Model, Shared};
+use super::model::{Direction, Event, EventIdx, Expr, Func, Input, InputKind, Model};
 use super::walk::{Descend, Visit, Walk};
 
 /// Appends the flow switches of every mode to `model.events` (after all declared events, so
-/// declared events fire first at a shared instant) and to the mode's event list.
+/// declared events fire first at a shared instant) and to the mode's event list, and lists the
+/// inputs its flows read in `Mode::inputs`.
 pub(crate) fn add_flow_switches(model: &mut Model) {
     for m in 0..model.modes.len() {
         let (mut walk, mut switches) = (Walk::new(), Switches::new());
@@ -34,7 +36,7 @@ pub(crate) fn add_flow_switches(model: &mut Model) {
         let guards = switches.found;
         let mode = &model.modes[m];
         let count = guards.len();
-        let mut new_events: Vec<Event> = guards
+        let new_events: Vec<Event> = guards
             .into_iter()
             .enumerate()
             .map(|(k, guard)| Event {
@@ -52,47 +54,14 @@ pub(crate) fn add_flow_switches(model: &mut Model) {
                 owner: Some(super::ModeId(m as u16)),
                 span: mode.span,
                 implicit: true,
-                knot: None,
             })
             .collect();
-        for input in &switches.inputs {
-            new_events.extend(knot_events(model, ModeId(m as u16), input));
-        }
+        model.modes[m].inputs = switches.inputs;
         for event in new_events {
             model.modes[m].events.push(EventIdx(model.events.len() as u32));
             model.events.push(event);
         }
     }
-}
-
-/// The knots of `input` in `mode`'s flows as implicit time events (see the module comment).
-fn knot_events(model: &Model, mode: ModeId, input: &Input) -> Vec<Event> {
-    let vector = model.vectors.iter().find(|v| v.first == input.first).map_or("?", |v| v.name.as_str());
-    let (func, mode_name, span) =
-        (input.kind.name(), &model.modes[mode.0 as usize].name, model.modes[mode.0 as usize].span);
-    // One position for all the knots, lowered once; the value's own is the same node (hash-consing),
-    // so the guards and the value agree on the side of every knot to the last bit.
-    let position = Expr::Shared(Shared::new(input.position()));
-    input
-        .knots()
-        .map(|k| Event {
-            name: format!("knot {k} of {func}(t, .., {vector}) in mode {mode_name}"),
-            guard: Expr::Binary(
-                super::BinOp::Sub,
-                Box::new(position.clone()),
-                Box::new(Expr::Num(f64::from(k))),
-            ),
-            direction: Direction::Either,
-            condition: None,
-            resets: Vec::new(),
-            target: None,
-            is_stop: false,
-            owner: Some(mode),
-            span,
-            implicit: true,
-            knot: Some(Knot { kind: input.kind, k, position: position.clone(), vector: vector.to_string() }),
-        })
-        .collect()
 }
 
 /// Whether `e` jumps somewhere in time or the state: it has an `if` comparison or a `sign`
@@ -116,7 +85,7 @@ pub(crate) fn reads_pwc(e: &Expr) -> bool {
 /// whose `let`s share subexpressions costs its size, not the size of the expanded tree.
 struct Switches {
     found: Vec<Expr>,
-    /// The inputs found, without repeats: their knots are implicit events too.
+    /// The inputs found, without repeats: their knots are the mode's breakpoints.
     inputs: Vec<Input>,
     moving: Walk<()>,
 }
@@ -161,7 +130,8 @@ impl Visit for Switches {
             }
             // An input's knots are its switches; its window reads parameters only.
             Expr::Input(input) => {
-                if !self.inputs.contains(input) {
+                // A `pwc` of one value never jumps: it has no knots.
+                if !input.knots().is_empty() && !self.inputs.contains(input) {
                     self.inputs.push((**input).clone());
                 }
                 return ControlFlow::Continue(Descend::Over);

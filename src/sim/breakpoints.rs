@@ -1,7 +1,9 @@
 //! Stage 5 (sim): breakpoints, the times the integrator lands on exactly: a step that would pass
-//! one is clipped to end on it. `t_end` is always the last; time events and input knots join
-//! them. Also what a run's result says of events on or near them (a cusp at `t_end`, derivatives
-//! that hold only on one side). Knows nothing of models' functions or methods.
+//! one is clipped to end on it. `t_end` is always the last; time events join it, and each mode's
+//! input knots (`pwl`, `pwc`), which are breakpoints of that mode only: a queue per mode, in time
+//! order, that the run passes through once (a control of 10,000 knots costs a cursor, not a
+//! search). Also what a run's result says of events on or near breakpoints (a cusp at `t_end`,
+//! derivatives that hold only on one side). Knows nothing of models' functions or methods.
 
 use std::sync::Arc;
 
@@ -13,14 +15,23 @@ use super::system::{GuardShape, SystemInfo};
 pub(crate) struct Breakpoints {
     times: Vec<f64>,
     next: usize,
+    /// Per mode: its input knots as `(time, knot set)`, in time order, and the first one the
+    /// run has not passed.
+    knots: Vec<Vec<(f64, u32)>>,
+    knot_next: Vec<usize>,
 }
 
 impl Breakpoints {
-    /// Starts a run: forgets the times of an earlier run and lands on `t_end` last.
-    pub fn reset(&mut self, t_end: f64) {
+    /// Starts a run in a system of `modes` modes: forgets the times of an earlier run and lands
+    /// on `t_end` last.
+    pub fn reset(&mut self, t_end: f64, modes: usize) {
         self.times.clear();
         self.times.push(t_end);
         self.next = 0;
+        self.knots.resize_with(modes, Vec::new);
+        self.knots.iter_mut().for_each(Vec::clear);
+        self.knot_next.clear();
+        self.knot_next.resize(modes, 0);
     }
 
     /// Adds a time to land on (before `sort`).
@@ -28,19 +39,65 @@ impl Breakpoints {
         self.times.push(t);
     }
 
+    /// Adds a knot of knot set `set` at `t`, a breakpoint of `mode` (before `sort`).
+    pub fn add_knot(&mut self, mode: usize, t: f64, set: u32) {
+        self.knots[mode].push((t, set));
+    }
+
     /// Orders the times after the last `add`.
     pub fn sort(&mut self) {
         self.times.sort_by(f64::total_cmp);
         self.times.dedup();
+        for knots in &mut self.knots {
+            knots.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        }
     }
 
-    /// The first breakpoint strictly after `t` (`t_end` itself when `t` is at or past it). The
-    /// ones at or before `t` are consumed.
-    pub fn next_after(&mut self, t: f64) -> f64 {
+    /// The first breakpoint of `mode` strictly after `t` (`t_end` itself when `t` is at or past
+    /// it). The ones at or before `t` are consumed.
+    pub fn next_after(&mut self, t: f64, mode: usize) -> f64 {
         while self.next + 1 < self.times.len() && self.times[self.next] <= t {
             self.next += 1;
         }
-        self.times[self.next]
+        let time = self.times[self.next];
+        match self.knot_after(t, mode) {
+            Some(knot) => knot.min(time),
+            None => time,
+        }
+    }
+
+    /// The first breakpoint of `mode` strictly after `t`, as [`Self::next_after`] but consuming
+    /// nothing: a step that ends at `t` has not crossed the knots there yet.
+    pub fn peek_after(&self, t: f64, mode: usize) -> f64 {
+        let later = |times: &[f64]| times.iter().copied().find(|&b| b > t);
+        let time = later(&self.times[self.next..]).unwrap_or(self.times[self.times.len() - 1]);
+        let knot = match (self.knots.get(mode), self.knot_next.get(mode)) {
+            (Some(knots), Some(&next)) => knots[next..].iter().map(|k| k.0).find(|&k| k > t),
+            _ => None,
+        };
+        knot.map_or(time, |k| k.min(time))
+    }
+
+    /// The first knot of `mode` strictly after `t`; the ones at or before `t` are consumed.
+    pub fn knot_after(&mut self, t: f64, mode: usize) -> Option<f64> {
+        let (knots, next) = (self.knots.get(mode)?, self.knot_next.get_mut(mode)?);
+        while *next < knots.len() && knots[*next].0 <= t {
+            *next += 1;
+        }
+        knots.get(*next).map(|k| k.0)
+    }
+
+    /// The knots of `mode` at `t` exactly, `(time, knot set)`, not consumed (the ones before `t`
+    /// are).
+    pub fn knots_at(&mut self, t: f64, mode: usize) -> &[(f64, u32)] {
+        let (Some(knots), Some(next)) = (self.knots.get(mode), self.knot_next.get_mut(mode)) else {
+            return &[];
+        };
+        while *next < knots.len() && knots[*next].0 < t {
+            *next += 1;
+        }
+        let count = knots[*next..].iter().take_while(|k| k.0 == t).count();
+        &knots[*next..*next + count]
     }
 }
 
@@ -93,5 +150,35 @@ pub(crate) fn near_breakpoints(
                 margin,
             });
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn knots_are_a_queue_per_mode_and_a_step_ending_on_one_leaves_it_to_be_crossed() {
+        let mut b = Breakpoints::default();
+        b.reset(10.0, 2);
+        b.add(5.0);
+        for (t, set) in [(3.0, 0), (1.0, 0), (2.0, 1), (2.0, 0)] {
+            b.add_knot(0, t, set);
+        }
+        b.add_knot(1, 4.0, 2);
+        b.sort();
+        // Each mode sees its own knots among the shared times.
+        assert_eq!(b.next_after(0.0, 0), 1.0);
+        assert_eq!(b.next_after(0.0, 1), 4.0);
+        // A step that ended on the knot at 1 has not crossed it: looking ahead consumes nothing.
+        assert_eq!(b.peek_after(1.0, 0), 2.0);
+        assert_eq!(b.knots_at(1.0, 0), &[(1.0, 0)]);
+        // The next step from 1 passes it; two knot sets at one time are met together.
+        assert_eq!(b.next_after(1.0, 0), 2.0);
+        assert_eq!(b.knots_at(2.0, 0), &[(2.0, 0), (2.0, 1)]);
+        assert_eq!(b.next_after(3.0, 0), 5.0);
+        assert!(b.knots_at(3.5, 0).is_empty());
+        assert_eq!(b.next_after(5.0, 0), 10.0);
+        assert_eq!(b.next_after(12.0, 1), 10.0);
     }
 }

@@ -15,8 +15,10 @@ use std::sync::Arc;
 use super::breakpoints::{near_breakpoints, on_breakpoint, Breakpoints};
 use super::event::detect::{clear_side, moves_across, Crossing, Detector, Pending, Selection};
 use super::event::guards::Guards;
-use super::event::jump::{dot_nonzero, CrossingContext, Jump, JumpOutcome};
+use super::event::jump::{dot_nonzero, same, CrossingContext, Jump, JumpOutcome};
 use super::event::zeno;
+use super::fp_mode::IeeeArithmetic;
+use super::knots::Knots;
 use super::method::rk::Rk;
 use super::method::stepper::{Interpolant, Rhs, Stepper};
 use super::mode_rhs::rhs_for;
@@ -100,13 +102,15 @@ enum Landing {
 pub(crate) const MAX_CASCADE_ROUNDS: usize = 100;
 
 /// A step as planned: from `t0`, of size `h`, ending at `t1` (exactly the breakpoint it lands on
-/// when `lands`).
+/// when `lands`; an input knot of the mode when `on_knot`, the flow then read on the knot's
+/// earlier side at the step's end).
 #[derive(Clone, Copy, Debug)]
 struct Plan {
     t0: f64,
     h: f64,
     t1: f64,
     lands: bool,
+    on_knot: bool,
 }
 
 /// What an accepted attempt needs: its dense output for the events (`for_events`) or for samples
@@ -143,6 +147,9 @@ pub(crate) struct Workspace<St: Stepper = Rk> {
     pub(crate) det: Detector,
     pub(crate) jump: Jump,
     pub(crate) breakpoints: Breakpoints,
+    /// The input knots' scratch, and the knots met at the current instant (`(time, knot set)`).
+    pub(crate) knots: Knots,
+    pub(crate) knot_sets: Vec<(f64, u32)>,
     /// The integrated vector `[x, S]`.
     pub(crate) z: Vec<f64>,
     /// The events of the last group that fired: id, pre-crossing sign, crossing speed, and the
@@ -234,6 +241,9 @@ pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = R
     switch_post: Option<f64>,
     /// The state and sensitivities just before an instant at `t_end` (for `SimResult::end_cusp`).
     before_end: Option<(Vec<f64>, usize)>,
+    /// The current instant is on input knots: its events read the flows on the knots' earlier
+    /// side.
+    left_of_knot: bool,
 }
 
 impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R, St> {
@@ -247,10 +257,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         work: &'a mut Workspace<St>,
         recorder: &'a mut R,
     ) -> Self {
+        // Every entry of a run computes in IEEE arithmetic, whatever mode the caller's thread is in.
+        let _ieee = IeeeArithmetic::enter();
         let info = sys.info();
         let (n, m) = (info.n_states(), info.n_grad());
         work.stepper.reset();
-        work.breakpoints.reset(opts.t_end);
+        work.breakpoints.reset(opts.t_end, info.modes.len());
         sys.initial_state(p, &mut work.z[..n]);
         sys.initial_sens(p, &mut work.z[n..]);
         work.void.fill(false);
@@ -283,6 +295,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             landing: SwitchLanding::default(),
             switch_post: None,
             before_end: None,
+            left_of_knot: false,
             sampler: Sampler::new(sys, p, &opts.at),
         };
         if it.work.z[..n].iter().any(|v| !v.is_finite()) {
@@ -302,7 +315,8 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     }
 
     /// Time events (`t >= expression of parameters`) land on their time exactly: their times in
-    /// `(t_start, t_end)` become breakpoints.
+    /// `(t_start, t_end)` become breakpoints, and so do the input knots of every mode (of that
+    /// mode only).
     fn add_time_events(&mut self) {
         let n = self.n;
         for mode in 0..self.info.modes.len() {
@@ -344,6 +358,8 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 }
             }
         }
+        let span = (self.opts.t_start, self.opts.t_end);
+        self.work.knots.queue(self.sys, self.p, span, &mut self.work.breakpoints);
         self.work.breakpoints.sort();
     }
 
@@ -469,6 +485,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
 
     /// Attempts one step and says what happened.
     pub fn step(&mut self) -> StepOutcome {
+        let _ieee = IeeeArithmetic::enter();
         if let Some(stop) = &self.done {
             return StepOutcome::Done(stop.clone());
         }
@@ -496,9 +513,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         self.attempts += 1;
         // The mode's guards, for every detection call of this step.
         let cx = self.guards();
-        let mut rhs = rhs_for(self.sys, self.p, self.n, self.mode);
+        let ceiling = if plan.on_knot { plan.t1.next_down() } else { f64::INFINITY };
+        let mut rhs = rhs_for(self.sys, self.p, self.n, self.mode).with_ceiling(ceiling);
         let err = self.work.stepper.attempt(plan.t0, &self.work.z, plan.h, &mut rhs);
-        if err > 1.0 || err.is_nan() {
+        if err > 1.0 && !self.rounding_explains(plan, err) || err.is_nan() {
             return self.reject(&cx, plan, err, &mut rhs);
         }
         // A running cost takes no part in the error test's norm, but a step that leaves it less
@@ -561,8 +579,19 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 },
             });
         }
+        if let Some(set) = self.work.knots.broken.get(self.mode).copied().flatten() {
+            return Err(StopReason::Fault {
+                error: SimError::KnotsNotFinite {
+                    input: self.info.knots[set as usize].name.clone(),
+                    t: self.t,
+                    mode: self.mode,
+                    state: self.fault_state(),
+                },
+            });
+        }
         let t0 = self.t;
-        let mut t_land = self.work.breakpoints.next_after(t0);
+        let mut t_land = self.work.breakpoints.next_after(t0, self.mode);
+        let knot = self.work.breakpoints.knot_after(t0, self.mode);
         if let Some(t_pre) = self.landing.limit(t0) {
             t_land = t_land.min(t_pre);
         }
@@ -589,7 +618,42 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             });
         }
         let t1 = if lands { t_land } else { t0 + h_try };
-        Ok(Plan { t0, h: h_try, t1, lands })
+        Ok(Plan { t0, h: h_try, t1, lands, on_knot: lands && knot == Some(t_land) })
+    }
+
+    /// Whether the error estimate `err` (above 1) of the attempt just made, which lands on a
+    /// breakpoint, is no more than the rounding of its stage times explains. A stage at
+    /// `t0 + c h` is read at a time off by up to half a spacing of `t`, which moves its
+    /// derivative by the derivative's rate of change times that: over the step, about
+    /// `|F_i(t1) - F_i(t0)| spacing / h` in component `i`, and an error estimate (`h` times
+    /// weights summing to less than one) by less than `|F_i(t1) - F_i(t0)| spacing`. Where that,
+    /// in units of the tolerance, reaches `err`, the estimate measures the times' rounding, not
+    /// the step: a shorter step rounds worse, and this one lands on its breakpoint, so it is
+    /// taken. Only a very short step with a fast-changing derivative gets there: an input window
+    /// of `1e-12`, whose sensitivities with respect to its ends change at `1e24` a unit of time.
+    fn rounding_explains(&self, plan: Plan, err: f64) -> bool {
+        let n = self.n;
+        if !plan.lands || !err.is_finite() || n == 0 {
+            return false;
+        }
+        let spacing = plan.t1.abs().max(plan.t0.abs()).next_up() - plan.t1.abs().max(plan.t0.abs());
+        let stepper = &self.work.stepper;
+        let (f0, f1, z0, z1) =
+            (stepper.start_derivative(), stepper.end_derivative(), &self.work.z, stepper.end_state());
+        // The components in the error test: the running costs are out, unless every state is one
+        // or the options put them in (`run::error_test_exclusions`).
+        let q = &self.info.quadrature;
+        let costs_out = !self.opts.quadrature_error_control && q.len() == n && !q.iter().all(|&c| c);
+        let controlled = |i: usize| !(i >= n && !self.opts.sens_error_control || costs_out && q[i % n]);
+        let floor = (0..z0.len())
+            .filter(|&i| controlled(i))
+            .map(|i| {
+                let scale = self.opts.atol + self.opts.rtol * z0[i].abs().max(z1[i].abs());
+                (f1[i] - f0[i]).abs() * spacing / scale
+            })
+            .filter(|noise| noise.is_finite())
+            .fold(0.0, f64::max);
+        err <= floor
     }
 
     /// An attempt that failed its error test (`err`): a shorter step, aimed just before a flow
@@ -671,15 +735,17 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             Selection::Nothing
         };
         let nothing = matches!(selection, Selection::Nothing) && plan.lands;
-        if nothing && self.landing.cross_at_landing(&mut self.work.det, cx, &mut self.work.breakpoints, t1) {
+        if nothing && self.landing.cross_at_landing(&mut self.work.det, cx, &self.work.breakpoints, t1) {
             if !(look.for_events || look.sample_due) {
                 self.work.stepper.build_interpolant(t0, &self.work.z, rhs);
             }
             selection = Selection::Fire(t1);
         }
+        // At `t_end`, and at an input knot where the flow jumps: a crossing there to round-off is
+        // on it (at a knot, the event meets it, rather than the next step on its other side).
         if matches!(selection, Selection::Nothing)
             && plan.lands
-            && t1 >= self.opts.t_end
+            && (t1 >= self.opts.t_end || plan.on_knot && self.knot_jumps_at(t1))
             && self.end_on_guards()
         {
             if !(look.for_events || look.sample_due) {
@@ -690,17 +756,20 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         Ok(selection)
     }
 
-    /// Nothing fired in the step: the state moves to its end.
+    /// Nothing fired in the step: the state moves to its end (and across the input knots there).
     fn accept<F: Rhs>(&mut self, plan: Plan, look: Look, h_next: f64, rhs: &mut F) -> StepOutcome {
         let (t0, t1) = (plan.t0, plan.t1);
+        // Samples on a knot are taken once it is crossed: the input's value there is the later
+        // side's.
+        let before_knot = plan.on_knot;
         if look.sample_due {
             self.work.z_start.copy_from_slice(&self.work.z);
-            if self.land_samples(t0, t1, false, rhs) {
+            if self.land_samples(t0, t1, before_knot, rhs) {
                 // The step itself again (the same step: samples do not change the run), for
                 // its end state.
                 self.work.stepper.land(t0, &self.work.z, plan.h, rhs);
             }
-            self.sample_step(t1, false);
+            self.sample_step(t1, before_knot);
         }
         let at_start = if self.work.stepper.masked() { self.start_derivative_singularity() } else { None };
         self.work.stepper.accept(&mut self.work.z);
@@ -713,9 +782,61 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             }
         }
         self.work.det.advance();
+        if plan.on_knot {
+            self.cross_knots();
+            self.sampler.take_here(&mut self.work.output_jac, t1, self.mode, &self.work.z[..]);
+        }
         self.record(PointKind::Step);
         self.h = h_next;
         StepOutcome::Accepted
+    }
+
+    /// Whether an input knot of the current mode where the flow jumps (`pwc`) is at `t`.
+    fn knot_jumps_at(&mut self, t: f64) -> bool {
+        let info = self.info;
+        self.work.breakpoints.knots_at(t, self.mode).iter().any(|&(_, set)| info.knots[set as usize].jumps)
+    }
+
+    /// Crosses the input knots of the current mode at the current time, where a step just ended
+    /// (reading the inputs on the knots' earlier side): at a `pwc` knot the sensitivities jump
+    /// by `(f- - f+) dt_k/dp` (nothing at a `pwl` knot); the stepper restarts on the later side
+    /// (its derivative there: the flow, or the sensitivities' rate, changed), and the guards'
+    /// speeds with it where the flow jumped. The controller's proposal stands.
+    fn cross_knots(&mut self) {
+        let (t, mode, n) = (self.t, self.mode, self.n);
+        let sets = self.work.breakpoints.knots_at(t, mode);
+        self.work.knot_sets.clear();
+        self.work.knot_sets.extend_from_slice(sets);
+        let x = &self.work.z[..n];
+        let crossed = self.work.knots.jump(self.sys, self.p, mode, t, x, &self.work.knot_sets, false);
+        self.stats.switches += crossed.jumping;
+        if crossed.jumps {
+            self.work.knots.apply_new(&mut self.work.z[n..], n);
+            self.note_knots_apart(crossed, t);
+        }
+        if crossed.jumps || self.m > 0 {
+            let mut rhs = rhs_for(self.sys, self.p, n, mode);
+            self.work.stepper.restart(t, &self.work.z, &mut rhs);
+        }
+        if crossed.jumps {
+            let f = &self.work.stepper.start_derivative()[..n];
+            self.work.det.eval_start(&self.guards(), t, &self.work.z[..n], f);
+        }
+    }
+
+    /// Knots of inputs that move apart with a parameter met at `t`: a warning naming them.
+    fn note_knots_apart(&mut self, crossed: super::knots::Crossed, t: f64) {
+        if !crossed.apart {
+            return;
+        }
+        let names: Vec<&str> = self
+            .work
+            .knot_sets
+            .iter()
+            .filter(|&&(_, set)| self.info.knots[set as usize].jumps)
+            .map(|&(_, set)| &*self.info.knots[set as usize].name)
+            .collect();
+        self.warnings.push(SimWarning::KnotsApart { inputs: names.join(", ").into(), time: t });
     }
 
     /// The guard at `pos` stops being finite at `t` inside the step, before any crossing: the
@@ -743,6 +864,13 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         rhs: &mut F,
     ) -> StepOutcome {
         let (t0, t1) = (plan.t0, plan.t1);
+        // A crossing located a few spacings of `t` before an input knot the step ends on, where
+        // the flow jumps, is on the knot: the event meets it there (as at `t_end`, rule 8).
+        let t_fire = if plan.on_knot && t_fire < t1 && on_breakpoint(t_fire, t1) && self.knot_jumps_at(t1) {
+            t1
+        } else {
+            t_fire
+        };
         let at_start = if self.work.stepper.masked() { self.start_derivative_singularity() } else { None };
         let sampling = look.sample_due || self.sampler.wanted(&*self.recorder, t_fire);
         if sampling {
@@ -1016,11 +1144,18 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             // An instant at t_end: the other side of the cusp is the run without it.
             self.before_end = Some((self.work.z.to_vec(), first));
         }
+        // On input knots the events are met on the knots' earlier side, and the knots are
+        // crossed after them (`knots_after_instant`).
+        let (t_instant, switches) = (self.t, self.stats.switches);
+        self.left_of_knot = self.knots_at_instant(t_instant);
         let mut rounds = 0;
         let mut estimate;
         loop {
             let round_start = self.work.fired.len();
             if let Some(stop) = self.fire_group(rounds > 0) {
+                if self.left_of_knot {
+                    self.stop_at_knots(first);
+                }
                 return StepOutcome::Done(stop);
             }
             if self.work.z[..n].iter().any(|v| !v.is_finite()) {
@@ -1046,6 +1181,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             }
             self.work.before.0.clear();
             self.work.before.0.extend_from_slice(&self.work.z[..n]);
+        }
+        if self.left_of_knot {
+            // One declared event and nothing else: no cascade, no flow switch.
+            let single = rounds == 0 && self.events.len() == first + 1 && self.stats.switches == switches;
+            self.knots_after_instant(t_instant, first, single);
+            estimate = self.restart();
         }
         self.record(PointKind::AfterEvents);
         self.sampler.take_here(&mut self.work.output_jac, self.t, self.mode, &self.work.z[..]);
@@ -1074,6 +1215,149 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             self.h = self.h.min((NEXT_CROSSING_REACH * (t_next - self.t)).max(floor));
         }
         StepOutcome::Fired { first, count: self.events.len() - first }
+    }
+
+    /// Whether input knots of any mode are at the instant `t` (its events then read the flows on
+    /// the knots' earlier side); the flow's jump at those of the current mode, at the state
+    /// before the instant, into `Knots::jump_old`.
+    fn knots_at_instant(&mut self, t: f64) -> bool {
+        let modes = self.info.modes.len();
+        if !(0..modes).any(|m| !self.work.breakpoints.knots_at(t, m).is_empty()) {
+            return false;
+        }
+        let sets = self.work.breakpoints.knots_at(t, self.mode);
+        self.work.knot_sets.clear();
+        self.work.knot_sets.extend_from_slice(sets);
+        let x = &self.work.z[..self.n];
+        self.work.knots.jump(self.sys, self.p, self.mode, t, x, &self.work.knot_sets, true);
+        true
+    }
+
+    /// After the events of an instant at `t` on input knots (the run's events `first..`, `single`
+    /// when one event fired alone): the knots of the mode the run goes on in are crossed (the
+    /// sensitivities jump by `(f- - f+) dt_k/dp` at a `pwc` knot), and where the flow jumps
+    /// there, in the mode the events were met in or the one after, the derivatives that moving
+    /// the events off the knots would change do not exist: for one event, those that differ
+    /// between the two orders of the event and the knots (`Jump::knot_order`); for a group or a
+    /// cascade, every derivative with respect to a parameter that moves the instant and the
+    /// knots apart, and the event times' where a state event fired. A warning names the first
+    /// event when any was found not to exist.
+    fn knots_after_instant(&mut self, t: f64, first: usize, single: bool) {
+        let (mode, n) = (self.mode, self.n);
+        let sets = self.work.breakpoints.knots_at(t, mode);
+        self.work.knot_sets.clear();
+        self.work.knot_sets.extend_from_slice(sets);
+        let x = &self.work.z[..n];
+        let crossed = self.work.knots.jump(self.sys, self.p, mode, t, x, &self.work.knot_sets, false);
+        self.stats.switches += crossed.jumping;
+        if crossed.jumps {
+            self.work.knots.apply_new(&mut self.work.z[n..], n);
+            self.note_knots_apart(crossed, t);
+        }
+        let old = self.work.knots.old;
+        let Some(d) = self.instant.filter(|_| self.events.len() > first && (old.jumps || crossed.jumps))
+        else {
+            return;
+        };
+        let knots = &self.work.knots;
+        let voided = if single {
+            let s = &mut self.work.z[n..];
+            let voided = self.work.jump.knot_order(
+                (&knots.jump_old, &knots.dt_old),
+                (&knots.jump_new, &knots.dt_new),
+                d,
+                s,
+            );
+            if voided {
+                self.events[first].dtime = existing(&self.work.jump.dte);
+            }
+            voided
+        } else {
+            self.void_apart(first)
+        };
+        if voided {
+            let set = old.set.or(crossed.set).unwrap_or(0) as usize;
+            let e = &self.events[first];
+            self.warnings.push(SimWarning::EventAtKnot {
+                event: e.event,
+                name: e.name.clone(),
+                time: t,
+                input: self.info.knots[set].name.clone(),
+            });
+        }
+    }
+
+    /// The events `first..` of an instant on input knots, as a group or a cascade: every
+    /// derivative with respect to a parameter that moves the instant (`instant_dte`) and the
+    /// knots where the flow jumps apart does not exist, nor does a state event's time derivative
+    /// with respect to it. Returns whether any was found so.
+    fn void_apart(&mut self, first: usize) -> bool {
+        let (n, knots) = (self.n, &self.work.knots);
+        let (old_jumps, new_jumps) = (knots.old.jumps, knots.jump_new.iter().any(|&j| j != 0.0));
+        let mut voided = false;
+        for j in 0..self.m {
+            let a = self.work.instant_dte[j];
+            let apart = (old_jumps && !same(a, knots.dt_old[j])) || (new_jumps && !same(a, knots.dt_new[j]));
+            if !apart {
+                continue;
+            }
+            voided = true;
+            self.work.z[n + j * n..n + (j + 1) * n].fill(f64::NAN);
+            for e in &mut self.events[first..] {
+                if self.info.events[e.event].guard != GuardShape::Time {
+                    if let Some(dtime) = &mut e.dtime {
+                        dtime[j] = f64::NAN;
+                    }
+                }
+            }
+        }
+        for e in &mut self.events[first..] {
+            if e.dtime.as_ref().is_some_and(|d| d.iter().all(|v| v.is_nan())) {
+                e.dtime = None;
+            }
+        }
+        voided
+    }
+
+    /// A stop event fired on input knots where the flow jumps, in the mode it was met in: the
+    /// final derivatives with respect to a parameter that moves the stop and the knots apart
+    /// differ on the two sides (the flow the stop's motion carries the state along is either
+    /// side's), and do not exist, nor does the stop's time derivative unless it is a time event's
+    /// (the same on both sides).
+    fn stop_at_knots(&mut self, first: usize) {
+        if !self.work.knots.old.jumps || self.events.len() <= first {
+            return;
+        }
+        let time_event = self.info.events[self.events[first].event].guard == GuardShape::Time;
+        let (n, knots) = (self.n, &self.work.knots);
+        let mut voided = false;
+        for j in 0..self.m {
+            let a = self.work.instant_dte.get(j).copied().unwrap_or(f64::NAN);
+            if same(a, knots.dt_old[j]) {
+                continue;
+            }
+            voided = true;
+            self.work.z[n + j * n..n + (j + 1) * n].fill(f64::NAN);
+            if let Some((total, dte)) = &mut self.stop_total {
+                total[j * n..(j + 1) * n].fill(f64::NAN);
+                if !time_event {
+                    dte[j] = f64::NAN;
+                }
+            }
+            if let Some(dtime) = self.events[first].dtime.as_mut().filter(|_| !time_event) {
+                dtime[j] = f64::NAN;
+            }
+        }
+        if voided {
+            let set = self.work.knots.old.set.unwrap_or(0) as usize;
+            let e = &self.events[first];
+            self.warnings.push(SimWarning::EventAtKnot {
+                event: e.event,
+                name: e.name.clone(),
+                time: self.t,
+                input: self.info.knots[set].name.clone(),
+            });
+        }
     }
 
     /// After a round of events (`before.0` holds the state before it, the detector the guards
@@ -1354,17 +1638,8 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// state before the switch is not on the interpolant any more: the gradients are then marked
     /// as not meaningful instead.
     fn cross_switch(&mut self, ev: usize, pos: usize, crossing: Crossing, after_an_event: bool) {
-        // A `pwl` knot: the flow is continuous across it, so nothing jumps; but its derivative
-        // (the sensitivities' right-hand side, when the knot moves with a parameter) does, so
-        // the run goes on past it like past a switch.
-        let kink = self.info.events[ev].kink;
         let (n, t) = (self.n, self.t);
-        if kink && (after_an_event || crossing.on_guard) {
-            return;
-        }
-        if !kink {
-            self.stats.switches += 1;
-        }
+        self.stats.switches += 1;
         if after_an_event || crossing.on_guard {
             // The flow before the switch is not known: no sensitivity survives it.
             if self.work.z[n..].iter().any(|v| !v.is_nan()) {
@@ -1419,9 +1694,6 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         if self.switch_post.is_none_or(|tp| t_post > tp) {
             self.switch_post = Some(t_post);
             self.work.switch_flow.1.copy_from_slice(x_post);
-        }
-        if kink {
-            return;
         }
         let (x, s) = self.work.z.split_at_mut(n);
         let sides = ((crossing.t_pre, &x_pre[..]), (t_post, &x_post[..]));
@@ -1503,6 +1775,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             rtol: self.opts.rtol,
             atol: self.opts.atol,
             graze_tol: self.opts.graze_tol,
+            left_of_knot: self.left_of_knot,
         }
     }
 
@@ -1589,6 +1862,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// and the outputs' (chained through the output Jacobians), warnings, statistics. The
     /// trajectory is the recorder's to give.
     pub fn finish(mut self, stopped_by: StopReason) -> SimResult {
+        let _ieee = IeeeArithmetic::enter();
         self.sampler.take_here(&mut self.work.output_jac, self.t, self.mode, &self.work.z[..]);
         let samples = self.sampler.finish(&self.events);
         let (n, m, k) = (self.n, self.m, self.info.n_outputs());

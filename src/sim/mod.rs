@@ -20,6 +20,8 @@
 //! - `samples.rs`: the values at `SimOptions::at`, taken as the run passes them and completed
 //!   once it is over.
 //! - `run.rs`: a run from start to end, the reusable `Runner`.
+//! - `fp_mode.rs`: IEEE arithmetic (subnormals kept) for the length of each entry into a run,
+//!   whatever the calling thread set (XLA's threads flush them).
 //! - `result.rs`: what a run reports.
 //!
 //! Imports between the wings go one way: `event/` uses `method/`'s `Interpolant` and `Stepper`
@@ -27,7 +29,9 @@
 
 mod breakpoints;
 mod event;
+mod fp_mode;
 mod integrator;
+mod knots;
 mod linalg;
 mod method;
 mod mode_rhs;

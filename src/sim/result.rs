@@ -108,6 +108,19 @@ pub enum SimError {
         /// The state there.
         state: Vec<f64>,
     },
+    /// A fault: the knots of an input of the current mode cannot be timed (its window has no
+    /// length, or an end that is not finite).
+    #[error("{}", self.fault_text(None))]
+    KnotsNotFinite {
+        /// The input: `pwl(t, .., u)`.
+        input: Arc<str>,
+        /// The time it happened.
+        t: f64,
+        /// The mode it happened in (index).
+        mode: usize,
+        /// The state there.
+        state: Vec<f64>,
+    },
     #[error(
         "rtol {rtol:e} cannot be met: below {floor:e} the error estimates are round-off in double precision"
     )]
@@ -183,6 +196,10 @@ impl SimError {
             SimError::NonFinite { t, mode, state } => format!("non-finite state {}", at(*t, *mode, state)),
             SimError::GuardNotFinite { event, t, mode, state } => format!(
                 "the guard of event `{event}` stops being finite {}: whether it crosses zero beyond that cannot be told",
+                at(*t, *mode, state)
+            ),
+            SimError::KnotsNotFinite { input, t, mode, state } => format!(
+                "the knots of `{input}` are not finite {}: its window must have two different, finite ends",
                 at(*t, *mode, state)
             ),
             other => other.to_string(),
@@ -281,6 +298,29 @@ pub enum SimWarning {
     SwitchAtEvent {
         /// The switch's name.
         name: Arc<str>,
+        /// When.
+        time: f64,
+    },
+    /// A declared event fired on an input knot where the flow jumps (a `pwc` knot, at the
+    /// instant the step lands on it): where a parameter moves the event off the knot, the two meet
+    /// in either order on the two sides of it, and the derivatives that differ between the two
+    /// (the event time's, where the flow it crosses at jumps) do not exist from here on.
+    EventAtKnot {
+        /// The event (index into `SystemInfo::events`).
+        event: usize,
+        /// The event's name.
+        name: Arc<str>,
+        /// When.
+        time: f64,
+        /// The input: `pwc(t, .., u)`.
+        input: Arc<str>,
+    },
+    /// Knots of inputs that move apart with a parameter meet at `time`, where the flow jumps:
+    /// the derivatives with respect to such a parameter do not exist from here on (the flow
+    /// between the two knots is neither input's jump).
+    KnotsApart {
+        /// The inputs, `pwc(t, .., u), pwc(t, .., w)`.
+        inputs: Arc<str>,
         /// When.
         time: f64,
     },
@@ -410,6 +450,17 @@ impl fmt::Display for SimWarning {
                  t = {time}): it may be less accurate than --rtol; --quadrature-error-control puts \
                  it under the error test",
                 if *steps == 1 { "" } else { "s" }
+            ),
+            SimWarning::EventAtKnot { name, time, input, .. } => write!(
+                f,
+                "event `{name}` fired at t = {time} on a knot of `{input}`, where the flow jumps: \
+                 derivatives that move the event off the knot and differ on its two sides do not \
+                 exist from here on"
+            ),
+            SimWarning::KnotsApart { inputs, time } => write!(
+                f,
+                "knots of {inputs} meet at t = {time}, where the flow jumps: derivatives with respect \
+                 to parameters that move them apart do not exist from here on"
             ),
             SimWarning::NotDifferentiable { time, state, param, count, cause } => {
                 let others = if *count > 1 {

@@ -6,6 +6,7 @@ use super::breakpoints::Breakpoints;
 use super::event::detect::Detector;
 use super::event::jump::Jump;
 use super::integrator::{Integrator, StepOutcome, Workspace};
+use super::knots::Knots;
 use super::method::auto::Auto;
 use super::method::rk::Rk;
 use super::method::rosenbrock::Rosenbrock;
@@ -130,6 +131,8 @@ impl<St: Stepper> ShapedWork<'_, St> {
             det: Detector::new(info, n, m),
             jump: Jump::new(n, m),
             breakpoints: Breakpoints::default(),
+            knots: Knots::new(n, m, info.modes.len()),
+            knot_sets: Vec::new(),
             z: vec![0.0; nz],
             fired: Vec::new(),
             output_jac: (vec![0.0; k * n], vec![0.0; k * m], vec![0.0; k]),

@@ -135,7 +135,7 @@ impl SwitchLanding {
         &self,
         det: &mut Detector,
         cx: &Guards<S>,
-        breakpoints: &mut Breakpoints,
+        breakpoints: &Breakpoints,
         t1: f64,
     ) -> bool {
         let Some(landing) = self.target.filter(|l| l.t_pre == t1) else {
@@ -148,7 +148,7 @@ impl SwitchLanding {
         // With a breakpoint (a time event) before the predicted crossing, the next step lands on
         // it and crosses the switch there, with the event, in time order.
         let t_cross = t1 + g.abs() / speed.abs() + spacing;
-        if !near || breakpoints.next_after(t1) <= t_cross {
+        if !near || breakpoints.peek_after(t1, cx.mode) <= t_cross {
             return false;
         }
         let ev = cx.events()[landing.pos];

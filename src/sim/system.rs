@@ -57,15 +57,30 @@ pub struct EventInfo {
     /// it the state is kept, the sensitivities jump by `(f- - f+) dt/dp` with the flow evaluated
     /// on each side, and nothing is recorded as an event.
     pub implicit: bool,
-    /// An implicit event where the flow only kinks (a knot of a `pwl` input): a time event the
-    /// steps land on, so none straddles the kink, but nothing jumps and nothing is recorded.
-    pub kink: bool,
     /// How the guard depends on time and the state, which decides how its crossings are searched.
     pub guard: GuardShape,
     /// Whether the reset acts on the guard's motion: it assigns a state that the guard or its
     /// speed `g_x f + g_t` reads (a bounce, a stop). Such an event that leaves the state on its
     /// guard with the flow carrying it through again is stuck, not a fresh crossing.
     pub contact: bool,
+}
+
+/// The knots of an input (`pwl`, `pwc`) a mode's flows read: times known when a run starts (the
+/// first floating-point times where the knot position `HybridSystem::knot_position`, affine in
+/// `t`, has reached each knot), which the integrator keeps as a queue of breakpoints
+/// (`sim/breakpoints.rs`): a step ends exactly on the next one, with the input read on its
+/// earlier side at the step's end, and the next step starts on its later side.
+#[derive(Clone, Debug, PartialEq)]
+pub struct KnotSet {
+    /// The input as messages name it: `pwc(t, .., u)`.
+    pub name: Arc<str>,
+    /// The mode whose flows read it.
+    pub mode: usize,
+    /// Whether the flow jumps at each knot (`pwc`: the sensitivities jump by `(f- - f+) dt_k/dp`
+    /// where a knot moves with a parameter); otherwise it only kinks (`pwl`) and nothing jumps.
+    pub jumps: bool,
+    /// The knots' numbers: knot `k` is where the position is `k`.
+    pub knots: std::ops::Range<u32>,
 }
 
 /// The shape of a guard along a trajectory, from its symbolic derivatives.
@@ -97,6 +112,8 @@ pub struct SystemInfo {
     pub modes: Vec<ModeInfo>,
     /// The events, declared ones first, then the implicit ones.
     pub events: Vec<EventInfo>,
+    /// The modes' input knots ([`HybridSystem::knot_position`] takes an index into this).
+    pub knots: Vec<KnotSet>,
     /// The mode the run starts in.
     pub initial_mode: usize,
     /// `quadrature[i]`: state `i` is a running cost that no flow, guard, condition or other
@@ -290,6 +307,20 @@ pub trait HybridSystem: Sync {
     fn guard_states(&self, event: usize) -> Option<&[u32]> {
         let _ = event;
         None
+    }
+    /// The knot position of knot set `set` (`SystemInfo::knots`) at `t`: affine in `t`, knot `k`
+    /// where it is `k`, computed as the input's value computes it (so both agree on the side of
+    /// every knot). The default, for a system without knots, is NaN.
+    fn knot_position(&self, set: usize, t: f64, p: &[f64]) -> f64 {
+        let _ = (set, t, p);
+        f64::NAN
+    }
+    /// The knot position's derivatives: `sp` (m) with respect to the gradient parameters; returns
+    /// its rate `s_t`. The default, for a system without knots, is NaN.
+    fn knot_position_grad(&self, set: usize, t: f64, p: &[f64], sp: &mut [f64]) -> f64 {
+        let _ = (set, t, p);
+        sp.fill(f64::NAN);
+        f64::NAN
     }
     /// Whether the enabling condition holds (true for events without one).
     fn condition(&self, event: usize, t: f64, x: &[f64], p: &[f64]) -> bool;

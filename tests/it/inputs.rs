@@ -316,7 +316,7 @@ fn check_shows_inputs_and_their_knots() {
         "  f[6] = 5  in [0, 50]  (f[0] .. f[5])",
         "    der(v) = (k * (L0 - y) - pwc(b @ 3 * t / 2.5) * v + pwl(f @ 5 * t / 2.5)) / m - g",
         "  pwl(t, .., f) in mode stance: knots 0 .. 5 at 5 * t / 2.5 = k (kinks: steps land on them)",
-        "  pwc(t, .., b) in mode stance: knots 1 .. 2 at 3 * t / 2.5 = k (jumps: located like flow switches)",
+        "  pwc(t, .., b) in mode stance: knots 1 .. 2 at 3 * t / 2.5 = k (jumps: steps land on them, the gradients jump there)",
     ] {
         assert!(stdout.lines().any(|l| l == line), "missing `{line}` in:\n{stdout}");
     }

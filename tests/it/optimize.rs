@@ -437,6 +437,7 @@ fn a_multi_start_in_shards_merges_into_the_report_of_one_process() {
             start: model.params().values().to_vec(),
             sim: model.sim_options(),
             options,
+            solver: hybc::optimize::SolverChoice::Auto,
         };
         let mut json = request.run(&compiled, None).expect("solves").to_json();
         json["stats"]["compile_seconds"] = Value::Null;

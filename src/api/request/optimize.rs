@@ -10,7 +10,8 @@ use crate::api::{Compiled, Error, Model};
 use crate::fit::Bounds;
 use crate::optimize::report::OptimizeReport;
 use crate::optimize::{
-    optimize, parse_constraint, OptimizeError, OptimizeOptions, OptimizeProblem, Progress, Quantity, Slsqp,
+    optimize, parse_constraint, OptimizeError, OptimizeOptions, OptimizeProblem, Progress, Quantity,
+    SolverChoice,
 };
 use crate::sema::ParamIdx;
 use crate::sim::SimOptions;
@@ -30,6 +31,8 @@ pub struct OptimizeRequest<'a> {
     pub sim: SimOptions,
     /// The solver's tolerances, the starts and the threads.
     pub options: OptimizeOptions,
+    /// Which local solver runs (`--solver`, Python `solver=`).
+    pub solver: SolverChoice,
 }
 
 /// Why an optimisation gave no report.
@@ -41,6 +44,9 @@ pub enum OptimizeFailure {
     /// A constraint does not parse, or there are more than the cap.
     #[error("{0}")]
     Constraint(String),
+    /// The solver asked for does not take the problem (L-BFGS-B with general constraints).
+    #[error("{0}")]
+    Solver(String),
     /// The solver refused the problem (a start outside its bounds, ...).
     #[error(transparent)]
     Refused(OptimizeError),
@@ -109,6 +115,10 @@ impl OptimizeRequest<'_> {
             crate::limits::count("constraints in all", constraints.len(), 0, crate::limits::MAX_CONSTRAINTS)
                 .map_err(|e| OptimizeFailure::Constraint(e.to_string()))?;
         }
+        let solver = self
+            .solver
+            .pick(compiled.info().grad_params.len(), constraints.len())
+            .map_err(OptimizeFailure::Solver)?;
         let problem = OptimizeProblem {
             system: compiled.system(),
             start: self.start,
@@ -118,7 +128,7 @@ impl OptimizeRequest<'_> {
             sim: self.sim,
         };
         let started = Instant::now();
-        let result = optimize(&problem, &self.options, &Slsqp, progress).map_err(OptimizeFailure::Refused)?;
+        let result = optimize(&problem, &self.options, solver, progress).map_err(OptimizeFailure::Refused)?;
         Ok(OptimizeReport {
             model: compiled.model().name().to_string(),
             info,

@@ -1307,7 +1307,7 @@ impl Detector {
         let (info, evs) = (cx.info, cx.events());
         let is_switch = |ev: usize| {
             let e = &info.events[ev];
-            e.implicit && !e.kink && e.guard != GuardShape::Time
+            e.implicit && e.guard != GuardShape::Time
         };
         if !evs.iter().any(|&ev| is_switch(ev)) {
             return None;

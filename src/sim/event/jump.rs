@@ -46,6 +46,12 @@ pub(crate) fn dot_nonzero(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).filter(|(a, _)| **a != 0.0).map(|(a, b)| a * b).sum()
 }
 
+/// Whether `a` and `b` are one number up to the round-off of computing them in different ways
+/// (an event's time derivative and an input knot's motion).
+pub(crate) fn same(a: f64, b: f64) -> bool {
+    a == b || (a - b).abs() <= 64.0 * f64::EPSILON * a.abs().max(b.abs())
+}
+
 /// `a b`, or zero when `a` is exactly zero (whatever `b`, NaN included).
 fn times_nonzero(a: f64, b: f64) -> f64 {
     if a == 0.0 {
@@ -74,6 +80,10 @@ pub(crate) struct CrossingContext {
     pub rtol: f64,
     pub atol: f64,
     pub graze_tol: f64,
+    /// The instant is on input knots (their times are the first where the inputs take their new
+    /// values): the flows on both sides of the event are read just before it, on the knots'
+    /// earlier side, and the knots are crossed after the event (`knot_order`).
+    pub left_of_knot: bool,
 }
 
 pub(crate) struct Jump {
@@ -103,6 +113,8 @@ pub(crate) struct Jump {
     x_plus: Vec<f64>,
     s_plus: Vec<f64>,
     v: Vec<f64>,
+    /// Scratch: `R_x` times the flow's jump at input knots (`knot_order`).
+    rj: Vec<f64>,
     /// The guard's curvature `|g''|` and accuracy `delta` at the last crossing judged.
     curvature: f64,
     accuracy: f64,
@@ -145,6 +157,7 @@ impl Jump {
             x_plus: vec![0.0; n],
             s_plus: vec![0.0; n * m],
             v: vec![0.0; n],
+            rj: vec![0.0; n],
             curvature: 0.0,
             accuracy: 0.0,
             dte: vec![0.0; m],
@@ -201,7 +214,9 @@ impl Jump {
         given: Option<(&[f64], f64)>,
     ) -> JumpOutcome {
         let (n, m) = (self.n, self.m);
-        sys.flow(mode_old, t, x, p, &mut self.f_minus);
+        // On input knots the flows are the knots' earlier side's (see `knot_order`).
+        let t_flow = if context.left_of_knot { t.next_down() } else { t };
+        sys.flow(mode_old, t_flow, x, p, &mut self.f_minus);
         let measured = self.velocity_holds(t, mode_old, x);
         let outcome = match given {
             Some((dte, _)) => {
@@ -217,7 +232,7 @@ impl Jump {
         };
         sys.reset(ev, t, x, p, &mut self.x_plus);
         self.reset_jacobian(sys, ev, t, x, p);
-        sys.flow(mode_new, t, &self.x_plus, p, &mut self.f_plus);
+        sys.flow(mode_new, t_flow, &self.x_plus, p, &mut self.f_plus);
         // The products over a row's nonzeros, in column order: the sums of `dot_nonzero` over
         // the whole row, term for term.
         let (nz, rows) = (&self.rx_nz, &self.rx_rows);
@@ -242,6 +257,85 @@ impl Jump {
         x.copy_from_slice(&self.x_plus);
         s.copy_from_slice(&self.s_plus);
         outcome
+    }
+
+    /// The event just applied (by [`Self::apply`], with its own time gradient and crossing speed
+    /// `d`) met input knots at its instant, on their earlier side: there the flow jumps by
+    /// `j_old` in the mode the event was met in (at the state before it), the knots moving by
+    /// `dt_old` (`dt_k/dp`), and by `j_new` in the mode after it (at the state after it, moving by
+    /// `dt_new`), and `s` already holds that jump, `+ j_new dt_new`, crossed after the event. A
+    /// parameter that moves the event with the knots keeps this order on both sides of it. One
+    /// that moves them apart has the other order on one side: the knots first (`S + j_old
+    /// dt_old`), then the event on their later side, where its crossing speed is
+    /// `d - g_x j_old`, so its time's derivative is
+    /// `b = (a d - g_x j_old dt_old) / (d - g_x j_old)` against this side's `a`. The two sides'
+    /// sensitivities differ by `v (a - b) + (R_x j_old) (b - dt_old) - j_new (b - dt_new)`, with
+    /// `v = R_x f- + R_t - f+`: the entries where that is more than round-off do not exist, nor
+    /// does the event time's derivative where `a` and `b` differ (NaN in `s` and in `dte`); a
+    /// parameter for which neither order holds on one side (`a` and `b` on two sides of the
+    /// knots' motion) keeps no derivative. Returns whether any derivative was found not to exist.
+    /// A reset that commutes with the flow's jump (`R_x j_old = j_new`) and a guard that does
+    /// not read it (`g_x j_old = 0`) keep every derivative: a time event on a knot that does not
+    /// move, or a counter at a rate's switch.
+    pub fn knot_order(
+        &mut self,
+        (j_old, dt_old): (&[f64], &[f64]),
+        (j_new, dt_new): (&[f64], &[f64]),
+        d: f64,
+        s: &mut [f64],
+    ) -> bool {
+        const EPS: f64 = f64::EPSILON;
+        let n = self.n;
+        let jumps = |j: &[f64]| j.iter().any(|&v| v != 0.0);
+        let (old_jumps, new_jumps) = (jumps(j_old), jumps(j_new));
+        let gj = dot_nonzero(&self.gx, j_old);
+        let (nz, rows) = (&self.rx_nz, &self.rx_rows);
+        for (i, rj) in self.rj.iter_mut().enumerate() {
+            *rj = nz[rows[i]..rows[i + 1]]
+                .iter()
+                .filter(|&&(c, _)| j_old[c] != 0.0)
+                .map(|&(c, v)| v * j_old[c])
+                .sum();
+        }
+        let mut voided = false;
+        for j in 0..self.m {
+            let a = self.dte[j];
+            let together = (!old_jumps || same(a, dt_old[j])) && (!new_jumps || same(a, dt_new[j]));
+            if a.is_nan() || together {
+                continue;
+            }
+            let b = if gj == 0.0 { a } else { (a * d - gj * dt_old[j]) / (d - gj) };
+            let dt = if old_jumps { dt_old[j] } else { dt_new[j] };
+            let knots_apart = old_jumps && new_jumps && !same(dt_old[j], dt_new[j]);
+            let column = &mut s[j * n..(j + 1) * n];
+            // Both orders must hold on a side each: `a` and `b` on one side of the knots' motion
+            // (a NaN `b`, from a crossing speed that vanishes on the later side, holds neither).
+            let one_side = (a - dt) * (b - dt) > 0.0;
+            if knots_apart || !one_side {
+                column.fill(f64::NAN);
+                self.dte[j] = f64::NAN;
+                voided = true;
+                continue;
+            }
+            if !same(a, b) {
+                self.dte[j] = f64::NAN;
+                voided = true;
+            }
+            for (i, s) in column.iter_mut().enumerate() {
+                let (v, rj, jn) = (self.v[i], self.rj[i], j_new[i]);
+                let diff = v * (a - b) + rj * (b - dt_old[j]) - jn * (b - dt_new[j]);
+                let scale = v.abs() * (a.abs() + b.abs())
+                    + rj.abs() * (b.abs() + dt_old[j].abs())
+                    + jn.abs() * (b.abs() + dt_new[j].abs());
+                // NaN-safe: a difference that is not a number is not round-off.
+                let round_off = diff.abs() <= 64.0 * EPS * scale;
+                if !round_off {
+                    *s = f64::NAN;
+                    voided = true;
+                }
+            }
+        }
+        voided
     }
 
     /// `R_x` (into `rx_nz`, `rx_rows`), `R_p` and `R_t` of event `ev` at `(t, x)`.

@@ -73,6 +73,7 @@ pub fn ball() -> ModelFunctions {
             reset_p: mat(2, 3, vec![(1, 1, neg_v)]),
             reset_t: vec_(vec![]),
         }],
+        knots: vec![],
         init: vec![h0, zero],
         init_p: mat(2, 3, vec![(0, 2, one)]),
         outputs: vec![h, v2],
@@ -97,12 +98,12 @@ pub fn ball_info(grad_params: Vec<usize>) -> SystemInfo {
             is_stop: false,
             has_condition: true,
             implicit: false,
-            kink: false,
             guard: GuardShape::Affine,
             contact: true,
         }],
         initial_mode: 0,
         quadrature: Vec::new(),
+        knots: Vec::new(),
     }
 }
 
@@ -127,6 +128,7 @@ pub fn output_only(
             flow_t: vec_(vec![]),
         }],
         events: vec![],
+        knots: vec![],
         init: vec![zero; n_states as usize],
         init_p: mat(n_states, n_params, vec![]),
         output_x: mat(k, n_states, vec![]),
@@ -144,6 +146,7 @@ pub fn output_only(
         events: vec![],
         initial_mode: 0,
         quadrature: Vec::new(),
+        knots: Vec::new(),
     };
     (funcs, info)
 }

@@ -40,7 +40,6 @@ impl Ball {
             is_stop: floor_stop,
             has_condition: false,
             implicit: false,
-            kink: false,
             guard: GuardShape::Affine,
             contact: true,
         }];
@@ -53,7 +52,6 @@ impl Ball {
                 is_stop: false,
                 has_condition: true,
                 implicit: false,
-                kink: false,
                 guard: GuardShape::Affine,
                 contact: true,
             });
@@ -69,6 +67,7 @@ impl Ball {
                 events,
                 initial_mode: 0,
                 quadrature: Vec::new(),
+                knots: Vec::new(),
             },
             v0,
             ceiling: ceiling.unwrap_or(0.0),
@@ -187,7 +186,6 @@ impl Thermostat {
             is_stop: false,
             has_condition: false,
             implicit: false,
-            kink: false,
             guard: GuardShape::Affine,
             contact: false,
         };
@@ -204,6 +202,7 @@ impl Thermostat {
                 events: vec![ev("off", Direction::Rising, 1), ev("on", Direction::Falling, 0)],
                 initial_mode: 0,
                 quadrature: Vec::new(),
+                knots: Vec::new(),
             },
             t0,
         }
@@ -299,7 +298,6 @@ impl Counter {
             is_stop: false,
             has_condition: false,
             implicit: false,
-            kink: false,
             guard: GuardShape::Affine,
             contact: false,
         };
@@ -313,6 +311,7 @@ impl Counter {
                 events: vec![ev("A"), ev("B")],
                 initial_mode: 0,
                 quadrature: Vec::new(),
+                knots: Vec::new(),
             },
             x0,
         }
@@ -426,12 +425,12 @@ impl Oscillator {
                     is_stop: false,
                     has_condition: false,
                     implicit: false,
-                    kink: false,
                     guard: GuardShape::Affine,
                     contact: false,
                 }],
                 initial_mode: 0,
                 quadrature: Vec::new(),
+                knots: Vec::new(),
             },
         }
     }

@@ -4,6 +4,7 @@ pub mod cli;
 pub mod expr;
 pub mod hand_functions;
 pub mod hand_systems;
+pub mod knots;
 pub mod measured;
 pub mod models;
 pub mod printed;
