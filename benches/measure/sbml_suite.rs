@@ -103,7 +103,7 @@ fn main() {
     }
     println!("\nreasons (refused and errors):");
     let mut reasons: Vec<_> = reasons.into_iter().collect();
-    reasons.sort_by(|a, b| b.1.cmp(&a.1));
+    reasons.sort_by_key(|r| std::cmp::Reverse(r.1));
     for (r, n) in reasons {
         println!("{n:5}  {r}");
     }

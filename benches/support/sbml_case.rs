@@ -174,6 +174,8 @@ pub fn simulate(import: &hybc::sbml::Import, settings: &Settings, results: &str)
         rtol: 1e-10,
         atol: (settings.absolute * 1e-4).clamp(1e-16, 1e-10),
         at: times.iter().map(|t| t.clamp(settings.start, t_end)).collect(),
+        // Some cases fire an event every hundredth of a time unit for 100 time units.
+        max_events: 1_000_000,
         ..SimOptions::default()
     };
     let run = match compiled.simulate(&model.params(), &opts) {

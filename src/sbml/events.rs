@@ -107,7 +107,7 @@ fn crossings(f: &Math, found: &[Math], want: bool) -> Vec<Crossing> {
             // Crossing onto the atom's inclusive side (`a >= b` rising, `a > b` falling): at the
             // start on a zero guard the atom already has its new value, so SBML compares it
             // with `initialValue` and fires there only through the `_start` event.
-            if matches!(op, Op::Geq | Op::Leq) == rising {
+            if matches!(op, Op::Geq | Op::Leq) == rising && !apart_at_start(&args[0], &args[1]) {
                 let later = Math::Apply(Op::Gt, vec![Math::Time, Math::Num(0.0)], 0);
                 enable = fold(&Math::Apply(Op::And, vec![later, enable], 0));
             }
@@ -115,6 +115,19 @@ fn crossings(f: &Math, found: &[Math], want: bool) -> Vec<Crossing> {
         }
     }
     out
+}
+
+/// Whether `a` and `b` differ at the start whatever the parameters (`t >= 0.99`: no guard on
+/// zero at the start to worry about).
+fn apart_at_start(a: &Math, b: &Math) -> bool {
+    fn at_zero(m: &Math) -> Math {
+        match m {
+            Math::Time => Math::Num(0.0),
+            Math::Apply(op, args, at) => Math::Apply(*op, args.iter().map(at_zero).collect(), *at),
+            other => other.clone(),
+        }
+    }
+    matches!((fold(&at_zero(a)), fold(&at_zero(b))), (Math::Num(x), Math::Num(y)) if x != y)
 }
 
 fn not(m: Math) -> Math {

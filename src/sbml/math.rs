@@ -463,10 +463,10 @@ pub(super) fn fold(m: &Math) -> Math {
                 }
             }
             // Short cuts that keep a truth value exact: `and` with a false, `or` with a true.
-            if *op == Op::And && args.iter().any(|a| *a == Math::Bool(false)) {
+            if *op == Op::And && args.contains(&Math::Bool(false)) {
                 return Math::Bool(false);
             }
-            if *op == Op::Or && args.iter().any(|a| *a == Math::Bool(true)) {
+            if *op == Op::Or && args.contains(&Math::Bool(true)) {
                 return Math::Bool(true);
             }
             if matches!(op, Op::And | Op::Or) {
@@ -486,7 +486,7 @@ pub(super) fn fold(m: &Math) -> Math {
                 let c = fold(c);
                 match value(&c) {
                     Some(Value::B(false)) => continue,
-                    Some(Value::N(x)) if x == 0.0 => continue,
+                    Some(Value::N(0.0)) => continue,
                     Some(_) if kept.is_empty() => return fold(v),
                     Some(_) => {
                         return Math::Piecewise(kept, Some(Box::new(fold(v))));
@@ -584,7 +584,7 @@ fn apply(op: Op, a: &[Value]) -> Option<Value> {
         Implies => b(!truth(a[0]) || truth(a[1])),
         Quotient => n((x(0) / x(1)).trunc()),
         Rem => n(x(0) % x(1)),
-        Max => a.iter().map(|v| num(*v)).reduce(f64::max).and_then(|m| n(m)),
-        Min => a.iter().map(|v| num(*v)).reduce(f64::min).and_then(|m| n(m)),
+        Max => a.iter().map(|v| num(*v)).reduce(f64::max).and_then(&n),
+        Min => a.iter().map(|v| num(*v)).reduce(f64::min).and_then(n),
     }
 }

@@ -257,12 +257,12 @@ pub(super) struct Quantities {
     pub concentration: BTreeMap<String, String>,
 }
 
+/// What a translation gives: the `.hyb` text, where each SBML quantity is read, and the SBML
+/// ids renamed (id, name).
+pub(super) type Translation = (String, Quantities, Vec<(String, String)>);
+
 /// Translates the model; `None` when anything was refused (the refusals are in `out`).
-pub(super) fn translate(
-    xml: &Xml<'_>,
-    sbml: &Sbml<'_, '_>,
-    out: &mut Vec<Refusal>,
-) -> Option<(String, Quantities, Vec<(String, String)>)> {
+pub(super) fn translate(xml: &Xml<'_>, sbml: &Sbml<'_, '_>, out: &mut Vec<Refusal>) -> Option<Translation> {
     let mut ids: Vec<&str> = Vec::new();
     ids.extend(sbml.compartments.iter().map(|c| c.id.as_str()));
     ids.extend(sbml.species.iter().map(|s| s.id.as_str()));
@@ -391,12 +391,12 @@ fn declare(tr: &mut Tr<'_, '_, '_>) {
                 let by_reactions = !s.boundary && !s.constant && changed_by_reactions.contains(id.as_str());
                 if tr.rule.contains_key(id) {
                     Storage::Rule
+                } else if !s.only_substance && !s.constant && varying_compartments.contains(&s.compartment) {
+                    // Its amount changes only by reactions, rate rules or events; its
+                    // concentration also by the compartment's size.
+                    Storage::Amount(tr.names.fresh(&format!("{id}_amount")))
                 } else if tr.rate.contains_key(id) || assigned.contains(id.as_str()) || by_reactions {
-                    if !s.only_substance && varying_compartments.contains(&s.compartment) {
-                        Storage::Amount(tr.names.fresh(&format!("{id}_amount")))
-                    } else {
-                        Storage::State
-                    }
+                    Storage::State
                 } else {
                     match (s.only_substance, s.initial_amount, s.initial_concentration) {
                         (true, Some(v), _) | (false, None, Some(v))
