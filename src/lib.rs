@@ -47,6 +47,7 @@ pub mod periodic;
 #[cfg(feature = "plot")]
 pub mod plot;
 pub mod report;
+pub mod sbml;
 pub mod sema;
 pub mod sim;
 pub mod sobol;
@@ -56,9 +57,9 @@ pub mod sweep;
 pub mod syntax;
 
 pub use api::{
-    check_source, method_named, positive_number, time_span, Compiled, Error, FitFailure, FitRequest,
-    FrontendError, GradCheckRequest, Model, ModelError, OptimizeFailure, OptimizeRequest, OptionError,
-    ParamError, Params, PeriodicRequest, Run, SimOverrides, Simulator, SobolFailure, SobolRequest, Spelling,
-    SweepRequest, VaryPriorError, MAX_MODEL_BYTES,
+    check_source, import_sbml, import_sbml_file, is_sbml_path, method_named, positive_number, time_span,
+    Compiled, Error, FitFailure, FitRequest, FrontendError, GradCheckRequest, ImportError, Model, ModelError,
+    OptimizeFailure, OptimizeRequest, OptionError, ParamError, Params, PeriodicRequest, Run, SimOverrides,
+    Simulator, SobolFailure, SobolRequest, Spelling, SweepRequest, VaryPriorError, MAX_MODEL_BYTES,
 };
 pub use sim::{Method, SimOptions, StopReason, TrajectoryRequest};

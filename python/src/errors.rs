@@ -1,7 +1,8 @@
 //! The exception classes of `hybc` and how the library's errors map onto them.
 //!
-//! - `ModelError` (a `ValueError`): the model text does not parse or check; the message is the
-//!   rendered diagnostic (file:line:column, the line, a caret).
+//! - `ModelError` (a `ValueError`): the model text does not parse or check, or an SBML document
+//!   is refused; the message is the rendered diagnostic (file:line:column, the line, a caret; for
+//!   SBML the element refused).
 //! - `ParameterError` (a `ValueError`): an unknown parameter name, a value outside its declared
 //!   range or not finite, a name given twice.
 //! - `ValueError`: simulation options refused before running (a negative tolerance, ...).
@@ -28,6 +29,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 pub fn to_py(error: hybc::Error) -> PyErr {
     match error {
         hybc::Error::Model(e) => ModelError::new_err(e.rendered),
+        hybc::Error::Import(e) => ModelError::new_err(e.rendered),
         hybc::Error::Param(e) => ParameterError::new_err(e.to_string()),
         hybc::Error::Read { .. } | hybc::Error::TooLarge { .. } => PyOSError::new_err(chain(&error)),
         other => PyValueError::new_err(chain(&other)),

@@ -78,6 +78,12 @@ impl Model {
         py.detach(|| hybc::Model::from_file(&path)).map(Model::wrap).map_err(errors::to_py)
     }
 
+    /// Imports an SBML file (Level 2 or 3) and checks the model it becomes.
+    #[staticmethod]
+    fn from_sbml(py: Python<'_>, path: std::path::PathBuf) -> PyResult<Model> {
+        py.detach(|| hybc::Model::from_sbml_file(&path)).map(Model::wrap).map_err(errors::to_py)
+    }
+
     #[getter]
     fn name(&self) -> &str {
         self.model.name()

@@ -17,6 +17,9 @@ pub enum Error {
     /// The model text has syntax or semantic errors.
     #[error("{0}")]
     Model(#[from] ModelError),
+    /// An SBML document the importer refused (`Model::from_sbml`).
+    #[error("{0}")]
+    Import(#[from] super::ImportError),
     /// A model file could not be read.
     #[error("cannot read `{}`", path.display())]
     Read {

@@ -13,6 +13,7 @@
 mod compiled;
 mod error;
 mod frontend;
+mod import;
 mod model;
 mod options;
 mod params;
@@ -23,6 +24,7 @@ mod summary;
 pub use compiled::{Compiled, Simulator};
 pub use error::{Error, ModelError, ParamError};
 pub use frontend::{check_source, FrontendError};
+pub use import::{import_sbml, import_sbml_file, is_sbml_path, ImportError};
 pub use model::{Model, MAX_MODEL_BYTES};
 pub use options::{method_named, positive_number, time_span, OptionError, SimOverrides, Spelling};
 pub use params::Params;

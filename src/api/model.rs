@@ -1,6 +1,5 @@
 //! A checked model: parsed, names resolved, ready to compile.
 
-use std::io::Read as _;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -52,16 +51,14 @@ impl Model {
 
     /// Reads (at most [`MAX_MODEL_BYTES`]), parses and checks a model file; diagnostics name the
     /// path as given. Bytes that are not UTF-8 are replaced (and then reported where they stand).
+    /// A path ending in `.xml` or `.sbml` is an SBML document, imported first
+    /// ([`Self::from_sbml_file`]).
     pub fn from_file(path: impl AsRef<Path>) -> Result<Model, Error> {
         let path = path.as_ref();
-        let read_error = |source| Error::Read { path: path.to_path_buf(), source };
-        let file = std::fs::File::open(path).map_err(read_error)?;
-        let mut bytes = Vec::new();
-        file.take(MAX_MODEL_BYTES + 1).read_to_end(&mut bytes).map_err(read_error)?;
-        if bytes.len() as u64 > MAX_MODEL_BYTES {
-            return Err(Error::TooLarge { path: path.to_path_buf(), limit: MAX_MODEL_BYTES });
+        if super::import::is_sbml_path(path) {
+            return Model::from_sbml_file(path);
         }
-        Model::parse_named(&String::from_utf8_lossy(&bytes), &path.display().to_string())
+        Model::parse_named(&super::import::read_text(path)?, &path.display().to_string())
     }
 
     /// The model's name (`model NAME`).

@@ -4,6 +4,7 @@
 mod check;
 mod derive;
 mod fit;
+mod import;
 mod optimize;
 mod options;
 mod output;
@@ -33,6 +34,8 @@ struct Cli {
 enum Command {
     /// Check a model and print a summary of it.
     Check(check::CheckArgs),
+    /// Translate an SBML model (Level 2 or 3) into a readable .hyb model.
+    Import(import::ImportArgs),
     /// Print the symbolic derivatives of every model function.
     Derive(derive::DeriveArgs),
     /// Simulate a model; report events, final state, outputs and their gradients.
@@ -77,6 +80,7 @@ pub fn main() -> ExitCode {
     };
     match cli.command {
         Command::Check(args) => check::run(&args),
+        Command::Import(args) => import::run(&args),
         Command::Derive(args) => derive::run(&args),
         Command::Run(args) => run::run(&args),
         Command::Fit(args) => fit::run(&args),
@@ -93,6 +97,10 @@ pub(crate) fn load_model(path: &Path) -> Result<crate::Model, ExitCode> {
     match crate::Model::from_file(path) {
         Ok(model) => Ok(model),
         Err(crate::Error::Model(e)) => {
+            eprint!("{e}");
+            Err(ExitCode::from(EXIT_MODEL_ERROR))
+        }
+        Err(crate::Error::Import(e)) => {
             eprint!("{e}");
             Err(ExitCode::from(EXIT_MODEL_ERROR))
         }
@@ -124,7 +132,7 @@ pub(crate) fn compile_model(model: &crate::Model, grad: &[ParamIdx]) -> Result<c
 
 #[derive(Debug, Clone, clap::Args)]
 pub(crate) struct ModelArg {
-    /// The model file (.hyb).
+    /// The model file (.hyb, or SBML as .xml or .sbml).
     pub file: PathBuf,
 }
 

@@ -44,6 +44,7 @@ mod quadrature;
 mod relations;
 mod run_gradients;
 mod samples;
+mod sbml;
 mod sim_ball;
 mod sim_events;
 mod sobol;
