@@ -170,6 +170,7 @@ fn block(lines: &[String]) -> String {
 /// The hybc events of the model's SBML events.
 pub(super) fn events(tr: &mut Tr<'_, '_, '_>) -> Option<Translated> {
     let sbml = tr.sbml;
+    super::order::refuse_random_order(tr);
     let mut order: Vec<(usize, Option<f64>)> = Vec::new();
     for (i, e) in sbml.events.iter().enumerate() {
         let priority = match &e.priority {

@@ -327,3 +327,65 @@ fn hostile_documents_are_refused_without_a_panic() {
     // Some mutations leave a valid document (in a comment, a name): both sides are exercised.
     assert!(imported > 0);
 }
+
+/// Two events on `x >= 1` (x = t), with priorities `p1`, `p2`, assigning `a1 := v1`, `a2 := v2`.
+fn two_events(p1: f64, a1: &str, v1: &str, p2: f64, a2: &str, v2: &str) -> String {
+    let event = |id: &str, p: f64, a: &str, v: &str| {
+        format!(
+            r#"      <event id="{id}" useValuesFromTriggerTime="true">
+        <trigger initialValue="true" persistent="true">{}</trigger>
+        <priority>{}</priority>
+        <listOfEventAssignments><eventAssignment variable="{a}">{}</eventAssignment></listOfEventAssignments>
+      </event>"#,
+            math("<apply><geq/><ci>x</ci><cn>1</cn></apply>"),
+            math(&format!("<cn>{p}</cn>")),
+            math(v)
+        )
+    };
+    doc(&format!(
+        r#"    <listOfParameters>
+      <parameter id="x" value="0" constant="false"/>
+      <parameter id="a" value="0" constant="false"/>
+      <parameter id="b" value="0" constant="false"/>
+      <parameter id="s" constant="false"/>
+    </listOfParameters>
+    <listOfRules>
+      <rateRule variable="x">{}</rateRule>
+      <assignmentRule variable="s">{}</assignmentRule>
+    </listOfRules>
+    <listOfEvents>
+{}
+{}
+    </listOfEvents>"#,
+        math("<cn>1</cn>"),
+        math("<apply><plus/><ci>a</ci><cn>10</cn></apply>"),
+        event("e1", p1, a1, v1),
+        event("e2", p2, a2, v2)
+    ))
+}
+
+#[test]
+fn events_whose_order_is_random_in_sbml_are_refused() {
+    let num = |v: f64| format!("<cn>{v}</cn>");
+    // Equal priorities, and the second reads (through the rule `s = a + 10`) what the first
+    // assigns: SBML's order is random, and so is b. Refused at the second event's priority.
+    let xml = two_events(1.0, "a", &num(5.0), 1.0, "b", "<ci>s</ci>");
+    let err = hybc::sbml::import(&xml).unwrap_err();
+    assert_eq!(err.refusals.len(), 1, "{:?}", err.refusals);
+    let r = &err.refusals[0];
+    assert!(r.reason.contains("`e1` and `e2` have the same priority (1)"), "{}", r.reason);
+    assert!(r.reason.contains("random order"), "{}", r.reason);
+    assert_eq!(r.element, "<priority>");
+    assert_eq!(&xml[r.offset..r.offset + 10], "<priority>");
+    // Equal priorities assigning one symbol: the last one's value would win at random.
+    let err = hybc::sbml::import(&two_events(2.0, "a", &num(5.0), 2.0, "a", &num(6.0))).unwrap_err();
+    assert!(err.refusals[0].reason.contains("random order"), "{:?}", err.refusals);
+    // The other side. Equal priorities, independent assignments: any order gives a = 5, b = 7.
+    let xml = two_events(1.0, "a", &num(5.0), 1.0, "b", &num(7.0));
+    assert_eq!(final_value(&xml, 2.0, "a"), 5.0);
+    assert_eq!(final_value(&xml, 2.0, "b"), 7.0);
+    // Different priorities that interact: SBML's order is fixed, the higher first, so e2 (2)
+    // reads a = 0 before e1 (1) sets it: b = s = 10. With e1 higher, b = 15.
+    assert_eq!(final_value(&two_events(1.0, "a", &num(5.0), 2.0, "b", "<ci>s</ci>"), 2.0, "b"), 10.0);
+    assert_eq!(final_value(&two_events(2.0, "a", &num(5.0), 1.0, "b", "<ci>s</ci>"), 2.0, "b"), 15.0);
+}
