@@ -208,18 +208,16 @@ pub(super) fn events(tr: &mut Tr<'_, '_, '_>) -> Option<Translated> {
             None => tr.names.fresh("event"),
         };
         // Each assignment: its target's name, its value, and (a concentration kept as an
-        // amount) the compartment size it is multiplied by after the event.
+        // amount) the compartment size it is multiplied by.
         let mut assigns: Vec<(String, Math, Option<Math>, roxmltree::Node<'_, '_>)> = Vec::new();
         for a in &e.assignments {
             let Some(sym) = tr.syms.get(&a.variable) else { continue };
             match (&sym.storage, sym.kind) {
                 (Storage::Amount(amount), Kind::Species(k)) => {
-                    let c = &sbml.species[k].compartment;
-                    let size = e
-                        .assignments
-                        .iter()
-                        .find(|b| &b.variable == c)
-                        .map_or(Math::Ci(c.clone()), |b| b.math.clone());
+                    // The amount is the value times the compartment's size before the event,
+                    // even where the same event sets the size: SBML computes every assignment
+                    // on the state before any (the suite's 01506, 01779, 01780).
+                    let size = Math::Ci(sbml.species[k].compartment.clone());
                     assigns.push((amount.clone(), a.math.clone(), Some(size), a.node));
                 }
                 _ => assigns.push((sym.name.clone(), a.math.clone(), None, a.node)),
