@@ -31,7 +31,7 @@ fn strip(m: &Math) -> Math {
 }
 
 /// The comparisons a trigger is built from, or why it cannot be split into crossings.
-fn atoms(m: &Math, out: &mut Vec<Math>) -> Result<(), String> {
+pub(super) fn atoms(m: &Math, out: &mut Vec<Math>) -> Result<(), String> {
     match m {
         Math::Bool(_) => Ok(()),
         Math::Apply(Op::And | Op::Or | Op::Not | Op::Xor | Op::Implies, args, _) => {
@@ -194,6 +194,7 @@ pub(super) fn events(tr: &mut Tr<'_, '_, '_>) -> Option<Translated> {
         (None, Some(_)) => std::cmp::Ordering::Greater,
         (None, None) => std::cmp::Ordering::Equal,
     });
+    super::order::refuse_sequential(tr, &order);
     let mut out = Translated { events: Vec::new(), states: Vec::new(), ders: Vec::new() };
     for (i, _) in order {
         let e = &sbml.events[i];

@@ -1,16 +1,25 @@
-//! Random event order, refused. SBML executes events of equal priority that fire at one instant
-//! in random order (Level 3, "priorities"); hybc fires them in one fixed order. The order matters
-//! only where one event changes what the other reads (its trigger, its assignments' values, its
-//! delay) or assigns: then the fixed order is one draw of SBML's distribution and the simulation
-//! is not SBML's. The rule, static and conservative: two events with equal constant priorities,
-//! either of which assigns a symbol the other reads or assigns (reads followed through assignment
-//! rules, reactions' rates and a concentration's compartment), are refused at the second's
+//! Simultaneous events whose order SBML and hybc see differently, refused.
+//!
+//! Random order. SBML executes events of equal priority that fire at one instant in random order
+//! (Level 3, "priorities"); hybc fires them in one fixed order. The order matters only where one
+//! event changes what the other reads (its trigger, its assignments' values, its delay) or
+//! assigns: then the fixed order is one draw of SBML's distribution and the simulation is not
+//! SBML's. The rule, static and conservative: two events with equal constant priorities, either
+//! of which assigns a symbol the other reads or assigns (reads followed through assignment rules,
+//! reactions' rates and a concentration's compartment), are refused at the second's
 //! `<priority>`. Whether their triggers can hold at one instant is not decided: events of equal
-//! priority are written to compete, and a pair that cannot is rare (none in the suite).
+//! priority are written to compete.
+//!
+//! Judged at the trigger. SBML decides which events fire at an instant, and computes the values
+//! of those that use trigger-time values, on the state before any executes; a persistent one
+//! executes though an earlier one turned its trigger false. hybc judges each event on the state
+//! the ones before it left. Where an earlier event that can fire with a later one (a shared
+//! comparison in their triggers, or both firing at the start) changes the later one's values or
+//! may turn its persistent trigger false, the later one is refused at its `<trigger>`.
 
 use std::collections::{HashMap, HashSet};
 
-use super::math::{fold, Math};
+use super::math::{fold, substitute, Math};
 use super::read::{Event, Sbml};
 use super::translate::Tr;
 
@@ -52,24 +61,8 @@ fn sources<'s>(sbml: &'s Sbml<'_, '_>) -> HashMap<&'s str, Vec<String>> {
 
 /// Every id the event reads, through the symbols computed from others.
 fn reads(e: &Event<'_, '_>, sources: &HashMap<&str, Vec<String>>) -> HashSet<String> {
-    let mut todo = Vec::new();
-    names(&e.trigger, &mut todo);
-    for a in &e.assignments {
-        names(&a.math, &mut todo);
-    }
-    if let Some((_, d)) = &e.delay {
-        names(d, &mut todo);
-    }
-    let mut seen = HashSet::new();
-    while let Some(id) = todo.pop() {
-        if let Some(more) = sources.get(id.as_str()) {
-            if !seen.contains(&id) {
-                todo.extend(more.iter().cloned());
-            }
-        }
-        seen.insert(id);
-    }
-    seen
+    let values = e.assignments.iter().map(|a| &a.math);
+    closure(std::iter::once(&e.trigger).chain(values).chain(e.delay.as_ref().map(|(_, d)| d)), sources)
 }
 
 /// Refuses each pair of events whose equal constant priorities leave SBML's order random and
@@ -109,6 +102,83 @@ pub(super) fn refuse_random_order(tr: &mut Tr<'_, '_, '_>) {
                     "{} and {} have the same priority ({p}) and one assigns what the other reads or assigns: SBML executes them in random order when they fire together, hybc in one fixed order",
                     name(first),
                     name(e)
+                ),
+            );
+        }
+    }
+}
+
+/// Whether `a` and `b` can fire at one instant: their triggers turn true at the crossing of one
+/// comparison, or both fire at the start (`initialValue="false"`).
+fn together(a: &Event<'_, '_>, b: &Event<'_, '_>) -> bool {
+    let (mut x, mut y) = (Vec::new(), Vec::new());
+    if super::events::atoms(&a.trigger, &mut x).is_err() || super::events::atoms(&b.trigger, &mut y).is_err()
+    {
+        return false;
+    }
+    (!a.initial_value && !b.initial_value) || x.iter().any(|m| y.contains(m))
+}
+
+/// The ids `ms` read, through the symbols computed from others.
+fn closure<'m>(ms: impl Iterator<Item = &'m Math>, sources: &HashMap<&str, Vec<String>>) -> HashSet<String> {
+    let mut ids = Vec::new();
+    ms.for_each(|m| names(m, &mut ids));
+    let mut seen = HashSet::new();
+    while let Some(id) = ids.pop() {
+        if let Some(more) = sources.get(id.as_str()) {
+            if !seen.contains(&id) {
+                ids.extend(more.iter().cloned());
+            }
+        }
+        seen.insert(id);
+    }
+    seen
+}
+
+/// Whether `first`, executed before `later` at one instant, changes what SBML fixes when
+/// `later` fires and hybc reads later, on the state `first` left: `later`'s values if computed
+/// at the trigger time, its trigger's truth if persistent (SBML executes it though `first` turned
+/// it false). A persistent trigger that `first`'s constant values leave true is unchanged.
+fn disturbs(first: &Event<'_, '_>, later: &Event<'_, '_>, sources: &HashMap<&str, Vec<String>>) -> bool {
+    let writes = |ids: &HashSet<String>| first.assignments.iter().any(|a| ids.contains(&a.variable));
+    if later.use_trigger_values && writes(&closure(later.assignments.iter().map(|a| &a.math), sources)) {
+        return true;
+    }
+    if later.persistent && writes(&closure(std::iter::once(&later.trigger), sources)) {
+        let bound: HashMap<&str, &Math> =
+            first.assignments.iter().map(|a| (a.variable.as_str(), &a.math)).collect();
+        return fold(&substitute(&later.trigger, &bound)) != Math::Bool(true);
+    }
+    false
+}
+
+/// Refuses an event that fires with an earlier one (in hybc's order, `order`) that disturbs it
+/// ([`disturbs`]): SBML judges all the events that fire at one instant on the state before any
+/// executes, hybc each on the state the ones before it left (the suite's 00935, 01330, 01333,
+/// 01337). Non-persistent triggers and values computed at execution are judged alike by both.
+pub(super) fn refuse_sequential(tr: &mut Tr<'_, '_, '_>, order: &[(usize, Option<f64>)]) {
+    let sbml = tr.sbml;
+    let sources = sources(sbml);
+    for (k, &(j, _)) in order.iter().enumerate() {
+        let later = &sbml.events[j];
+        if later.delay.is_some() {
+            continue;
+        }
+        let earlier = order[..k]
+            .iter()
+            .map(|&(i, _)| &sbml.events[i])
+            .find(|e| e.delay.is_none() && together(e, later) && disturbs(e, later, &sources));
+        if let Some(first) = earlier {
+            let name = |e: &Event<'_, '_>| {
+                e.id.clone().map_or_else(|| "an event".to_string(), |id| format!("`{id}`"))
+            };
+            tr.refuse(
+                later.trigger_node,
+                format!(
+                    "{} fires with {} and executes after it, which changes what {} fixes when it fires (a persistent trigger's truth or values from the trigger time): SBML judges both on the state before either executes, hybc the second on the state the first left",
+                    name(later),
+                    name(first),
+                    name(later)
                 ),
             );
         }

@@ -371,11 +371,10 @@ fn events_whose_order_is_random_in_sbml_are_refused() {
     // assigns: SBML's order is random, and so is b. Refused at the second event's priority.
     let xml = two_events(1.0, "a", &num(5.0), 1.0, "b", "<ci>s</ci>");
     let err = hybc::sbml::import(&xml).unwrap_err();
-    assert_eq!(err.refusals.len(), 1, "{:?}", err.refusals);
-    let r = &err.refusals[0];
+    // (e2's value from the trigger time is refused too: the test below.)
+    let r = err.refusals.iter().find(|r| r.element == "<priority>").expect("a refusal at <priority>");
     assert!(r.reason.contains("`e1` and `e2` have the same priority (1)"), "{}", r.reason);
     assert!(r.reason.contains("random order"), "{}", r.reason);
-    assert_eq!(r.element, "<priority>");
     assert_eq!(&xml[r.offset..r.offset + 10], "<priority>");
     // Equal priorities assigning one symbol: the last one's value would win at random.
     let err = hybc::sbml::import(&two_events(2.0, "a", &num(5.0), 2.0, "a", &num(6.0))).unwrap_err();
@@ -385,7 +384,28 @@ fn events_whose_order_is_random_in_sbml_are_refused() {
     assert_eq!(final_value(&xml, 2.0, "a"), 5.0);
     assert_eq!(final_value(&xml, 2.0, "b"), 7.0);
     // Different priorities that interact: SBML's order is fixed, the higher first, so e2 (2)
-    // reads a = 0 before e1 (1) sets it: b = s = 10. With e1 higher, b = 15.
+    // reads a = 0 before e1 (1) sets it: b = s = 10.
     assert_eq!(final_value(&two_events(1.0, "a", &num(5.0), 2.0, "b", "<ci>s</ci>"), 2.0, "b"), 10.0);
-    assert_eq!(final_value(&two_events(2.0, "a", &num(5.0), 1.0, "b", "<ci>s</ci>"), 2.0, "b"), 15.0);
+}
+
+#[test]
+fn simultaneous_events_judged_at_the_trigger_are_refused_where_hybc_would_not() {
+    let num = |v: f64| format!("<cn>{v}</cn>");
+    // e1 (priority 2) sets a before e2 executes; e2's value, from the trigger time, is s = 0 + 10
+    // in SBML, 15 on the state e1 left: refused at e2's trigger.
+    let xml = two_events(2.0, "a", &num(5.0), 1.0, "b", "<ci>s</ci>");
+    let err = hybc::sbml::import(&xml).unwrap_err();
+    assert_eq!(err.refusals.len(), 1, "{:?}", err.refusals);
+    let r = &err.refusals[0];
+    assert!(r.reason.starts_with("`e2` fires with `e1` and executes after it"), "{}", r.reason);
+    assert_eq!(r.element, "<trigger>");
+    // e1 turns e2's persistent trigger `x >= 1` false (x := 0): SBML still executes e2, hybc
+    // would not. Refused.
+    let err = hybc::sbml::import(&two_events(2.0, "x", &num(0.0), 1.0, "b", &num(7.0))).unwrap_err();
+    assert!(err.refusals[0].reason.contains("persistent"), "{:?}", err.refusals);
+    // The other side: e1 leaves e2's trigger true (x := 3): both execute, b = 7, x = 3 then
+    // grows again (x = t - 1 + 3 at t = 2: 4).
+    let xml = two_events(2.0, "x", &num(3.0), 1.0, "b", &num(7.0));
+    assert_eq!(final_value(&xml, 2.0, "b"), 7.0);
+    assert!((final_value(&xml, 2.0, "x") - 4.0).abs() < 1e-9);
 }
