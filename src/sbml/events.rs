@@ -130,6 +130,32 @@ fn apart_at_start(a: &Math, b: &Math) -> bool {
     matches!((fold(&at_zero(a)), fold(&at_zero(b))), (Math::Num(x), Math::Num(y)) if x != y)
 }
 
+/// The symbols whose assignment rules jump, directly or through other rules: a guard that reads
+/// one is not continuous (the suite's 00936: `S1 = piecewise(sin(10 t), t < 2, 1)`).
+fn jumping_rules(sbml: &super::read::Sbml<'_, '_>) -> std::collections::HashSet<String> {
+    let mut out = std::collections::HashSet::new();
+    loop {
+        let before = out.len();
+        for r in &sbml.assignment_rules {
+            let mut ids = Vec::new();
+            super::order::names(&r.math, &mut ids);
+            if has_jump(&r.math) || ids.iter().any(|id| out.contains(id)) {
+                out.insert(r.variable.clone());
+            }
+        }
+        if out.len() == before {
+            return out;
+        }
+    }
+}
+
+/// The first symbol `atom` reads whose assignment rule jumps.
+fn reads_jump(atom: &Math, jumps: &std::collections::HashSet<String>) -> Option<String> {
+    let mut ids = Vec::new();
+    super::order::names(atom, &mut ids);
+    ids.into_iter().find(|id| jumps.contains(id))
+}
+
 fn not(m: Math) -> Math {
     fold(&Math::Apply(Op::Not, vec![m], 0))
 }
@@ -195,6 +221,8 @@ pub(super) fn events(tr: &mut Tr<'_, '_, '_>) -> Option<Translated> {
         (None, None) => std::cmp::Ordering::Equal,
     });
     super::order::refuse_sequential(tr, &order);
+    super::order::refuse_retrigger(tr);
+    let jumps = jumping_rules(sbml);
     let mut out = Translated { events: Vec::new(), states: Vec::new(), ders: Vec::new() };
     for (i, _) in order {
         let e = &sbml.events[i];
@@ -202,6 +230,10 @@ pub(super) fn events(tr: &mut Tr<'_, '_, '_>) -> Option<Translated> {
         let mut found = Vec::new();
         if let Err(reason) = atoms(&e.trigger, &mut found) {
             tr.refuse(node, reason);
+            continue;
+        }
+        if let Some(id) = found.iter().find_map(|a| reads_jump(a, &jumps)) {
+            tr.refuse(node, format!("a trigger compares `{id}`, whose assignment rule jumps (a piecewise or a truth value): hybc's guards are continuous"));
             continue;
         }
         let base = match &e.id {

@@ -16,6 +16,11 @@
 //! the ones before it left. Where an earlier event that can fire with a later one (a shared
 //! comparison in their triggers, or both firing at the start) changes the later one's values or
 //! may turn its persistent trigger false, the later one is refused at its `<trigger>`.
+//!
+//! Fired again. SBML judges every trigger again after each execution at an instant, so a trigger
+//! that events firing together set back and forth fires at each turn to true; hybc judges a
+//! guard's crossing once. A trigger reading what two events that can fire together both assign
+//! is refused.
 
 use std::collections::{HashMap, HashSet};
 
@@ -24,7 +29,7 @@ use super::read::{Event, Sbml};
 use super::translate::Tr;
 
 /// The SBML ids `m` reads directly.
-fn names(m: &Math, out: &mut Vec<String>) {
+pub(super) fn names(m: &Math, out: &mut Vec<String>) {
     match m {
         Math::Ci(id) | Math::RateOf(id) => out.push(id.clone()),
         Math::Apply(_, args, _) | Math::Call(_, args, _) => args.iter().for_each(|a| names(a, out)),
@@ -179,6 +184,40 @@ pub(super) fn refuse_sequential(tr: &mut Tr<'_, '_, '_>, order: &[(usize, Option
                     name(later),
                     name(first),
                     name(later)
+                ),
+            );
+        }
+    }
+}
+
+/// Refuses an event whose trigger reads a symbol that two other events, firing together, both
+/// assign: SBML judges the trigger again after each execution, so at one instant it can turn
+/// true, false and true again and execute several times (the suite's 00978); hybc judges it on
+/// the guard's crossing, once.
+pub(super) fn refuse_retrigger(tr: &mut Tr<'_, '_, '_>) {
+    let sbml = tr.sbml;
+    let sources = sources(sbml);
+    for e in &sbml.events {
+        let read = closure(std::iter::once(&e.trigger), &sources);
+        let setters: Vec<&Event<'_, '_>> = sbml
+            .events
+            .iter()
+            .filter(|f| !std::ptr::eq(*f, e) && f.assignments.iter().any(|a| read.contains(&a.variable)))
+            .collect();
+        let pair = setters
+            .iter()
+            .enumerate()
+            .find_map(|(k, a)| setters[k + 1..].iter().find(|b| together(a, b)).map(|b| (*a, *b)));
+        if let Some((a, b)) = pair {
+            let name = |e: &Event<'_, '_>| {
+                e.id.clone().map_or_else(|| "an event".to_string(), |id| format!("`{id}`"))
+            };
+            tr.refuse(
+                e.trigger_node,
+                format!(
+                    "this trigger reads what {} and {} both assign when they fire together: SBML judges it after each, so it can fire more than once at that instant; hybc judges it once",
+                    name(a),
+                    name(b)
                 ),
             );
         }

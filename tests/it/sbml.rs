@@ -409,3 +409,83 @@ fn simultaneous_events_judged_at_the_trigger_are_refused_where_hybc_would_not() 
     assert_eq!(final_value(&xml, 2.0, "b"), 7.0);
     assert!((final_value(&xml, 2.0, "x") - 4.0).abs() < 1e-9);
 }
+
+/// Events `(id, trigger, variable, value)`, with x' = 1 from 0 and an assignment rule
+/// `s = RULE`, no priorities, persistent, initialValue true.
+fn events_doc(rule: &str, events: &[(&str, String, &str, String)]) -> String {
+    let list: Vec<String> = events
+        .iter()
+        .map(|(id, trigger, var, value)| {
+            format!(
+                r#"      <event id="{id}" useValuesFromTriggerTime="true">
+        <trigger initialValue="true" persistent="true">{}</trigger>
+        <listOfEventAssignments><eventAssignment variable="{var}">{}</eventAssignment></listOfEventAssignments>
+      </event>"#,
+                math(trigger),
+                math(value)
+            )
+        })
+        .collect();
+    doc(&format!(
+        r#"    <listOfParameters>
+      <parameter id="x" value="0" constant="false"/>
+      <parameter id="m" value="0" constant="false"/>
+      <parameter id="n" value="0" constant="false"/>
+      <parameter id="s" constant="false"/>
+    </listOfParameters>
+    <listOfRules>
+      <rateRule variable="x">{}</rateRule>
+      <assignmentRule variable="s">{}</assignmentRule>
+    </listOfRules>
+    <listOfEvents>
+{}
+    </listOfEvents>"#,
+        math("<cn>1</cn>"),
+        math(rule),
+        list.join("\n")
+    ))
+}
+
+#[test]
+fn a_trigger_that_can_fire_twice_at_one_instant_is_refused() {
+    let at_x1 = "<apply><geq/><ci>x</ci><cn>1</cn></apply>".to_string();
+    let m_gt_1 = "<apply><gt/><ci>m</ci><cn>1</cn></apply>".to_string();
+    let n_plus_1 = "<apply><plus/><ci>n</ci><cn>1</cn></apply>".to_string();
+    let rule = "<ci>x</ci>";
+    // `on` and `off` both set m at x = 1: SBML judges `m > 1` after each (and would fire `count`
+    // once per turn to true); hybc once. Refused at `count`'s trigger.
+    let xml = events_doc(
+        rule,
+        &[
+            ("on", at_x1.clone(), "m", "<cn>2</cn>".into()),
+            ("off", at_x1.clone(), "m", "<cn>0</cn>".into()),
+            ("count", m_gt_1.clone(), "n", n_plus_1.clone()),
+        ],
+    );
+    let err = hybc::sbml::import(&xml).unwrap_err();
+    assert_eq!(err.refusals.len(), 1, "{:?}", err.refusals);
+    assert!(err.refusals[0].reason.contains("`on` and `off` both assign"), "{:?}", err.refusals);
+    assert_eq!(err.refusals[0].element, "<trigger>");
+    // The other side: one event sets m, `count` fires once, in SBML as in hybc.
+    let xml = events_doc(rule, &[("on", at_x1, "m", "<cn>2</cn>".into()), ("count", m_gt_1, "n", n_plus_1)]);
+    assert_eq!(final_value(&xml, 2.0, "n"), 1.0);
+}
+
+#[test]
+fn a_trigger_reading_a_rule_that_jumps_is_refused_at_import() {
+    let s_lt_0 = "<apply><lt/><ci>s</ci><cn>0</cn></apply>".to_string();
+    let s_gt_1 = "<apply><gt/><ci>s</ci><cn>1</cn></apply>".to_string();
+    let n_plus_1 = "<apply><plus/><ci>n</ci><cn>1</cn></apply>".to_string();
+    // s = piecewise(x - 0.5, x < 2, 1): the suite's 00936. Refused at import, not at the check.
+    let jump = "<piecewise><piece><apply><minus/><ci>x</ci><cn>0.5</cn></apply><apply><lt/><ci>x</ci><cn>2</cn></apply></piece><otherwise><cn>1</cn></otherwise></piecewise>";
+    let err = hybc::sbml::import(&events_doc(jump, &[("e", s_lt_0, "n", n_plus_1.clone())])).unwrap_err();
+    assert_eq!(err.refusals.len(), 1, "{:?}", err.refusals);
+    assert!(
+        err.refusals[0].reason.contains("compares `s`, whose assignment rule jumps"),
+        "{:?}",
+        err.refusals
+    );
+    // The other side: a continuous rule s = 2 x, crossing 1 at x = 0.5, once.
+    let xml = events_doc("<apply><times/><cn>2</cn><ci>x</ci></apply>", &[("e", s_gt_1, "n", n_plus_1)]);
+    assert_eq!(final_value(&xml, 2.0, "n"), 1.0);
+}
