@@ -16,7 +16,7 @@ from . import _hybc
 class Model:
     """A hybrid model parsed and checked from `.hyb` text.
 
-    ``Model(text)`` or ``Model.from_file(path)``; a bad model raises :class:`hybc.ModelError`
+    ``Model(text)``, ``Model.from_file(path)`` or ``Model.from_sbml(path)``; a bad model raises :class:`hybc.ModelError`
     whose message is the rendered diagnostic (file:line:column, the line and a caret).
     Compiling happens at the first run with a given gradient set and is cached.
     """
@@ -31,6 +31,17 @@ class Model:
         """Reads, parses and checks a model file (diagnostics name the path as given)."""
         model = cls.__new__(cls)
         model._native = _hybc.Model.from_file(os.fspath(path))
+        return model
+
+    @classmethod
+    def from_sbml(cls, path: str | os.PathLike[str]) -> "Model":
+        """Imports an SBML file (Level 2 or 3) and checks the `.hyb` model it becomes (docs/sbml.md).
+
+        What the importer refuses raises :class:`hybc.ModelError` naming each element at the
+        path's line and column, with the reason.
+        """
+        model = cls.__new__(cls)
+        model._native = _hybc.Model.from_sbml(os.fspath(path))
         return model
 
     # Pickled as its text, so that Dask workers (and multiprocessing) rebuild it; each process

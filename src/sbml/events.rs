@@ -31,7 +31,7 @@ fn strip(m: &Math) -> Math {
 }
 
 /// The comparisons a trigger is built from, or why it cannot be split into crossings.
-fn atoms(m: &Math, out: &mut Vec<Math>) -> Result<(), String> {
+pub(super) fn atoms(m: &Math, out: &mut Vec<Math>) -> Result<(), String> {
     match m {
         Math::Bool(_) => Ok(()),
         Math::Apply(Op::And | Op::Or | Op::Not | Op::Xor | Op::Implies, args, _) => {
@@ -130,6 +130,32 @@ fn apart_at_start(a: &Math, b: &Math) -> bool {
     matches!((fold(&at_zero(a)), fold(&at_zero(b))), (Math::Num(x), Math::Num(y)) if x != y)
 }
 
+/// The symbols whose assignment rules jump, directly or through other rules: a guard that reads
+/// one is not continuous (the suite's 00936: `S1 = piecewise(sin(10 t), t < 2, 1)`).
+fn jumping_rules(sbml: &super::read::Sbml<'_, '_>) -> std::collections::HashSet<String> {
+    let mut out = std::collections::HashSet::new();
+    loop {
+        let before = out.len();
+        for r in &sbml.assignment_rules {
+            let mut ids = Vec::new();
+            super::order::names(&r.math, &mut ids);
+            if has_jump(&r.math) || ids.iter().any(|id| out.contains(id)) {
+                out.insert(r.variable.clone());
+            }
+        }
+        if out.len() == before {
+            return out;
+        }
+    }
+}
+
+/// The first symbol `atom` reads whose assignment rule jumps.
+fn reads_jump(atom: &Math, jumps: &std::collections::HashSet<String>) -> Option<String> {
+    let mut ids = Vec::new();
+    super::order::names(atom, &mut ids);
+    ids.into_iter().find(|id| jumps.contains(id))
+}
+
 fn not(m: Math) -> Math {
     fold(&Math::Apply(Op::Not, vec![m], 0))
 }
@@ -170,6 +196,7 @@ fn block(lines: &[String]) -> String {
 /// The hybc events of the model's SBML events.
 pub(super) fn events(tr: &mut Tr<'_, '_, '_>) -> Option<Translated> {
     let sbml = tr.sbml;
+    super::order::refuse_random_order(tr);
     let mut order: Vec<(usize, Option<f64>)> = Vec::new();
     for (i, e) in sbml.events.iter().enumerate() {
         let priority = match &e.priority {
@@ -193,6 +220,9 @@ pub(super) fn events(tr: &mut Tr<'_, '_, '_>) -> Option<Translated> {
         (None, Some(_)) => std::cmp::Ordering::Greater,
         (None, None) => std::cmp::Ordering::Equal,
     });
+    super::order::refuse_sequential(tr, &order);
+    super::order::refuse_retrigger(tr);
+    let jumps = jumping_rules(sbml);
     let mut out = Translated { events: Vec::new(), states: Vec::new(), ders: Vec::new() };
     for (i, _) in order {
         let e = &sbml.events[i];
@@ -202,23 +232,25 @@ pub(super) fn events(tr: &mut Tr<'_, '_, '_>) -> Option<Translated> {
             tr.refuse(node, reason);
             continue;
         }
+        if let Some(id) = found.iter().find_map(|a| reads_jump(a, &jumps)) {
+            tr.refuse(node, format!("a trigger compares `{id}`, whose assignment rule jumps (a piecewise or a truth value): hybc's guards are continuous"));
+            continue;
+        }
         let base = match &e.id {
             Some(id) => tr.names.sbml(id),
             None => tr.names.fresh("event"),
         };
         // Each assignment: its target's name, its value, and (a concentration kept as an
-        // amount) the compartment size it is multiplied by after the event.
+        // amount) the compartment size it is multiplied by.
         let mut assigns: Vec<(String, Math, Option<Math>, roxmltree::Node<'_, '_>)> = Vec::new();
         for a in &e.assignments {
             let Some(sym) = tr.syms.get(&a.variable) else { continue };
             match (&sym.storage, sym.kind) {
                 (Storage::Amount(amount), Kind::Species(k)) => {
-                    let c = &sbml.species[k].compartment;
-                    let size = e
-                        .assignments
-                        .iter()
-                        .find(|b| &b.variable == c)
-                        .map_or(Math::Ci(c.clone()), |b| b.math.clone());
+                    // The amount is the value times the compartment's size before the event,
+                    // even where the same event sets the size: SBML computes every assignment
+                    // on the state before any (the suite's 01506, 01779, 01780).
+                    let size = Math::Ci(sbml.species[k].compartment.clone());
                     assigns.push((amount.clone(), a.math.clone(), Some(size), a.node));
                 }
                 _ => assigns.push((sym.name.clone(), a.math.clone(), None, a.node)),

@@ -8,13 +8,15 @@
 //! ```text
 //! xml.rs (roxmltree, positions) -> read.rs (SBML elements -> Sbml; math.rs: MathML -> Math,
 //!   function definitions inlined, constants folded) -> translate.rs (storages, flows, initial
-//!   values; events.rs: triggers -> crossings) -> print.rs (Math -> .hyb text; names.rs)
+//!   values; events.rs: triggers -> crossings;
+//!   order.rs: random event order refused) -> print.rs (Math -> .hyb text; names.rs)
 //! ```
 
 mod error;
 mod events;
 mod math;
 mod names;
+mod order;
 mod print;
 mod read;
 mod translate;

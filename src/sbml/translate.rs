@@ -98,6 +98,11 @@ impl Scope for Dynamic<'_, '_, '_, '_> {
         Ok("t".to_string())
     }
     fn rate_of(&mut self, id: &str) -> Result<String, String> {
+        // A reaction's local parameter (or an event's held value) shadows the model's symbol
+        // and does not change: its rate is 0 (the suite's 01460).
+        if self.locals.is_some_and(|l| l.contains_key(id)) {
+            return Ok("0".to_string());
+        }
         let sym = self.tr.syms.get(id).ok_or_else(|| format!("rateOf of unknown identifier `{id}`"))?;
         match &sym.storage {
             Storage::Param(_) | Storage::Const => Ok("0".to_string()),
@@ -391,9 +396,11 @@ fn declare(tr: &mut Tr<'_, '_, '_>) {
                 let by_reactions = !s.boundary && !s.constant && changed_by_reactions.contains(id.as_str());
                 if tr.rule.contains_key(id) {
                     Storage::Rule
-                } else if !s.only_substance && !s.constant && varying_compartments.contains(&s.compartment) {
+                } else if !s.only_substance && varying_compartments.contains(&s.compartment) {
                     // Its amount changes only by reactions, rate rules or events; its
-                    // concentration also by the compartment's size.
+                    // concentration also by the compartment's size. A constant species too: what
+                    // stays is its amount (the suite's 01117, 01118), diluted as the
+                    // compartment grows.
                     Storage::Amount(tr.names.fresh(&format!("{id}_amount")))
                 } else if tr.rate.contains_key(id) || assigned.contains(id.as_str()) || by_reactions {
                     Storage::State

@@ -327,3 +327,165 @@ fn hostile_documents_are_refused_without_a_panic() {
     // Some mutations leave a valid document (in a comment, a name): both sides are exercised.
     assert!(imported > 0);
 }
+
+/// Two events on `x >= 1` (x = t), with priorities `p1`, `p2`, assigning `a1 := v1`, `a2 := v2`.
+fn two_events(p1: f64, a1: &str, v1: &str, p2: f64, a2: &str, v2: &str) -> String {
+    let event = |id: &str, p: f64, a: &str, v: &str| {
+        format!(
+            r#"      <event id="{id}" useValuesFromTriggerTime="true">
+        <trigger initialValue="true" persistent="true">{}</trigger>
+        <priority>{}</priority>
+        <listOfEventAssignments><eventAssignment variable="{a}">{}</eventAssignment></listOfEventAssignments>
+      </event>"#,
+            math("<apply><geq/><ci>x</ci><cn>1</cn></apply>"),
+            math(&format!("<cn>{p}</cn>")),
+            math(v)
+        )
+    };
+    doc(&format!(
+        r#"    <listOfParameters>
+      <parameter id="x" value="0" constant="false"/>
+      <parameter id="a" value="0" constant="false"/>
+      <parameter id="b" value="0" constant="false"/>
+      <parameter id="s" constant="false"/>
+    </listOfParameters>
+    <listOfRules>
+      <rateRule variable="x">{}</rateRule>
+      <assignmentRule variable="s">{}</assignmentRule>
+    </listOfRules>
+    <listOfEvents>
+{}
+{}
+    </listOfEvents>"#,
+        math("<cn>1</cn>"),
+        math("<apply><plus/><ci>a</ci><cn>10</cn></apply>"),
+        event("e1", p1, a1, v1),
+        event("e2", p2, a2, v2)
+    ))
+}
+
+#[test]
+fn events_whose_order_is_random_in_sbml_are_refused() {
+    let num = |v: f64| format!("<cn>{v}</cn>");
+    // Equal priorities, and the second reads (through the rule `s = a + 10`) what the first
+    // assigns: SBML's order is random, and so is b. Refused at the second event's priority.
+    let xml = two_events(1.0, "a", &num(5.0), 1.0, "b", "<ci>s</ci>");
+    let err = hybc::sbml::import(&xml).unwrap_err();
+    // (e2's value from the trigger time is refused too: the test below.)
+    let r = err.refusals.iter().find(|r| r.element == "<priority>").expect("a refusal at <priority>");
+    assert!(r.reason.contains("`e1` and `e2` have the same priority (1)"), "{}", r.reason);
+    assert!(r.reason.contains("random order"), "{}", r.reason);
+    assert_eq!(&xml[r.offset..r.offset + 10], "<priority>");
+    // Equal priorities assigning one symbol: the last one's value would win at random.
+    let err = hybc::sbml::import(&two_events(2.0, "a", &num(5.0), 2.0, "a", &num(6.0))).unwrap_err();
+    assert!(err.refusals[0].reason.contains("random order"), "{:?}", err.refusals);
+    // The other side. Equal priorities, independent assignments: any order gives a = 5, b = 7.
+    let xml = two_events(1.0, "a", &num(5.0), 1.0, "b", &num(7.0));
+    assert_eq!(final_value(&xml, 2.0, "a"), 5.0);
+    assert_eq!(final_value(&xml, 2.0, "b"), 7.0);
+    // Different priorities that interact: SBML's order is fixed, the higher first, so e2 (2)
+    // reads a = 0 before e1 (1) sets it: b = s = 10.
+    assert_eq!(final_value(&two_events(1.0, "a", &num(5.0), 2.0, "b", "<ci>s</ci>"), 2.0, "b"), 10.0);
+}
+
+#[test]
+fn simultaneous_events_judged_at_the_trigger_are_refused_where_hybc_would_not() {
+    let num = |v: f64| format!("<cn>{v}</cn>");
+    // e1 (priority 2) sets a before e2 executes; e2's value, from the trigger time, is s = 0 + 10
+    // in SBML, 15 on the state e1 left: refused at e2's trigger.
+    let xml = two_events(2.0, "a", &num(5.0), 1.0, "b", "<ci>s</ci>");
+    let err = hybc::sbml::import(&xml).unwrap_err();
+    assert_eq!(err.refusals.len(), 1, "{:?}", err.refusals);
+    let r = &err.refusals[0];
+    assert!(r.reason.starts_with("`e2` fires with `e1` and executes after it"), "{}", r.reason);
+    assert_eq!(r.element, "<trigger>");
+    // e1 turns e2's persistent trigger `x >= 1` false (x := 0): SBML still executes e2, hybc
+    // would not. Refused.
+    let err = hybc::sbml::import(&two_events(2.0, "x", &num(0.0), 1.0, "b", &num(7.0))).unwrap_err();
+    assert!(err.refusals[0].reason.contains("persistent"), "{:?}", err.refusals);
+    // The other side: e1 leaves e2's trigger true (x := 3): both execute, b = 7, x = 3 then
+    // grows again (x = t - 1 + 3 at t = 2: 4).
+    let xml = two_events(2.0, "x", &num(3.0), 1.0, "b", &num(7.0));
+    assert_eq!(final_value(&xml, 2.0, "b"), 7.0);
+    assert!((final_value(&xml, 2.0, "x") - 4.0).abs() < 1e-9);
+}
+
+/// Events `(id, trigger, variable, value)`, with x' = 1 from 0 and an assignment rule
+/// `s = RULE`, no priorities, persistent, initialValue true.
+fn events_doc(rule: &str, events: &[(&str, String, &str, String)]) -> String {
+    let list: Vec<String> = events
+        .iter()
+        .map(|(id, trigger, var, value)| {
+            format!(
+                r#"      <event id="{id}" useValuesFromTriggerTime="true">
+        <trigger initialValue="true" persistent="true">{}</trigger>
+        <listOfEventAssignments><eventAssignment variable="{var}">{}</eventAssignment></listOfEventAssignments>
+      </event>"#,
+                math(trigger),
+                math(value)
+            )
+        })
+        .collect();
+    doc(&format!(
+        r#"    <listOfParameters>
+      <parameter id="x" value="0" constant="false"/>
+      <parameter id="m" value="0" constant="false"/>
+      <parameter id="n" value="0" constant="false"/>
+      <parameter id="s" constant="false"/>
+    </listOfParameters>
+    <listOfRules>
+      <rateRule variable="x">{}</rateRule>
+      <assignmentRule variable="s">{}</assignmentRule>
+    </listOfRules>
+    <listOfEvents>
+{}
+    </listOfEvents>"#,
+        math("<cn>1</cn>"),
+        math(rule),
+        list.join("\n")
+    ))
+}
+
+#[test]
+fn a_trigger_that_can_fire_twice_at_one_instant_is_refused() {
+    let at_x1 = "<apply><geq/><ci>x</ci><cn>1</cn></apply>".to_string();
+    let m_gt_1 = "<apply><gt/><ci>m</ci><cn>1</cn></apply>".to_string();
+    let n_plus_1 = "<apply><plus/><ci>n</ci><cn>1</cn></apply>".to_string();
+    let rule = "<ci>x</ci>";
+    // `on` and `off` both set m at x = 1: SBML judges `m > 1` after each (and would fire `count`
+    // once per turn to true); hybc once. Refused at `count`'s trigger.
+    let xml = events_doc(
+        rule,
+        &[
+            ("on", at_x1.clone(), "m", "<cn>2</cn>".into()),
+            ("off", at_x1.clone(), "m", "<cn>0</cn>".into()),
+            ("count", m_gt_1.clone(), "n", n_plus_1.clone()),
+        ],
+    );
+    let err = hybc::sbml::import(&xml).unwrap_err();
+    assert_eq!(err.refusals.len(), 1, "{:?}", err.refusals);
+    assert!(err.refusals[0].reason.contains("`on` and `off` both assign"), "{:?}", err.refusals);
+    assert_eq!(err.refusals[0].element, "<trigger>");
+    // The other side: one event sets m, `count` fires once, in SBML as in hybc.
+    let xml = events_doc(rule, &[("on", at_x1, "m", "<cn>2</cn>".into()), ("count", m_gt_1, "n", n_plus_1)]);
+    assert_eq!(final_value(&xml, 2.0, "n"), 1.0);
+}
+
+#[test]
+fn a_trigger_reading_a_rule_that_jumps_is_refused_at_import() {
+    let s_lt_0 = "<apply><lt/><ci>s</ci><cn>0</cn></apply>".to_string();
+    let s_gt_1 = "<apply><gt/><ci>s</ci><cn>1</cn></apply>".to_string();
+    let n_plus_1 = "<apply><plus/><ci>n</ci><cn>1</cn></apply>".to_string();
+    // s = piecewise(x - 0.5, x < 2, 1): the suite's 00936. Refused at import, not at the check.
+    let jump = "<piecewise><piece><apply><minus/><ci>x</ci><cn>0.5</cn></apply><apply><lt/><ci>x</ci><cn>2</cn></apply></piece><otherwise><cn>1</cn></otherwise></piecewise>";
+    let err = hybc::sbml::import(&events_doc(jump, &[("e", s_lt_0, "n", n_plus_1.clone())])).unwrap_err();
+    assert_eq!(err.refusals.len(), 1, "{:?}", err.refusals);
+    assert!(
+        err.refusals[0].reason.contains("compares `s`, whose assignment rule jumps"),
+        "{:?}",
+        err.refusals
+    );
+    // The other side: a continuous rule s = 2 x, crossing 1 at x = 0.5, once.
+    let xml = events_doc("<apply><times/><cn>2</cn><ci>x</ci></apply>", &[("e", s_gt_1, "n", n_plus_1)]);
+    assert_eq!(final_value(&xml, 2.0, "n"), 1.0);
+}
