@@ -4,14 +4,16 @@
 //! `cases/semantic`.
 //!
 //! Run: `cargo run --release --example sbml_suite -- PATH/cases/semantic [CASE ...]`;
-//! `SBML_VERBOSE=1` prints every case's outcome. The figures are in docs/accuracy.md.
+//! `SBML_VERBOSE=1` prints every case's outcome; `SBML_CHECK_GRAD=1` also runs the gradient
+//! checker (`--check-grad`, every parameter) on each passing case with events and counts its
+//! verdicts. The figures are in docs/accuracy.md.
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
 #[path = "../support/sbml_case.rs"]
 mod sbml_case;
-use sbml_case::{run_case, Outcome};
+use sbml_case::{check_gradients, run_case, GradOutcome, Outcome};
 
 #[derive(Default)]
 struct Count {
@@ -58,6 +60,8 @@ fn main() {
     let mut by_component: BTreeMap<String, Count> = BTreeMap::new();
     let mut by_test: BTreeMap<String, Count> = BTreeMap::new();
     let mut reasons: BTreeMap<String, usize> = BTreeMap::new();
+    let check_grad = std::env::var("SBML_CHECK_GRAD").is_ok();
+    let mut grad: BTreeMap<String, usize> = BTreeMap::new();
     let start = std::time::Instant::now();
     for case in &cases {
         let dir = root.join(case);
@@ -86,6 +90,35 @@ fn main() {
         }
         if verbose || matches!(outcome, Outcome::Fail(_) | Outcome::Error(_)) {
             println!("{case} {kind} {}", why.lines().next().unwrap_or(""));
+        }
+        let with_events = tags.components.iter().any(|c| c.starts_with("Event"));
+        if check_grad && with_events && outcome == Outcome::Pass {
+            let checked = std::panic::catch_unwind(|| check_gradients(&dir, case))
+                .unwrap_or_else(|_| GradOutcome::Error("panic".to_string()));
+            let key = match &checked {
+                GradOutcome::Checked(v) => v.word().to_string(),
+                GradOutcome::NoParameter => "no parameter".to_string(),
+                GradOutcome::Error(_) => "error".to_string(),
+            };
+            if !matches!(
+                checked,
+                GradOutcome::Checked(hybc::gradcheck::Verdict::Passed) | GradOutcome::NoParameter
+            ) {
+                println!(
+                    "{case} --check-grad {key} {}",
+                    match &checked {
+                        GradOutcome::Error(m) => m.lines().next().unwrap_or(""),
+                        _ => "",
+                    }
+                );
+            }
+            *grad.entry(key).or_default() += 1;
+        }
+    }
+    if check_grad {
+        println!("\n--check-grad on the passing cases with events (every parameter):");
+        for (k, n) in &grad {
+            println!("{n:5}  {k}");
         }
     }
     println!("\n{} cases in {:.1} s\n", cases.len(), start.elapsed().as_secs_f64());

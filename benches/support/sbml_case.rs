@@ -137,12 +137,13 @@ pub fn run_case(dir: &Path, case: &str) -> (Tags, Outcome) {
     (tags, outcome)
 }
 
-/// Simulates an imported case and compares it with its results.
-pub fn simulate(import: &hybc::sbml::Import, settings: &Settings, results: &str) -> Outcome {
-    let mut lines = results.lines();
-    let header: Vec<String> = lines.next().unwrap_or("").split(',').map(|s| s.trim().to_string()).collect();
-    let rows: Vec<Vec<f64>> =
-        lines.filter(|l| !l.trim().is_empty()).map(|l| l.split(',').map(value).collect()).collect();
+/// The imported text with each of the suite's variables (the results' header after `time`) as
+/// an output `sbml_out_K`, or why a variable has no value in it.
+fn with_variables(
+    import: &hybc::sbml::Import,
+    settings: &Settings,
+    header: &[String],
+) -> Result<String, Outcome> {
     let mut text = import.text.clone();
     text.push_str("\n# The suite's variables\n");
     for (k, v) in header.iter().enumerate().skip(1) {
@@ -154,10 +155,23 @@ pub fn simulate(import: &hybc::sbml::Import, settings: &Settings, results: &str)
             import.value_of(v)
         };
         let Some(expr) = expr else {
-            return Outcome::Error(format!("no variable `{v}` in the imported model"));
+            return Err(Outcome::Error(format!("no variable `{v}` in the imported model")));
         };
         text.push_str(&format!("output sbml_out_{k} = {expr}\n"));
     }
+    Ok(text)
+}
+
+/// Simulates an imported case and compares it with its results.
+pub fn simulate(import: &hybc::sbml::Import, settings: &Settings, results: &str) -> Outcome {
+    let mut lines = results.lines();
+    let header: Vec<String> = lines.next().unwrap_or("").split(',').map(|s| s.trim().to_string()).collect();
+    let rows: Vec<Vec<f64>> =
+        lines.filter(|l| !l.trim().is_empty()).map(|l| l.split(',').map(value).collect()).collect();
+    let text = match with_variables(import, settings, &header) {
+        Ok(text) => text,
+        Err(outcome) => return outcome,
+    };
     let model = match Model::parse_named(&text, "imported.hyb") {
         Ok(m) => m,
         Err(e) => return Outcome::Error(format!("the imported text does not check: {e}")),
@@ -206,4 +220,71 @@ pub fn simulate(import: &hybc::sbml::Import, settings: &Settings, results: &str)
         }
     }
     Outcome::Pass
+}
+
+/// What `--check-grad` says of a case: `hybc run --check-grad` on the case's model with every
+/// parameter differentiated, at the case's settings (rtol 1e-10, the final values of the suite's
+/// variables and the event times compared with central differences).
+#[derive(Clone, Debug, PartialEq)]
+pub enum GradOutcome {
+    /// The checker's verdict.
+    Checked(hybc::gradcheck::Verdict),
+    /// The model has no parameter to differentiate.
+    NoParameter,
+    /// The check could not be made: why.
+    Error(String),
+}
+
+/// The gradient check of case `case` in `dir`, which must import (see [`run_case`]).
+pub fn check_gradients(dir: &Path, case: &str) -> GradOutcome {
+    let read =
+        |suffix: &str| std::fs::read_to_string(dir.join(format!("{case}-{suffix}"))).unwrap_or_default();
+    let settings = read_settings(&read("settings.txt"));
+    let Some(file) = model_file(dir, case) else {
+        return GradOutcome::Error("no SBML Level 2 or 3 file".to_string());
+    };
+    let xml = std::fs::read_to_string(&file).unwrap_or_default();
+    let Ok(import) = hybc::sbml::import(&xml) else {
+        return GradOutcome::Error("refused".to_string());
+    };
+    let results = read("results.csv");
+    let header: Vec<String> =
+        results.lines().next().unwrap_or("").split(',').map(|s| s.trim().to_string()).collect();
+    let text = match with_variables(&import, &settings, &header) {
+        Ok(text) => text,
+        Err(outcome) => return GradOutcome::Error(format!("{outcome:?}")),
+    };
+    let model = match Model::parse_named(&text, "imported.hyb") {
+        Ok(m) => m,
+        Err(e) => return GradOutcome::Error(format!("the imported text does not check: {e}")),
+    };
+    let names: Vec<String> = model.param_names().map(str::to_string).collect();
+    if names.is_empty() {
+        return GradOutcome::NoParameter;
+    }
+    let compiled = match model.compile(&names) {
+        Ok(c) => c,
+        Err(e) => return GradOutcome::Error(format!("compile: {e}")),
+    };
+    let opts = SimOptions {
+        t_start: settings.start,
+        t_end: settings.start + settings.duration,
+        rtol: 1e-10,
+        atol: (settings.absolute * 1e-4).clamp(1e-16, 1e-10),
+        max_events: 1_000_000,
+        ..SimOptions::default()
+    };
+    let params = model.params();
+    let run = match compiled.simulate(&params, &opts) {
+        Ok(r) => r,
+        Err(e) => return GradOutcome::Error(format!("run: {e}")),
+    };
+    let request = hybc::GradCheckRequest {
+        sim: opts.clone(),
+        check: hybc::gradcheck::CheckOptions::for_rtol(opts.rtol),
+    };
+    match request.run(&compiled, params.values(), run.result()) {
+        Ok(check) => GradOutcome::Checked(check.verdict()),
+        Err(e) => GradOutcome::Error(format!("check: {e}")),
+    }
 }
