@@ -23,7 +23,7 @@ use super::method::rk::Rk;
 use super::method::stepper::{Interpolant, Rhs, Stepper};
 use super::mode_rhs::rhs_for;
 use super::options::SimOptions;
-use super::recorder::{Point, PointKind, Recorder};
+use super::recorder::{Point, PointKind, Recorder, TapeEntry, TapeStep};
 use super::result::{
     EndCusp, EventRecord, FinalState, MethodSegment, SimError, SimResult, SimStats, SimWarning, StopReason,
     VoidCause,
@@ -119,6 +119,17 @@ struct Plan {
 struct Look {
     for_events: bool,
     sample_due: bool,
+}
+
+/// How a step that ends at an event instant gave the state there (for the adjoint tape).
+#[derive(Clone, Copy, Debug)]
+enum Cut {
+    /// The step's own end.
+    End,
+    /// The step retaken to end on the instant, its end moved on by this `dt`.
+    Landed(f64),
+    /// The dense output, read at this time.
+    Dense(f64),
 }
 
 /// What one [`Integrator::step`] did.
@@ -244,6 +255,15 @@ pub struct Integrator<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper = R
     /// The current instant is on input knots: its events read the flows on the knots' earlier
     /// side.
     left_of_knot: bool,
+    /// The recorder keeps an adjoint tape (`Recorder::keeps_tape`).
+    tapes: bool,
+    /// The run carries sensitivities, or keeps a tape for an adjoint that will: what such a run
+    /// measures (a landed instant's velocity, a restart on a `pwl` knot) it measures too.
+    sens_like: bool,
+    /// The tape's scratch: the states at the start of a step cut at an instant, and the retaken
+    /// step's size and the move along its end derivative of a landed instant.
+    tape_x0: Vec<f64>,
+    tape_landing: (f64, f64),
 }
 
 impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R, St> {
@@ -296,8 +316,16 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             switch_post: None,
             before_end: None,
             left_of_knot: false,
+            tapes: false,
+            sens_like: m > 0,
+            tape_x0: Vec::new(),
+            tape_landing: (0.0, 0.0),
             sampler: Sampler::new(sys, p, &opts.at),
         };
+        if it.recorder.keeps_tape() {
+            (it.tapes, it.sens_like) = (true, true);
+            it.tape_x0.resize(n, 0.0);
+        }
         if it.work.z[..n].iter().any(|v| !v.is_finite()) {
             it.done = Some(it.fault_nonfinite());
             return it;
@@ -772,6 +800,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             self.sample_step(t1, before_knot);
         }
         let at_start = if self.work.stepper.masked() { self.start_derivative_singularity() } else { None };
+        if self.tapes {
+            self.tape_x0.copy_from_slice(&self.work.z[..self.n]);
+            self.tape_step(plan, plan.h, Cut::End);
+        }
         self.work.stepper.accept(&mut self.work.z);
         self.t = t1;
         self.landing.clear();
@@ -814,7 +846,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             self.work.knots.apply_new(&mut self.work.z[n..], n);
             self.note_knots_apart(crossed, t);
         }
-        if crossed.jumps || self.m > 0 {
+        if crossed.jumps && self.tapes {
+            self.recorder.tape(&TapeEntry::Unsupported("an input knot where the flow jumps (pwc)"));
+        }
+        if crossed.jumps || self.sens_like {
             let mut rhs = rhs_for(self.sys, self.p, n, mode);
             self.work.stepper.restart(t, &self.work.z, &mut rhs);
         }
@@ -872,6 +907,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             t_fire
         };
         let at_start = if self.work.stepper.masked() { self.start_derivative_singularity() } else { None };
+        if self.tapes {
+            self.tape_x0.copy_from_slice(&self.work.z[..self.n]);
+        }
+        let mut cut = Cut::End;
         let sampling = look.sample_due || self.sampler.wanted(&*self.recorder, t_fire);
         if sampling {
             self.work.z_start.copy_from_slice(&self.work.z);
@@ -885,7 +924,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             t_fire
         } else {
             match self.land_on_event(t0, t_fire, t1, rhs) {
-                Landing::Landed(t_landed) => t_landed,
+                Landing::Landed(t_landed) => {
+                    cut = Cut::Landed(self.tape_landing.1);
+                    t_landed
+                }
                 Landing::Retry if plan.h > GUARD_WALK_FLOOR * t0.abs().max(1.0) => {
                     // The dense output was too far off where it was read (a stiff phase: its
                     // error times the stiffness is the crossing speed's): the step does not
@@ -900,10 +942,15 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 }
                 Landing::Dense | Landing::Retry => {
                     self.work.stepper.interpolant().eval(t_fire, &mut self.work.z);
+                    cut = Cut::Dense(t_fire);
                     t_fire
                 }
             }
         };
+        if self.tapes {
+            let h = if matches!(cut, Cut::Landed(_)) { self.tape_landing.0 } else { plan.h };
+            self.tape_step(plan, h, cut);
+        }
         // Samples before the instant, taken now that the step stands.
         if sampling {
             self.land_samples(t0, t_fire, true, rhs);
@@ -1031,6 +1078,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 if t <= t0 {
                     return Landing::Dense;
                 }
+                self.tape_landing = (t_fire - t0, dt);
                 self.landed_velocity(t0, t_fire, t, rhs);
                 return Landing::Landed(t);
             }
@@ -1040,6 +1088,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             // The flow's extrapolation did not get across (a stiff flow at the landed state):
             // the landed state is, a few spacings of `t` past the first time across.
             self.work.z.copy_from_slice(self.work.stepper.end_state());
+            self.tape_landing = (t_fire - t0, 0.0);
             self.landed_velocity(t0, t_fire, t_fire, rhs);
             return Landing::Landed(t_fire);
         }
@@ -1071,7 +1120,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         self.work.jump.clear_velocity();
         let (n, h) = (self.n, t_land - t0);
         let delta = VELOCITY_HALF_WIDTH * h;
-        if self.m == 0 || n == 0 || delta <= LANDING_RESOLVED * (t_land.abs().next_up() - t_land.abs()) {
+        if !self.sens_like || n == 0 || delta <= LANDING_RESOLVED * (t_land.abs().next_up() - t_land.abs()) {
             return;
         }
         let (v, probe) = &mut self.work.landed_velocity;
@@ -1549,6 +1598,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             let info: &'a SystemInfo = self.info;
             let einfo = &info.events[ev];
             if einfo.implicit {
+                if self.tapes {
+                    self.recorder.tape(&TapeEntry::Unsupported("a flow switch"));
+                }
                 self.cross_switch(ev, pos, crossing, self.work.fired.len() > declared_before || cascade);
                 continue;
             }
@@ -1582,6 +1634,23 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 Some(speed) if cascade => Some((&self.work.instant_dte[..], speed)),
                 _ => None,
             };
+            if self.tapes {
+                let entry = if given.is_some() {
+                    TapeEntry::Unsupported("an event that cascades at another's instant")
+                } else if self.left_of_knot {
+                    TapeEntry::Unsupported("an event on an input knot")
+                } else {
+                    TapeEntry::Jump {
+                        event: ev,
+                        t,
+                        mode_before,
+                        mode_after,
+                        x,
+                        velocity: self.work.jump.measured_velocity(t, mode_before, x),
+                    }
+                };
+                self.recorder.tape(&entry);
+            }
             let out = self.work.jump.apply(
                 self.sys,
                 ev,
@@ -1599,6 +1668,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 self.instant = Some(out.denominator);
                 self.work.instant_dte.clear();
                 self.work.instant_dte.extend_from_slice(&self.work.jump.dte);
+            }
+            if out.grazing && self.tapes {
+                self.recorder.tape(&TapeEntry::Unsupported("a grazing crossing"));
             }
             self.note_conditioning(ev, t, out);
             self.events.push(EventRecord {
@@ -1823,6 +1895,22 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     }
 
     /// Records the current point as `kind`, if the recorder wants it.
+    /// Tells the tape of the step from `tape_x0` planned as `plan` (taken with size `h`) and how
+    /// it ended; a Rosenbrock step is one the backward pass does not carry.
+    fn tape_step(&mut self, plan: Plan, h: f64, cut: Cut) {
+        let Some(pair) = self.work.stepper.tape_pair() else {
+            self.recorder.tape(&TapeEntry::Unsupported("a step of a Rosenbrock method"));
+            return;
+        };
+        let ceiling = if plan.on_knot { plan.t1.next_down() } else { f64::INFINITY };
+        let step = TapeStep { pair, t0: plan.t0, h, ceiling, mode: self.mode, x0: &self.tape_x0 };
+        self.recorder.tape(&match cut {
+            Cut::End => TapeEntry::Step(step),
+            Cut::Landed(dt) => TapeEntry::Landed(step, dt),
+            Cut::Dense(t) => TapeEntry::Dense(step, t),
+        });
+    }
+
     fn record(&mut self, kind: PointKind) {
         if !(self.recorder.is_active() && self.recorder.wants(kind)) {
             return;

@@ -16,7 +16,9 @@
 //! - `switch_landing.rs`: `SwitchLanding`, a step retried to land just before a flow switch it
 //!   crossed (branch locking by cutting), owned by the integrator.
 //! - `breakpoints.rs`: times landed on exactly, and events on or near them.
-//! - `recorder.rs`: trajectories through an observer.
+//! - `recorder.rs`: trajectories through an observer; the adjoint tape's entries.
+//! - `adjoint/`: gradients by the discrete adjoint: a run recorded on a tape without
+//!   sensitivities, walked backward once per quantity.
 //! - `samples.rs`: the values at `SimOptions::at`, taken as the run passes them and completed
 //!   once it is over.
 //! - `run.rs`: a run from start to end, the reusable `Runner`.
@@ -27,6 +29,7 @@
 //! Imports between the wings go one way: `event/` uses `method/`'s `Interpolant` and `Stepper`
 //! traits and its polynomials, `method/` uses `linalg/`, and `linalg/` uses neither.
 
+pub mod adjoint;
 mod breakpoints;
 mod event;
 mod fp_mode;
@@ -49,9 +52,11 @@ pub use method::auto::{Auto, AutoDense};
 pub use method::dense::Dense;
 pub use method::rk::Rk;
 pub use method::rosenbrock::{Rosenbrock, RowDense};
-pub use method::stepper::{Interpolant, Rhs, Stepper};
+pub use method::stepper::{Interpolant, Rhs, Stepper, TapePair};
 pub use options::*;
-pub use recorder::{NoRecorder, Point, PointKind, Recorder, RowSchedule, TrajectoryRecorder};
+pub use recorder::{
+    NoRecorder, Point, PointKind, Recorder, RowSchedule, TapeEntry, TapeStep, TrajectoryRecorder,
+};
 pub use result::*;
 pub use run::{run, Driver, Runner, SystemRef, MAX_SAMPLED_ROWS, MIN_RTOL};
 pub use system::*;

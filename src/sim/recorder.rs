@@ -3,6 +3,7 @@
 //! the dense-output samples it asks for. The built-in [`TrajectoryRecorder`] keeps rows for
 //! `SimOptions::trajectory`; other recorders (a plot feed, an adjoint tape) implement the trait.
 
+use super::method::stepper::TapePair;
 use super::options::TrajectoryRequest;
 use super::result::TrajectoryRow;
 
@@ -54,6 +55,67 @@ pub trait Recorder {
     }
     /// Takes one point the recorder wants.
     fn record(&mut self, point: &Point<'_>);
+    /// Whether the recorder keeps an adjoint tape (`sim/adjoint/`): the integrator then tells
+    /// [`Self::tape`] of every step and jump the sensitivities are carried through, and measures
+    /// what a run with sensitivities measures (a landed instant's velocity), so that the run
+    /// takes the steps a run with sensitivities left out of the error test takes.
+    fn keeps_tape(&self) -> bool {
+        false
+    }
+    /// Takes one piece of the run for the adjoint's backward pass (only when [`Self::keeps_tape`]).
+    fn tape(&mut self, entry: &TapeEntry<'_>) {
+        let _ = entry;
+    }
+}
+
+/// A step of an explicit pair as the adjoint tape records it: from `(t0, x0)` of size `h` in
+/// `mode`, the flow read at `ceiling` at the latest (a step ending on an input knot).
+#[derive(Clone, Copy, Debug)]
+pub struct TapeStep<'a> {
+    /// The method.
+    pub pair: TapePair,
+    /// Its start.
+    pub t0: f64,
+    /// Its size.
+    pub h: f64,
+    /// The latest time the flow is read at.
+    pub ceiling: f64,
+    /// The mode it integrates.
+    pub mode: usize,
+    /// The states at its start.
+    pub x0: &'a [f64],
+}
+
+/// One piece of a run as the adjoint tape sees it: the primal values the backward pass
+/// recomputes the piece from. States are the `n` states, without sensitivities.
+#[derive(Clone, Copy, Debug)]
+pub enum TapeEntry<'a> {
+    /// A whole step.
+    Step(TapeStep<'a>),
+    /// A step cut at an event instant: the state there read off its dense output at this time.
+    Dense(TapeStep<'a>, f64),
+    /// A step retaken to end on an event instant (the step's `h` is the retaken one), its end
+    /// moved on by this `dt` along its end derivative: `z = z_end + dt F(z_end)`.
+    Landed(TapeStep<'a>, f64),
+    /// Event `event` applied at `t` to the state `x`, from `mode_before` to `mode_after`;
+    /// `velocity`: the trajectory's measured velocity where it replaced the flow in the crossing
+    /// speed.
+    Jump {
+        /// The event.
+        event: usize,
+        /// Its instant.
+        t: f64,
+        /// The mode it fired in.
+        mode_before: usize,
+        /// The mode after it.
+        mode_after: usize,
+        /// The state before it.
+        x: &'a [f64],
+        /// The measured velocity, where it replaced the flow.
+        velocity: Option<&'a [f64]>,
+    },
+    /// Something the backward pass does not carry (yet): named for the refusal.
+    Unsupported(&'static str),
 }
 
 /// Records nothing.

@@ -266,6 +266,43 @@ pub trait HybridSystem: Sync {
             *out = (a - b) / (2.0 * h);
         }
     }
+    /// The flow's vector-Jacobian products at `(t, x)` in `mode`: `gx = f_x^T w` (n) and
+    /// `gp = f_p^T w` (m), both overwritten: what the adjoint's backward pass needs at every
+    /// stage. The default reads `f_p` and `f_x` off [`Self::flow_sens`] (exact, `n + 1` calls);
+    /// a compiled model has a kernel of its own.
+    #[allow(clippy::too_many_arguments)]
+    fn flow_vjp(&self, mode: usize, t: f64, x: &[f64], w: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) {
+        let n = x.len();
+        let m = gp.len();
+        let cols = m.max(1);
+        let mut dx = vec![0.0; n];
+        let mut s = vec![0.0; n * m];
+        let mut fp = vec![0.0; n * m];
+        self.flow_sens(mode, t, x, &s, p, &mut dx, &mut fp);
+        for (j, g) in gp.iter_mut().enumerate() {
+            *g = w.iter().zip(&fp[j * n..(j + 1) * n]).map(|(a, b)| a * b).sum();
+        }
+        if m == 0 {
+            // Without sensitivity columns `flow_sens` says nothing of `f_x`: central differences,
+            // as `flow_jac`'s default (hand-written systems in tests only).
+            let mut fx = vec![0.0; n * n];
+            let (mut ft, mut st) = (vec![0.0; n], Vec::new());
+            self.flow_jac(mode, t, x, &[], p, &mut fx, &mut ft, &mut st);
+            for (c, g) in gx.iter_mut().enumerate() {
+                *g = (0..n).map(|i| w[i] * fx[i * n + c]).sum();
+            }
+            return;
+        }
+        let mut ds = vec![0.0; n * cols];
+        for (c, g) in gx.iter_mut().enumerate() {
+            s.fill(0.0);
+            for j in 0..m {
+                s[j * n + c] = 1.0;
+            }
+            self.flow_sens(mode, t, x, &s, p, &mut dx, &mut ds);
+            *g = (0..n).map(|i| w[i] * (ds[i] - fp[i])).sum();
+        }
+    }
     /// Guards of every event active in `mode`, in the order of `ModeInfo::events`.
     fn guards(&self, mode: usize, t: f64, x: &[f64], p: &[f64], g: &mut [f64]);
     /// Speeds `g_x f + g_t` of every guard active in `mode` (order of `ModeInfo::events`) along a

@@ -4,6 +4,7 @@
 
 mod support;
 
+mod adjoint;
 mod check_grad;
 mod cli_cases;
 mod cli_run;

@@ -188,6 +188,12 @@ impl Jump {
         }
     }
 
+    /// The velocity of [`Self::set_velocity`] where it holds at `(t, mode, x)` (the one an event
+    /// applied there takes): what the adjoint tape records of it.
+    pub fn measured_velocity(&self, t: f64, mode: usize, x: &[f64]) -> Option<&[f64]> {
+        self.velocity_holds(t, mode, x).then_some(&self.velocity[..])
+    }
+
     /// Whether the velocity of [`Self::set_velocity`] holds at `(t, mode, x)`.
     fn velocity_holds(&self, t: f64, mode: usize, x: &[f64]) -> bool {
         matches!(&self.velocity_at, Some((t_at, mode_at, x_at)) if *t_at == t && *mode_at == mode && x_at[..] == x[..])

@@ -27,7 +27,7 @@ use super::dense::Dense;
 use super::poly::CAP;
 use super::rk::Rk;
 use super::rosenbrock::{Rosenbrock, RowDense};
-use super::stepper::{Interpolant, Rhs, Stepper};
+use super::stepper::{Interpolant, Rhs, Stepper, TapePair};
 use super::tableau::{DOP853, DOPRI5};
 use crate::sim::options::Method;
 use crate::sim::result::MethodSegment;
@@ -352,6 +352,14 @@ impl Stepper for Auto {
             self.row.visit_stage_states(visit)
         } else {
             self.rk.visit_stage_states(visit)
+        }
+    }
+
+    fn tape_pair(&self) -> Option<TapePair> {
+        if self.stiff {
+            None
+        } else {
+            self.rk.tape_pair()
         }
     }
 

@@ -20,11 +20,11 @@
 
 use super::dense::Dense;
 use super::errnorm::{controlled, BlockNorm};
-use super::stepper::{Rhs, Stepper};
+use super::stepper::{Rhs, Stepper, TapePair};
 use super::sums::{centred_sum, stage_sum};
 #[cfg(doc)]
 use super::tableau::Control;
-use super::tableau::Tableau;
+use super::tableau::{DenseKind, Tableau};
 
 const SAFETY: f64 = 0.9;
 /// `|y1 - y^|` below this many round-offs of `|y1|` leaves the stiffness estimate that decides
@@ -409,6 +409,13 @@ impl Stepper for Rk {
 
     fn end_state(&self) -> &[f64] {
         &self.y_new
+    }
+
+    fn tape_pair(&self) -> Option<TapePair> {
+        Some(match self.tab.dense {
+            DenseKind::Dopri5 => TapePair::Dopri5,
+            DenseKind::Dop853 => TapePair::Dop853,
+        })
     }
 
     fn end_derivative(&self) -> &[f64] {

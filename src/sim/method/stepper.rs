@@ -161,6 +161,16 @@ pub trait Interpolant {
     }
 }
 
+/// An explicit pair, as the adjoint tape (`sim/recorder.rs`, `TapeEntry`) names the method of a
+/// step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TapePair {
+    /// Dormand-Prince 5(4).
+    Dopri5,
+    /// DOP853.
+    Dop853,
+}
+
 /// A time-stepping method with error control and dense output.
 ///
 /// The protocol, as the integrator drives it: `restart` at the start and after every jump, then
@@ -239,6 +249,11 @@ pub trait Stepper {
     /// The stretches of the run each method integrated, for a stepper that switches between
     /// methods (`auto::Auto`), up to the current point `t`; `None` for a single method.
     fn segments(&self, _t: f64) -> Option<Vec<crate::sim::result::MethodSegment>> {
+        None
+    }
+    /// The explicit pair the last attempt was taken with; `None` for a Rosenbrock method (the
+    /// adjoint's backward pass recomputes the explicit pairs' steps only).
+    fn tape_pair(&self) -> Option<TapePair> {
         None
     }
 }
