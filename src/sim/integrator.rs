@@ -847,7 +847,13 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             self.note_knots_apart(crossed, t);
         }
         if crossed.jumps && self.tapes {
-            self.recorder.tape(&TapeEntry::Unsupported("an input knot where the flow jumps (pwc)"));
+            let entry = match crossed.set {
+                Some(set) if crossed.jumping == 1 => {
+                    TapeEntry::Knot { set: set as usize, t, jump: &self.work.knots.jump_new }
+                }
+                _ => TapeEntry::Unsupported("input knots of several pwc inputs at one time"),
+            };
+            self.recorder.tape(&entry);
         }
         if crossed.jumps || self.sens_like {
             let mut rhs = rhs_for(self.sys, self.p, n, mode);
@@ -1598,9 +1604,6 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             let info: &'a SystemInfo = self.info;
             let einfo = &info.events[ev];
             if einfo.implicit {
-                if self.tapes {
-                    self.recorder.tape(&TapeEntry::Unsupported("a flow switch"));
-                }
                 self.cross_switch(ev, pos, crossing, self.work.fired.len() > declared_before || cascade);
                 continue;
             }
@@ -1712,6 +1715,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     fn cross_switch(&mut self, ev: usize, pos: usize, crossing: Crossing, after_an_event: bool) {
         let (n, t) = (self.n, self.t);
         self.stats.switches += 1;
+        if self.tapes && (after_an_event || crossing.on_guard || self.left_of_knot) {
+            self.recorder.tape(&TapeEntry::Unsupported("a flow switch at another event's instant"));
+        }
         if after_an_event || crossing.on_guard {
             // The flow before the switch is not known: no sensitivity survives it.
             if self.work.z[n..].iter().any(|v| !v.is_nan()) {
@@ -1769,7 +1775,14 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         }
         let (x, s) = self.work.z.split_at_mut(n);
         let sides = ((crossing.t_pre, &x_pre[..]), (t_post, &x_post[..]));
+        if self.tapes {
+            let (pre, post) = sides;
+            self.recorder.tape(&TapeEntry::Switch { event: ev, t, mode: self.mode, x, pre, post });
+        }
         let out = self.work.jump.apply_switch(self.sys, ev, self.mode, t, x, sides, s, self.p, context);
+        if self.tapes && (out.grazing || self.work.jump.benign) {
+            self.recorder.tape(&TapeEntry::Unsupported("a grazing flow switch"));
+        }
         self.note_conditioning(ev, t, out);
     }
 

@@ -114,6 +114,33 @@ pub enum TapeEntry<'a> {
         /// The measured velocity, where it replaced the flow.
         velocity: Option<&'a [f64]>,
     },
+    /// The flow switch `event` crossed at `t` in `mode` at the state `x`, its flow read before
+    /// it at `pre` and past it at `post` (the state stays; the sensitivities jump by
+    /// `(f- - f+) dt/dp`).
+    Switch {
+        /// The switch (an implicit event).
+        event: usize,
+        /// Its instant.
+        t: f64,
+        /// The mode.
+        mode: usize,
+        /// The state at the instant.
+        x: &'a [f64],
+        /// A time and state just before the switch.
+        pre: (f64, &'a [f64]),
+        /// A time and state just past it.
+        post: (f64, &'a [f64]),
+    },
+    /// The `pwc` knot of knot set `set` crossed at `t`, where the flow jumps by `jump`
+    /// (`f- - f+`): the sensitivities jump by `jump dt_k/dp`.
+    Knot {
+        /// The knot set (`SystemInfo::knots`).
+        set: usize,
+        /// The knot's time.
+        t: f64,
+        /// The flow's jump there.
+        jump: &'a [f64],
+    },
     /// Something the backward pass does not carry (yet): named for the refusal.
     Unsupported(&'static str),
 }

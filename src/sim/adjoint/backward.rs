@@ -248,3 +248,62 @@ pub(super) fn jump_backward<S: HybridSystem + ?Sized>(
         (0..n).map(|c| (0..n).map(|i| rx[i * n + c] * lam[i]).sum::<f64>() - gx[c] * scale).collect();
     lam.copy_from_slice(&before);
 }
+
+/// A flow switch as the backward pass recomputes it.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Switch<'a> {
+    pub event: usize,
+    pub t: f64,
+    pub mode: usize,
+    pub x: &'a [f64],
+    pub pre: (f64, &'a [f64]),
+    pub post: (f64, &'a [f64]),
+}
+
+/// A flow switch's jump `S+ = S- + (f- - f+) dt/dp`, `dt/dp = -(g_x S- + g_p) / d` with
+/// `d = g_x f- + g_t`, transposed: `lam` from after the switch to before it.
+pub(super) fn switch_backward<S: HybridSystem + ?Sized>(
+    sys: &S,
+    p: &[f64],
+    switch: &Switch<'_>,
+    lam: &mut [f64],
+    pbar: &mut [f64],
+) {
+    let n = switch.x.len();
+    let (mut f_minus, mut f_plus) = (vec![0.0; n], vec![0.0; n]);
+    sys.flow(switch.mode, switch.pre.0, switch.pre.1, p, &mut f_minus);
+    sys.flow(switch.mode, switch.post.0, switch.post.1, p, &mut f_plus);
+    let (mut gx, mut gp) = (vec![0.0; n], vec![0.0; pbar.len()]);
+    let gt = sys.guard_grad(switch.event, switch.t, switch.x, p, &mut gx, &mut gp);
+    let d = gx.iter().zip(&f_minus).map(|(a, b)| a * b).sum::<f64>() + gt;
+    let u: f64 = (0..n).map(|i| (f_minus[i] - f_plus[i]) * lam[i]).sum();
+    let scale = u / d;
+    for (l, g) in lam.iter_mut().zip(&gx) {
+        *l -= g * scale;
+    }
+    for (pb, g) in pbar.iter_mut().zip(&gp) {
+        *pb -= g * scale;
+    }
+}
+
+/// A `pwc` knot's jump `S+ = S- + J dt_k/dp` (`J` the flow's jump, `dt_k/dp = -s_p / s_t` from
+/// the knot position `s`), transposed: `lam` passes unchanged, the parameters that move the knot
+/// gain `(J . lam) dt_k/dp`.
+pub(super) fn knot_backward<S: HybridSystem + ?Sized>(
+    sys: &S,
+    p: &[f64],
+    set: usize,
+    t: f64,
+    jump: &[f64],
+    lam: &[f64],
+    pbar: &mut [f64],
+) {
+    let mut sp = vec![0.0; pbar.len()];
+    let rate = sys.knot_position_grad(set, t, p, &mut sp);
+    let u: f64 = jump.iter().zip(lam).map(|(a, b)| a * b).sum();
+    for (pb, &sp) in pbar.iter_mut().zip(&sp) {
+        if sp != 0.0 {
+            *pb += u * (-sp / rate);
+        }
+    }
+}

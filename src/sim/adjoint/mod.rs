@@ -21,7 +21,9 @@ use super::result::{SimError, SimResult, StopReason};
 use super::run::Runner;
 use super::system::HybridSystem;
 use super::SimOptions;
-use backward::{jump_backward, step_backward, Jump, Scratch, Step, StepEnd};
+use backward::{
+    jump_backward, knot_backward, step_backward, switch_backward, Jump, Scratch, Step, StepEnd, Switch,
+};
 pub(crate) use plain::WithoutSens;
 
 /// Why a gradient cannot be had by the adjoint.
@@ -43,6 +45,8 @@ pub enum AdjointError {
 enum Piece {
     Step { at: StepAt, end: StepEnd },
     Jump { event: usize, t: f64, mode_before: usize, mode_after: usize, x: usize, velocity: Option<usize> },
+    Switch { event: usize, t: f64, mode: usize, x: usize, pre: (f64, usize), post: (f64, usize) },
+    Knot { set: usize, t: f64, jump: usize },
 }
 
 /// A step's primal values, its start state at `x` in the tape's store.
@@ -114,6 +118,13 @@ impl Recorder for Tape {
                 let velocity = velocity.map(|v| self.keep(v));
                 Piece::Jump { event, t, mode_before, mode_after, x, velocity }
             }
+            &TapeEntry::Switch { event, t, mode, x, pre, post } => {
+                let x = self.keep(x);
+                let pre = (pre.0, self.keep(pre.1));
+                let post = (post.0, self.keep(post.1));
+                Piece::Switch { event, t, mode, x, pre, post }
+            }
+            &TapeEntry::Knot { set, t, jump } => Piece::Knot { set, t, jump: self.keep(jump) },
             TapeEntry::Unsupported(what) => {
                 self.unsupported.get_or_insert(what);
                 return;
@@ -246,6 +257,20 @@ impl Recorded {
                     };
                     let time_bar = time_bars[event] + if is_stop_end { end_time_bar } else { 0.0 };
                     jump_backward(sys, p, &jump, time_bar, is_stop_end, &mut lam, &mut pbar);
+                }
+                Piece::Switch { event: ev, t, mode, x, pre, post } => {
+                    let switch = Switch {
+                        event: ev,
+                        t,
+                        mode,
+                        x: &store[x..x + n],
+                        pre: (pre.0, &store[pre.1..pre.1 + n]),
+                        post: (post.0, &store[post.1..post.1 + n]),
+                    };
+                    switch_backward(sys, p, &switch, &mut lam, &mut pbar);
+                }
+                Piece::Knot { set, t, jump } => {
+                    knot_backward(sys, p, set, t, &store[jump..jump + n], &lam, &mut pbar)
                 }
             }
         }

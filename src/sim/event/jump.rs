@@ -122,6 +122,9 @@ pub(crate) struct Jump {
     pub dte: Vec<f64>,
     /// Total derivative of the post-event state (filled when asked for).
     pub total: Vec<f64>,
+    /// Whether the last flow switch applied grazed with a jump that vanishes with the speed
+    /// (`benign_graze`): its saltation is the limit, not the formula the adjoint transposes.
+    pub benign: bool,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -162,6 +165,7 @@ impl Jump {
             accuracy: 0.0,
             dte: vec![0.0; m],
             total: vec![0.0; n * m],
+            benign: false,
         }
     }
 
@@ -401,6 +405,7 @@ impl Jump {
         context: CrossingContext,
     ) -> JumpOutcome {
         let n = self.n;
+        self.benign = false;
         sys.flow(mode, t_pre, x_pre, p, &mut self.f_minus);
         let outcome = self.event_time_gradient(sys, ev, t, x, s, p, context, false);
         sys.flow(mode, t_post, x_post, p, &mut self.f_plus);
@@ -417,6 +422,7 @@ impl Jump {
             )
         {
             // `self.v` holds the limit `c` of `J / d`: the jump `-c (g_x S + g_p)` exists.
+            self.benign = true;
             for j in 0..self.m {
                 let sj = &mut s[j * n..(j + 1) * n];
                 let numerator = dot_nonzero(&self.gx, sj) + self.gp[j];
