@@ -57,9 +57,10 @@ pub mod sweep;
 pub mod syntax;
 
 pub use api::{
-    check_source, import_sbml, import_sbml_file, is_sbml_path, method_named, positive_number, time_span,
-    Compiled, Error, FitFailure, FitRequest, FrontendError, GradCheckRequest, ImportError, Model, ModelError,
-    OptimizeFailure, OptimizeRequest, OptionError, ParamError, Params, PeriodicRequest, Run, SimOverrides,
-    Simulator, SobolFailure, SobolRequest, Spelling, SweepRequest, VaryPriorError, MAX_MODEL_BYTES,
+    check_source, import_sbml, import_sbml_file, is_sbml_path, method_named, positive_number, sens_named,
+    time_span, Compiled, Error, FitFailure, FitRequest, FrontendError, GradCheckRequest, ImportError, Model,
+    ModelError, OptimizeFailure, OptimizeRequest, OptionError, ParamError, Params, PeriodicRequest, Run,
+    SimOverrides, Simulator, SobolFailure, SobolRequest, Spelling, SweepRequest, VaryPriorError,
+    MAX_MODEL_BYTES,
 };
-pub use sim::{Method, SimOptions, StopReason, TrajectoryRequest};
+pub use sim::{Method, Sens, SimOptions, StopReason, TrajectoryRequest};

@@ -248,6 +248,7 @@ impl RunReport {
                     "rhs_calls": r.stats.rhs_calls,
                     "events": r.stats.events,
                     "switches": r.stats.switches,
+                    "sens": r.stats.sens.map(|s| s.name()),
                     "compile_seconds": self.compile_seconds,
                     "run_seconds": self.run_seconds,
                 })),
@@ -359,9 +360,11 @@ impl RunReport {
                 format!("\nmethods: {}", parts.join(", "))
             }
         };
+        let sens =
+            if r.stats.sens == Some(crate::sim::Sens::Adjoint) { ", gradients by the adjoint" } else { "" };
         writeln!(
             out,
-            "\n{} steps ({} rejected), {} kernel calls{switches}, compile {:.2} ms, run {:.1} us{methods}",
+            "\n{} steps ({} rejected), {} kernel calls{switches}{sens}, compile {:.2} ms, run {:.1} us{methods}",
             r.stats.steps,
             r.stats.rejected,
             r.stats.rhs_calls,

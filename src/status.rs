@@ -56,7 +56,8 @@ impl RunStatus {
                 SimWarning::NearGrazing { .. }
                 | SimWarning::StartsAcross { .. }
                 | SimWarning::NearBreakpoint { .. }
-                | SimWarning::CostUnresolved { .. } => {}
+                | SimWarning::CostUnresolved { .. }
+                | SimWarning::AdjointNotCarried { .. } => {}
             }
         }
         status

@@ -76,6 +76,13 @@ impl SimKeywords {
                 "quadrature_error_control" => out.quadrature_error_control = get(&key, &value)?,
                 "land_events" => out.land_events = get(&key, &value)?,
                 "h_max" => out.h_max = get(&key, &value)?,
+                "sens" => {
+                    let name: Option<String> = get(&key, &value)?;
+                    out.sens = name
+                        .map(|name| hybc::sens_named(&name, Spelling::Keyword))
+                        .transpose()
+                        .map_err(value_error)?;
+                }
                 _ => {
                     return Err(PyTypeError::new_err(format!(
                         "unexpected keyword argument '{key}' (the simulation keywords are {})",

@@ -26,7 +26,9 @@ pub use error::{Error, ModelError, ParamError};
 pub use frontend::{check_source, FrontendError};
 pub use import::{import_sbml, import_sbml_file, is_sbml_path, ImportError};
 pub use model::{Model, MAX_MODEL_BYTES};
-pub use options::{method_named, positive_number, time_span, OptionError, SimOverrides, Spelling};
+pub use options::{
+    method_named, positive_number, sens_named, time_span, OptionError, SimOverrides, Spelling,
+};
 pub use params::Params;
 pub use request::fit::{FitFailure, FitRequest};
 pub use request::gradcheck::GradCheckRequest;

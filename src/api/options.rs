@@ -5,7 +5,7 @@
 //! same words, each naming the option as its user wrote it.
 
 use crate::limits;
-use crate::sim::{LinearSolver, Method, SimOptions, MAX_SAMPLED_ROWS};
+use crate::sim::{LinearSolver, Method, Sens, SimOptions, MAX_SAMPLED_ROWS};
 
 /// How a front end spells an option in its messages: `--t-start` on the command line, `t_start`
 /// in Python (the library's own name, a [`SimOptions`] field).
@@ -70,12 +70,14 @@ pub struct SimOverrides {
     /// The sample times (`hybc run --at`, `simulate(at=...)`): ascending, within the run's span
     /// (checked by `apply`, against the span it sets).
     pub at: Option<Vec<f64>>,
+    /// How gradients are computed (`--sens`, `sens=`).
+    pub sens: Option<Sens>,
 }
 
 impl SimOverrides {
     /// The options' names, as [`SimOptions`] spells them, in the order a front end lists them
     /// (Python's message for an unknown keyword). A test holds each front end to this list.
-    pub const OPTIONS: [&'static str; 14] = [
+    pub const OPTIONS: [&'static str; 15] = [
         "t_end",
         "rtol",
         "atol",
@@ -90,6 +92,7 @@ impl SimOverrides {
         "t_start",
         "linear_solver",
         "at",
+        "sens",
     ];
 
     /// `base` (usually [`Model::sim_options`](super::Model::sim_options)) with these values laid
@@ -155,6 +158,7 @@ impl SimOverrides {
             linear_solver: self.linear_solver.unwrap_or(base.linear_solver),
             trajectory: base.trajectory,
             at,
+            sens: self.sens.unwrap_or(base.sens),
         })
     }
 }
@@ -181,6 +185,18 @@ pub fn sample_times_within(times: &[f64], t_start: f64, t_end: f64, name: &str) 
         previous = Some(t);
     }
     Ok(())
+}
+
+/// The gradient mode named `name` (`forward`, `adjoint`, `auto`), for a front end that reads it
+/// as text.
+pub fn sens_named(name: &str, spelling: Spelling) -> Result<Sens, OptionError> {
+    Sens::ALL.into_iter().find(|s| s.name() == name).ok_or_else(|| OptionError {
+        option: "sens",
+        message: format!(
+            "{}: expected \"forward\", \"adjoint\" or \"auto\", found {name:?}",
+            spelling.of("sens")
+        ),
+    })
 }
 
 /// The method named `name` (`auto`, `dopri5`, `dop853`, `rodas5p`, `rodas4`: the command line's

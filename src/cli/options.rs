@@ -7,7 +7,7 @@
 use clap::ValueEnum;
 
 use crate::sema::ParamIdx;
-use crate::sim::{Method, SimOptions};
+use crate::sim::{Method, Sens, SimOptions};
 use crate::{Model, ParamError, Params, SimOverrides, Spelling};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -31,6 +31,27 @@ impl From<MethodArg> for Method {
             MethodArg::Dop853 => Method::Dop853,
             MethodArg::Rodas5p => Method::Rodas5p,
             MethodArg::Rodas4 => Method::Rodas4,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub(crate) enum SensArg {
+    /// One sensitivity column per differentiated parameter, under the error control.
+    Forward,
+    /// The discrete adjoint: one backward pass over the recorded run for the quantities
+    /// reported; its cost does not grow with the parameters.
+    Adjoint,
+    /// The adjoint when the quantities reported are far fewer than the parameters.
+    Auto,
+}
+
+impl From<SensArg> for Sens {
+    fn from(arg: SensArg) -> Sens {
+        match arg {
+            SensArg::Forward => Sens::Forward,
+            SensArg::Adjoint => Sens::Adjoint,
+            SensArg::Auto => Sens::Auto,
         }
     }
 }
@@ -87,6 +108,11 @@ pub(crate) struct SimFlags {
     /// dense output; one more step attempt per event.
     #[arg(long)]
     land_events: bool,
+    /// How gradients are computed: forward sensitivities, the discrete adjoint (the derivative of
+    /// the steps a run with --no-sens-error-control takes), or whichever is cheaper
+    /// (docs/cli.md, gradients).
+    #[arg(long, value_enum, default_value = "forward")]
+    sens: SensArg,
 }
 
 /// The flag that sets each [`SimOverrides::OPTIONS`] entry (`None`: no flag, the option is the
@@ -94,7 +120,7 @@ pub(crate) struct SimFlags {
 /// commands' flags and against the options, so that a new option gets a flag (and a keyword in
 /// Python: python/tests).
 #[cfg(test)]
-pub(crate) const FLAG_OF_OPTION: [(&str, Option<&str>); 14] = [
+pub(crate) const FLAG_OF_OPTION: [(&str, Option<&str>); 15] = [
     ("t_end", Some("--t-end")),
     ("rtol", Some("--rtol")),
     ("atol", Some("--atol")),
@@ -110,6 +136,7 @@ pub(crate) const FLAG_OF_OPTION: [(&str, Option<&str>); 14] = [
     ("linear_solver", None),
     // `hybc run` only, as `simulate(at=...)` is Python's.
     ("at", Some("--at")),
+    ("sens", Some("--sens")),
 ];
 
 impl SimFlags {
@@ -130,6 +157,7 @@ impl SimFlags {
             land_events: self.land_events.then_some(true),
             linear_solver: None,
             at: None,
+            sens: Some(self.sens.into()),
         }
     }
 }
@@ -245,6 +273,7 @@ mod tests {
             land_events: _,
             linear_solver: _,
             at: _,
+            sens: _,
         } = SimOverrides::default();
         let listed: Vec<&str> = FLAG_OF_OPTION.iter().map(|(option, _)| *option).collect();
         assert_eq!(listed, SimOverrides::OPTIONS);

@@ -68,6 +68,37 @@ pub enum TrajectoryRequest {
     Every(f64),
 }
 
+/// How a run's gradients are computed (`hybc run --sens`, docs/cli.md): the report is the same
+/// whichever ran.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Sens {
+    /// Forward sensitivities: one column per differentiated parameter, integrated with the states
+    /// (under the error control unless `sens_error_control` is off).
+    Forward,
+    /// The discrete adjoint (`sim::adjoint`): the run recorded without sensitivities, then one
+    /// backward pass for the quantities reported; equal to the forward sensitivities of a run with
+    /// `sens_error_control` off. Where it does not carry a run yet, the forward sensitivities are
+    /// computed instead, with a warning.
+    Adjoint,
+    /// The adjoint when it is the cheaper (`sim::adjoint::prefers_adjoint`), else forward.
+    Auto,
+}
+
+impl Sens {
+    /// Every mode, in the order the command line lists them.
+    pub const ALL: [Sens; 3] = [Sens::Forward, Sens::Adjoint, Sens::Auto];
+
+    /// Its name on the command line and in JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Sens::Forward => "forward",
+            Sens::Adjoint => "adjoint",
+            Sens::Auto => "auto",
+        }
+    }
+}
+
 /// Options of [`run`](super::run). Times are model time; tolerances are per component, applied
 /// as `atol + rtol * |x_i|` to states and (by default) to sensitivities.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -125,6 +156,8 @@ pub struct SimOptions {
     /// output (`SimResult::samples`): ascending, within `[t_start, t_end]`. They do not cut the
     /// steps. A sample at an event instant is taken after the instant's events.
     pub at: Vec<f64>,
+    /// How gradients are computed.
+    pub sens: Sens,
 }
 
 /// The run defaults, the one set the CLI and the library share: a model's `simulate` line
@@ -147,6 +180,7 @@ impl Default for SimOptions {
             linear_solver: super::LinearSolver::Auto,
             trajectory: TrajectoryRequest::None,
             at: Vec::new(),
+            sens: Sens::Forward,
         }
     }
 }

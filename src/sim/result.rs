@@ -396,6 +396,13 @@ pub enum SimWarning {
         /// The start of the worst step.
         time: f64,
     },
+    /// `--sens adjoint` was asked for, but the run holds a piece the adjoint does not carry yet:
+    /// the gradients are the forward sensitivities' (error-controlled as `sens_error_control`
+    /// says).
+    AdjointNotCarried {
+        /// What the adjoint does not carry (`a step of a Rosenbrock method`, ...).
+        what: &'static str,
+    },
 }
 
 impl fmt::Display for SimWarning {
@@ -457,6 +464,9 @@ impl fmt::Display for SimWarning {
                  derivatives that move the event off the knot and differ on its two sides do not \
                  exist from here on"
             ),
+            SimWarning::AdjointNotCarried { what } => {
+                write!(f, "the adjoint does not carry {what} yet: the gradients are forward sensitivities")
+            }
             SimWarning::KnotsApart { inputs, time } => write!(
                 f,
                 "knots of {inputs} meet at t = {time}, where the flow jumps: derivatives with respect \
@@ -734,6 +744,8 @@ pub struct SimStats {
     pub events: usize,
     /// Flow switches crossed (implicit events, not in `events`).
     pub switches: usize,
+    /// How the gradients were computed (`None`: no parameter differentiated).
+    pub sens: Option<super::Sens>,
 }
 
 /// One row of a recorded trajectory.

@@ -2,6 +2,7 @@
 //! once and keeps the scratch buffers between runs; [`run`] is one run with a fresh one. Each run
 //! is a loop over `Integrator::step` with the trajectory recorder the options ask for.
 
+use super::adjoint;
 use super::breakpoints::Breakpoints;
 use super::event::detect::Detector;
 use super::event::jump::Jump;
@@ -13,9 +14,9 @@ use super::method::rosenbrock::Rosenbrock;
 use super::method::row_tableau::{RODAS4, RODAS5P};
 use super::method::stepper::Stepper;
 use super::method::tableau::{DOP853, DOPRI5};
-use super::options::{Method, SimOptions, TrajectoryRequest};
+use super::options::{Method, Sens, SimOptions, TrajectoryRequest};
 use super::recorder::{Recorder, TrajectoryRecorder};
-use super::result::{EventRecord, SimError, SimResult, StopReason};
+use super::result::{EventRecord, SimError, SimResult, SimWarning, StopReason};
 use super::system::{HybridSystem, SystemInfo};
 
 /// The smallest relative tolerance accepted: ten times the spacing of floating-point numbers
@@ -252,14 +253,53 @@ impl<H: SystemRef> Runner<H> {
     }
 
     /// [`Self::run`] with another recorder (the result's `trajectory` is then `None`).
+    ///
+    /// With `SimOptions::sens` asking for the adjoint and a recorder that records nothing, the
+    /// gradients are the adjoint's (`sim::adjoint`); where it does not carry the run, or
+    /// (`auto`) is not the cheaper, the run is the forward one (with a warning when the adjoint
+    /// was asked for by name).
     pub fn run_with<R: Recorder>(&mut self, p: &[f64], recorder: &mut R) -> Result<SimResult, SimError> {
         let sys = self.sys.system();
         check_params(sys.info(), p)?;
-        Ok(match &mut self.work {
+        let m = sys.info().n_grad();
+        let by_adjoint = self.opts.sens != Sens::Forward && m > 0 && !recorder.is_active();
+        let mut fell_back = None;
+        if by_adjoint {
+            match adjoint::run_by_adjoint(sys, p, &self.opts, self.opts.sens == Sens::Auto)? {
+                Ok(result) => return Ok(result),
+                Err(e) if self.opts.sens == Sens::Adjoint => fell_back = Some(e),
+                Err(_) => {}
+            }
+        }
+        let mut result = self.run_forward(p, recorder);
+        if m > 0 {
+            result.stats.sens = Some(Sens::Forward);
+        }
+        if let Some(adjoint::AdjointError::Unsupported(what)) = fell_back {
+            result.warnings.push(SimWarning::AdjointNotCarried { what });
+        }
+        Ok(result)
+    }
+
+    /// A run with forward sensitivities whatever `SimOptions::sens` says (checked parameters).
+    fn run_forward<R: Recorder>(&mut self, p: &[f64], recorder: &mut R) -> SimResult {
+        let sys = self.sys.system();
+        match &mut self.work {
             Work::Explicit(w) => run_to_end(Integrator::new(sys, p, &self.opts, w, recorder)),
             Work::Rosenbrock(w) => run_to_end(Integrator::new(sys, p, &self.opts, w, recorder)),
             Work::Auto(w) => run_to_end(Integrator::new(sys, p, &self.opts, &mut **w, recorder)),
-        })
+        }
+    }
+
+    /// [`Self::run_with`] with forward sensitivities whatever `SimOptions::sens` says: the
+    /// adjoint's own recording run.
+    pub(crate) fn run_forward_with<R: Recorder>(
+        &mut self,
+        p: &[f64],
+        recorder: &mut R,
+    ) -> Result<SimResult, SimError> {
+        check_params(self.sys.system().info(), p)?;
+        Ok(self.run_forward(p, recorder))
     }
 
     /// A run at `p` to drive step by step: [`Integrator::step`] until it says `Done`, then

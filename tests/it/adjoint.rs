@@ -10,7 +10,7 @@ use hybc::codegen::{compile, CompileOptions};
 use hybc::lower::{lower, system_info};
 use hybc::sema::ParamIdx;
 use hybc::sim::adjoint::{record, AdjointError, Seed};
-use hybc::sim::{run, Method, SimOptions, SimResult, StopReason};
+use hybc::sim::{run, Method, Sens, SimOptions, SimResult, StopReason};
 
 use crate::support::models::{shipped_models, ShippedModel};
 
@@ -225,4 +225,76 @@ fn what_the_adjoint_does_not_carry_yet_is_refused_by_name_never_approximated() {
     let err =
         recorded.gradient(compiled.system(), &p, &seed).expect_err("Rosenbrock steps are not carried yet");
     assert!(matches!(err, AdjointError::Unsupported(w) if w.contains("Rosenbrock")), "{err}");
+}
+
+/// Runs `src` through the door with `sens`, every parameter differentiated.
+fn door_run(src: &str, vectors: &[(&str, &[f64])], opts: &SimOptions) -> hybc::Run {
+    let (compiled, p) = compiled(src, vectors);
+    let mut params = compiled.params();
+    for (name, values) in vectors {
+        params.set_vector(name, values).expect("a vector");
+    }
+    assert_eq!(params.values(), &p[..]);
+    compiled.simulate(&params, opts).expect("runs")
+}
+
+const BALL: &str = "model ball\nparam g = 9.81\nparam e = 0.8\nparam h0 = 1\nstate y = h0\nstate v = 0\n\
+                    der(y) = v\nder(v) = -g\nevent touchdown when y <= 0 {\n v := -e * v\n}\n\
+                    output energy = 0.5 * v^2 + g * y\n";
+
+#[test]
+fn sens_adjoint_gives_the_report_of_a_forward_run_without_sensitivity_error_control() {
+    let base = SimOptions { t_end: 2.5, rtol: 1e-10, atol: 1e-12, ..SimOptions::default() };
+    let forward = door_run(BALL, &[], &SimOptions { sens_error_control: false, ..base.clone() });
+    let adjoint = door_run(BALL, &[], &SimOptions { sens: Sens::Adjoint, ..base.clone() });
+    assert_eq!(forward.result().stats.sens, Some(Sens::Forward));
+    assert_eq!(adjoint.result().stats.sens, Some(Sens::Adjoint));
+    assert_eq!(forward.events().len(), 4);
+    assert_eq!(forward.events().len(), adjoint.events().len());
+    let close = |a: f64, b: f64, what: &str| {
+        assert!((a - b).abs() <= 1e-12 * a.abs().max(b.abs()).max(1.0), "{what}: {a} vs {b}");
+    };
+    for param in ["g", "e", "h0"] {
+        for k in 0..4 {
+            let (f, a) = (forward.devent_time(k, param).unwrap(), adjoint.devent_time(k, param).unwrap());
+            close(f, a, &format!("dt{k}/d{param}"));
+        }
+        for state in ["y", "v"] {
+            close(forward.dstate(state, param).unwrap(), adjoint.dstate(state, param).unwrap(), state);
+        }
+        close(forward.doutput("energy", param).unwrap(), adjoint.doutput("energy", param).unwrap(), "energy");
+    }
+    // The same report, word for word but the timings and the summary's mode.
+    let text = |run: &hybc::Run| {
+        let mut text = String::new();
+        run.report().write_table(&mut text).expect("writes");
+        text.lines().take_while(|l| !l.contains("steps (")).map(str::to_string).collect::<Vec<_>>()
+    };
+    assert_eq!(text(&forward), text(&adjoint));
+}
+
+#[test]
+fn sens_auto_takes_the_adjoint_only_when_the_quantities_are_few_against_the_parameters() {
+    // Three parameters, 4 events + 2 states + 1 output: forward.
+    let opts = SimOptions { t_end: 2.5, sens: Sens::Auto, ..SimOptions::default() };
+    assert_eq!(door_run(BALL, &[], &opts).result().stats.sens, Some(Sens::Forward));
+    // A control of 40 knots, 3 quantities: the adjoint.
+    let src = "model drive\nparam u[40] = 0.5\nstate p = 0\nstate v = 0\n\
+               der(p) = v\nder(v) = pwl(t, 0, 1, u)\noutput cost = p^2 + v^2\n";
+    let opts = SimOptions { t_end: 1.0, sens: Sens::Auto, ..SimOptions::default() };
+    assert_eq!(door_run(src, &[], &opts).result().stats.sens, Some(Sens::Adjoint));
+}
+
+#[test]
+fn sens_adjoint_on_a_run_it_does_not_carry_computes_forward_and_says_so() {
+    let src = "model cascade\nparam h = 1\nstate x = 0\nstate n = 0\nder(x) = 1\nder(n) = 0\n\
+               event a when x >= h {\n x := 2 * h\n}\nevent b when x >= 1.5 * h {\n n := n + 1\n}\n";
+    let opts = SimOptions { t_end: 2.0, sens: Sens::Adjoint, ..SimOptions::default() };
+    let run = door_run(src, &[], &opts);
+    assert_eq!(run.result().stats.sens, Some(Sens::Forward));
+    let said: Vec<String> = run.warnings().iter().map(|w| w.to_string()).collect();
+    assert!(said.iter().any(|w| w.contains("adjoint does not carry") && w.contains("cascades")), "{said:?}");
+    // x = t up to the kick at t = h, then 2h + (t - h): dx(2)/dh = 1.
+    let dxdh = run.dstate("x", "h").expect("exists");
+    assert!((dxdh - 1.0).abs() < 1e-9, "{dxdh}");
 }

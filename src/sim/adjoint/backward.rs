@@ -95,16 +95,31 @@ fn nested_weights(s: f64, count: usize) -> [f64; 8] {
     w
 }
 
-/// `lam` (n): on entry the cotangent of the state the step hands on, on return that of its
-/// start; `pbar` (m) gains the parameters' share.
+/// `lams` (rows of n): on entry the cotangents of the state the step hands on, on return those
+/// of its start; `pbars` (rows of m) gain the parameters' share. The stages are recomputed once
+/// for every row.
 pub(super) fn step_backward<S: HybridSystem + ?Sized>(
     sys: &S,
     p: &[f64],
     step: &Step<'_>,
-    lam: &mut [f64],
-    pbar: &mut [f64],
+    lams: &mut [f64],
+    pbars: &mut [f64],
     w: &mut Scratch,
 ) {
+    let (n, rows) = (step.x0.len(), lams.len() / step.x0.len().max(1));
+    if n == 0 || rows == 0 {
+        return;
+    }
+    let m = pbars.len() / rows;
+    let stages = recompute_stages(sys, p, step, w);
+    for r in 0..rows {
+        let (lam, pbar) = (&mut lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
+        row_backward(sys, p, step, stages, lam, pbar, w);
+    }
+}
+
+/// The step's stage inputs and derivatives (states only) into the scratch; returns how many.
+fn recompute_stages<S: HybridSystem + ?Sized>(sys: &S, p: &[f64], step: &Step<'_>, w: &mut Scratch) -> usize {
     let n = step.x0.len();
     let tab = tableau(step.pair);
     let s = tab.stages;
@@ -125,6 +140,24 @@ pub(super) fn step_backward<S: HybridSystem + ?Sized>(
         stage_sum(&w.k, n, &tab.a[i], h, |c| step.x0[c], xi);
         sys.flow(step.mode, at(t0 + tab.c[i] * h), xi, p, &mut w.k[i * n..(i + 1) * n]);
     }
+    stages
+}
+
+/// One row of [`step_backward`], over the stages [`recompute_stages`] left in the scratch.
+fn row_backward<S: HybridSystem + ?Sized>(
+    sys: &S,
+    p: &[f64],
+    step: &Step<'_>,
+    stages: usize,
+    lam: &mut [f64],
+    pbar: &mut [f64],
+    w: &mut Scratch,
+) {
+    let n = step.x0.len();
+    let tab = tableau(step.pair);
+    let s = tab.stages;
+    let at = |t: f64| if t > step.ceiling { step.ceiling } else { t };
+    let (t0, h) = (step.t0, step.h);
     w.kbar.clear();
     w.kbar.resize(stages * n, 0.0);
     w.xbar.clear();

@@ -26,6 +26,16 @@ use backward::{
 };
 pub(crate) use plain::WithoutSens;
 
+/// `Sens::Auto` takes the adjoint when the quantities reported (rows) are fewer than this
+/// fraction of the differentiated parameters: a backward pass per row costs about what a forward
+/// sensitivity column does (docs/design.md, "The adjoint").
+pub const AUTO_ROWS_PER_PARAM: f64 = 0.5;
+
+/// Whether `Sens::Auto` takes the adjoint for `rows` quantities and `params` parameters.
+pub fn prefers_adjoint(rows: usize, params: usize) -> bool {
+    (rows as f64) < AUTO_ROWS_PER_PARAM * params as f64
+}
+
 /// Why a gradient cannot be had by the adjoint.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum AdjointError {
@@ -170,8 +180,70 @@ pub fn record<S: HybridSystem + ?Sized>(sys: &S, p: &[f64], opts: &SimOptions) -
     if !opts.at.is_empty() {
         tape.unsupported = Some("samples at given times (--at)");
     }
-    let result = Runner::new(&plain, &opts)?.run_with(p, &mut tape)?;
+    let result = Runner::new(&plain, &opts)?.run_forward_with(p, &mut tape)?;
     Ok(Recorded { result, tape })
+}
+
+/// A run's result with the gradients of every quantity it reports (event times, final states and
+/// outputs, their total derivatives at a stop event) by the adjoint: `Ok(Err(why))` where the
+/// adjoint does not carry the run, or (`auto`) is not the cheaper; the caller then runs forward.
+pub(crate) fn run_by_adjoint<S: HybridSystem + ?Sized>(
+    sys: &S,
+    p: &[f64],
+    opts: &SimOptions,
+    auto: bool,
+) -> Result<Result<SimResult, AdjointError>, SimError> {
+    let recorded = record(sys, p, opts)?;
+    let result = &recorded.result;
+    if result.end_cusp.is_some() {
+        return Ok(Err(AdjointError::Unsupported("an event at t_end (the other side of its cusp)")));
+    }
+    let info = sys.info();
+    let (n, m, k) = (info.n_states(), info.n_grad(), info.n_outputs());
+    let at_stop = matches!(result.stopped_by, StopReason::Event { .. });
+    let mut seeds: Vec<Seed> =
+        (0..result.events.len()).map(|e| Seed { event_times: vec![(e, 1.0)], ..Seed::default() }).collect();
+    for total in [false, true] {
+        if total && !at_stop {
+            continue;
+        }
+        for i in 0..n {
+            let mut state = vec![0.0; n];
+            state[i] = 1.0;
+            seeds.push(Seed { state, total, ..Seed::default() });
+        }
+        for i in 0..k {
+            let mut outputs = vec![0.0; k];
+            outputs[i] = 1.0;
+            seeds.push(Seed { outputs, total, ..Seed::default() });
+        }
+    }
+    if auto && !prefers_adjoint(seeds.len(), m) {
+        return Ok(Err(AdjointError::Unsupported("(auto) a run with more quantities than parameters")));
+    }
+    let rows = match recorded.gradients(sys, p, &seeds) {
+        Ok(rows) => rows,
+        Err(e) => return Ok(Err(e)),
+    };
+    let mut result = recorded.result;
+    let mut rows = rows.into_iter();
+    for event in &mut result.events {
+        event.dtime = rows.next();
+    }
+    let mut columns = |count: usize| -> Vec<f64> {
+        let block: Vec<Vec<f64>> = rows.by_ref().take(count).collect();
+        // Column per parameter: entry `j * count + i` is quantity `i`'s derivative by `j`.
+        (0..m).flat_map(|j| block.iter().map(move |row| row[j])).collect()
+    };
+    let fin = &mut result.final_state;
+    fin.dstate = Some(columns(n));
+    fin.doutputs = Some(columns(k));
+    if at_stop {
+        fin.dstate_total = Some(columns(n));
+        fin.doutputs_total = Some(columns(k));
+    }
+    result.stats.sens = Some(super::Sens::Adjoint);
+    Ok(Ok(result))
 }
 
 impl Recorded {
@@ -183,48 +255,65 @@ impl Recorded {
         p: &[f64],
         seed: &Seed,
     ) -> Result<Vec<f64>, AdjointError> {
+        Ok(self.gradients(sys, p, std::slice::from_ref(seed))?.remove(0))
+    }
+
+    /// The gradients of several quantities in one backward pass: each step's stages are
+    /// recomputed once for all of them.
+    pub fn gradients<S: HybridSystem + ?Sized>(
+        &self,
+        sys: &S,
+        p: &[f64],
+        seeds: &[Seed],
+    ) -> Result<Vec<Vec<f64>>, AdjointError> {
         if let Some(what) = self.tape.unsupported {
             return Err(AdjointError::Unsupported(what));
         }
         let info = sys.info();
         let (n, m, k) = (info.n_states(), info.n_grad(), info.n_outputs());
         let fin = &self.result.final_state;
-        let stop_total = match &self.result.stopped_by {
+        let at_stop = match &self.result.stopped_by {
             StopReason::TEnd => false,
-            StopReason::Event { .. } => seed.total,
+            StopReason::Event { .. } => true,
             other => return Err(AdjointError::Ended(format!("{other:?}"))),
         };
-        if !(seed.state.is_empty() || seed.state.len() == n)
-            || !(seed.outputs.is_empty() || seed.outputs.len() == k)
-        {
-            return Err(AdjointError::Seed(format!("{n} state and {k} output weights expected")));
-        }
         let events = self.result.events.len();
-        if let Some(&(bad, _)) = seed.event_times.iter().find(|&&(e, _)| e >= events) {
-            return Err(AdjointError::Seed(format!("event {bad} of a run with {events}")));
-        }
-        let mut lam = vec![0.0; n];
-        let mut pbar = vec![0.0; m];
-        lam.iter_mut().zip(&seed.state).for_each(|(l, w)| *l = *w);
-        // The outputs at the end: y_x^T ybar into the state's cotangent, y_p^T ybar into the
-        // parameters', y_t . ybar into the stop's time when the total derivative is asked for.
-        let mut end_time_bar = 0.0;
-        if !seed.outputs.is_empty() {
-            let (mut yx, mut yp, mut yt) = (vec![0.0; k * n], vec![0.0; k * m], vec![0.0; k]);
-            sys.output_jac(fin.time, &fin.state, p, &mut yx, &mut yp, &mut yt);
-            for (i, &w) in seed.outputs.iter().enumerate() {
-                for c in 0..n {
-                    lam[c] += w * yx[i * n + c];
-                }
-                for j in 0..m {
-                    pbar[j] += w * yp[j * k + i];
-                }
-                end_time_bar += w * yt[i];
+        for seed in seeds {
+            if !(seed.state.is_empty() || seed.state.len() == n)
+                || !(seed.outputs.is_empty() || seed.outputs.len() == k)
+            {
+                return Err(AdjointError::Seed(format!("{n} state and {k} output weights expected")));
+            }
+            if let Some(&(bad, _)) = seed.event_times.iter().find(|&&(e, _)| e >= events) {
+                return Err(AdjointError::Seed(format!("event {bad} of a run with {events}")));
             }
         }
-        let mut time_bars = vec![0.0; events];
-        for &(e, w) in &seed.event_times {
-            time_bars[e] += w;
+        let rows = seeds.len();
+        if m == 0 || rows == 0 {
+            return Ok(vec![Vec::new(); rows]);
+        }
+        let mut lams = vec![0.0; rows * n];
+        let mut pbars = vec![0.0; rows * m];
+        let mut end_time_bars = vec![0.0; rows];
+        let (mut yx, mut yp, mut yt) = (vec![0.0; k * n], vec![0.0; k * m], vec![0.0; k]);
+        if seeds.iter().any(|s| !s.outputs.is_empty()) {
+            sys.output_jac(fin.time, &fin.state, p, &mut yx, &mut yp, &mut yt);
+        }
+        for (r, seed) in seeds.iter().enumerate() {
+            let (lam, pbar) = (&mut lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
+            lam.iter_mut().zip(&seed.state).for_each(|(l, w)| *l = *w);
+            // The outputs at the end: y_x^T ybar into the state's cotangent, y_p^T ybar into
+            // the parameters', y_t . ybar into the stop's time when the total derivative is
+            // asked for.
+            for (i, &w) in seed.outputs.iter().enumerate() {
+                for (c, l) in lam.iter_mut().enumerate() {
+                    *l += w * yx[i * n + c];
+                }
+                for (j, pb) in pbar.iter_mut().enumerate() {
+                    *pb += w * yp[j * k + i];
+                }
+                end_time_bars[r] += w * yt[i];
+            }
         }
         let mut scratch = Scratch::default();
         let mut event = events;
@@ -242,11 +331,10 @@ impl Recorded {
                         x0: &store[at.x..at.x + n],
                         end,
                     };
-                    step_backward(sys, p, &step, &mut lam, &mut pbar, &mut scratch);
+                    step_backward(sys, p, &step, &mut lams, &mut pbars, &mut scratch);
                 }
                 Piece::Jump { event: ev, t, mode_before, mode_after, x, velocity } => {
                     event -= 1;
-                    let is_stop_end = stop_total && Some(index) == last_jump;
                     let jump = Jump {
                         event: ev,
                         t,
@@ -255,8 +343,16 @@ impl Recorded {
                         x: &store[x..x + n],
                         velocity: velocity.map(|v| &store[v..v + n]),
                     };
-                    let time_bar = time_bars[event] + if is_stop_end { end_time_bar } else { 0.0 };
-                    jump_backward(sys, p, &jump, time_bar, is_stop_end, &mut lam, &mut pbar);
+                    for (r, seed) in seeds.iter().enumerate() {
+                        let is_stop_end = at_stop && seed.total && Some(index) == last_jump;
+                        let mut time_bar =
+                            seed.event_times.iter().filter(|e| e.0 == event).map(|e| e.1).sum::<f64>();
+                        if is_stop_end {
+                            time_bar += end_time_bars[r];
+                        }
+                        let (lam, pbar) = (&mut lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
+                        jump_backward(sys, p, &jump, time_bar, is_stop_end, lam, pbar);
+                    }
                 }
                 Piece::Switch { event: ev, t, mode, x, pre, post } => {
                     let switch = Switch {
@@ -267,19 +363,30 @@ impl Recorded {
                         pre: (pre.0, &store[pre.1..pre.1 + n]),
                         post: (post.0, &store[post.1..post.1 + n]),
                     };
-                    switch_backward(sys, p, &switch, &mut lam, &mut pbar);
+                    for r in 0..rows {
+                        let (lam, pbar) = (&mut lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
+                        switch_backward(sys, p, &switch, lam, pbar);
+                    }
                 }
                 Piece::Knot { set, t, jump } => {
-                    knot_backward(sys, p, set, t, &store[jump..jump + n], &lam, &mut pbar)
+                    for r in 0..rows {
+                        let (lam, pbar) = (&lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
+                        knot_backward(sys, p, set, t, &store[jump..jump + n], lam, pbar);
+                    }
                 }
             }
         }
         // The initial state's own dependence on the parameters.
         let mut s0 = vec![0.0; n * m];
         sys.initial_sens(p, &mut s0);
-        for (j, pb) in pbar.iter_mut().enumerate() {
-            *pb += (0..n).map(|i| s0[j * n + i] * lam[i]).sum::<f64>();
+        let mut out = Vec::with_capacity(rows);
+        for r in 0..rows {
+            let (lam, pbar) = (&lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
+            for (j, pb) in pbar.iter_mut().enumerate() {
+                *pb += (0..n).map(|i| s0[j * n + i] * lam[i]).sum::<f64>();
+            }
+            out.push(pbar.to_vec());
         }
-        Ok(pbar)
+        Ok(out)
     }
 }
