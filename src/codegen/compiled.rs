@@ -397,6 +397,17 @@ impl HybridSystem for CompiledModel {
         }
     }
 
+    #[allow(clippy::too_many_arguments)]
+    fn flow_vjp(&self, mode: usize, t: f64, x: &[f64], w: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) {
+        // `w` is the kernel's `s` input; `Kernel::call` checks every length.
+        match self.kernels.flow_vjp.get(mode) {
+            Some(k) => {
+                k.call(t, x, w, p, [gx, gp, &mut []]);
+            }
+            None => poison([gx, gp, &mut []]),
+        }
+    }
+
     fn prepare_jacobians(&self) -> Result<(), String> {
         self.stiff_kernels().map(|_| ()).map_err(str::to_owned)
     }

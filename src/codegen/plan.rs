@@ -4,7 +4,7 @@
 //! inside the lengths it declares.
 
 use super::CodegenError;
-use crate::expr::{ExprId, ExprStore, ModelFunctions, SparseMat, SparseVec};
+use crate::expr::{ExprId, ExprStore, ModeFunctions, ModelFunctions, SparseMat, SparseVec};
 use crate::sim::SystemInfo;
 
 /// Number of output pointers every kernel takes (unused ones receive empty slices).
@@ -197,6 +197,8 @@ pub(crate) struct ModelKernels<K> {
     /// Per mode.
     pub flow: Vec<K>,
     pub flow_sens: Vec<K>,
+    /// `f_x^T w` and `f_p^T w`, with `w` passed as the `s` input (the adjoint's products).
+    pub flow_vjp: Vec<K>,
     pub guards: Vec<K>,
     /// `g_x f + g_t` of every guard of the mode, with the flow `f` passed as the `s` input.
     pub guard_speeds: Vec<K>,
@@ -223,6 +225,7 @@ impl<K> ModelKernels<K> {
         self.flow
             .iter()
             .chain(&self.flow_sens)
+            .chain(&self.flow_vjp)
             .chain(&self.guards)
             .chain(&self.guard_speeds)
             .chain(&self.guard_grad)
@@ -239,6 +242,7 @@ impl<K> ModelKernels<K> {
         self.flow
             .iter_mut()
             .chain(&mut self.flow_sens)
+            .chain(&mut self.flow_vjp)
             .chain(&mut self.guards)
             .chain(&mut self.guard_speeds)
             .chain(&mut self.guard_grad)
@@ -255,6 +259,7 @@ impl<K> ModelKernels<K> {
         let mut all = |ks: &[K]| ks.iter().map(&mut f).collect::<Result<Vec<L>, E>>();
         let flow = all(&self.flow)?;
         let flow_sens = all(&self.flow_sens)?;
+        let flow_vjp = all(&self.flow_vjp)?;
         let guards = all(&self.guards)?;
         let guard_speeds = all(&self.guard_speeds)?;
         let guard_grad = all(&self.guard_grad)?;
@@ -270,6 +275,7 @@ impl<K> ModelKernels<K> {
         Ok(ModelKernels {
             flow,
             flow_sens,
+            flow_vjp,
             guards,
             guard_speeds,
             guard_grad,
@@ -309,6 +315,7 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
     let mut plan = ModelPlan {
         flow: Vec::new(),
         flow_sens: Vec::new(),
+        flow_vjp: Vec::new(),
         guards: Vec::new(),
         guard_speeds: Vec::new(),
         guard_grad: Vec::new(),
@@ -352,6 +359,7 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
                 sens.write(1, j * n + i, term)?;
             }
         }
+        let vjp = plan_flow_vjp(mode_idx, mode, &dims)?;
         let mut guards = KernelPlan::new(
             format!("mode{mode_idx}_guards"),
             dims.lens(n, 0, [mode_info.events.len(), 0, 0]),
@@ -381,6 +389,7 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
         }
         plan.flow.push(flow);
         plan.flow_sens.push(sens);
+        plan.flow_vjp.push(vjp);
         plan.guards.push(guards);
         plan.guard_speeds.push(speeds);
     }
@@ -481,6 +490,37 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
         kernel.check(&funcs.store)?;
     }
     Ok(plan)
+}
+
+/// `mode{k}_flow_vjp` (inputs `x` (n), `s = w` (n)): `gx = f_x^T w` (n) and `gp = f_p^T w` (m,
+/// by sensitivity column), each entry one `SensDot` over the structurally nonzero entries of
+/// its column of `f_x` or `f_p`, rows ascending: the transpose of `flow_sens`'s products, so a
+/// sparse model's products cost its Jacobian's entries, never `n^2`. Entries without one are
+/// zero-filled (by the kernel when small, `write_small_zeros`). A vector parameter read by an
+/// input (`pwl`, `pwc`) has one `f_p` entry per element and row that reads it.
+fn plan_flow_vjp(mode_idx: usize, mode: &ModeFunctions, dims: &Dims) -> Result<KernelPlan, CodegenError> {
+    let (n, m) = (dims.n, dims.n_grad);
+    let mut vjp = KernelPlan::new(format!("mode{mode_idx}_flow_vjp"), dims.lens(n, n, [n, m, 0]));
+    vjp.prefill = [true, true, false];
+    // The entries are sorted by (row, column): grouped by column, each keeps its rows ascending.
+    let mut fx_cols: Vec<Vec<(ExprId, u32)>> = vec![Vec::new(); n];
+    for &(i, c, e) in &mode.flow_x.entries {
+        fx_cols[c as usize].push((e, i));
+    }
+    let mut fp_cols: Vec<Vec<(ExprId, u32)>> = vec![Vec::new(); m];
+    for &(i, param, e) in &mode.flow_p.entries {
+        if let Some(c) = dims.grad_col[param as usize] {
+            fp_cols[c].push((e, i));
+        }
+    }
+    for (out, cols) in [(0, fx_cols), (1, fp_cols)] {
+        for (j, products) in cols.into_iter().enumerate() {
+            if !products.is_empty() {
+                vjp.write(out, j, Term::SensDot { products, bias: None })?;
+            }
+        }
+    }
+    Ok(vjp)
 }
 
 pub(crate) fn index_u32(what: &str, index: usize) -> Result<u32, CodegenError> {

@@ -4,6 +4,7 @@
 
 mod support;
 
+mod adjoint_kernels;
 mod check_grad;
 mod cli_cases;
 mod cli_run;
