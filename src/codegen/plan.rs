@@ -197,8 +197,6 @@ pub(crate) struct ModelKernels<K> {
     /// Per mode.
     pub flow: Vec<K>,
     pub flow_sens: Vec<K>,
-    /// `f_x^T w` and `f_p^T w`, with `w` passed as the `s` input (the adjoint's products).
-    pub flow_vjp: Vec<K>,
     pub guards: Vec<K>,
     /// `g_x f + g_t` of every guard of the mode, with the flow `f` passed as the `s` input.
     pub guard_speeds: Vec<K>,
@@ -225,7 +223,6 @@ impl<K> ModelKernels<K> {
         self.flow
             .iter()
             .chain(&self.flow_sens)
-            .chain(&self.flow_vjp)
             .chain(&self.guards)
             .chain(&self.guard_speeds)
             .chain(&self.guard_grad)
@@ -242,7 +239,6 @@ impl<K> ModelKernels<K> {
         self.flow
             .iter_mut()
             .chain(&mut self.flow_sens)
-            .chain(&mut self.flow_vjp)
             .chain(&mut self.guards)
             .chain(&mut self.guard_speeds)
             .chain(&mut self.guard_grad)
@@ -259,7 +255,6 @@ impl<K> ModelKernels<K> {
         let mut all = |ks: &[K]| ks.iter().map(&mut f).collect::<Result<Vec<L>, E>>();
         let flow = all(&self.flow)?;
         let flow_sens = all(&self.flow_sens)?;
-        let flow_vjp = all(&self.flow_vjp)?;
         let guards = all(&self.guards)?;
         let guard_speeds = all(&self.guard_speeds)?;
         let guard_grad = all(&self.guard_grad)?;
@@ -275,7 +270,6 @@ impl<K> ModelKernels<K> {
         Ok(ModelKernels {
             flow,
             flow_sens,
-            flow_vjp,
             guards,
             guard_speeds,
             guard_grad,
@@ -315,7 +309,6 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
     let mut plan = ModelPlan {
         flow: Vec::new(),
         flow_sens: Vec::new(),
-        flow_vjp: Vec::new(),
         guards: Vec::new(),
         guard_speeds: Vec::new(),
         guard_grad: Vec::new(),
@@ -359,7 +352,6 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
                 sens.write(1, j * n + i, term)?;
             }
         }
-        let vjp = plan_flow_vjp(mode_idx, mode, &dims)?;
         let mut guards = KernelPlan::new(
             format!("mode{mode_idx}_guards"),
             dims.lens(n, 0, [mode_info.events.len(), 0, 0]),
@@ -389,7 +381,6 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
         }
         plan.flow.push(flow);
         plan.flow_sens.push(sens);
-        plan.flow_vjp.push(vjp);
         plan.guards.push(guards);
         plan.guard_speeds.push(speeds);
     }
@@ -490,6 +481,20 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
         kernel.check(&funcs.store)?;
     }
     Ok(plan)
+}
+
+/// The adjoint's kernels, one per mode ([`plan_flow_vjp`]). `CompiledModel` plans and compiles
+/// them on the first `flow_vjp` call, into a module of their own: a forward run never pays for
+/// them (in the model's module they doubled the compile time of a 1000-state chain).
+pub(crate) fn plan_vjp(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Vec<KernelPlan>, CodegenError> {
+    let dims = check_shape(funcs, info)?;
+    let plan_mode = |(k, mode): (usize, &ModeFunctions)| {
+        let mut plan = plan_flow_vjp(k, mode, &dims)?;
+        plan.write_small_zeros();
+        plan.check(&funcs.store)?;
+        Ok(plan)
+    };
+    funcs.modes.iter().enumerate().map(plan_mode).collect()
 }
 
 /// `mode{k}_flow_vjp` (inputs `x` (n), `s = w` (n)): `gx = f_x^T w` (n) and `gp = f_p^T w` (m,

@@ -3,7 +3,7 @@
 //! never with `n^2`. (Its values are tested against the interpreter and the transpose
 //! relations in tests/it/adjoint_kernels.rs.)
 
-use super::plan::{plan_model, KernelPlan, Term};
+use super::plan::{plan_vjp, KernelPlan, Term};
 use super::translate::needed_nodes;
 use crate::expr::{ExprId, ModelFunctions};
 use crate::lower::{lower, system_info};
@@ -16,8 +16,7 @@ fn vjp_plan(source: &str) -> (ModelFunctions, KernelPlan) {
     let funcs = lower(&model);
     let grad: Vec<ParamIdx> = (0..model.n_params() as u32).map(ParamIdx).collect();
     let info = system_info(&model, &grad);
-    let plan = plan_model(&funcs, &info).expect("plans");
-    let vjp = plan.flow_vjp[0].clone();
+    let vjp = plan_vjp(&funcs, &info).expect("plans").swap_remove(0);
     (funcs, vjp)
 }
 
