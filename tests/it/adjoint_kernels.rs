@@ -480,3 +480,21 @@ fn the_default_reads_a_row_against_its_smallest_parameter_entry() {
     assert_eq!(gx, [2.0 * (2.0 * 0.1), 0.0, 2.0 * -0.875]);
     assert_eq!(gp, [2.0 * -x2, 0.0]);
 }
+
+#[test]
+fn the_compiled_flow_vjp_checks_its_lengths_and_its_mode() {
+    // A caller's bug shows as NaN in its results, never as a read or write out of bounds.
+    let source = "model two\nparam a = 1\nstate x = 1\nstate y = 0\nder(x) = a * y\nder(y) = -x\n";
+    let model = hybc::check_source(source).expect("checks");
+    let funcs = lower(&model);
+    let jit = CompiledModel::compile(&funcs, system_info(&model, &[ParamIdx(0)]), &CompileOptions::default())
+        .expect("compiles");
+    let (x, p) = ([1.0, 2.0], [3.0]);
+    let (gx, gp) = vjp(&jit, 0, 0.0, &x, &[1.0, 1.0], &p);
+    assert_eq!((gx, gp), (vec![-1.0, 3.0], vec![2.0]), "f_x = [[0, a], [-1, 0]], f_p = [y, 0]");
+    for (w, gx_len, gp_len, mode) in [(2, 2, 1, 1), (1, 2, 1, 0), (2, 3, 1, 0), (2, 2, 0, 0)] {
+        let (mut gx, mut gp) = (vec![0.0; gx_len], vec![0.0; gp_len]);
+        jit.flow_vjp(mode, 0.0, &x, &vec![1.0; w], &p, &mut gx, &mut gp);
+        assert!(gx.iter().chain(&gp).all(|g| g.is_nan()), "w {w}, gx {gx_len}, gp {gp_len}, mode {mode}");
+    }
+}
