@@ -161,8 +161,8 @@ pub trait HybridSystem: Sync {
     /// The flow's vector-Jacobian products at `(t, x)` in `mode`: `gx = f_x^T w` (n) and
     /// `gp = f_p^T w` (m, one entry per differentiated parameter, `grad_params` order), both
     /// overwritten: what the adjoint's backward pass needs at every stage. A compiled model has a
-    /// kernel that sums each entry over the structurally nonzero entries of its column of `f_x`
-    /// or `f_p`, never forming `f_x`; a zero `w_i` annihilates an entry that is infinite or NaN
+    /// kernel, compiled on the first call, that sums each entry over the structurally nonzero
+    /// entries of its column of `f_x` or `f_p`, never forming `f_x`; a zero `w_i` annihilates an entry that is infinite or NaN
     /// at a finite state, as a zero sensitivity does in [`Self::flow_sens`] (the default skips the
     /// rows whose `w_i` is zero).
     ///
