@@ -14,7 +14,9 @@
 //! - `... -- closed [SOLVER] [B] N...`: the solver alone on the closed-form objective (no model,
 //!   no runs: the quadratic every run computes to round-off): its evaluations and its own time,
 //!   so its cost at counts whose runs are too slow today.
-//! - `... -- run N...`: compile time and one run with the gradient of every knot.
+//! - `... -- run N...`: compile time and one run with the gradient of every knot; then the
+//!   adjoint's `flow_vjp` (its kernel's compile on the first call, and one call) against one
+//!   `flow_sens` call.
 //!
 //! SOLVER is `lbfgsb` (default) or `slsqp`, B a bound (default 3; `inf` for none). docs/performance.md,
 //! "Optimisation over many knots", has the figures.
@@ -24,6 +26,7 @@ use std::time::Instant;
 use hybc::fit::Bounds;
 use hybc::optimize::solver::{LocalSolver, Program, SmoothPoint};
 use hybc::optimize::{optimize, Lbfgsb, OptimizeOptions, OptimizeProblem, Quantity, Slsqp};
+use hybc::sim::HybridSystem;
 use hybc::Model;
 
 #[path = "../../tests/it/support/knots.rs"]
@@ -169,7 +172,10 @@ fn closed(solver: &dyn LocalSolver, bound: f64, counts: &[usize]) {
 }
 
 fn run(counts: &[usize]) {
-    println!("{:>6} {:>9} {:>9}", "knots", "compile", "run");
+    println!(
+        "{:>6} {:>9} {:>9} {:>12} {:>10} {:>11}",
+        "knots", "compile", "run", "vjp compile", "vjp call", "sens call"
+    );
     for &n in counts {
         let started = Instant::now();
         let model = Model::parse(&source(n, 3.0)).expect("model");
@@ -177,6 +183,31 @@ fn run(counts: &[usize]) {
         let compile = started.elapsed().as_secs_f64();
         let started = Instant::now();
         compiled.simulate(&model.params(), &model.sim_options()).expect("runs");
-        println!("{:>6} {:>8.3}s {:>8.3}s", n, compile, started.elapsed().as_secs_f64());
+        let run = started.elapsed().as_secs_f64();
+        // The adjoint's products (issue #40): the first `flow_vjp` call compiles its kernel; then
+        // one call against one `flow_sens` call (every knot's sensitivity column), at t = 0.3.
+        let sys = compiled.system();
+        let p: Vec<f64> = (0..n).map(|k| (k % 7) as f64 / 7.0).chain([knots::LAM]).collect();
+        let (x, w) = ([0.1, 0.2, 0.3], [1.0, -1.0, 0.5]);
+        let (mut gx, mut gp) = (vec![0.0; 3], vec![0.0; n]);
+        let started = Instant::now();
+        sys.flow_vjp(0, 0.3, &x, &w, &p, &mut gx, &mut gp);
+        let vjp_compile = started.elapsed().as_secs_f64();
+        let per_call = |f: &mut dyn FnMut()| {
+            let reps = (200_000 / n).max(10);
+            let started = Instant::now();
+            for _ in 0..reps {
+                f();
+            }
+            started.elapsed().as_secs_f64() / reps as f64 * 1e6
+        };
+        let vjp_call = per_call(&mut || sys.flow_vjp(0, 0.3, &x, &w, &p, &mut gx, &mut gp));
+        let s = vec![0.0; 3 * n];
+        let (mut dx, mut ds) = (vec![0.0; 3], vec![0.0; 3 * n]);
+        let sens_call = per_call(&mut || sys.flow_sens(0, 0.3, &x, &s, &p, &mut dx, &mut ds));
+        println!(
+            "{:>6} {:>8.3}s {:>8.3}s {:>11.3}s {:>8.2}us {:>9.2}us",
+            n, compile, run, vjp_compile, vjp_call, sens_call
+        );
     }
 }

@@ -9,7 +9,7 @@ use cranelift_frontend::FunctionBuilderContext;
 use cranelift_jit::{JITBuilder, JITModule};
 use cranelift_module::{default_libcall_names, FuncId, Module};
 
-use super::plan::{plan_model, KernelPlan, Lens, ModelKernels, N_OUTS};
+use super::plan::{plan_model, plan_vjp, KernelPlan, Lens, ModelKernels, N_OUTS};
 use super::runtime::Callee;
 use super::stiff::plan_stiff;
 use super::translate::{declare_callees, define_driver, define_kernel};
@@ -85,13 +85,17 @@ pub struct CompiledModel {
     enclosures: Vec<Enclosure>,
     n_kernels: usize,
     module: Mutex<Option<JITModule>>,
-    /// The model's functions, kept to compile the stiff kernels on demand (their second
-    /// derivatives cost compile time that explicit runs never repay); dropped once they are built.
+    /// The model's functions, kept to compile the stiff and the adjoint's kernels on demand
+    /// (their compile time is never repaid by the runs that do not use them).
     source: Mutex<Option<ModelFunctions>>,
     opts: CompileOptions,
     /// The stiff kernels once built (or why they could not be); their module is freed in `Drop`.
     stiff: OnceLock<Result<StiffKernels, String>>,
     stiff_module: Mutex<Option<JITModule>>,
+    /// Each mode's `flow_vjp` kernel once built (`HybridSystem::flow_vjp`'s first call); their
+    /// module is freed in `Drop`.
+    vjp: OnceLock<Result<Vec<Kernel>, String>>,
+    vjp_module: Mutex<Option<JITModule>>,
 }
 
 /// The kernels a Rosenbrock stepper needs, per mode (see `codegen::stiff`).
@@ -147,6 +151,8 @@ impl CompiledModel {
                 opts: *opts,
                 stiff: OnceLock::new(),
                 stiff_module: Mutex::new(None),
+                vjp: OnceLock::new(),
+                vjp_module: Mutex::new(None),
             }),
             Err(e) => {
                 // SAFETY: no pointer into the module's memory was handed out: `build_kernels`
@@ -157,7 +163,8 @@ impl CompiledModel {
         }
     }
 
-    /// Number of native functions generated (the stiff kernels, built on demand, not counted).
+    /// Number of native functions generated (the stiff and the adjoint's kernels, built on
+    /// demand, not counted).
     pub fn n_kernels(&self) -> usize {
         self.n_kernels
     }
@@ -173,50 +180,80 @@ impl CompiledModel {
     }
 
     fn build_stiff(&self) -> Result<StiffKernels, CodegenError> {
-        let mut source = lock(&self.source);
-        let mut funcs =
-            source.take().ok_or(CodegenError::Internal { reason: "model functions already consumed" })?;
+        // A copy: the plan adds the second derivatives to its store.
+        let mut funcs = lock(&self.source)
+            .clone()
+            .ok_or(CodegenError::Internal { reason: "model functions already consumed" })?;
         let plan = plan_stiff(&mut funcs, &self.info)?;
-        let cut = |ks: &[KernelPlan]| -> Vec<(String, Vec<KernelPlan>)> {
-            ks.iter().map(|k| (k.name.clone(), k.parts(self.opts.max_part_size))).collect()
-        };
-        let (jac, dir) = (cut(&plan.jac), cut(&plan.dir));
-        let all_parts = || jac.iter().chain(&dir).flat_map(|(_, p)| p);
-        let largest = all_parts().map(KernelPlan::size).max().unwrap_or(0);
-        let most_nodes = all_parts()
-            .map(|k| super::translate::needed_nodes(&funcs.store, k.roots()).len())
-            .max()
-            .unwrap_or(0);
-        let mut module = new_module(&self.opts, largest, most_nodes)?;
-        let built = (|| {
-            let callees = declare_callees(&mut module)?;
-            let mut ctx = module.make_context();
-            let mut fn_ctx = FunctionBuilderContext::new();
-            let mut define = |list: &[(String, Vec<KernelPlan>)]| {
+        let (module, mut kernels) = build_module(&self.opts, &funcs, &[&plan.jac, &plan.dir], "stiff")?;
+        *lock(&self.stiff_module) = Some(module);
+        let dir = kernels.pop().unwrap_or_default();
+        let jac = kernels.pop().unwrap_or_default();
+        Ok(StiffKernels { jac, dir, patterns: plan.patterns })
+    }
+
+    /// The adjoint's kernels, compiled on first use: every mode's `flow_vjp` (`plan::plan_vjp`).
+    fn vjp_kernels(&self) -> Result<&[Kernel], &str> {
+        self.vjp
+            .get_or_init(|| self.build_vjp().map_err(|e| e.to_string()))
+            .as_deref()
+            .map_err(String::as_str)
+    }
+
+    fn build_vjp(&self) -> Result<Vec<Kernel>, CodegenError> {
+        let source = lock(&self.source);
+        let funcs =
+            source.as_ref().ok_or(CodegenError::Internal { reason: "model functions already consumed" })?;
+        let plan = plan_vjp(funcs, &self.info)?;
+        let (module, mut kernels) = build_module(&self.opts, funcs, &[&plan], "flow_vjp")?;
+        *lock(&self.vjp_module) = Some(module);
+        Ok(kernels.pop().unwrap_or_default())
+    }
+}
+
+/// A JIT module of its own for kernels compiled on demand: every list of `lists` defined (cut
+/// into parts), finalized, and its kernels fetched, list by list. The caller keeps the module
+/// alive as long as the kernels (and frees it in `Drop`); on an error it is freed here.
+fn build_module(
+    opts: &CompileOptions,
+    funcs: &ModelFunctions,
+    lists: &[&[KernelPlan]],
+    what: &str,
+) -> Result<(JITModule, Vec<Vec<Kernel>>), CodegenError> {
+    let cut: Vec<Vec<(String, Vec<KernelPlan>)>> = lists
+        .iter()
+        .map(|ks| ks.iter().map(|k| (k.name.clone(), k.parts(opts.max_part_size))).collect())
+        .collect();
+    let all_parts = || cut.iter().flatten().flat_map(|(_, p)| p);
+    let largest = all_parts().map(KernelPlan::size).max().unwrap_or(0);
+    let most_nodes =
+        all_parts().map(|k| super::translate::needed_nodes(&funcs.store, k.roots()).len()).max().unwrap_or(0);
+    let mut module = new_module(opts, largest, most_nodes)?;
+    let built = (|| {
+        let callees = declare_callees(&mut module)?;
+        let mut ctx = module.make_context();
+        let mut fn_ctx = FunctionBuilderContext::new();
+        let ids = cut
+            .iter()
+            .map(|list| {
                 list.iter()
-                    .map(|entry| define_entry(&mut module, &mut ctx, &mut fn_ctx, &callees, &funcs, entry))
+                    .map(|entry| define_entry(&mut module, &mut ctx, &mut fn_ctx, &callees, funcs, entry))
                     .collect::<Result<Vec<_>, CodegenError>>()
-            };
-            let (jac_ids, dir_ids) = (define(&jac)?, define(&dir)?);
-            module.finalize_definitions().map_err(|source| CodegenError::Module {
-                kernel: "finalize stiff".into(),
-                source: Box::new(source),
-            })?;
-            let fetch =
-                |ids: &[(FuncId, Lens, [bool; N_OUTS])]| ids.iter().map(|e| finalized(&module, e)).collect();
-            Ok(StiffKernels { jac: fetch(&jac_ids), dir: fetch(&dir_ids), patterns: plan.patterns.clone() })
-        })();
-        match built {
-            Ok(kernels) => {
-                *lock(&self.stiff_module) = Some(module);
-                Ok(kernels)
-            }
-            Err(e) => {
-                // SAFETY: no pointer into the module's memory was handed out: the kernels are
-                // dropped with the error.
-                unsafe { module.free_memory() };
-                Err(e)
-            }
+            })
+            .collect::<Result<Vec<_>, CodegenError>>()?;
+        module.finalize_definitions().map_err(|source| CodegenError::Module {
+            kernel: format!("finalize {what}"),
+            source: Box::new(source),
+        })?;
+        Ok(ids.iter().map(|list| list.iter().map(|e| finalized(&module, e)).collect()).collect())
+    })();
+    match built {
+        Ok(kernels) => Ok((module, kernels)),
+        Err(e) => {
+            // SAFETY: no pointer into the module's memory was handed out: the kernels are
+            // dropped with the error.
+            unsafe { module.free_memory() };
+            Err(e)
         }
     }
 }
@@ -246,6 +283,14 @@ impl Drop for CompiledModel {
         };
         if let Some(module) = stiff.take() {
             // SAFETY: as above, for the stiff kernels in `self.stiff`.
+            unsafe { module.free_memory() };
+        }
+        let vjp = match self.vjp_module.get_mut() {
+            Ok(slot) => slot,
+            Err(poisoned) => poisoned.into_inner(),
+        };
+        if let Some(module) = vjp.take() {
+            // SAFETY: as above, for the adjoint's kernels in `self.vjp`.
             unsafe { module.free_memory() };
         }
     }
@@ -394,6 +439,18 @@ impl HybridSystem for CompiledModel {
                 k.call(t, x, s, p, [dx, ds, &mut []]);
             }
             None => poison([dx, ds, &mut []]),
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn flow_vjp(&self, mode: usize, t: f64, x: &[f64], w: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) {
+        // `w` is the kernel's `s` input; `Kernel::call` checks every length. Compiled on the
+        // first call (NaN if that failed: the trait has no error channel).
+        match self.vjp_kernels().ok().and_then(|k| k.get(mode)) {
+            Some(k) => {
+                k.call(t, x, w, p, [gx, gp, &mut []]);
+            }
+            None => poison([gx, gp, &mut []]),
         }
     }
 

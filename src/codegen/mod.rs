@@ -12,6 +12,8 @@ mod compiled;
 mod plan;
 mod runtime;
 mod stiff;
+#[cfg(test)]
+mod tests;
 mod translate;
 
 pub use compiled::CompiledModel;

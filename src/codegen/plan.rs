@@ -4,7 +4,7 @@
 //! inside the lengths it declares.
 
 use super::CodegenError;
-use crate::expr::{ExprId, ExprStore, ModelFunctions, SparseMat, SparseVec};
+use crate::expr::{ExprId, ExprStore, ModeFunctions, ModelFunctions, SparseMat, SparseVec};
 use crate::sim::SystemInfo;
 
 /// Number of output pointers every kernel takes (unused ones receive empty slices).
@@ -481,6 +481,51 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
         kernel.check(&funcs.store)?;
     }
     Ok(plan)
+}
+
+/// The adjoint's kernels, one per mode ([`plan_flow_vjp`]). `CompiledModel` plans and compiles
+/// them on the first `flow_vjp` call, into a module of their own: a forward run never pays for
+/// them (in the model's module they doubled the compile time of a 1000-state chain).
+pub(crate) fn plan_vjp(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Vec<KernelPlan>, CodegenError> {
+    let dims = check_shape(funcs, info)?;
+    let plan_mode = |(k, mode): (usize, &ModeFunctions)| {
+        let mut plan = plan_flow_vjp(k, mode, &dims)?;
+        plan.write_small_zeros();
+        plan.check(&funcs.store)?;
+        Ok(plan)
+    };
+    funcs.modes.iter().enumerate().map(plan_mode).collect()
+}
+
+/// `mode{k}_flow_vjp` (inputs `x` (n), `s = w` (n)): `gx = f_x^T w` (n) and `gp = f_p^T w` (m,
+/// by sensitivity column), each entry one `SensDot` over the structurally nonzero entries of
+/// its column of `f_x` or `f_p`, rows ascending: the transpose of `flow_sens`'s products, so a
+/// sparse model's products cost its Jacobian's entries, never `n^2`. Entries without one are
+/// zero-filled (by the kernel when small, `write_small_zeros`). A vector parameter read by an
+/// input (`pwl`, `pwc`) has one `f_p` entry per element and row that reads it.
+fn plan_flow_vjp(mode_idx: usize, mode: &ModeFunctions, dims: &Dims) -> Result<KernelPlan, CodegenError> {
+    let (n, m) = (dims.n, dims.n_grad);
+    let mut vjp = KernelPlan::new(format!("mode{mode_idx}_flow_vjp"), dims.lens(n, n, [n, m, 0]));
+    vjp.prefill = [true, true, false];
+    // The entries are sorted by (row, column): grouped by column, each keeps its rows ascending.
+    let mut fx_cols: Vec<Vec<(ExprId, u32)>> = vec![Vec::new(); n];
+    for &(i, c, e) in &mode.flow_x.entries {
+        fx_cols[c as usize].push((e, i));
+    }
+    let mut fp_cols: Vec<Vec<(ExprId, u32)>> = vec![Vec::new(); m];
+    for &(i, param, e) in &mode.flow_p.entries {
+        if let Some(c) = dims.grad_col[param as usize] {
+            fp_cols[c].push((e, i));
+        }
+    }
+    for (out, cols) in [(0, fx_cols), (1, fp_cols)] {
+        for (j, products) in cols.into_iter().enumerate() {
+            if !products.is_empty() {
+                vjp.write(out, j, Term::SensDot { products, bias: None })?;
+            }
+        }
+    }
+    Ok(vjp)
 }
 
 pub(crate) fn index_u32(what: &str, index: usize) -> Result<u32, CodegenError> {

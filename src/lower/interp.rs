@@ -52,6 +52,8 @@ struct ModeKernels {
     fx_finite: Vec<bool>,
     /// `(row, sensitivity column)` of each `f_p` entry in `flow_sens`.
     fp: Vec<(usize, usize)>,
+    /// Whether each `f_p` entry is finite at every finite input (`flow_vjp` multiplies them).
+    fp_finite: Vec<bool>,
     guards: Tape,
 }
 
@@ -133,9 +135,11 @@ impl Interpreter {
                     roots.push(e);
                 }
                 let mut fp = Vec::new();
+                let mut fp_finite = Vec::new();
                 for &(i, k, e) in &mode.flow_p.entries {
                     if let Some(j) = col(k) {
                         fp.push((i as usize, j));
+                        fp_finite.push(crate::expr::finite_at_finite_inputs(store, e));
                         roots.push(e);
                     }
                 }
@@ -152,6 +156,7 @@ impl Interpreter {
                     fx,
                     fx_finite,
                     fp,
+                    fp_finite,
                     guards: Tape::new(store, &guard_roots),
                 }
             })
@@ -259,6 +264,32 @@ impl HybridSystem for Interpreter {
         }
         for (&(i, j), v) in m.fp.iter().zip(fp) {
             ds[j * n + i] += v;
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn flow_vjp(&self, mode: usize, t: f64, x: &[f64], w: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) {
+        let Some(m) = self.modes.get(mode) else {
+            return;
+        };
+        let n = self.info.n_states();
+        let mut values = vec![0.0; m.flow_sens.n_roots()];
+        m.flow_sens.eval_into(t, x, p, &mut Vec::new(), &mut values);
+        let rest = values.get(n..).unwrap_or(&[]);
+        let (fx, fp) = rest.split_at(m.fx.len().min(rest.len()));
+        gx.fill(0.0);
+        gp.fill(0.0);
+        // The entries run by row, so each output entry sums its rows ascending, as the
+        // compiled kernel does; a zero `w_i` annihilates a possibly infinite entry, as there.
+        for ((&(i, k), v), &finite) in m.fx.iter().zip(fx).zip(&m.fx_finite) {
+            if finite || w[i] != 0.0 {
+                gx[k] += v * w[i];
+            }
+        }
+        for ((&(i, j), v), &finite) in m.fp.iter().zip(fp).zip(&m.fp_finite) {
+            if finite || w[i] != 0.0 {
+                gp[j] += v * w[i];
+            }
         }
     }
 

@@ -158,6 +158,70 @@ pub trait HybridSystem: Sync {
     // The argument list mirrors the native kernel's ABI; a struct would only add a copy.
     #[allow(clippy::too_many_arguments)]
     fn flow_sens(&self, mode: usize, t: f64, x: &[f64], s: &[f64], p: &[f64], dx: &mut [f64], ds: &mut [f64]);
+    /// The flow's vector-Jacobian products at `(t, x)` in `mode`: `gx = f_x^T w` (n) and
+    /// `gp = f_p^T w` (m, one entry per differentiated parameter, `grad_params` order), both
+    /// overwritten: what the adjoint's backward pass needs at every stage. A compiled model has a
+    /// kernel, compiled on the first call, that sums each entry over the structurally nonzero
+    /// entries of its column of `f_x` or `f_p`, never forming `f_x`; a zero `w_i` annihilates an entry that is infinite or NaN
+    /// at a finite state, as a zero sensitivity does in [`Self::flow_sens`] (the default skips the
+    /// rows whose `w_i` is zero).
+    ///
+    /// The default, for hand-written systems in tests, reads the Jacobians off
+    /// [`Self::flow_sens`] with `n + 1` calls: `f_p` with `s = 0` (then column `j` of `ds` is
+    /// `f_p_j`), and column `c` of `f_x` with every sensitivity column set to the unit vector
+    /// `e_c` (then `ds_j - f_p_j = f_x e_c`). That is exact but for the rounding of the sum
+    /// `f_x e_c + f_p_j` and its difference; each row takes the column `j` whose `|f_p_j|` is the
+    /// smallest (exact where some parameter does not enter the row), so an entry of `f_x` is off
+    /// by at most `eps (|f_x| + min_j |f_p_j|)`. With no differentiated parameter (`m = 0`) the
+    /// sensitivities carry nothing to read `f_x` from: the default then takes `f_x` from
+    /// [`Self::flow_jac`] (after [`Self::prepare_jacobians`]; NaN if that fails), which is
+    /// whatever the system gives there: exact if it writes its Jacobian, central differences
+    /// (about 1e-10 relative) under the default `flow_jac`.
+    #[allow(clippy::too_many_arguments)]
+    fn flow_vjp(&self, mode: usize, t: f64, x: &[f64], w: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) {
+        let n = x.len();
+        let m = self.info().n_grad();
+        let mut fx = vec![0.0; n * n];
+        if m == 0 {
+            if self.prepare_jacobians().is_err() {
+                gx.fill(f64::NAN);
+                gp.fill(f64::NAN);
+                return;
+            }
+            let mut ft = vec![0.0; n];
+            self.flow_jac(mode, t, x, &[], p, &mut fx, &mut ft, &mut []);
+        } else {
+            let mut dx = vec![0.0; n];
+            let mut fp = vec![0.0; n * m];
+            self.flow_sens(mode, t, x, &vec![0.0; n * m], p, &mut dx, &mut fp);
+            for (j, g) in gp.iter_mut().enumerate() {
+                *g = (0..n).filter(|&i| w[i] != 0.0).map(|i| w[i] * fp[j * n + i]).sum();
+            }
+            // The column each row reads `f_x` from: the one with the smallest `|f_p_j|`.
+            let best: Vec<usize> = (0..n)
+                .map(|i| {
+                    (0..m).min_by(|&a, &b| fp[a * n + i].abs().total_cmp(&fp[b * n + i].abs())).unwrap_or(0)
+                })
+                .collect();
+            let mut s = vec![0.0; n * m];
+            let mut ds = vec![0.0; n * m];
+            for c in 0..n {
+                for j in 0..m {
+                    s[j * n + c] = 1.0;
+                }
+                self.flow_sens(mode, t, x, &s, p, &mut dx, &mut ds);
+                for (i, &j) in best.iter().enumerate() {
+                    fx[i * n + c] = ds[j * n + i] - fp[j * n + i];
+                }
+                for j in 0..m {
+                    s[j * n + c] = 0.0;
+                }
+            }
+        }
+        for (c, g) in gx.iter_mut().enumerate() {
+            *g = (0..n).filter(|&i| w[i] != 0.0).map(|i| w[i] * fx[i * n + c]).sum();
+        }
+    }
     /// Makes [`Self::flow_jac`] and [`Self::sens_dir`] ready (a compiled model compiles their
     /// kernels here, once); called before a run with an implicit method. An error says why
     /// they cannot be had. The default (the central differences below) needs nothing.
@@ -264,43 +328,6 @@ pub trait HybridSystem: Sync {
         self.flow_sens(mode, t, &xm, s, p, &mut f, &mut sm);
         for (out, (a, b)) in dir.iter_mut().zip(sp.iter().zip(&sm)) {
             *out = (a - b) / (2.0 * h);
-        }
-    }
-    /// The flow's vector-Jacobian products at `(t, x)` in `mode`: `gx = f_x^T w` (n) and
-    /// `gp = f_p^T w` (m), both overwritten: what the adjoint's backward pass needs at every
-    /// stage. The default reads `f_p` and `f_x` off [`Self::flow_sens`] (exact, `n + 1` calls);
-    /// a compiled model has a kernel of its own.
-    #[allow(clippy::too_many_arguments)]
-    fn flow_vjp(&self, mode: usize, t: f64, x: &[f64], w: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) {
-        let n = x.len();
-        let m = gp.len();
-        let cols = m.max(1);
-        let mut dx = vec![0.0; n];
-        let mut s = vec![0.0; n * m];
-        let mut fp = vec![0.0; n * m];
-        self.flow_sens(mode, t, x, &s, p, &mut dx, &mut fp);
-        for (j, g) in gp.iter_mut().enumerate() {
-            *g = w.iter().zip(&fp[j * n..(j + 1) * n]).map(|(a, b)| a * b).sum();
-        }
-        if m == 0 {
-            // Without sensitivity columns `flow_sens` says nothing of `f_x`: central differences,
-            // as `flow_jac`'s default (hand-written systems in tests only).
-            let mut fx = vec![0.0; n * n];
-            let (mut ft, mut st) = (vec![0.0; n], Vec::new());
-            self.flow_jac(mode, t, x, &[], p, &mut fx, &mut ft, &mut st);
-            for (c, g) in gx.iter_mut().enumerate() {
-                *g = (0..n).map(|i| w[i] * fx[i * n + c]).sum();
-            }
-            return;
-        }
-        let mut ds = vec![0.0; n * cols];
-        for (c, g) in gx.iter_mut().enumerate() {
-            s.fill(0.0);
-            for j in 0..m {
-                s[j * n + c] = 1.0;
-            }
-            self.flow_sens(mode, t, x, &s, p, &mut dx, &mut ds);
-            *g = (0..n).map(|i| w[i] * (ds[i] - fp[i])).sum();
         }
     }
     /// Guards of every event active in `mode`, in the order of `ModeInfo::events`.

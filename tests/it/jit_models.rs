@@ -4,9 +4,9 @@
 //!
 //! Tolerance: bit for bit, because each kernel evaluates the same DAG in the same order as the
 //! evaluator and the host wrappers call the evaluator's own `apply_*`. The one exception is the
-//! sign of zero in `flow_sens`: the interpreter accumulates `f_x S` onto `+0.0`, the JIT starts
-//! from the first product, so `-0.0` there may come out as `+0.0`; those entries are compared
-//! with `==`.
+//! sign of zero in `flow_sens` and `flow_vjp`: the interpreter accumulates their sums onto
+//! `+0.0`, the JIT starts from the first product, so `-0.0` there may come out as `+0.0`; those
+//! entries are compared with `==`.
 
 use crate::support::hand_functions::same;
 use crate::support::models::shipped_models;
@@ -73,6 +73,7 @@ fn compare(name: &str, jit: &dyn HybridSystem, reference: &dyn HybridSystem, p: 
         let t = rng.next() * 5.0;
         let x = rng.vec(n);
         let sens = rng.vec(n * m);
+        let weights = rng.vec(n);
         let what = |f: &str| format!("{name} trial {trial} {f}");
         for (mode, mode_info) in info.modes.iter().enumerate() {
             let (a, b) = run2(&|s, o| s.flow(mode, t, &x, p, o), n);
@@ -87,6 +88,14 @@ fn compare(name: &str, jit: &dyn HybridSystem, reference: &dyn HybridSystem, p: 
             let ((dxa, dsa), (dxb, dsb)) = (fs(jit), fs(reference));
             assert_bits(&what("flow_sens dx"), &dxa, &dxb);
             assert_values(&what("flow_sens ds"), &dsa, &dsb);
+            // The adjoint's products at random weights: sums as
+            // `flow_sens`'s, so equal but for the sign of a zero.
+            let vjp = |s: &dyn HybridSystem| {
+                let (mut gx, mut gp) = (vec![f64::NAN; n], vec![f64::NAN; m]);
+                s.flow_vjp(mode, t, &x, &weights, p, &mut gx, &mut gp);
+                [gx, gp].concat()
+            };
+            assert_values(&what("flow_vjp"), &vjp(jit), &vjp(reference));
         }
         for event in 0..info.events.len() {
             let gg = |s: &dyn HybridSystem| {

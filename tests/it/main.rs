@@ -5,6 +5,7 @@
 mod support;
 
 mod adjoint;
+mod adjoint_kernels;
 mod check_grad;
 mod cli_cases;
 mod cli_run;
