@@ -275,7 +275,12 @@ impl<H: SystemRef> Runner<H> {
         if m > 0 {
             result.stats.sens = Some(Sens::Forward);
         }
-        if let Some(adjoint::AdjointError::Unsupported(what)) = fell_back {
+        let what = match fell_back {
+            Some(adjoint::AdjointError::Unsupported(what)) => Some(what),
+            Some(adjoint::AdjointError::Ended(_)) => Some("a run that ends before t_end but by a stop event"),
+            Some(adjoint::AdjointError::Seed(_)) | None => None,
+        };
+        if let Some(what) = what {
             result.warnings.push(SimWarning::AdjointNotCarried { what });
         }
         Ok(result)

@@ -183,6 +183,56 @@ fn gradient_check(g: &GenModel, c: Config) -> Result<(), String> {
     Ok(())
 }
 
+/// The adjoint relation: with `--sens adjoint` every derivative the run reports equals, to
+/// round-off, the forward sensitivities of the same run with the sensitivities out of the error
+/// test (both differentiate the same steps; docs/accuracy.md, "The adjoint against the forward
+/// sensitivities"). `Ok(None)` when the adjoint carried the run, `Ok(Some(why))` when it computed
+/// forward sensitivities instead (what it does not carry yet, its warning).
+fn adjoint_relation(g: &GenModel, c: Config) -> Result<Option<String>, String> {
+    let v = Variant::default();
+    let c = Config { grad: true, ..c };
+    let model = Model::parse(&g.text(&v)).map_err(|e| format!("does not parse: {e}"))?;
+    let names: Vec<String> = (0..g.params.len()).map(|j| format!("p{j}")).collect();
+    let compiled = model.compile(&names).map_err(|e| format!("does not compile: {e}"))?;
+    let (_, opts) = simulate(g, &v, c, RTOL, ATOL)?;
+    let opts = SimOptions { sens_error_control: false, ..opts };
+    let run = |sens| {
+        compiled
+            .simulate(&compiled.params(), &SimOptions { sens, ..opts.clone() })
+            .map_err(|e| format!("does not run: {e}"))
+    };
+    let (forward, adjoint) = (run(hybc::Sens::Forward)?, run(hybc::Sens::Adjoint)?);
+    let not_carried = (adjoint.result().stats.sens != Some(hybc::Sens::Adjoint)).then(|| {
+        let said =
+            adjoint.warnings().iter().map(|w| w.to_string()).find(|w| w.contains("adjoint does not carry"));
+        // A model without parameters has no gradient to compute either way.
+        said.unwrap_or_else(|| "no parameter".to_string())
+    });
+    // Every derivative of the report, forward and adjoint, NaN where none exists.
+    let rows = |r: &hybc::Run| -> Vec<f64> {
+        let res = r.result();
+        let fin = &res.final_state;
+        let mut out: Vec<f64> = res.events.iter().flat_map(|e| e.dtime.clone().unwrap_or_default()).collect();
+        for d in [&fin.dstate, &fin.doutputs, &fin.dstate_total, &fin.doutputs_total].into_iter().flatten() {
+            out.extend(d);
+        }
+        out
+    };
+    let (f, a) = (rows(&forward), rows(&adjoint));
+    if f.len() != a.len() {
+        return Err(format!("adjoint: {} derivatives reported, forward {}", a.len(), f.len()));
+    }
+    let scale = f.iter().filter(|x| x.is_finite()).fold(0.0f64, |m, x| m.max(x.abs()));
+    for (k, (x, y)) in f.iter().zip(&a).enumerate() {
+        let both_missing = x.is_nan() && y.is_nan();
+        let within = (x - y).abs() <= 1e-10 * x.abs().max(1e-3 * scale).max(1e-300);
+        if !both_missing && !within {
+            return Err(format!("adjoint: derivative {k} is {y:e}, forward {x:e} (scale {scale:e})"));
+        }
+    }
+    Ok(not_carried)
+}
+
 /// The tolerances of the run that stands in for the reference of a model whose guards are not
 /// all polynomial: 1e4 times tighter than the runs it judges, so its own error is a negligible
 /// part of their tolerance.
@@ -466,6 +516,8 @@ pub struct Summary {
     pub violations: Vec<Violation>,
     /// Derivatives reported not to exist that one-sided differences confirm as cusps.
     pub cusps_confirmed: usize,
+    /// Models whose run the adjoint carried, and those it left to forward sensitivities by why.
+    pub adjoint: (usize, std::collections::BTreeMap<String, usize>),
     worst: Worst,
 }
 
@@ -551,6 +603,14 @@ pub fn harness(seed: u64, first: u64, count: usize, budget: Duration, configs: &
                 report(c, "gradient check", why);
             }
         }
+        // The adjoint against the forward sensitivities, under one configuration.
+        let c = configs[(index as usize + 2) % configs.len()];
+        s.runs += 2;
+        match adjoint_relation(&g, c) {
+            Ok(None) => s.adjoint.0 += 1,
+            Ok(Some(why)) => *s.adjoint.1.entry(why).or_default() += 1,
+            Err(why) => report(c, "adjoint", why),
+        }
         // Each relation under one configuration, cycling through them from model to model.
         for (k, (name, v)) in variants(&g, index).into_iter().enumerate() {
             let c = configs[(index as usize + k) % configs.len()];
@@ -614,7 +674,7 @@ fn generated_models_keep_every_relation_under_every_stepper() {
         "relations: seed {seed}, {} models ({} against a tight run, {} drawn again as ambiguous, {} with \
          gradients not judged, {} derivatives reported missing and confirmed as cusps), \
          {} runs, {} violations in {} models ({} of them known); worst in tolerances where every relation holds: values {:.1}, \
-         times {:.1}, gradients {:.1}, time gradients {:.1}",
+         times {:.1}, gradients {:.1}, time gradients {:.1}; the adjoint carried {} models and left {} to forward mode ({:?})",
         s.models,
         s.relations_only,
         s.ambiguous,
@@ -627,7 +687,10 @@ fn generated_models_keep_every_relation_under_every_stepper() {
         s.worst.value,
         s.worst.time,
         s.worst.grad,
-        s.worst.dtime
+        s.worst.dtime,
+        s.adjoint.0,
+        s.adjoint.1.values().sum::<usize>(),
+        s.adjoint.1
     );
     // Each violation's line, then the reproducers of the first few models.
     for v in &s.violations {
