@@ -1638,8 +1638,8 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 _ => None,
             };
             if self.tapes {
-                let entry = if given.is_some() {
-                    TapeEntry::Unsupported("an event that cascades at another's instant")
+                let entry = if onto_guard {
+                    TapeEntry::Unsupported("an event whose guard a reset put the state on")
                 } else if self.left_of_knot {
                     TapeEntry::Unsupported("an event on an input knot")
                 } else {
@@ -1650,6 +1650,8 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                         mode_after,
                         x,
                         velocity: self.work.jump.measured_velocity(t, mode_before, x),
+                        cascade: given.is_some(),
+                        first_of_instant: self.instant.is_none() && !cascade,
                     }
                 };
                 self.recorder.tape(&entry);

@@ -113,6 +113,10 @@ pub enum TapeEntry<'a> {
         x: &'a [f64],
         /// The measured velocity, where it replaced the flow.
         velocity: Option<&'a [f64]>,
+        /// It cascades from the instant's first event: its `dt/dp` is that event's.
+        cascade: bool,
+        /// It is the instant's first event (whose `dt/dp` later cascades take).
+        first_of_instant: bool,
     },
     /// The flow switch `event` crossed at `t` in `mode` at the state `x`, its flow read before
     /// it at `pre` and past it at `post` (the state stays; the sensitivities jump by

@@ -237,7 +237,9 @@ pub(super) struct Jump<'a> {
 /// before it; `time_bar` is the cotangent of the event's time itself (an `EVENT#K` quantity, an
 /// output's time derivative at a stop). `total`: the jump is a stop event's whose total
 /// derivative is asked for (the state carried to the stop's time: `f+` left out, the measured
-/// velocity in the velocity jump).
+/// velocity in the velocity jump). `given`: the event cascades from its instant's first event and
+/// takes that event's `dt/dp`, not its own: then nothing goes through its guard, and the
+/// cotangent of that `dt/dp` is returned for the first event (else 0).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn jump_backward<S: HybridSystem + ?Sized>(
     sys: &S,
@@ -245,9 +247,10 @@ pub(super) fn jump_backward<S: HybridSystem + ?Sized>(
     jump: &Jump<'_>,
     time_bar: f64,
     total: bool,
+    given: bool,
     lam: &mut [f64],
     pbar: &mut [f64],
-) {
+) -> f64 {
     let n = jump.x.len();
     let m = pbar.len();
     let (t, x) = (jump.t, jump.x);
@@ -272,7 +275,8 @@ pub(super) fn jump_backward<S: HybridSystem + ?Sized>(
         let rf: f64 = (0..n).map(|c| rx[i * n + c] * through[c]).sum();
         u += (rf + rt[i] - f_plus[i]) * lam[i];
     }
-    let scale = u / d;
+    // dt/dp = -(g_x S- + g_p) / d, its cotangent u; a cascading event's is its instant's.
+    let scale = if given { 0.0 } else { u / d };
     for (j, pb) in pbar.iter_mut().enumerate() {
         let rpl: f64 = (0..n).map(|i| rp[j * n + i] * lam[i]).sum();
         *pb += rpl - gp[j] * scale;
@@ -280,6 +284,11 @@ pub(super) fn jump_backward<S: HybridSystem + ?Sized>(
     let before: Vec<f64> =
         (0..n).map(|c| (0..n).map(|i| rx[i * n + c] * lam[i]).sum::<f64>() - gx[c] * scale).collect();
     lam.copy_from_slice(&before);
+    if given {
+        u
+    } else {
+        0.0
+    }
 }
 
 /// A flow switch as the backward pass recomputes it.

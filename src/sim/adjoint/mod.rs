@@ -53,10 +53,33 @@ pub enum AdjointError {
 /// One recorded piece.
 #[derive(Clone, Copy, Debug)]
 enum Piece {
-    Step { at: StepAt, end: StepEnd },
-    Jump { event: usize, t: f64, mode_before: usize, mode_after: usize, x: usize, velocity: Option<usize> },
-    Switch { event: usize, t: f64, mode: usize, x: usize, pre: (f64, usize), post: (f64, usize) },
-    Knot { set: usize, t: f64, jump: usize },
+    Step {
+        at: StepAt,
+        end: StepEnd,
+    },
+    Jump {
+        event: usize,
+        t: f64,
+        mode_before: usize,
+        mode_after: usize,
+        x: usize,
+        velocity: Option<usize>,
+        cascade: bool,
+        first_of_instant: bool,
+    },
+    Switch {
+        event: usize,
+        t: f64,
+        mode: usize,
+        x: usize,
+        pre: (f64, usize),
+        post: (f64, usize),
+    },
+    Knot {
+        set: usize,
+        t: f64,
+        jump: usize,
+    },
 }
 
 /// A step's primal values, its start state at `x` in the tape's store.
@@ -123,10 +146,19 @@ impl Recorder for Tape {
             TapeEntry::Step(s) => Piece::Step { at: self.step_at(s), end: StepEnd::End },
             TapeEntry::Landed(s, dt) => Piece::Step { at: self.step_at(s), end: StepEnd::Landed(*dt) },
             TapeEntry::Dense(s, t) => Piece::Step { at: self.step_at(s), end: StepEnd::Dense(*t) },
-            &TapeEntry::Jump { event, t, mode_before, mode_after, x, velocity } => {
+            &TapeEntry::Jump {
+                event,
+                t,
+                mode_before,
+                mode_after,
+                x,
+                velocity,
+                cascade,
+                first_of_instant,
+            } => {
                 let x = self.keep(x);
                 let velocity = velocity.map(|v| self.keep(v));
-                Piece::Jump { event, t, mode_before, mode_after, x, velocity }
+                Piece::Jump { event, t, mode_before, mode_after, x, velocity, cascade, first_of_instant }
             }
             &TapeEntry::Switch { event, t, mode, x, pre, post } => {
                 let x = self.keep(x);
@@ -316,6 +348,9 @@ impl Recorded {
             }
         }
         let mut scratch = Scratch::default();
+        // Per row: the cotangent of the current instant's `dt/dp` gathered from the events that
+        // cascade from its first event (they take its `dt/dp`), handed to that event.
+        let mut pending = vec![0.0; rows];
         let mut event = events;
         let store = &self.tape.store;
         let last_jump = self.tape.pieces.iter().rposition(|p| matches!(p, Piece::Jump { .. }));
@@ -333,7 +368,16 @@ impl Recorded {
                     };
                     step_backward(sys, p, &step, &mut lams, &mut pbars, &mut scratch);
                 }
-                Piece::Jump { event: ev, t, mode_before, mode_after, x, velocity } => {
+                Piece::Jump {
+                    event: ev,
+                    t,
+                    mode_before,
+                    mode_after,
+                    x,
+                    velocity,
+                    cascade,
+                    first_of_instant,
+                } => {
                     event -= 1;
                     let jump = Jump {
                         event: ev,
@@ -350,8 +394,14 @@ impl Recorded {
                         if is_stop_end {
                             time_bar += end_time_bars[r];
                         }
+                        if first_of_instant {
+                            time_bar += std::mem::take(&mut pending[r]);
+                        }
                         let (lam, pbar) = (&mut lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
-                        jump_backward(sys, p, &jump, time_bar, is_stop_end, lam, pbar);
+                        let dte_bar = jump_backward(sys, p, &jump, time_bar, is_stop_end, cascade, lam, pbar);
+                        if cascade {
+                            pending[r] += dte_bar;
+                        }
                     }
                 }
                 Piece::Switch { event: ev, t, mode, x, pre, post } => {
