@@ -38,7 +38,7 @@ pub fn fit_report(
 ) -> PyResult<(String, Vec<String>)> {
     let keywords = SimKeywords::from_kwargs(sim)?;
     let inner = model.inner();
-    let sim = keywords.options(inner)?;
+    let sim = keywords.analysis_options(inner)?;
     if free.is_empty() {
         return Err(ParameterError::new_err("free: name at least one parameter to fit"));
     }

@@ -43,7 +43,7 @@ pub fn optimize_report(
     sim: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<String> {
     let keywords = SimKeywords::from_kwargs(sim)?;
-    let sim = keywords.options(model.inner())?;
+    let sim = keywords.analysis_options(model.inner())?;
     if free.is_empty() {
         return Err(ParameterError::new_err("free: name at least one parameter to optimise"));
     }

@@ -99,6 +99,12 @@ impl SimKeywords {
         self.overrides.apply(&model.sim_options(), Spelling::Keyword).map_err(value_error)
     }
 
+    /// [`Self::options`] for `fit` and `optimize`, whose gradients default to the cheaper mode
+    /// (`hybc::Model::analysis_sim_options`).
+    pub fn analysis_options(&self, model: &hybc::Model) -> PyResult<SimOptions> {
+        self.overrides.apply(&model.analysis_sim_options(), Spelling::Keyword).map_err(value_error)
+    }
+
     /// [`Self::options`] with the sample times of `at=` (`hybc run --at`), their order and range
     /// checked by the library against the run's span.
     pub fn options_at(&self, model: &hybc::Model, at: Option<Vec<f64>>) -> PyResult<SimOptions> {

@@ -121,6 +121,13 @@ impl Model {
         }
     }
 
+    /// The options of an analysis's runs that differentiate (`fit`, `optimize`): as
+    /// [`Self::sim_options`], with gradients by the cheaper mode (`Sens::Auto`: the adjoint when
+    /// the quantities are far fewer than the free parameters) unless the caller says otherwise.
+    pub fn analysis_sim_options(&self) -> SimOptions {
+        SimOptions { sens: crate::sim::Sens::Auto, ..self.sim_options() }
+    }
+
     /// The index of parameter `name`, or an error that lists the model's parameters.
     /// An element of a vector parameter is named `u[3]` (no spaces, no leading zeros); the vector's
     /// own name is refused here with a word on how to name its elements.

@@ -4,7 +4,7 @@
 use clap::ValueEnum;
 use std::process::ExitCode;
 
-use super::options::{at_most, parameter_values, parse_param_list, positive, sim_options, SimFlags};
+use super::options::{analysis_sim_options, at_most, parameter_values, parse_param_list, positive, SimFlags};
 use super::{compile_model, load_model, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
 use crate::fit::FitOptions;
 use crate::{Error, FitFailure, FitRequest, Model};
@@ -89,7 +89,7 @@ fn fit_model(model: &Model, args: &FitArgs) -> Result<ExitCode, String> {
         return Err("--free: name at least one parameter to fit".to_string());
     }
     let start = parameter_values(model, &args.set)?.values().to_vec();
-    let sim = sim_options(model, &args.sim)?;
+    let sim = analysis_sim_options(model, &args.sim)?;
     let options = fit_options(args)?;
     let compiled = match compile_model(model, &free) {
         Ok(c) => c,

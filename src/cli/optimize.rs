@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use clap::ValueEnum;
 
-use super::options::{at_most, parameter_values, parse_param_list, positive, sim_options, SimFlags};
+use super::options::{analysis_sim_options, at_most, parameter_values, parse_param_list, positive, SimFlags};
 use super::{compile_model, load_model, usage_error, ModelArg, EXIT_GOAL_NOT_MET, EXIT_SIM_STOPPED};
 use crate::fit::Bounds;
 use crate::optimize::report::OptimizeReport;
@@ -162,7 +162,7 @@ fn optimize_model(model: &Model, args: &OptimizeArgs) -> Result<ExitCode, String
     at_most(&format!("--free (parameters, vector elements counted; the cap of {solver})"), free.len(), cap)?;
     choice.pick(free.len(), args.subject_to.len()).map_err(|e| format!("--solver: {e}"))?;
     let start = parameter_values(model, &args.set)?.values().to_vec();
-    let sim = sim_options(model, &args.sim)?;
+    let sim = analysis_sim_options(model, &args.sim)?;
     let options = options(args)?;
     let bounds = bounds(model, &free, &args.bounds)?;
     if let Some(path) = &args.plot {

@@ -109,10 +109,10 @@ pub(crate) struct SimFlags {
     #[arg(long)]
     land_events: bool,
     /// How gradients are computed: forward sensitivities, the discrete adjoint (the derivative of
-    /// the steps a run with --no-sens-error-control takes), or whichever is cheaper
-    /// (docs/cli.md, gradients).
-    #[arg(long, value_enum, default_value = "forward")]
-    sens: SensArg,
+    /// the steps a run with --no-sens-error-control takes), or whichever is cheaper (docs/cli.md,
+    /// gradients). Default: forward for run, sweep, sobol and periodic; auto for fit and optimize.
+    #[arg(long, value_enum)]
+    sens: Option<SensArg>,
 }
 
 /// The flag that sets each [`SimOverrides::OPTIONS`] entry (`None`: no flag, the option is the
@@ -157,7 +157,7 @@ impl SimFlags {
             land_events: self.land_events.then_some(true),
             linear_solver: None,
             at: None,
-            sens: Some(self.sens.into()),
+            sens: self.sens.map(Into::into),
         }
     }
 }
@@ -166,6 +166,12 @@ impl SimFlags {
 /// (`Model::sim_options`), checked by the library; no trajectory, no sample times.
 pub(crate) fn sim_options(model: &Model, flags: &SimFlags) -> Result<SimOptions, String> {
     flags.overrides().apply(&model.sim_options(), Spelling::Flag).map_err(|e| e.message)
+}
+
+/// [`sim_options`] for `fit` and `optimize`, whose gradients default to the cheaper mode
+/// (`Model::analysis_sim_options`).
+pub(crate) fn analysis_sim_options(model: &Model, flags: &SimFlags) -> Result<SimOptions, String> {
+    flags.overrides().apply(&model.analysis_sim_options(), Spelling::Flag).map_err(|e| e.message)
 }
 
 /// Parameter values: the defaults with every `--set P=VALUE` applied and range-checked; a
