@@ -309,3 +309,44 @@ fn sens_adjoint_on_a_run_it_does_not_carry_computes_forward_and_says_so() {
     let got = run.devent_time(0, "h0").expect("exists");
     assert!((got - want).abs() < 1e-6 * want, "{got} vs {want}");
 }
+
+/// `|got - want| <= tol max(|want|, 1)`.
+fn near(got: f64, want: f64, tol: f64, what: &str) {
+    assert!((got - want).abs() <= tol * want.abs().max(1.0), "{what}: {got} against {want}");
+}
+
+#[test]
+fn the_adjoint_gives_the_closed_forms_of_a_bounce_an_input_and_a_stop() {
+    let opts = SimOptions { rtol: 1e-12, atol: 1e-14, sens: Sens::Adjoint, ..SimOptions::default() };
+    // The ball's energy after four bounces is e^8 g h0 (flights conserve it exactly).
+    let run = door_run(BALL, &[], &SimOptions { t_end: 2.5, ..opts.clone() });
+    assert_eq!((run.events().len(), run.result().stats.sens), (4, Some(Sens::Adjoint)));
+    let (g, e, h0) = (9.81f64, 0.8f64, 1.0f64);
+    near(run.doutput("energy", "e").unwrap(), 8.0 * e.powi(7) * g * h0, 1e-10, "dE/de");
+    near(run.doutput("energy", "h0").unwrap(), e.powi(8) * g, 1e-10, "dE/dh0");
+    // der(x) = pwc(t, t0, t1, u) over 400 knots: x = u_0 t0 + w sum u_k + u_{N-1} (t_end - t1).
+    let n = 400;
+    let u: Vec<f64> = (0..n).map(|k| ((k * 37) % 11) as f64 / 5.0 - 1.0).collect();
+    let src = format!("model zoh\nparam u[{n}] = 0\nparam t0 = 0.1\nparam t1 = 0.9\nstate x = 0\nder(x) = pwc(t, t0, t1, u)\n");
+    let run = door_run(&src, &[("u", &u)], &SimOptions { t_end: 1.0, ..opts.clone() });
+    assert_eq!(run.result().stats.sens, Some(Sens::Adjoint));
+    let (t0, t1, t_end) = (0.1, 0.9, 1.0);
+    let w = (t1 - t0) / n as f64;
+    let mean = u.iter().sum::<f64>() / n as f64;
+    for k in [0, 1, 57, n - 2, n - 1] {
+        let extra = if k == 0 { t0 } else { 0.0 } + if k == n - 1 { t_end - t1 } else { 0.0 };
+        near(run.dstate("x", &format!("u[{k}]")).unwrap(), w + extra, 1e-12, &format!("dx/du[{k}]"));
+    }
+    near(run.dstate("x", "t0").unwrap(), u[0] - mean, 1e-12, "dx/dt0");
+    near(run.dstate("x", "t1").unwrap(), mean - u[n - 1], 1e-12, "dx/dt1");
+    // A stop at a parameter's time: x(T) = x0 exp(a T); the total derivatives carry it there.
+    let src = "model grow\nparam a = 0.7\nparam T = 1.3\nstate x = 2\nder(x) = a * x\n\
+               event finish when t >= T {\n stop\n}\n";
+    let run = door_run(src, &[], &SimOptions { t_end: 5.0, ..opts });
+    assert_eq!(run.result().stats.sens, Some(Sens::Adjoint));
+    let (a, t) = (0.7f64, 1.3f64);
+    let x = 2.0 * (a * t).exp();
+    near(run.dstate_total("x", "T").unwrap(), a * x, 1e-10, "dx/dT");
+    near(run.dstate_total("x", "a").unwrap(), t * x, 1e-10, "dx/da");
+    near(run.devent_time(0, "T").unwrap(), 1.0, 1e-12, "dt_stop/dT");
+}
