@@ -350,3 +350,36 @@ fn the_adjoint_gives_the_closed_forms_of_a_bounce_an_input_and_a_stop() {
     near(run.dstate_total("x", "a").unwrap(), t * x, 1e-10, "dx/da");
     near(run.devent_time(0, "T").unwrap(), 1.0, 1e-12, "dt_stop/dT");
 }
+
+#[test]
+fn the_adjoint_gives_both_sides_of_the_cusp_of_an_event_at_t_end() {
+    // A time event on t_end itself: `final` is after it, `end_cusp` (JSON
+    // `final.without_end_events`) before it.
+    let src =
+        "model tick\nparam a = 0.3\nparam k = 1.1\nstate x = 1\nstate y = 0\nder(x) = -k * x\nder(y) = x\n\
+               event tick when t >= 2 {\n x := x + a\n y := y * k\n}\noutput z = x * y\n";
+    let base = SimOptions {
+        t_end: 2.0,
+        rtol: 1e-10,
+        atol: 1e-12,
+        sens_error_control: false,
+        ..SimOptions::default()
+    };
+    let forward = door_run(src, &[], &base);
+    let adjoint = door_run(src, &[], &SimOptions { sens: Sens::Adjoint, ..base });
+    assert_eq!(adjoint.result().stats.sens, Some(Sens::Adjoint));
+    let (f, a) = (forward.result(), adjoint.result());
+    let (fc, ac) = (f.end_cusp.as_ref().expect("an event at t_end"), a.end_cusp.as_ref().expect("the same"));
+    for (fd, ad) in [
+        (&fc.dstate, &ac.dstate),
+        (&fc.doutputs, &ac.doutputs),
+        (&f.final_state.dstate, &a.final_state.dstate),
+    ] {
+        let (fd, ad) = (fd.as_ref().expect("exists"), ad.as_ref().expect("exists"));
+        assert!(rel_gap(ad, fd, 0.0) <= 1e-12, "{ad:?} vs {fd:?}");
+    }
+    // Before the tick x = exp(-2k): dx/da = 0 there, 1 after it.
+    let (fd, ad) = (fc.dstate.as_ref().unwrap(), f.final_state.dstate.as_ref().unwrap());
+    assert_eq!(fd[0], 0.0);
+    assert!((ad[0] - 1.0).abs() < 1e-12);
+}

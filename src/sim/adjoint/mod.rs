@@ -190,6 +190,9 @@ pub struct Seed {
     /// At a stop event: the total derivative of the final values (carried to the stop's time,
     /// `FinalState::dstate_total`) rather than `dstate`.
     pub total: bool,
+    /// Events fired at `t_end`: the final values before them (`SimResult::end_cusp`, the other
+    /// side of the cusp) rather than after.
+    pub before_end_events: bool,
 }
 
 /// A run recorded for the adjoint: its result (values, events; no gradients) and its tape.
@@ -227,9 +230,6 @@ pub(crate) fn run_by_adjoint<S: HybridSystem + ?Sized>(
 ) -> Result<Result<SimResult, AdjointError>, SimError> {
     let recorded = record(sys, p, opts)?;
     let result = &recorded.result;
-    if result.end_cusp.is_some() {
-        return Ok(Err(AdjointError::Unsupported("an event at t_end (the other side of its cusp)")));
-    }
     let info = sys.info();
     let (n, m, k) = (info.n_states(), info.n_grad(), info.n_outputs());
     let at_stop = matches!(result.stopped_by, StopReason::Event { .. });
@@ -248,6 +248,18 @@ pub(crate) fn run_by_adjoint<S: HybridSystem + ?Sized>(
             let mut outputs = vec![0.0; k];
             outputs[i] = 1.0;
             seeds.push(Seed { outputs, total, ..Seed::default() });
+        }
+    }
+    if result.end_cusp.is_some() {
+        for i in 0..n {
+            let mut state = vec![0.0; n];
+            state[i] = 1.0;
+            seeds.push(Seed { state, before_end_events: true, ..Seed::default() });
+        }
+        for i in 0..k {
+            let mut outputs = vec![0.0; k];
+            outputs[i] = 1.0;
+            seeds.push(Seed { outputs, before_end_events: true, ..Seed::default() });
         }
     }
     if auto && !prefers_adjoint(seeds.len(), m) {
@@ -273,6 +285,10 @@ pub(crate) fn run_by_adjoint<S: HybridSystem + ?Sized>(
     if at_stop {
         fin.dstate_total = Some(columns(n));
         fin.doutputs_total = Some(columns(k));
+    }
+    if let Some(cusp) = &mut result.end_cusp {
+        cusp.dstate = Some(columns(n));
+        cusp.doutputs = Some(columns(k));
     }
     result.stats.sens = Some(super::Sens::Adjoint);
     Ok(Ok(result))
@@ -327,11 +343,20 @@ impl Recorded {
         let mut lams = vec![0.0; rows * n];
         let mut pbars = vec![0.0; rows * m];
         let mut end_time_bars = vec![0.0; rows];
-        let (mut yx, mut yp, mut yt) = (vec![0.0; k * n], vec![0.0; k * m], vec![0.0; k]);
-        if seeds.iter().any(|s| !s.outputs.is_empty()) {
-            sys.output_jac(fin.time, &fin.state, p, &mut yx, &mut yp, &mut yt);
+        if seeds.iter().any(|s| s.before_end_events) && self.result.end_cusp.is_none() {
+            return Err(AdjointError::Seed("no event fired at t_end".into()));
         }
+        let (mut yx, mut yp, mut yt) = (vec![0.0; k * n], vec![0.0; k * m], vec![0.0; k]);
         for (r, seed) in seeds.iter().enumerate() {
+            if !seed.outputs.is_empty() {
+                // The outputs where the seed reads them: after the run, or before its events
+                // at `t_end`.
+                let state = match (&self.result.end_cusp, seed.before_end_events) {
+                    (Some(cusp), true) => &cusp.state,
+                    _ => &fin.state,
+                };
+                sys.output_jac(fin.time, state, p, &mut yx, &mut yp, &mut yt);
+            }
             let (lam, pbar) = (&mut lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
             lam.iter_mut().zip(&seed.state).for_each(|(l, w)| *l = *w);
             // The outputs at the end: y_x^T ybar into the state's cotangent, y_p^T ybar into
@@ -354,6 +379,11 @@ impl Recorded {
         let mut event = events;
         let store = &self.tape.store;
         let last_jump = self.tape.pieces.iter().rposition(|p| matches!(p, Piece::Jump { .. }));
+        // The pieces after the last step: the instant at the end. A row before the events at
+        // `t_end` starts below them (they still count for the event indices).
+        let last_step = self.tape.pieces.iter().rposition(|p| matches!(p, Piece::Step { .. }));
+        let skips =
+            |r: usize, index: usize| seeds[r].before_end_events && last_step.is_none_or(|s| index > s);
         for (index, piece) in self.tape.pieces.iter().enumerate().rev() {
             match *piece {
                 Piece::Step { at, end } => {
@@ -388,6 +418,9 @@ impl Recorded {
                         velocity: velocity.map(|v| &store[v..v + n]),
                     };
                     for (r, seed) in seeds.iter().enumerate() {
+                        if skips(r, index) {
+                            continue;
+                        }
                         let is_stop_end = at_stop && seed.total && Some(index) == last_jump;
                         let mut time_bar =
                             seed.event_times.iter().filter(|e| e.0 == event).map(|e| e.1).sum::<f64>();
@@ -413,13 +446,13 @@ impl Recorded {
                         pre: (pre.0, &store[pre.1..pre.1 + n]),
                         post: (post.0, &store[post.1..post.1 + n]),
                     };
-                    for r in 0..rows {
+                    for r in (0..rows).filter(|&r| !skips(r, index)) {
                         let (lam, pbar) = (&mut lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
                         switch_backward(sys, p, &switch, lam, pbar);
                     }
                 }
                 Piece::Knot { set, t, jump } => {
-                    for r in 0..rows {
+                    for r in (0..rows).filter(|&r| !skips(r, index)) {
                         let (lam, pbar) = (&lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
                         knot_backward(sys, p, set, t, &store[jump..jump + n], lam, pbar);
                     }
