@@ -1,0 +1,112 @@
+//! Measures the adjoint on a large model with a parameter per link (issue #40, section 4): the W5
+//! diffusion chain (`benches/support/chain.rs`) with N cells and one conductance per link,
+//! `d[i]` between cells i and i+1 (N - 1 parameters, every one differentiated), integrated with
+//! Dormand-Prince to T = 10 at rtol 1e-8 (the top-up event on `x0` included). For each N: a
+//! plain run (the model compiled without gradients), the adjoint of the last cell's output `y`
+//! (recording run and one backward pass), the process's peak memory after them, then forward
+//! sensitivities of all N - 1 columns (`sens_error_control` off: the same steps) and the gap
+//! between the two gradients. Medians of `--repeat` runs (default 3).
+//!
+//! `cargo run --release --example adjoint_chain -- 100 1000`; one size per process for a clean
+//! peak memory. docs/performance.md, "Gradients by the adjoint", has the figures.
+
+use std::time::Instant;
+
+use hybc::sim::adjoint::{record, Seed};
+use hybc::sim::{run, Method, SimOptions};
+use hybc::Model;
+
+/// The chain of `n` cells, a conductance per link, with the top-up event of W5.
+fn source(n: usize) -> String {
+    let mut s = format!("model link_chain\nparam d[{}] = 50 in [0.1, 1000]\nparam c = 0.1\n", n - 1);
+    for i in 0..n {
+        s.push_str(&format!("state x{i} = {}\n", if i == 0 { 1.0 } else { 0.0 }));
+    }
+    for i in 0..n {
+        let mut rhs = format!("-c * x{i}");
+        if i > 0 {
+            rhs.push_str(&format!(" + d[{}] * (x{} - x{i})", i - 1, i - 1));
+        }
+        if i + 1 < n {
+            rhs.push_str(&format!(" - d[{i}] * (x{i} - x{})", i + 1));
+        }
+        s.push_str(&format!("der(x{i}) = {rhs}\n"));
+    }
+    s.push_str("initial mode fill {\n    event top_up when x0 <= 0.6 -> rest {\n        x0 := x0 + 0.3\n    }\n}\nmode rest {\n}\n");
+    s.push_str(&format!("output y = x{}\n", n - 1));
+    s
+}
+
+fn median(mut xs: Vec<f64>) -> f64 {
+    xs.sort_by(f64::total_cmp);
+    xs[xs.len() / 2]
+}
+
+/// Peak resident memory of this process (Linux), in MiB.
+fn peak_mib() -> f64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<f64>().ok())
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+fn main() {
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let repeat = match args.iter().position(|a| a == "--repeat") {
+        Some(i) => {
+            let v = args[i + 1].parse().expect("a count");
+            args.drain(i..i + 2);
+            v
+        }
+        None => 3,
+    };
+    let sizes: Vec<usize> = args.iter().map(|a| a.parse().expect("a size")).collect();
+    let opts = SimOptions { t_end: 10.0, method: Method::Dopri5, sens_error_control: false, ..SimOptions::default() };
+    for n in sizes {
+        let model = Model::parse(&source(n)).expect("checks");
+        let plain_model = model.compile::<&str>(&[]).expect("compiles");
+        let with_grad = model.compile(&["d"]).expect("compiles");
+        let p = with_grad.params().values().to_vec();
+        let seed = Seed { outputs: vec![1.0], ..Seed::default() };
+        let (mut plain, mut adjoint) = (Vec::new(), Vec::new());
+        let (mut steps, mut events, mut grad, mut tape_mib) = (0, 0, Vec::new(), 0.0);
+        // The first adjoint compiles the flow's vector-Jacobian kernel: timed apart.
+        let started = Instant::now();
+        let recorded = record(with_grad.system(), &p, &opts).expect("records");
+        recorded.gradient(with_grad.system(), &p, &seed).expect("carried");
+        let first = started.elapsed().as_secs_f64();
+        for _ in 0..repeat {
+            let t = Instant::now();
+            let r = run(plain_model.system(), &p, &opts).expect("runs");
+            plain.push(t.elapsed().as_secs_f64());
+            (steps, events) = (r.stats.steps, r.events.len());
+            let t = Instant::now();
+            let recorded = record(with_grad.system(), &p, &opts).expect("records");
+            grad = recorded.gradient(with_grad.system(), &p, &seed).expect("carried");
+            adjoint.push(t.elapsed().as_secs_f64());
+            tape_mib = recorded.tape.bytes() as f64 / (1024.0 * 1024.0);
+        }
+        let peak = peak_mib();
+        let (plain, adjoint) = (median(plain), median(adjoint));
+        let t = Instant::now();
+        let r = run(with_grad.system(), &p, &opts).expect("runs");
+        let forward = t.elapsed().as_secs_f64();
+        let dy = r.final_state.doutputs.expect("doutputs");
+        let scale = dy.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        let gap = grad.iter().zip(&dy).fold(0.0f64, |a, (x, y)| a.max((x - y).abs())) / scale;
+        println!(
+            "N = {n} ({} parameters, {steps} steps, {events} events): plain {:.1} ms, adjoint {:.1} ms ({:.1}x plain; \
+             first call {:.0} ms with the kernel's compile), tape {tape_mib:.1} MiB, peak {peak:.0} MiB; \
+             forward {:.0} ms ({:.0}x plain); gap {gap:.0e}",
+            n - 1,
+            plain * 1e3,
+            adjoint * 1e3,
+            adjoint / plain,
+            first * 1e3,
+            forward * 1e3,
+            forward / plain,
+        );
+    }
+}
