@@ -261,8 +261,9 @@ class Function:
         """How many points each kind of native work of this function (and of every identical one:
         they share a handle) ran so far: ``plain`` (values), ``forward`` (runs with forward
         sensitivities), ``adjoint`` (points whose cotangents the adjoint pulled back),
-        ``transposed`` (points pulled back through the forward Jacobians). For tests and
-        diagnostics."""
+        ``recorded`` (runs recorded for the adjoint, one backward pass each: the rows of
+        ``jax.jacrev`` at one point share one), ``transposed`` (points pulled back through the
+        forward Jacobians). For tests and diagnostics."""
         return dict(_hybc.jax_counts(self.handle))
 
     def __repr__(self) -> str:

@@ -116,20 +116,20 @@ def test_grad_runs_the_adjoint_and_no_forward_sensitivities(ball_model):
     f = hj.function(ball_model, params=["e", "h0"], outputs=["energy"], events=4)
     before = f.counts()
     jax.block_until_ready(jax.grad(lambda p: f(p)["energy"])(P0))
-    assert delta(f, before) == {"plain": 1, "forward": 0, "adjoint": 1, "transposed": 0}
+    assert delta(f, before) == {"plain": 1, "forward": 0, "adjoint": 1, "recorded": 1, "transposed": 0}
     before = f.counts()
     jax.block_until_ready(jax.jacfwd(lambda p: f(p)["energy"])(P0))
-    assert delta(f, before) == {"plain": 1, "forward": 1, "adjoint": 0, "transposed": 0}
+    assert delta(f, before) == {"plain": 1, "forward": 1, "adjoint": 0, "recorded": 0, "transposed": 0}
     # jax.jacrev: one cotangent per row, all at one point: one recorded run, one backward pass
     # for the 4 rows (the handler groups equal points).
     before = f.counts()
     jax.block_until_ready(jax.jacrev(lambda p: f(p)["event_times"])(P0))
-    assert delta(f, before) == {"plain": 1, "forward": 0, "adjoint": 4, "transposed": 0}
+    assert delta(f, before) == {"plain": 1, "forward": 0, "adjoint": 4, "recorded": 1, "transposed": 0}
     # sens="forward": reverse mode through the forward Jacobians, as before the adjoint.
     g = hj.function(ball_model, params=["e", "h0"], outputs=["energy"], events=4, sens="forward")
     before = g.counts()
     grad = jax.grad(lambda p: g(p)["energy"])(P0)
-    assert delta(g, before) == {"plain": 1, "forward": 1, "adjoint": 0, "transposed": 1}
+    assert delta(g, before) == {"plain": 1, "forward": 1, "adjoint": 0, "recorded": 0, "transposed": 1}
     rel_close(grad, jax.grad(lambda p: f(p)["energy"])(P0), TOL_CONTROLLED)
 
 
@@ -215,7 +215,8 @@ def test_a_cascade_the_adjoint_does_not_carry_still_gets_the_right_grad():
     before = f.counts()
     grad = jax.grad(lambda p: f(p)["x"])(p)
     # Pulled back through the forward Jacobians, inside the handler.
-    assert delta(f, before) == {"plain": 1, "forward": 1, "adjoint": 0, "transposed": 1}
+    # (the run was recorded, its tape holds the cascade: the backward pass refused it)
+    assert delta(f, before) == {"plain": 1, "forward": 1, "adjoint": 0, "recorded": 1, "transposed": 1}
     np.testing.assert_allclose(grad, [-2.0, 2.5], rtol=1e-9)
     # Event times k h / c: d/dh = k / c, d/dc = -k h / c^2 (k = 1, 1, 2, 2).
     k = np.array([1.0, 1.0, 2.0, 2.0])
@@ -273,3 +274,30 @@ def test_bad_params_give_nan_cotangents(ball_model):
     f = hj.function(ball_model, params=["e", "h0"], outputs=["energy"], events=4)
     grads = jax.vmap(jax.grad(lambda p: f(p)["energy"]))(jnp.array([[0.8, 1.0], [1.5, 1.0]]))
     assert np.all(np.isfinite(grads[0])) and np.all(np.isnan(grads[1]))
+
+
+def test_auto_takes_the_adjoint_from_three_inputs(ball_model):
+    """sens="auto": one cotangent row against m inputs, hybc run --sens auto's rule (rows < m / 2)."""
+    two = hj.function(ball_model, params=["e", "h0"], outputs=["energy"], sens="auto")
+    three = hj.function(ball_model, params=["e", "h0", "g"], outputs=["energy"], sens="auto")
+    before2, before3 = two.counts(), three.counts()
+    g2 = jax.grad(lambda p: two(p)["energy"])(P0)
+    g3 = jax.grad(lambda p: three(p)["energy"])(jnp.array([0.8, 1.0, 9.81]))
+    assert delta(two, before2)["transposed"] == 1 and delta(two, before2)["adjoint"] == 0
+    assert delta(three, before3)["adjoint"] == 1 and delta(three, before3)["forward"] == 0
+    rel_close(g3[:2], g2, TOL_CONTROLLED)
+
+
+def test_vmap_of_jacrev_equals_vmap_of_jacfwd(ball_model):
+    f = hj.function(ball_model, params=["e", "h0"], outputs=["energy"], events=4)
+
+    def values(p):
+        out = f(p)
+        return jnp.concatenate([out["event_times"], out["energy"][None]])
+
+    points = jnp.array([[0.8, 1.0], [0.7, 1.2]])
+    before = f.counts()
+    rev = jax.vmap(jax.jacrev(values))(points)
+    # 2 points x 5 rows pulled back, each point's rows in one recorded run and backward pass.
+    assert delta(f, before) == {"plain": 2, "forward": 0, "adjoint": 10, "recorded": 2, "transposed": 0}
+    rel_close(rev, jax.vmap(jax.jacfwd(values))(points), TOL_CONTROLLED)

@@ -141,8 +141,11 @@ pub struct Counts {
     pub plain: AtomicU64,
     /// Runs with forward sensitivities (forward mode, or reverse mode's fallback).
     pub forward: AtomicU64,
-    /// Points whose cotangents the adjoint pulled back (one recorded run, one backward pass).
+    /// Points whose cotangents the adjoint pulled back.
     pub adjoint: AtomicU64,
+    /// Runs recorded for the adjoint, each followed by one backward pass (consecutive points at
+    /// the same inputs share one).
+    pub recorded: AtomicU64,
     /// Points whose cotangents were pulled back through the forward Jacobians (the adjoint does
     /// not carry the run, or was not asked for).
     pub transposed: AtomicU64,
@@ -154,12 +157,13 @@ impl Counts {
     }
 
     /// `(name, count)` of each counter.
-    pub fn snapshot(&self) -> [(&'static str, u64); 4] {
+    pub fn snapshot(&self) -> [(&'static str, u64); 5] {
         let get = |c: &AtomicU64| c.load(Ordering::Relaxed);
         [
             ("plain", get(&self.plain)),
             ("forward", get(&self.forward)),
             ("adjoint", get(&self.adjoint)),
+            ("recorded", get(&self.recorded)),
             ("transposed", get(&self.transposed)),
         ]
     }
@@ -397,6 +401,7 @@ impl Function {
     fn pull_back_by_adjoint(&self, p: &[f64], pulls: &mut [Pull<'_>]) -> bool {
         let compiled = &self.with_jacobians.compiled;
         let sys = compiled.system();
+        Counts::add(&self.counts.recorded, 1);
         let Ok(recorded) = adjoint::record(sys, p, &self.with_jacobians.opts) else { return false };
         let result = &recorded.result;
         // An event on `t_end` leaves the derivative to forward mode's cusp rule, as

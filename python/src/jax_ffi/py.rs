@@ -117,7 +117,8 @@ pub fn jax_register(
 
 /// How many points each kind of native work of the function `handle` ran: `plain` (values),
 /// `forward` (with forward sensitivities), `adjoint` (cotangents pulled back by the adjoint),
-/// `transposed` (pulled back through the forward Jacobians). A debug accessor for the tests.
+/// `recorded` (runs recorded for the adjoint, also those it then did not carry), `transposed`
+/// (pulled back through the forward Jacobians). A debug accessor for the tests.
 #[pyfunction]
 pub fn jax_counts(handle: u64) -> PyResult<HashMap<&'static str, u64>> {
     let function = registry::get(handle)
