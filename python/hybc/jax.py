@@ -20,8 +20,9 @@ what suits it:
 - reverse mode (``jax.grad``, ``jax.vjp``, ``jax.jacrev``) never forms the Jacobian: the
   transpose pulls each cotangent back by hybc's discrete adjoint (the run recorded without
   sensitivities, then one backward pass for every cotangent at that point: the rows of
-  ``jax.jacrev`` share one run and one pass), so ``jax.grad`` of one loss costs about a plain run
-  and a backward pass however many inputs there are (a 1,000-knot control). Where the adjoint does
+  ``jax.jacrev`` share one run and one pass), so ``jax.grad`` of one loss runs a plain run, a
+  recorded run and one backward pass, and no sensitivity column whatever the number of inputs
+  (what a backward pass costs: docs/performance.md). Where the adjoint does
   not carry a run (a cascade of events at one instant, a grazing crossing, samples at ``at=``
   times, a run that ended early, ...) the handler pulls back through the forward Jacobians
   instead: the numbers are right either way. ``sens="forward"`` makes reverse mode always go
