@@ -142,7 +142,8 @@ def test_jacrev_equals_jacfwd(f, jit):
         out = fj(p)
         return jnp.concatenate([out["event_times"], out["energy"][None]])
 
-    np.testing.assert_array_equal(np.asarray(jax.jacfwd(gj)(jnp.array(P0))), np.asarray(jax.jacrev(gj)(jnp.array(P0))))
+    p = jnp.array(P0)
+    np.testing.assert_array_equal(np.asarray(jax.jacfwd(gj)(p)), np.asarray(jax.jacrev(gj)(p)))
 
 
 @pytest.mark.parametrize("jit", [False, True])
