@@ -301,3 +301,37 @@ def test_vmap_of_jacrev_equals_vmap_of_jacfwd(ball_model):
     # 2 points x 5 rows pulled back, each point's rows in one recorded run and backward pass.
     assert delta(f, before) == {"plain": 2, "forward": 0, "adjoint": 10, "recorded": 2, "transposed": 0}
     rel_close(rev, jax.vmap(jax.jacfwd(values))(points), TOL_CONTROLLED)
+
+
+def test_a_first_pull_back_in_a_parallel_batch(ball_model):
+    """A fresh model's first pull-backs run on the pool (8 points > the serial 4): the adjoint's
+    kernels are built on first use by whichever worker comes first, and every point still gets
+    the gradient a later serial call gives."""
+    model = hybc.Model(ball_model.source)
+    f = hj.function(model, params=["e", "h0"], outputs=["energy"], events=4, t_end=2.0)
+    points = jnp.stack([jnp.linspace(0.7, 0.9, 8), jnp.linspace(0.9, 1.3, 8)], axis=-1)
+    batched = jax.vmap(jax.grad(lambda p: f(p)["energy"]))(points)
+    assert f.counts()["adjoint"] == 8
+    for point, row in zip(points, batched):
+        np.testing.assert_allclose(row, jax.grad(lambda p: f(p)["energy"])(point), rtol=1e-14)
+
+
+def test_a_stop_event_time_and_the_values_at_it_in_one_cotangent():
+    """Stop at x = h with x' = c from x(0) = 0: t_stop = h / c; y' = 1, so y = t_stop.
+    loss = 2 y + 3 t_stop = 5 h / c: d/dh = 5 / c, d/dc = -5 h / c^2."""
+    model = hybc.Model(
+        "model stopat\nparam h = 2\nparam c = 4\nstate x = 0\nstate y = 0\nder(x) = c\n"
+        "der(y) = 1\nevent hit when x >= h {\n    stop\n}\n"
+    )
+    f = hj.function(model, params=["h", "c"], outputs=["y"], events=1, t_end=5.0)
+
+    def loss(p):
+        out = f(p)
+        return 2.0 * out["y"] + 3.0 * out["event_times"][0]
+
+    p = jnp.array([2.0, 4.0])
+    before = f.counts()
+    grad = jax.grad(loss)(p)
+    assert delta(f, before)["adjoint"] == 1
+    np.testing.assert_allclose(grad, [5.0 / 4.0, -5.0 * 2.0 / 16.0], rtol=1e-10)
+    rel_close(grad, jax.jacfwd(loss)(p), TOL_CONTROLLED)
