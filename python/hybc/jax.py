@@ -10,12 +10,33 @@
     jax.grad(lambda p: f(p)["energy"])(jnp.array([0.8, 1.0]))
 
 The function runs natively through one XLA FFI target (the handler is Rust, in
-``python/src/jax_ffi/``). Its derivative is a ``jax.custom_jvp`` whose JVP multiplies the
-Jacobians hybc's forward sensitivities give (saltation through every event) from the same native
-call that gives the values, so ``jax.grad``, ``jax.jacfwd``, ``jax.jacrev`` and ``jax.jvp`` all
-work (JAX transposes the linear JVP for reverse mode); a ``jax.vmap`` batch is one native call run
-in parallel. Derivatives are first order: a derivative of the Jacobian (``jax.hessian``) raises
-JAX's "The FFI call to `hybc_run` cannot be differentiated".
+``python/src/jax_ffi/``). Its derivative is a ``jax.custom_jvp`` whose tangent map is a linear
+function with a transpose of its own (``jax.custom_derivatives.linear_call``), so each mode runs
+what suits it:
+
+- forward mode (``jax.jvp``, ``jax.jacfwd``) multiplies the Jacobians hybc's forward
+  sensitivities give (saltation through every event): one run with one sensitivity column per
+  input;
+- reverse mode (``jax.grad``, ``jax.vjp``, ``jax.jacrev``) never forms the Jacobian: the
+  transpose pulls each cotangent back by hybc's discrete adjoint (the run recorded without
+  sensitivities, then one backward pass for every cotangent at that point: the rows of
+  ``jax.jacrev`` share one run and one pass), so ``jax.grad`` of one loss runs a plain run, a
+  recorded run and one backward pass, and no sensitivity column whatever the number of inputs
+  (what a backward pass costs: docs/performance.md). Where the adjoint does
+  not carry a run (what ``hybc run --sens adjoint`` does not carry yet, docs/cli.md: a
+  Rosenbrock step, a grazing crossing, ...; also samples at ``at=`` times, a run that ended
+  early, or a pulled-back number that is not finite) the handler pulls back through the forward
+  Jacobians instead: the numbers are right either way. ``sens="forward"`` makes reverse mode always go
+  through the forward Jacobians, ``sens="auto"`` takes the adjoint from three inputs on
+  (``hybc run --sens auto``'s rule for one row).
+
+The values come from the plain run (no sensitivities) in every mode. The adjoint differentiates
+the steps that run took, so it equals the forward sensitivities of a run with
+``sens_error_control=False`` to round-off; forward mode keeps the sensitivities under the error
+control by default, so ``jax.grad`` and ``jax.jacfwd`` agree to the tolerances (bit-close with
+``sens_error_control=False``). A ``jax.vmap`` batch of either mode is one native call, run in
+parallel. Derivatives are first order: a derivative of the Jacobian (``jax.hessian``) raises JAX's
+"The FFI call to `hybc_run` cannot be differentiated".
 
 Values along the trajectory: ``at=times`` reads the same outputs at each of the T times too,
 from the dense output (``Model.simulate(at=)``'s samples); ``f(p)["samples"][name]`` has shape
@@ -36,10 +57,11 @@ Rules:
   (grazing). A parameter outside its declared range gives ``bad_param`` and NaN everywhere.
 - The derivative of an unfired (NaN) event slot is 0: the pad is a constant, so a loss that masks
   the pads gets a finite gradient.
-- A plain call runs the model compiled without sensitivities; a differentiated call runs it with
-  them (their error is controlled too), so the two values agree to the tolerances, not bit for bit,
-  and ``status`` describes the run that gave the numbers: only a differentiated call can report
-  ``not_differentiable``, or a fault where only the sensitivities' error cannot be met.
+- ``status`` describes the plain run that gave the values, in every mode: a derivative that does
+  not exist (a flow whose derivative is not finite, a grazing crossing) is NaN, and
+  ``not_differentiable`` is not reported (it needs the sensitivities; ``Model.simulate`` with
+  ``grad=`` reports it). A cotangent of exactly 0 contributes nothing, so a NaN derivative of a
+  quantity the loss does not read never reaches the gradient.
 - float64 only: ``jax_enable_x64`` must be on; float32 inputs are refused.
 """
 
@@ -52,6 +74,14 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.custom_derivatives import linear_call
+from jax.extend.core import jaxpr_as_fun
+from jax.interpreters import batching
+
+try:  # the primitive behind linear_call, to give it a batching rule (see _linear_call_batcher)
+    from jax._src.custom_derivatives import linear_call_p
+except ImportError:  # a JAX that moved it: its own rule (if any) applies
+    linear_call_p = None
 
 from . import _hybc
 from ._model import _check_counts, _expand_names, _expand_vectors, _param_dict
@@ -92,6 +122,56 @@ def _register_target() -> None:
         capsule = jax.ffi.pycapsule(ctypes.c_void_p(address))
         jax.ffi.register_ffi_target(_TARGET, capsule, platform="cpu")
         _registered = True
+
+
+def _linear_call_batcher(axis_data, args, dims, *, callee, transpose_thunk, num_callee_consts, num_res):
+    """A batching rule for ``linear_call`` (JAX 0.10 has none): the callee and its transpose mapped
+    with ``jax.vmap`` (so that the FFI calls inside, ``vmap_method="broadcast_all"``, stay one
+    native call), and the result again a ``linear_call`` whose transpose is the mapped transpose.
+    A residual without a batch dimension stays unbatched: ``jax.jacfwd`` maps the tangents only,
+    and the forward Jacobians are then computed once, not once per basis tangent."""
+    params = dict(
+        callee=callee,
+        transpose_thunk=transpose_thunk,
+        num_callee_consts=num_callee_consts,
+        num_res=num_res,
+    )
+    if all(d is None for d in dims):
+        out = linear_call_p.bind(*args, **params)
+        return out, [None] * len(out)
+    size = axis_data.size
+    k = num_callee_consts + num_res
+    # Batched operands with their batch dimension first; the linear ones all batched.
+    args = [a if d is None else jnp.moveaxis(a, d, 0) for a, d in zip(args, dims)]
+    head, head_axes = args[:k], [None if d is None else 0 for d in dims[:k]]
+    lin = [
+        jnp.broadcast_to(a, (size, *jnp.shape(a))) if d is None else a for a, d in zip(args[k:], dims[k:])
+    ]
+    res_axes = head_axes[num_callee_consts:]
+    callee_fun = jaxpr_as_fun(callee)
+
+    def fun(head, lin):
+        return jax.vmap(lambda h, x: callee_fun(*h, *x), in_axes=(head_axes, 0))(head, lin)
+
+    def transpose(head, cts):
+        t_jaxpr, t_consts = transpose_thunk()
+        t_fun = jaxpr_as_fun(t_jaxpr)
+        return jax.vmap(lambda r, c: t_fun(*t_consts, *r, *c), in_axes=(res_axes, 0))(
+            head[num_callee_consts:], cts
+        )
+
+    out = linear_call(fun, transpose, head, lin)
+    return out, [0] * len(out)
+
+
+def _register_linear_call_batcher() -> None:
+    """Registers :func:`_linear_call_batcher` unless this JAX batches ``linear_call`` itself (every
+    rule lands in ``fancy_primitive_batchers``; ``primitive_batchers`` is a view of it)."""
+    if linear_call_p is not None and linear_call_p not in batching.fancy_primitive_batchers:
+        batching.fancy_primitive_batchers[linear_call_p] = _linear_call_batcher
+
+
+_register_linear_call_batcher()
 
 
 def _x64() -> bool:
@@ -147,20 +227,46 @@ class Function:
             ),
             vmap_method="broadcast_all",
         )
+        # Reverse mode's pull-back: (p, ct_values, ct_times) -> the inputs' cotangent.
+        pull_back = jax.ffi.ffi_call(
+            _TARGET, jax.ShapeDtypeStruct((m,), f64), vmap_method="broadcast_all"
+        )
         attr = np.int64(handle)
 
         @jax.custom_jvp
         def call(p):
             return plain(p, handle=attr)
 
+        def push_forward(p, dp):
+            # The linear tangent map (forward mode): the forward sensitivities' Jacobians.
+            _, dv, _, dt, _, _ = with_jacobians(p, handle=attr)
+            return dv @ dp, dt @ dp
+
+        def transpose(p, cts):
+            # Its transpose (reverse mode): the adjoint's backward pass, in the handler.
+            ct_values, ct_times = cts
+            return pull_back(p, ct_values, ct_times, handle=attr)
+
         @call.defjvp
         def call_jvp(primals, tangents):
             (p,), (dp,) = primals, tangents
-            v, dv, t, dt, n_events, status = with_jacobians(p, handle=attr)
+            # The values from the plain run: under jax.grad only the transpose runs, so nothing
+            # here may compute sensitivities.
+            v, t, n_events, status = plain(p, handle=attr)
+            dv, dt = linear_call(push_forward, transpose, p, dp)
             no_tangent = np.zeros((), dtype=jax.dtypes.float0)
-            return (v, t, n_events, status), (dv @ dp, dt @ dp, no_tangent, no_tangent)
+            return (v, t, n_events, status), (dv, dt, no_tangent, no_tangent)
 
         self._call = call
+
+    def counts(self) -> dict[str, int]:
+        """How many points each kind of native work of this function (and of every identical one:
+        they share a handle) ran so far: ``plain`` (values), ``forward`` (runs with forward
+        sensitivities), ``adjoint`` (points whose cotangents the adjoint pulled back),
+        ``recorded`` (runs recorded for the adjoint, one backward pass each: the rows of
+        ``jax.jacrev`` at one point share one), ``transposed`` (points pulled back through the
+        forward Jacobians). For tests and diagnostics."""
+        return dict(_hybc.jax_counts(self.handle))
 
     def __repr__(self) -> str:
         return (
@@ -241,6 +347,10 @@ def function(
     - ``sim_kw``: the keywords of ``Model.simulate``: ``t_end``, ``rtol``, ``atol``,
       ``max_events``, ``max_steps``, ``method``, ``graze_tol``, ``sens_error_control``,
       ``quadrature_error_control``, ``land_events``, ``h_max`` (the model's ``simulate`` line and the run defaults otherwise).
+    - ``sens``: how reverse mode computes: ``"adjoint"`` (the default: one backward pass per
+      cotangent, the forward Jacobians where the adjoint does not carry the run), ``"forward"``
+      (always through the forward Jacobians) or ``"auto"`` (the adjoint from three inputs on).
+      Forward mode always runs forward sensitivities.
 
     The model is compiled here (twice: without and with sensitivities, each cached per model).
     A bad name or option raises at once (``hybc.ParameterError``, ``ValueError``).
@@ -262,6 +372,8 @@ def function(
         raise ValueError(f"outputs: a name is given twice in {outputs}")
     native = getattr(model, "_native", model)
     fixed = _param_dict(_expand_vectors(values, vectors), "values")
+    if sim_kw.get("sens") is None:
+        sim_kw["sens"] = "adjoint"
     handle = _hybc.jax_register(
         native, params, outputs, events, fixed, at=None if times is None else times.tolist(), **sim_kw
     )

@@ -201,6 +201,31 @@ impl Run {
         self.info().modes[self.run.result().final_state.mode].name.clone()
     }
 
+    /// The run's counts as the JSON report's `stats` holds them: "steps", "rejected",
+    /// "rhs_calls", "events", "switches", "sens" (how the gradients were computed: "forward" or
+    /// "adjoint", None when no parameter was differentiated), "compile_seconds", "run_seconds".
+    #[getter]
+    fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let s = &self.run.result().stats;
+        let dict = PyDict::new(py);
+        dict.set_item("steps", s.steps)?;
+        dict.set_item("rejected", s.rejected)?;
+        dict.set_item("rhs_calls", s.rhs_calls)?;
+        dict.set_item("events", s.events)?;
+        dict.set_item("switches", s.switches)?;
+        dict.set_item("sens", self.sens())?;
+        dict.set_item("compile_seconds", self.compile_seconds())?;
+        dict.set_item("run_seconds", self.run_seconds())?;
+        Ok(dict)
+    }
+
+    /// How the gradients were computed: "forward" or "adjoint" (`stats["sens"]`); None when no
+    /// parameter was differentiated.
+    #[getter]
+    fn sens(&self) -> Option<&'static str> {
+        self.run.result().stats.sens.map(|s| s.name())
+    }
+
     #[getter]
     fn compile_seconds(&self) -> f64 {
         self.run.compiled().compile_seconds()

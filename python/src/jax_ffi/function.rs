@@ -10,13 +10,22 @@
 //! time derivatives (a pad is a constant, so a masked loss gets no NaN through them); a derivative
 //! that does not exist (grazing) is NaN, and so is every final value of a run that did not reach
 //! `t_end` (see `status.rs`).
+//!
+//! Reverse mode (`jax.grad`, `jax.vjp`, `jax.jacrev`) calls [`Function::pull_back_batch`]: per
+//! point, a cotangent of the values and of the event times in, the parameters' cotangent
+//! `dvalues^T ct_values + dtimes^T ct_times` out, computed by the discrete adjoint
+//! (`hybc::sim::adjoint`: the run recorded without sensitivities, then one backward pass for
+//! every cotangent at that point) where it carries the run, else from the forward Jacobians.
 
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 
 use rayon::prelude::*;
 
 use super::status;
+use hybc::sim::adjoint::{self, Seed};
 use hybc::sim::{SimOptions, SimResult};
+use hybc::{Sens, StopReason};
 
 /// What a value column reads from the final state.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -119,6 +128,52 @@ pub struct Function {
     events: usize,
     plain: Engine,
     with_jacobians: Engine,
+    /// Whether reverse mode takes the adjoint (else it transposes the forward Jacobians).
+    by_adjoint: bool,
+    counts: Counts,
+}
+
+/// How many points each kind of native work ran: what the tests read (through
+/// `_hybc.jax_counts`) to check that reverse mode runs no forward sensitivities.
+#[derive(Debug, Default)]
+pub struct Counts {
+    /// Runs without sensitivities (the values).
+    pub plain: AtomicU64,
+    /// Runs with forward sensitivities (forward mode, or reverse mode's fallback).
+    pub forward: AtomicU64,
+    /// Points whose cotangents the adjoint pulled back.
+    pub adjoint: AtomicU64,
+    /// Runs recorded for the adjoint, each followed by one backward pass (consecutive points at
+    /// the same inputs share one).
+    pub recorded: AtomicU64,
+    /// Points whose cotangents were pulled back through the forward Jacobians (the adjoint does
+    /// not carry the run, or was not asked for).
+    pub transposed: AtomicU64,
+}
+
+impl Counts {
+    fn add(counter: &AtomicU64, n: usize) {
+        counter.fetch_add(n as u64, Ordering::Relaxed);
+    }
+
+    /// `(name, count)` of each counter.
+    pub fn snapshot(&self) -> [(&'static str, u64); 5] {
+        let get = |c: &AtomicU64| c.load(Ordering::Relaxed);
+        [
+            ("plain", get(&self.plain)),
+            ("forward", get(&self.forward)),
+            ("adjoint", get(&self.adjoint)),
+            ("recorded", get(&self.recorded)),
+            ("transposed", get(&self.transposed)),
+        ]
+    }
+}
+
+/// One point of a reverse-mode call: its cotangents in, its parameters' cotangent out.
+struct Pull<'a> {
+    ct_values: &'a [f64],
+    ct_times: &'a [f64],
+    pbar: &'a mut [f64],
 }
 
 /// Batches up to this size run on the calling thread: a thread hand-off costs more than a point
@@ -127,7 +182,10 @@ const SERIAL_BATCH: usize = 4;
 
 impl Function {
     /// `plain` must be compiled without gradients and `with_jacobians` with gradients with
-    /// respect to the inputs, in order.
+    /// respect to the inputs, in order; both run forward sensitivities whatever their options'
+    /// `sens` says, and `reverse` chooses how reverse mode pulls cotangents back (`Auto`: the
+    /// adjoint when `hybc::sim::adjoint::prefers_adjoint` says one row is cheaper by it).
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         model_name: String,
         inputs: Vec<Input>,
@@ -136,11 +194,35 @@ impl Function {
         events: usize,
         plain: Engine,
         with_jacobians: Engine,
+        reverse: Sens,
     ) -> Function {
         assert_eq!(with_jacobians.n_grad(), inputs.len(), "Jacobian engine compiled for the inputs");
+        debug_assert!(plain.opts.sens == Sens::Forward && with_jacobians.opts.sens == Sens::Forward);
         let input_names = inputs.iter().map(|i| i.name.clone()).collect();
         let samples = plain.opts.at.len();
-        Function { model_name, inputs, input_names, base, columns, samples, events, plain, with_jacobians }
+        let by_adjoint = match reverse {
+            Sens::Forward => false,
+            Sens::Adjoint => true,
+            Sens::Auto => adjoint::prefers_adjoint(1, inputs.len()),
+        };
+        Function {
+            model_name,
+            inputs,
+            input_names,
+            base,
+            columns,
+            samples,
+            events,
+            plain,
+            with_jacobians,
+            by_adjoint,
+            counts: Counts::default(),
+        }
+    }
+
+    /// The points each kind of native work ran so far.
+    pub fn counts(&self) -> &Counts {
+        &self.counts
     }
 
     pub fn n_inputs(&self) -> usize {
@@ -168,6 +250,8 @@ impl Function {
         debug_assert_eq!(p.len(), batch * m);
         let Outputs { values, times, n_events, status, jacobians } = out;
         let engine = if jacobians.is_some() { &self.with_jacobians } else { &self.plain };
+        let counter = if jacobians.is_some() { &self.counts.forward } else { &self.counts.plain };
+        Counts::add(counter, batch);
         let mut slots: Vec<Slots<'_>> = Vec::with_capacity(batch);
         let mut values = values.chunks_mut(n.max(1));
         let mut times = times.chunks_mut(k.max(1));
@@ -200,33 +284,169 @@ impl Function {
     }
 
     fn run_point(&self, w: &mut Worker<'_>, q: &[f64], slot: Slots<'_>) {
+        if !self.set_inputs(w, q) {
+            return fill_failed(slot, status::BAD_PARAM);
+        }
+        match run(w) {
+            Some(result) => self.fill(slot, &result),
+            None => fill_failed(slot, status::FAULT),
+        }
+    }
+
+    /// Sets the worker's parameters to the inputs `q`; false (nothing set) when one is not finite
+    /// or outside its declared range.
+    fn set_inputs(&self, w: &mut Worker<'_>, q: &[f64]) -> bool {
         let in_range = q
             .iter()
             .zip(&self.inputs)
             .all(|(&v, input)| v.is_finite() && input.range.is_none_or(|(lo, hi)| (lo..=hi).contains(&v)));
-        if !in_range {
-            return fill_failed(slot, status::BAD_PARAM);
+        if in_range {
+            for (input, &v) in self.inputs.iter().zip(q) {
+                w.p[input.index] = v;
+            }
         }
-        for (input, &v) in self.inputs.iter().zip(q) {
-            w.p[input.index] = v;
+        in_range
+    }
+
+    /// Pulls `batch` points' cotangents back (`p`: `batch * n_inputs`, `ct_values`:
+    /// `batch * n_values`, `ct_times`: `batch * n_event_slots`, `pbar`: `batch * n_inputs`).
+    /// Consecutive points at the same inputs (the rows of `jax.jacrev`, which broadcasts `p`)
+    /// share one run and one backward pass.
+    pub fn pull_back_batch(
+        &self,
+        p: &[f64],
+        batch: usize,
+        ct_values: &[f64],
+        ct_times: &[f64],
+        pbar: &mut [f64],
+    ) {
+        let (m, k, n) = (self.n_inputs(), self.events, self.n_values());
+        debug_assert_eq!(p.len(), batch * m);
+        let inputs_of = |b: usize| &p[b * m..(b + 1) * m];
+        // Groups of consecutive points with bitwise equal inputs: (first point, points).
+        let mut groups: Vec<(usize, Vec<Pull<'_>>)> = Vec::new();
+        let mut pbars = pbar.chunks_mut(m.max(1));
+        for b in 0..batch {
+            let pull = Pull {
+                ct_values: &ct_values[b * n..(b + 1) * n],
+                ct_times: &ct_times[b * k..(b + 1) * k],
+                pbar: next_row(&mut pbars, m),
+            };
+            let same = groups.last().is_some_and(|(first, _)| {
+                inputs_of(*first).iter().zip(inputs_of(b)).all(|(a, c)| a.to_bits() == c.to_bits())
+            });
+            match groups.last_mut() {
+                Some((_, pulls)) if same => pulls.push(pull),
+                _ => groups.push((b, vec![pull])),
+            }
         }
-        let sim = match w.sim.take() {
-            Some(sim) => sim,
-            None => match w.engine.take() {
-                Ok(sim) => sim,
-                // Options were checked when the engine was built; a simulator cannot fail now.
-                Err(_) => return fill_failed(slot, status::FAULT),
-            },
+        let worker = || Worker { engine: &self.with_jacobians, sim: None, p: self.base.clone() };
+        if groups.len() <= SERIAL_BATCH {
+            let mut w = worker();
+            for (first, pulls) in groups {
+                self.pull_back(&mut w, inputs_of(first), pulls);
+            }
+        } else {
+            groups.into_par_iter().for_each_init(worker, |w, (first, pulls)| {
+                self.pull_back(w, inputs_of(first), pulls);
+            });
+        }
+    }
+
+    /// One point's cotangents pulled back: by the adjoint where it carries the run, else through
+    /// the forward Jacobians. Either way the result is `dvalues^T ct_values + dtimes^T ct_times`
+    /// with a cotangent of exactly 0 contributing nothing (not even a NaN derivative's NaN), and
+    /// a pad slot's time derivative 0.
+    fn pull_back(&self, w: &mut Worker<'_>, q: &[f64], mut pulls: Vec<Pull<'_>>) {
+        if !self.set_inputs(w, q) {
+            for pull in &mut pulls {
+                pull.pbar.fill(f64::NAN);
+            }
+            return;
+        }
+        if self.by_adjoint && self.samples == 0 && self.pull_back_by_adjoint(&w.p, &mut pulls) {
+            Counts::add(&self.counts.adjoint, pulls.len());
+            return;
+        }
+        Counts::add(&self.counts.transposed, pulls.len());
+        Counts::add(&self.counts.forward, 1);
+        let (m, k, n) = (self.n_inputs(), self.events, self.n_values());
+        let (mut values, mut times, mut n_events, mut code) = (vec![0.0; n], vec![0.0; k], 0, 0);
+        let (mut dv, mut dt) = (vec![0.0; n * m], vec![0.0; k * m]);
+        let slot = Slots {
+            values: &mut values,
+            times: &mut times,
+            n_events: &mut n_events,
+            status: &mut code,
+            jacobians: Some((&mut dv, &mut dt)),
         };
-        let mut sim = sim;
-        let result = sim.run_raw(&w.p);
-        w.sim = Some(sim);
-        match result {
-            Ok(result) => self.fill(slot, &result),
-            // Bad input to `run` (a parameter vector of the wrong length, options): the function
-            // was built from the model, so this cannot happen; never a silent number all the same.
-            Err(_) => fill_failed(slot, status::FAULT),
+        match run(w) {
+            Some(result) => self.fill(slot, &result),
+            None => fill_failed(slot, status::FAULT),
         }
+        for pull in pulls {
+            for (j, pb) in pull.pbar.iter_mut().enumerate() {
+                let weighted = |ct: &[f64], d: &[f64]| -> f64 {
+                    ct.iter().enumerate().filter(|(_, &c)| c != 0.0).map(|(i, &c)| c * d[i * m + j]).sum()
+                };
+                *pb = weighted(pull.ct_values, &dv) + weighted(pull.ct_times, &dt);
+            }
+        }
+    }
+
+    /// The adjoint's pull-back of every cotangent at `p` (all the model's parameters): one
+    /// recorded run, one backward pass. False where the adjoint does not carry the run, the run
+    /// ended early or a pulled-back entry is not finite: the caller then goes through the forward
+    /// Jacobians.
+    fn pull_back_by_adjoint(&self, p: &[f64], pulls: &mut [Pull<'_>]) -> bool {
+        let compiled = &self.with_jacobians.compiled;
+        let sys = compiled.system();
+        Counts::add(&self.counts.recorded, 1);
+        let Ok(recorded) = adjoint::record(sys, p, &self.with_jacobians.opts) else { return false };
+        let result = &recorded.result;
+        // An event on `t_end` leaves the derivative to forward mode's cusp rule, as
+        // `hybc run --sens adjoint` does.
+        if !result.stopped_by.is_complete() || result.end_cusp.is_some() {
+            return false;
+        }
+        let info = compiled.info();
+        let (n_states, n_outputs) = (info.n_states(), info.n_outputs());
+        // The values at a stop event carry the total derivative, as `fill` reads them.
+        let total = matches!(result.stopped_by, StopReason::Event { .. });
+        let fired = result.events.len();
+        let seeds: Vec<Seed> = pulls
+            .iter()
+            .map(|pull| {
+                let (mut state, mut outputs) = (vec![0.0; n_states], vec![0.0; n_outputs]);
+                for (col, &c) in self.columns.iter().zip(pull.ct_values) {
+                    match *col {
+                        Selector::Output(i) => outputs[i] += c,
+                        Selector::State(i) => state[i] += c,
+                    }
+                }
+                // A pad (an unfired slot) is a constant: its cotangent goes nowhere.
+                let event_times = pull
+                    .ct_times
+                    .iter()
+                    .take(fired)
+                    .copied()
+                    .enumerate()
+                    .filter(|&(_, c)| c != 0.0)
+                    .collect();
+                Seed { state, outputs, event_times, total }
+            })
+            .collect();
+        let Ok(rows) = recorded.gradients(sys, p, &seeds) else { return false };
+        // A non-finite entry: some derivative along the run does not exist (an infinite slope, a
+        // grazing time). The backward pass mixes every state's cotangent into every parameter's
+        // (0 * inf is NaN), while forward mode keeps existence per quantity: ask it.
+        if rows.iter().flatten().any(|v| !v.is_finite()) {
+            return false;
+        }
+        for (pull, row) in pulls.iter_mut().zip(rows) {
+            pull.pbar.copy_from_slice(&row);
+        }
+        true
     }
 
     fn fill(&self, slot: Slots<'_>, result: &SimResult) {
@@ -312,6 +532,19 @@ impl Selector {
             Selector::State(i) => dstates.map(|d| d[j * n + i]),
         }
     }
+}
+
+/// Runs the worker's simulator (taken from its engine on first use) at its parameters; `None`
+/// where no run could start (options were checked when the engine was built, and the parameter
+/// vector has the model's length, so never in practice: but never a silent number either).
+fn run(w: &mut Worker<'_>) -> Option<SimResult> {
+    let mut sim = match w.sim.take() {
+        Some(sim) => sim,
+        None => w.engine.take().ok()?,
+    };
+    let result = sim.run_raw(&w.p);
+    w.sim = Some(sim);
+    result.ok()
 }
 
 /// The next `width` values of a row-major buffer; a width of zero gets an empty slice (the

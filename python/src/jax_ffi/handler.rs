@@ -13,6 +13,16 @@
 //! | out: `dtimes` (Jacobian calls only) | f64 | `(K, m)` |
 //! | out: `n_events`, `status` | s32 | `()` |
 //!
+//! or, for reverse mode's pull-back (`Function::pull_back_batch`), three input buffers and one
+//! result buffer:
+//!
+//! | buffer | dtype | shape (after `B...`) |
+//! | --- | --- | --- |
+//! | in: `p` | f64 | `(m,)` inputs |
+//! | in: `ct_values` | f64 | `(n,)` the values' cotangent |
+//! | in: `ct_times` | f64 | `(K,)` the event times' cotangent |
+//! | out: `pbar` | f64 | `(m,)` the inputs' cotangent |
+//!
 //! and one attribute, `handle` (s64), naming the function in the registry. Leading dimensions
 //! `B...` (what `vmap_method="broadcast_all"` adds) are a batch run in one call. A malformed
 //! call (wrong dtype, shape or handle) is an INVALID_ARGUMENT error naming what is wrong; a
@@ -329,13 +339,25 @@ unsafe fn execute(frame: &CallFrame) -> Result<(), Failure> {
     let (m, n, k) = (function.n_inputs(), function.n_values(), function.n_event_slots());
 
     let (args, rets) = (&frame.args, &frame.rets);
-    if args.size != 1 {
-        return Err(Failure::invalid(format!("hybc: expected 1 input buffer, got {}", args.size)));
+    /// What a call asks for, by its buffer counts.
+    enum Call {
+        Values,
+        WithJacobians,
+        PullBack,
     }
-    let with_jacobians = match rets.size {
-        4 => false,
-        6 => true,
-        other => return Err(Failure::invalid(format!("hybc: expected 4 or 6 result buffers, got {other}"))),
+    let call = match (args.size, rets.size) {
+        (1, 4) => Call::Values,
+        (1, 6) => Call::WithJacobians,
+        (3, 1) => Call::PullBack,
+        (1, other) => {
+            return Err(Failure::invalid(format!("hybc: expected 4 or 6 result buffers, got {other}")))
+        }
+        (inputs, results) => {
+            return Err(Failure::invalid(format!(
+                "hybc: expected 1 input buffer (values) or 3 (a pull-back), got {inputs} inputs and \
+                 {results} results"
+            )))
+        }
     };
     // SAFETY: `args`/`rets` are the frame's live lists of `size` entries.
     let arg = |i| unsafe { read_buffer("input", i, args.size, args.types, args.args) };
@@ -362,6 +384,28 @@ unsafe fn execute(frame: &CallFrame) -> Result<(), Failure> {
     let batch: usize = batch_dims.iter().product();
 
     let views: Vec<BufferView> = (0..rets.size as usize).map(ret).collect::<Result<_, _>>()?;
+    let with_jacobians = match call {
+        Call::Values => false,
+        Call::WithJacobians => true,
+        Call::PullBack => {
+            let (ct_values, ct_times, pbar) = (arg(1)?, arg(2)?, &views[0]);
+            check_shape(&ct_values, &batch_dims, &[n], "the values' cotangent")?;
+            check_shape(&ct_times, &batch_dims, &[k], "the event times' cotangent")?;
+            check_shape(pbar, &batch_dims, &[m], "the parameters' cotangent")?;
+            // SAFETY: live, distinct XLA buffers of this call, checked for dtype and shape; the
+            // inputs are only read.
+            let (p, ct_values, ct_times, pbar) = unsafe {
+                (
+                    as_input::<f64>(&p, dtype::F64, "the parameters")?,
+                    as_input::<f64>(&ct_values, dtype::F64, "the values' cotangent")?,
+                    as_input::<f64>(&ct_times, dtype::F64, "the event times' cotangent")?,
+                    as_slice::<f64>(pbar, dtype::F64, "the parameters' cotangent")?,
+                )
+            };
+            function.pull_back_batch(p, batch, ct_values, ct_times, pbar);
+            return Ok(());
+        }
+    };
     let (values, dvalues, times, dtimes, n_events, status) = if with_jacobians {
         (&views[0], Some(&views[1]), &views[2], Some(&views[3]), &views[4], &views[5])
     } else {

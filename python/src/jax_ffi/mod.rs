@@ -20,5 +20,6 @@ use pyo3::prelude::*;
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(py::jax_handler_address, m)?)?;
     m.add_function(wrap_pyfunction!(py::jax_register, m)?)?;
+    m.add_function(wrap_pyfunction!(py::jax_counts, m)?)?;
     Ok(())
 }

@@ -49,7 +49,7 @@ pub fn jax_register(
     hybc::limits::count("events", events, 0, hybc::limits::MAX_EVENT_COLUMNS)
         .map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))?;
     let inner = model.inner();
-    let opts = keywords.options_at(inner, at)?;
+    let mut opts = keywords.options_at(inner, at)?;
     // Every point's buffers hold each column at the end and at each time, with a Jacobian row
     // per column and time: bounded like `hybc sweep`'s event columns times the sampled rows.
     let per_point = (columns.len() * (1 + opts.at.len())) as f64 * (1 + params.len()) as f64;
@@ -92,6 +92,9 @@ pub fn jax_register(
     if let Some(handle) = registry::find(&key) {
         return Ok(handle);
     }
+    // `sens` chooses how reverse mode pulls cotangents back; every run the engines make computes
+    // forward sensitivities or none (the adjoint is called by the function itself, per pull-back).
+    let reverse = std::mem::replace(&mut opts.sens, hybc::Sens::Forward);
     let plain = model.compiled(py, &[])?;
     let with_jacobians = model.compiled(py, &params)?;
     let base = base.values().to_vec();
@@ -105,10 +108,22 @@ pub fn jax_register(
                 events,
                 Engine::new(plain, opts.clone())?,
                 Engine::new(with_jacobians, opts)?,
+                reverse,
             ))
         })
         .map_err(errors::to_py)?;
     Ok(registry::insert(key, function))
+}
+
+/// How many points each kind of native work of the function `handle` ran: `plain` (values),
+/// `forward` (with forward sensitivities), `adjoint` (cotangents pulled back by the adjoint),
+/// `recorded` (runs recorded for the adjoint, also those it then did not carry), `transposed`
+/// (pulled back through the forward Jacobians). A debug accessor for the tests.
+#[pyfunction]
+pub fn jax_counts(handle: u64) -> PyResult<HashMap<&'static str, u64>> {
+    let function = registry::get(handle)
+        .ok_or_else(|| PyValueError::new_err(format!("no hybc.jax function {handle}")))?;
+    Ok(function.counts().snapshot().into_iter().collect())
 }
 
 fn inner_name(compiled: &hybc::Compiled) -> String {
