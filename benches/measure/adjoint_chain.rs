@@ -63,7 +63,12 @@ fn main() {
         None => 3,
     };
     let sizes: Vec<usize> = args.iter().map(|a| a.parse().expect("a size")).collect();
-    let opts = SimOptions { t_end: 10.0, method: Method::Dopri5, sens_error_control: false, ..SimOptions::default() };
+    let opts = SimOptions {
+        t_end: 10.0,
+        method: Method::Dopri5,
+        sens_error_control: false,
+        ..SimOptions::default()
+    };
     for n in sizes {
         let model = Model::parse(&source(n)).expect("checks");
         let plain_model = model.compile::<&str>(&[]).expect("compiles");

@@ -27,7 +27,7 @@ use hybc::fit::Bounds;
 use hybc::optimize::solver::{LocalSolver, Program, SmoothPoint};
 use hybc::optimize::{optimize, Lbfgsb, OptimizeOptions, OptimizeProblem, Quantity, Slsqp};
 use hybc::sim::HybridSystem;
-use hybc::Model;
+use hybc::{Model, Sens, SimOptions};
 
 #[path = "../../tests/it/support/knots.rs"]
 mod knots;
@@ -100,7 +100,16 @@ fn solve(solver: &dyn LocalSolver, bound: f64, counts: &[usize]) {
             bounds: vec![Bounds { lower: -bound, upper: bound }; n],
             objective: Quantity::parse("obj", compiled.info()).expect("objective"),
             constraints: Vec::new(),
-            sim: model.sim_options(),
+            // What `hybc optimize` takes: gradients by the cheaper mode (`--sens auto`), the
+            // adjoint here (one objective against N knots); `MANY_KNOTS_SENS=forward` for forward.
+            sim: SimOptions {
+                sens: if std::env::var("MANY_KNOTS_SENS").is_ok_and(|v| v == "forward") {
+                    Sens::Forward
+                } else {
+                    Sens::Auto
+                },
+                ..model.sim_options()
+            },
         };
         let started = Instant::now();
         let result = optimize(&problem, &OptimizeOptions::default(), solver, None).expect("optimises");
