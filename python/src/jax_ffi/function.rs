@@ -433,7 +433,7 @@ impl Function {
                     .enumerate()
                     .filter(|&(_, c)| c != 0.0)
                     .collect();
-                Seed { state, outputs, event_times, total }
+                Seed { state, outputs, event_times, total, ..Seed::default() }
             })
             .collect();
         let Ok(rows) = recorded.gradients(sys, p, &seeds) else { return false };
