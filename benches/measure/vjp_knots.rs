@@ -3,9 +3,9 @@
 //! elements, every parameter differentiated (K + 2 columns). Per K: the first `flow_vjp` call
 //! (which compiles the adjoint's kernel: best of a few fresh models), one call (median of
 //! batches, at times spread over the window so every segment is visited), and one `flow_sens`
-//! call beside it (the forward sensitivities, whose `f_p` has a column per knot). The kernel's
-//! share of the call is what grows with K where the products are written per knot; the trait's
-//! `gp` (K + 2 entries, overwritten) is zero-filled by every call either way.
+//! call beside it (the forward sensitivities, whose `f_p` has a column per knot), and the time of
+//! zero-filling `gp` (K + 2 entries, which the trait's `flow_vjp` overwrites: every call pays it
+//! whatever its kernel does).
 //!
 //! Run: `cargo run --release --example vjp_knots [K ...]`. Compare builds by running their
 //! binaries alternately (the figures in docs/performance.md were taken so).
@@ -41,7 +41,10 @@ fn per_call(batches: usize, per: usize, mut f: impl FnMut(usize)) -> f64 {
 fn main() {
     let ks: Vec<usize> = std::env::args().skip(1).map(|a| a.parse().expect("a knot count")).collect();
     let ks = if ks.is_empty() { vec![10, 100, 1000, 10_000] } else { ks };
-    println!("{:>6} {:>14} {:>14} {:>16}", "K", "first call ms", "vjp call us", "flow_sens us");
+    println!(
+        "{:>6} {:>14} {:>14} {:>14} {:>14}",
+        "K", "first call ms", "vjp call us", "gp fill us", "flow_sens us"
+    );
     for k in ks {
         let model = hybc::check_source(&source(k)).expect("checks");
         let grad: Vec<ParamIdx> = (0..model.n_params() as u32).map(ParamIdx).collect();
@@ -69,6 +72,11 @@ fn main() {
         let vjp = per_call(15, per, |i| sys.flow_vjp(0, time(i), &x, &w, &p, &mut gx, &mut gp));
         let (mut dx, s, mut ds) = ([0.0; 2], vec![0.0; 2 * m], vec![0.0; 2 * m]);
         let sens = per_call(15, per, |i| sys.flow_sens(0, time(i), &x, &s, &p, &mut dx, &mut ds));
-        println!("{k:>6} {first:>14.3} {vjp:>14.3} {sens:>16.3}");
+        // The zero fill of `gp` alone, which every call pays (the trait overwrites `gp`).
+        let fill = per_call(15, per, |i| {
+            gp.fill(0.0);
+            gp[i % m] = std::hint::black_box(1.0);
+        });
+        println!("{k:>6} {first:>14.3} {vjp:>14.3} {fill:>14.3} {sens:>14.3}");
     }
 }

@@ -55,7 +55,8 @@ struct ModeKernels {
     guards: Tape,
     /// `flow_vjp`'s roots, as the compiled kernel's (`codegen::plan::plan_flow_vjp`): the `f_x`
     /// entries (as in `fx`), the `f_p` entries of the differentiated parameters that no lookup
-    /// of `lookups` reads, the `df_i/dL` of each lookup, then each lookup's position.
+    /// of `ModeFunctions::lookups` reads, the `df_i/dL` of each of `vjp_lookups`, then their
+    /// positions.
     vjp: Tape,
     /// `(row, sensitivity column)` of each of those `f_p` entries, and whether it is finite at
     /// every finite input (`flow_vjp` multiplies them).

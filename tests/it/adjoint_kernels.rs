@@ -155,11 +155,20 @@ fn magnitude(
 /// weight (1) and added into `gp_j` lookup by lookup (`lookups`). Hence, to first order,
 /// `gamma(D_f + n + 1) S_f + gamma(D_a + n + 2 + lookups) S_a`, with `S_f = sum_i |w_i| M_f(i)`
 /// and `S_a = sum_L |wt_jL| sum_i |w_i| M_a(i, L)`.
-fn scatter_bound(n: usize, lookups: usize, (s_f, d_f): (f64, usize), (s_a, d_a): (f64, usize)) -> f64 {
-    gamma(d_f + n + 1) * s_f + gamma(d_a + n + 2 + lookups) * s_a
+fn scatter_bound(n: usize, m: &ScatterMagnitudes) -> f64 {
+    gamma(m.d_f + n + 1) * m.s_f + gamma(m.d_a + n + 2 + m.lookups) * m.s_a
 }
 
-/// `(S, D)` of [`scatter_bound`] for the sensitivity column of parameter `param` in `mode`, when a
+/// The sums and depths of [`scatter_bound`] for one element, and how many lookups read it.
+struct ScatterMagnitudes {
+    s_f: f64,
+    d_f: usize,
+    s_a: f64,
+    d_a: usize,
+    lookups: usize,
+}
+
+/// The magnitudes of [`scatter_bound`] for the sensitivity column of parameter `param` in `mode`, when a
 /// lookup of the mode's `lookups` reads it; `None` otherwise (the kernel's own product).
 #[allow(clippy::too_many_arguments)]
 fn scatter_magnitudes(
@@ -170,7 +179,7 @@ fn scatter_magnitudes(
     x: &[f64],
     w: &[f64],
     p: &[f64],
-) -> Option<((f64, usize), (f64, usize), usize)> {
+) -> Option<ScatterMagnitudes> {
     let mf = &funcs.modes[mode];
     let reading: Vec<_> = mf.lookups.iter().filter(|fl| fl.lookup.reads(param)).collect();
     if reading.is_empty() {
@@ -198,7 +207,7 @@ fn scatter_magnitudes(
             d_a = d_a.max(d);
         }
     }
-    Some(((s_f, d_f), (s_a, d_a), reading.len()))
+    Some(ScatterMagnitudes { s_f, d_f, s_a, d_a, lookups: reading.len() })
 }
 
 /// Counts of the checks one model made, so that a model whose every point is singular cannot
@@ -283,7 +292,7 @@ fn check_system(
                 let want = dot(&w, col);
                 let param = info.grad_params[j] as u32;
                 let bound = match scatter_magnitudes(funcs, mode, param, t, &x, &w, &p) {
-                    Some((f, a, lookups)) => scatter_bound(n, lookups, f, a),
+                    Some(magnitudes) => scatter_bound(n, &magnitudes),
                     None => transpose_bound(n, w.iter().zip(col).map(|(a, b)| (a * b).abs()).sum()),
                 };
                 if !bound.is_finite() {
@@ -311,7 +320,7 @@ fn trial_time(sys: &CompiledModel, mode: usize, trial: usize, p: &[f64], rng: &m
     let random = 2.0 + 2.0 * rng.next();
     let sets: Vec<usize> =
         (0..sys.info().knots.len()).filter(|&k| sys.info().knots[k].mode == mode).collect();
-    if sets.is_empty() || trial % 4 == 0 {
+    if sets.is_empty() || trial.is_multiple_of(4) {
         return (random, false);
     }
     let set = sets[trial / 4 % sets.len()];
