@@ -16,7 +16,7 @@ use super::translate::{declare_callees, define_driver, define_kernel};
 use super::{
     CodegenError, CompileOptions, OptLevel, RegAlloc, AUTO_REGALLOC_LIMIT, AUTO_REGALLOC_NODE_LIMIT,
 };
-use crate::expr::{Enclosure, ModelFunctions};
+use crate::expr::{scatter_lookup, Enclosure, Lookup, ModelFunctions};
 use crate::interval::{Dual, Interval};
 use crate::sim::{HybridSystem, SystemInfo};
 
@@ -94,8 +94,17 @@ pub struct CompiledModel {
     stiff_module: Mutex<Option<JITModule>>,
     /// Each mode's `flow_vjp` kernel once built (`HybridSystem::flow_vjp`'s first call); their
     /// module is freed in `Drop`.
-    vjp: OnceLock<Result<Vec<Kernel>, String>>,
+    vjp: OnceLock<Result<VjpKernels, String>>,
     vjp_module: Mutex<Option<JITModule>>,
+}
+
+/// The adjoint's kernels, per mode, with what the host scatters after each (`plan::VjpPlan`).
+struct VjpKernels {
+    flow_vjp: Vec<Kernel>,
+    /// Per mode, the lookups whose `[c_L, pos]` pairs `flow_vjp` writes to its third output.
+    lookups: Vec<Vec<Lookup>>,
+    /// The sensitivity column of every parameter.
+    columns: Vec<Option<usize>>,
 }
 
 /// The kernels a Rosenbrock stepper needs, per mode (see `codegen::stiff`).
@@ -193,21 +202,22 @@ impl CompiledModel {
     }
 
     /// The adjoint's kernels, compiled on first use: every mode's `flow_vjp` (`plan::plan_vjp`).
-    fn vjp_kernels(&self) -> Result<&[Kernel], &str> {
-        self.vjp
-            .get_or_init(|| self.build_vjp().map_err(|e| e.to_string()))
-            .as_deref()
-            .map_err(String::as_str)
+    fn vjp_kernels(&self) -> Result<&VjpKernels, &str> {
+        self.vjp.get_or_init(|| self.build_vjp().map_err(|e| e.to_string())).as_ref().map_err(String::as_str)
     }
 
-    fn build_vjp(&self) -> Result<Vec<Kernel>, CodegenError> {
+    fn build_vjp(&self) -> Result<VjpKernels, CodegenError> {
         let source = lock(&self.source);
         let funcs =
             source.as_ref().ok_or(CodegenError::Internal { reason: "model functions already consumed" })?;
         let plan = plan_vjp(funcs, &self.info)?;
-        let (module, mut kernels) = build_module(&self.opts, funcs, &[&plan], "flow_vjp")?;
+        let (module, mut kernels) = build_module(&self.opts, funcs, &[&plan.kernels], "flow_vjp")?;
         *lock(&self.vjp_module) = Some(module);
-        Ok(kernels.pop().unwrap_or_default())
+        Ok(VjpKernels {
+            flow_vjp: kernels.pop().unwrap_or_default(),
+            lookups: plan.lookups,
+            columns: plan.columns,
+        })
     }
 }
 
@@ -446,9 +456,24 @@ impl HybridSystem for CompiledModel {
     fn flow_vjp(&self, mode: usize, t: f64, x: &[f64], w: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) {
         // `w` is the kernel's `s` input; `Kernel::call` checks every length. Compiled on the
         // first call (NaN if that failed: the trait has no error channel).
-        match self.vjp_kernels().ok().and_then(|k| k.get(mode)) {
-            Some(k) => {
-                k.call(t, x, w, p, [gx, gp, &mut []]);
+        let vjp = self.vjp_kernels().ok();
+        match vjp.and_then(|v| Some((v, v.flow_vjp.get(mode)?, v.lookups.get(mode)?))) {
+            Some((v, k, lookups)) => {
+                // The kernel writes `[c_L, pos]` per scattered lookup; the host adds `c_L` times
+                // the (at most two) nonzero weights into `gp` (checked indices, in safe code).
+                let mut small = [0.0; 16];
+                let mut large = Vec::new();
+                let pairs = if 2 * lookups.len() <= small.len() {
+                    &mut small[..2 * lookups.len()]
+                } else {
+                    large.resize(2 * lookups.len(), 0.0);
+                    &mut large[..]
+                };
+                if k.call(t, x, w, p, [gx, gp, pairs]).is_some() {
+                    for (l, pair) in lookups.iter().zip(pairs.chunks_exact(2)) {
+                        scatter_lookup(*l, pair[1], pair[0], &v.columns, gp);
+                    }
+                }
             }
             None => poison([gx, gp, &mut []]),
         }

@@ -4,7 +4,7 @@
 //! inside the lengths it declares.
 
 use super::CodegenError;
-use crate::expr::{ExprId, ExprStore, ModeFunctions, ModelFunctions, SparseMat, SparseVec};
+use crate::expr::{ExprId, ExprStore, Lookup, ModeFunctions, ModelFunctions, SparseMat, SparseVec};
 use crate::sim::SystemInfo;
 
 /// Number of output pointers every kernel takes (unused ones receive empty slices).
@@ -117,7 +117,12 @@ impl KernelPlan {
     /// in the kernel cost less than a `memset` call per output per call (the guard and reset
     /// Jacobians, called at every step and event).
     pub(crate) fn write_small_zeros(&mut self) {
-        for out in 0..N_OUTS {
+        self.write_small_zeros_in(0..N_OUTS);
+    }
+
+    /// [`Self::write_small_zeros`] for the outputs `outs` only; the others keep their prefill.
+    pub(crate) fn write_small_zeros_in(&mut self, outs: std::ops::Range<usize>) {
+        for out in outs {
             let len = self.lens.out[out];
             if !self.prefill[out] || len > MAX_ZERO_WRITES {
                 continue;
@@ -483,39 +488,72 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
     Ok(plan)
 }
 
+/// The adjoint's kernels ([`plan_vjp`]) and what the host needs to finish their `gp`.
+#[derive(Clone, Debug)]
+pub(crate) struct VjpPlan {
+    /// Per mode, `mode{k}_flow_vjp`.
+    pub kernels: Vec<KernelPlan>,
+    /// Per mode, the lookups whose `[c_L, pos]` pairs the kernel writes to its third output, in
+    /// that order; the host scatters them (`expr::scatter_lookup`).
+    pub lookups: Vec<Vec<Lookup>>,
+    /// The sensitivity column of every parameter, `None` where it is not differentiated.
+    pub columns: Vec<Option<usize>>,
+}
+
 /// The adjoint's kernels, one per mode ([`plan_flow_vjp`]). `CompiledModel` plans and compiles
 /// them on the first `flow_vjp` call, into a module of their own: a forward run never pays for
 /// them (in the model's module they doubled the compile time of a 1000-state chain).
-pub(crate) fn plan_vjp(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Vec<KernelPlan>, CodegenError> {
+pub(crate) fn plan_vjp(funcs: &ModelFunctions, info: &SystemInfo) -> Result<VjpPlan, CodegenError> {
     let dims = check_shape(funcs, info)?;
-    let plan_mode = |(k, mode): (usize, &ModeFunctions)| {
-        let mut plan = plan_flow_vjp(k, mode, &dims)?;
-        plan.write_small_zeros();
+    let mut kernels = Vec::new();
+    let mut lookups = Vec::new();
+    for (k, mode) in funcs.modes.iter().enumerate() {
+        let (mut plan, scattered) = plan_flow_vjp(k, mode, &dims)?;
+        // `gp`'s entries of a scattered vector are the host's: the kernel leaves the whole
+        // output to the caller's zero fill, so that its size does not follow the knots.
+        plan.write_small_zeros_in(if scattered.is_empty() { 0..2 } else { 0..1 });
         plan.check(&funcs.store)?;
-        Ok(plan)
-    };
-    funcs.modes.iter().enumerate().map(plan_mode).collect()
+        kernels.push(plan);
+        lookups.push(scattered);
+    }
+    Ok(VjpPlan { kernels, lookups, columns: dims.grad_col })
 }
 
 /// `mode{k}_flow_vjp` (inputs `x` (n), `s = w` (n)): `gx = f_x^T w` (n) and `gp = f_p^T w` (m,
 /// by sensitivity column), each entry one `SensDot` over the structurally nonzero entries of
 /// its column of `f_x` or `f_p`, rows ascending: the transpose of `flow_sens`'s products, so a
 /// sparse model's products cost its Jacobian's entries, never `n^2`. Entries without one are
-/// zero-filled (by the kernel when small, `write_small_zeros`). A vector parameter read by an
-/// input (`pwl`, `pwc`) has one `f_p` entry per element and row that reads it.
-fn plan_flow_vjp(mode_idx: usize, mode: &ModeFunctions, dims: &Dims) -> Result<KernelPlan, CodegenError> {
+/// zero-filled (by the kernel when small, `write_small_zeros`).
+///
+/// A vector the flow reads through lookups only (`ModeFunctions::lookups`: a `pwl`/`pwc`
+/// control) has no product in `gp`: its `f_p` holds an entry per element and row, of which at
+/// most two per lookup are nonzero at any time. Instead the third output holds, per lookup `L`
+/// with a differentiated element, the pair `[c_L, pos]`: `c_L = sum_i w_i df_i/dL` (a `SensDot`
+/// over `L`'s rows) and `L`'s position, which the host scatters onto the elements `L` reads
+/// there (returned, in the output's order). So the kernel's size does not grow with the knots.
+fn plan_flow_vjp(
+    mode_idx: usize,
+    mode: &ModeFunctions,
+    dims: &Dims,
+) -> Result<(KernelPlan, Vec<Lookup>), CodegenError> {
     let (n, m) = (dims.n, dims.n_grad);
-    let mut vjp = KernelPlan::new(format!("mode{mode_idx}_flow_vjp"), dims.lens(n, n, [n, m, 0]));
+    let differentiated = |l: &Lookup| (l.base..l.base + l.len).any(|i| dims.grad_col[i as usize].is_some());
+    let scattered: Vec<&crate::expr::FlowLookup> =
+        mode.lookups.iter().filter(|fl| differentiated(&fl.lookup)).collect();
+    let name = format!("mode{mode_idx}_flow_vjp");
+    let mut vjp = KernelPlan::new(name, dims.lens(n, n, [n, m, 2 * scattered.len()]));
     vjp.prefill = [true, true, false];
     // The entries are sorted by (row, column): grouped by column, each keeps its rows ascending.
     let mut fx_cols: Vec<Vec<(ExprId, u32)>> = vec![Vec::new(); n];
     for &(i, c, e) in &mode.flow_x.entries {
         fx_cols[c as usize].push((e, i));
     }
+    let by_lookup = |param: u32| mode.lookups.iter().any(|fl| fl.lookup.reads(param));
     let mut fp_cols: Vec<Vec<(ExprId, u32)>> = vec![Vec::new(); m];
     for &(i, param, e) in &mode.flow_p.entries {
-        if let Some(c) = dims.grad_col[param as usize] {
-            fp_cols[c].push((e, i));
+        match dims.grad_col[param as usize] {
+            Some(c) if !by_lookup(param) => fp_cols[c].push((e, i)),
+            _ => {}
         }
     }
     for (out, cols) in [(0, fx_cols), (1, fp_cols)] {
@@ -525,7 +563,12 @@ fn plan_flow_vjp(mode_idx: usize, mode: &ModeFunctions, dims: &Dims) -> Result<K
             }
         }
     }
-    Ok(vjp)
+    for (q, fl) in scattered.iter().enumerate() {
+        let products: Vec<(ExprId, u32)> = fl.flow_l.entries.iter().map(|&(i, e)| (e, i)).collect();
+        vjp.write(2, 2 * q, Term::SensDot { products, bias: None })?;
+        vjp.write(2, 2 * q + 1, Term::Expr(fl.position))?;
+    }
+    Ok((vjp, scattered.iter().map(|fl| fl.lookup).collect()))
 }
 
 pub(crate) fn index_u32(what: &str, index: usize) -> Result<u32, CodegenError> {

@@ -1,7 +1,8 @@
 //! The plans of the adjoint's kernel, `mode{k}_flow_vjp`: its products are the columns of the
-//! symbolic Jacobians, and its size grows with a sparse model's entries and an input's knots,
-//! never with `n^2`. (Its values are tested against the interpreter and the transpose
-//! relations in tests/it/adjoint_kernels.rs.)
+//! symbolic Jacobians, and its size grows with a sparse model's entries, never with `n^2` nor
+//! with the knots of a control read through lookups only (the host scatters its cotangent).
+//! (Its values are tested against the interpreter and the transpose relations in
+//! tests/it/adjoint_kernels.rs.)
 
 use super::plan::{plan_vjp, KernelPlan, Term};
 use super::translate::needed_nodes;
@@ -16,7 +17,7 @@ fn vjp_plan(source: &str) -> (ModelFunctions, KernelPlan) {
     let funcs = lower(&model);
     let grad: Vec<ParamIdx> = (0..model.n_params() as u32).map(ParamIdx).collect();
     let info = system_info(&model, &grad);
-    let vjp = plan_vjp(&funcs, &info).expect("plans").swap_remove(0);
+    let vjp = plan_vjp(&funcs, &info).expect("plans").kernels.swap_remove(0);
     (funcs, vjp)
 }
 
@@ -69,38 +70,73 @@ der(z) = x + y
     assert_eq!(plan.size(), 3 + 6 + 3 + 2, "one per entry and one per product");
 }
 
-/// `der(x) = pwl(t, 0, 1, u) - k x` with `u` of `knots` elements: the plan's size and the
-/// expression nodes its roots need.
-fn pwl_kernel(knots: usize) -> (usize, usize) {
+/// `der(x) = pwl(t, 0, 1, u) - k x` (and `extra` added to it) with `u` of `knots` elements: the
+/// plan (every parameter differentiated), its size and the expression nodes its roots need.
+fn pwl_kernel(knots: usize, extra: &str) -> (KernelPlan, usize, usize) {
     let (funcs, plan) = vjp_plan(&format!(
         "model knots
 param k = 1
 param u[{knots}] = 0
 state x = 0
-der(x) = pwl(t, 0, 1, u) - k * x
+der(x) = pwl(t, 0, 1, u) - k * x{extra}
 "
     ));
-    // gx: the one entry -k; gp: -x for k, then each element's weight at the knot position.
-    assert_eq!(plan.lens.out, [1, knots + 1, 0]);
-    assert_eq!(products(&plan, 0, 0).len(), 1);
-    for j in 0..=knots {
-        assert_eq!(products(&plan, 1, j).len(), 1, "gp[{j}]");
-    }
-    (plan.size(), needed_nodes(&funcs.store, plan.roots()).len())
+    let nodes = needed_nodes(&funcs.store, plan.roots()).len();
+    let size = plan.size();
+    (plan, size, nodes)
 }
 
 #[test]
-fn a_pwl_input_gives_the_vjp_kernel_one_product_per_knot() {
-    // Each element of `u` has its own `f_p` entry (its hat weight at the knot position): the
-    // kernel writes all of them, with a constant number of nodes per knot. A run-time scatter
-    // onto the two elements the position reads is a later step (issue 40).
-    let sizes: Vec<(usize, usize)> = [50, 100, 200, 400].into_iter().map(pwl_kernel).collect();
-    for (&(size, _), knots) in sizes.iter().zip([50, 100, 200, 400]) {
-        assert_eq!(size, 2 * (knots + 1) + 2, "{knots} knots");
+fn a_control_read_through_lookups_only_gives_the_vjp_kernel_a_size_independent_of_its_knots() {
+    // gx: the one entry -k; gp: -x for k only; the third output: `[c_L, pos]` of the one lookup,
+    // `c_L` the product `1 * w_0`. The elements' entries are the host's scatter: none written,
+    // the whole of gp zero-filled by the caller.
+    let mut seen = Vec::new();
+    for knots in [10, 100, 1000] {
+        let (plan, size, nodes) = pwl_kernel(knots, "");
+        assert_eq!(plan.lens.out, [1, knots + 1, 2], "{knots} knots");
+        assert_eq!(plan.prefill, [false, true, false], "{knots} knots");
+        assert_eq!(products(&plan, 0, 0).len(), 1);
+        assert_eq!(products(&plan, 1, 0).len(), 1, "k's own entry stays a normal one");
+        for j in 1..=knots {
+            assert!(!plan.writes.iter().any(|w| w.out == 1 && w.index as usize == j), "gp[{j}] written");
+        }
+        assert_eq!(products(&plan, 2, 0).iter().map(|p| p.1).collect::<Vec<_>>(), [0], "c_L over row 0");
+        assert!(plan.writes.iter().any(|w| w.out == 2 && w.index == 1 && matches!(w.term, Term::Expr(_))));
+        assert_eq!(size, 2 + 2 + 2 + 1, "{knots} knots");
+        seen.push((size, nodes));
     }
-    let per_knot = (sizes[1].1 - sizes[0].1) / 50;
-    for w in sizes.windows(2) {
-        let (dk, dn) = (w[1].0 - w[0].0, w[1].1 - w[0].1);
-        assert_eq!(dn, per_knot * dk / 2, "the nodes grow linearly with the knots: {sizes:?}");
+    assert!(seen.windows(2).all(|w| w[0] == w[1]), "size and nodes equal at 10, 100, 1000 knots: {seen:?}");
+}
+
+#[test]
+fn a_control_also_summed_keeps_one_product_per_knot() {
+    // `sum(u)` reads every element as a parameter: the vector takes today's path, one `f_p`
+    // product per element (its weight at the position plus the sum's 1), and no lookup pair.
+    for knots in [10, 50] {
+        let (plan, size, _) = pwl_kernel(knots, " + sum(u)");
+        assert_eq!(plan.lens.out, [1, knots + 1, 0], "{knots} knots");
+        for j in 0..=knots {
+            assert_eq!(products(&plan, 1, j).len(), 1, "gp[{j}]");
+        }
+        assert_eq!(size, 2 + 2 * (knots + 1), "{knots} knots");
     }
+}
+
+#[test]
+fn a_control_not_differentiated_has_no_lookup_pair() {
+    // Only `k` differentiated: `u`'s lookup has no column to scatter onto.
+    let file = crate::syntax::parse(
+        "model m\nparam k = 1\nparam u[20] = 0\nstate x = 0\nder(x) = pwl(t, 0, 1, u) - k * x\n",
+    )
+    .expect("parses");
+    let model = crate::sema::check(&file).expect("checks");
+    let funcs = lower(&model);
+    assert_eq!(funcs.modes[0].lookups.len(), 1, "the lookup is listed with the mode");
+    let plan = plan_vjp(&funcs, &system_info(&model, &[ParamIdx(0)])).expect("plans");
+    assert_eq!(plan.kernels[0].lens.out, [1, 1, 0]);
+    assert!(plan.lookups[0].is_empty());
+    let plan = plan_vjp(&funcs, &system_info(&model, &[ParamIdx(5)])).expect("plans");
+    assert_eq!(plan.kernels[0].lens.out, [1, 1, 2], "u[4] alone is enough");
+    assert_eq!(plan.lookups[0].len(), 1);
 }

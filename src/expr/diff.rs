@@ -40,6 +40,11 @@ pub enum Var {
     Param(u32),
     /// The time `t`.
     Time,
+    /// A node taken as an independent variable: the derivative of an expression through this
+    /// node only, everything else (its own operands too) held fixed. The adjoint's lookups
+    /// (`ModeFunctions::lookups`): `df/dL` of a flow with respect to the value `L` of one
+    /// `pwl`/`pwc` lookup, which its vector's elements enter only through their weights.
+    Node(ExprId),
 }
 
 /// Memoised differentiation: keep one per store while building all of a model's Jacobians.
@@ -107,6 +112,10 @@ impl Differentiator {
     /// The derivative of one node whose children's derivatives are cached; a child without one
     /// does not depend on `wrt` (see [`Self::diff_along`]) and has derivative 0.
     fn diff_node(&self, s: &mut ExprStore, id: ExprId, wrt: Var) -> ExprId {
+        // The variable itself (before the early-out below: its operands do not depend on it).
+        if wrt == Var::Node(id) {
+            return s.one();
+        }
         let node = *s.node(id);
         // Only a missing child makes the zero constant here (never on `diff`'s path, where every
         // child is cached): interning it earlier would renumber the nodes built after it, and

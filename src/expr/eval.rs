@@ -132,6 +132,52 @@ pub fn apply_lookup(kind: LookupKind, pos: f64, u: &[f64]) -> f64 {
     }
 }
 
+/// The elements a lookup's value reads at knot position `pos` and their weights
+/// `d apply_lookup(kind, pos, u) / d u[j]`, piece by piece as [`apply_lookup`] computes the value
+/// (and as `diff`'s element weights are written): `Pwl`, `(1 - w)` on `u[k]` and `w` on `u[k+1]`
+/// of its segment `k` with `w` clamped to `[0, 1]` (so 1 on `u[0]` before the first knot and on
+/// `u[len-1]` after the last; at a knot, 1 on it and 0 on the next); `Pwc`, 1 on `u[k]`;
+/// `PwlSlope`, -1 on `u[k]` and +1 on `u[k+1]` inside `[0, len - 1)`. Entries whose weight is 0
+/// are left out (at most two remain), so the adjoint's scatter touches only what the value reads.
+/// A NaN position gives NaN weights (on the elements the value's clamped index reads).
+pub fn lookup_weights(kind: LookupKind, pos: f64, len: usize) -> impl Iterator<Item = (usize, f64)> {
+    let pair = match kind {
+        _ if len == 0 => [(0, 0.0), (0, 0.0)],
+        LookupKind::Pwl if len < 2 => [(0, 1.0), (0, 0.0)],
+        LookupKind::Pwl => {
+            let k = lookup_segment(pos, len - 2);
+            let w = (pos - k as f64).clamp(0.0, 1.0);
+            [(k, 1.0 - w), (k + 1, w)]
+        }
+        LookupKind::Pwc => [(lookup_segment(pos, len - 1), if pos.is_nan() { pos } else { 1.0 }), (0, 0.0)],
+        LookupKind::PwlSlope if len < 2 => [(0, 0.0), (0, 0.0)],
+        LookupKind::PwlSlope => {
+            let k = lookup_segment(pos, len - 2);
+            if pos.is_nan() {
+                [(k, pos), (k + 1, pos)]
+            } else if pos >= 0.0 && pos < (len - 1) as f64 {
+                [(k, -1.0), (k + 1, 1.0)]
+            } else {
+                [(0, 0.0), (0, 0.0)]
+            }
+        }
+    };
+    pair.into_iter().filter(|&(_, w)| w != 0.0)
+}
+
+/// The adjoint's scatter of one lookup's cotangent `c` (`sum_i w_i df_i/dL`): `gp[column[j]] +=
+/// c * weight` for each element `j` that `l` reads at `pos` ([`lookup_weights`]) and that has a
+/// sensitivity column (`column` maps every parameter to its column, `None` where it is not
+/// differentiated). Indices are checked: one out of range is skipped, never read or written.
+pub fn scatter_lookup(l: Lookup, pos: f64, c: f64, column: &[Option<usize>], gp: &mut [f64]) {
+    for (j, weight) in lookup_weights(l.kind, pos, l.len as usize) {
+        let param = l.base as usize + j;
+        if let Some(slot) = column.get(param).copied().flatten().and_then(|col| gp.get_mut(col)) {
+            *slot += c * weight;
+        }
+    }
+}
+
 fn sign(x: f64) -> f64 {
     if x > 0.0 {
         1.0

@@ -5,7 +5,7 @@
 //! parameters filters the sparse entries. Sparse containers hold only structurally non-zero
 //! entries, in ascending (row, column) order.
 
-use super::node::ExprId;
+use super::node::{ExprId, Lookup};
 use super::store::ExprStore;
 
 /// A sparse vector: `(index, expression)` for each structurally non-zero entry, ascending.
@@ -38,6 +38,28 @@ pub struct ModeFunctions {
     pub flow_p: SparseMat,
     /// `df_i/dt`.
     pub flow_t: SparseVec,
+    /// The lookups (`pwl`, `pwc`) of the vectors the flow reads through lookups only (no element
+    /// written out, no `sum` or `dot`), ascending by node: the adjoint's `f_p^T w` takes such a
+    /// vector as `c_L = sum_i w_i df_i/dL` per lookup `L`, scattered onto the (at most two)
+    /// elements `L` reads at its position, instead of one `flow_p` entry per element (which
+    /// `flow_p` still holds, for the forward sensitivities).
+    pub lookups: Vec<FlowLookup>,
+}
+
+/// A lookup a mode's flow reads, of a vector the flow reads through lookups only
+/// ([`ModeFunctions::lookups`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FlowLookup {
+    /// The lookup node `Lookup(lookup, position)`.
+    pub node: ExprId,
+    /// How it reads which vector.
+    pub lookup: Lookup,
+    /// Its knot position.
+    pub position: ExprId,
+    /// `df_i/dL`, the flow's derivative with respect to the lookup's value taken as an
+    /// independent variable (`Var::Node`): `df_i/du_j` is the sum over the vector's lookups of
+    /// `df_i/dL` times `u_j`'s weight at `L`'s position. Structurally nonzero rows only.
+    pub flow_l: SparseVec,
 }
 
 /// One event: guard, enabling condition and reset map with their derivatives.

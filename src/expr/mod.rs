@@ -14,7 +14,10 @@ pub mod store;
 pub use diff::{diff, Differentiator, Var};
 pub use display::{to_infix, to_infix_capped, to_infix_group, Group};
 pub use enclose::Enclosure;
-pub use eval::{apply_binary, apply_lookup, apply_select, apply_unary, eval, eval_one, Tape};
+pub use eval::{
+    apply_binary, apply_lookup, apply_select, apply_unary, eval, eval_one, lookup_weights, scatter_lookup,
+    Tape,
+};
 pub use finite::finite_at_finite_inputs;
 pub use functions::*;
 pub use node::*;

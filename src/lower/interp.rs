@@ -7,7 +7,7 @@
 //! `src/sim/system.rs`. Array lengths are the caller's responsibility, as the trait states; a mode
 //! or event index out of range leaves the outputs untouched instead of panicking.
 
-use crate::expr::{Enclosure, ExprId, ModelFunctions, SparseMat, SparseVec, Tape};
+use crate::expr::{scatter_lookup, Enclosure, ExprId, Lookup, ModelFunctions, SparseMat, SparseVec, Tape};
 use crate::interval::{Dual, Interval};
 use crate::sim::{HybridSystem, SystemInfo};
 
@@ -52,9 +52,20 @@ struct ModeKernels {
     fx_finite: Vec<bool>,
     /// `(row, sensitivity column)` of each `f_p` entry in `flow_sens`.
     fp: Vec<(usize, usize)>,
-    /// Whether each `f_p` entry is finite at every finite input (`flow_vjp` multiplies them).
-    fp_finite: Vec<bool>,
     guards: Tape,
+    /// `flow_vjp`'s roots, as the compiled kernel's (`codegen::plan::plan_flow_vjp`): the `f_x`
+    /// entries (as in `fx`), the `f_p` entries of the differentiated parameters that no lookup
+    /// of `ModeFunctions::lookups` reads, the `df_i/dL` of each of `vjp_lookups`, then their
+    /// positions.
+    vjp: Tape,
+    /// `(row, sensitivity column)` of each of those `f_p` entries, and whether it is finite at
+    /// every finite input (`flow_vjp` multiplies them).
+    vjp_fp: Vec<(usize, usize)>,
+    vjp_fp_finite: Vec<bool>,
+    /// The lookups of vectors read through lookups only with a differentiated element
+    /// (`ModeFunctions::lookups`), each with the rows of its `df_i/dL` and their finiteness:
+    /// their cotangents are scattered onto the elements they read.
+    vjp_lookups: Vec<(Lookup, Vec<(usize, bool)>)>,
 }
 
 #[derive(Clone, Debug)]
@@ -79,6 +90,8 @@ struct KnotKernels {
 #[derive(Clone, Debug)]
 pub struct Interpreter {
     info: SystemInfo,
+    /// The sensitivity column of every parameter, `None` where it is not differentiated.
+    columns: Vec<Option<usize>>,
     init: Tape,
     init_sens: Kernel,
     modes: Vec<ModeKernels>,
@@ -135,14 +148,38 @@ impl Interpreter {
                     roots.push(e);
                 }
                 let mut fp = Vec::new();
-                let mut fp_finite = Vec::new();
                 for &(i, k, e) in &mode.flow_p.entries {
                     if let Some(j) = col(k) {
                         fp.push((i as usize, j));
-                        fp_finite.push(crate::expr::finite_at_finite_inputs(store, e));
                         roots.push(e);
                     }
                 }
+                let finite = |e: ExprId| crate::expr::finite_at_finite_inputs(store, e);
+                let mut vjp_roots: Vec<ExprId> = mode.flow_x.entries.iter().map(|e| e.2).collect();
+                let by_lookup = |k: u32| mode.lookups.iter().any(|fl| fl.lookup.reads(k));
+                let (mut vjp_fp, mut vjp_fp_finite) = (Vec::new(), Vec::new());
+                for &(i, k, e) in &mode.flow_p.entries {
+                    match col(k) {
+                        Some(j) if !by_lookup(k) => {
+                            vjp_fp.push((i as usize, j));
+                            vjp_fp_finite.push(finite(e));
+                            vjp_roots.push(e);
+                        }
+                        _ => {}
+                    }
+                }
+                let scattered: Vec<_> = mode
+                    .lookups
+                    .iter()
+                    .filter(|fl| (fl.lookup.base..fl.lookup.base + fl.lookup.len).any(|k| col(k).is_some()))
+                    .collect();
+                let mut vjp_lookups = Vec::new();
+                for fl in &scattered {
+                    let rows = fl.flow_l.entries.iter().map(|&(i, e)| (i as usize, finite(e))).collect();
+                    vjp_roots.extend(fl.flow_l.entries.iter().map(|e| e.1));
+                    vjp_lookups.push((fl.lookup, rows));
+                }
+                vjp_roots.extend(scattered.iter().map(|fl| fl.position));
                 let guard_roots: Vec<ExprId> = info
                     .modes
                     .get(mode_idx)
@@ -156,8 +193,11 @@ impl Interpreter {
                     fx,
                     fx_finite,
                     fp,
-                    fp_finite,
                     guards: Tape::new(store, &guard_roots),
+                    vjp: Tape::new(store, &vjp_roots),
+                    vjp_fp,
+                    vjp_fp_finite,
+                    vjp_lookups,
                 }
             })
             .collect();
@@ -199,6 +239,7 @@ impl Interpreter {
         yparts.extend(v_parts(2, &funcs.output_t));
 
         Interpreter {
+            columns: column.clone(),
             init: Tape::new(store, &funcs.init),
             init_sens: Kernel::new(store, p_parts(0, &funcs.init_p, n)),
             modes,
@@ -272,11 +313,10 @@ impl HybridSystem for Interpreter {
         let Some(m) = self.modes.get(mode) else {
             return;
         };
-        let n = self.info.n_states();
-        let mut values = vec![0.0; m.flow_sens.n_roots()];
-        m.flow_sens.eval_into(t, x, p, &mut Vec::new(), &mut values);
-        let rest = values.get(n..).unwrap_or(&[]);
-        let (fx, fp) = rest.split_at(m.fx.len().min(rest.len()));
+        let mut values = vec![0.0; m.vjp.n_roots()];
+        m.vjp.eval_into(t, x, p, &mut Vec::new(), &mut values);
+        let (fx, rest) = values.split_at(m.fx.len().min(values.len()));
+        let (fp, mut rest) = rest.split_at(m.vjp_fp.len().min(rest.len()));
         gx.fill(0.0);
         gp.fill(0.0);
         // The entries run by row, so each output entry sums its rows ascending, as the
@@ -286,10 +326,27 @@ impl HybridSystem for Interpreter {
                 gx[k] += v * w[i];
             }
         }
-        for ((&(i, j), v), &finite) in m.fp.iter().zip(fp).zip(&m.fp_finite) {
+        for ((&(i, j), v), &finite) in m.vjp_fp.iter().zip(fp).zip(&m.vjp_fp_finite) {
             if finite || w[i] != 0.0 {
                 gp[j] += v * w[i];
             }
+        }
+        // Each scattered lookup's cotangent `c_L = sum_i w_i df_i/dL` (rows ascending), then
+        // `c_L` times its weights at its position, lookup by lookup, as the compiled model.
+        let mut cotangents = Vec::with_capacity(m.vjp_lookups.len());
+        for (_, rows) in &m.vjp_lookups {
+            let (entries, after) = rest.split_at(rows.len().min(rest.len()));
+            rest = after;
+            let mut c = 0.0;
+            for (&(i, finite), v) in rows.iter().zip(entries) {
+                if finite || w[i] != 0.0 {
+                    c += v * w[i];
+                }
+            }
+            cotangents.push(c);
+        }
+        for ((l, _), (c, &pos)) in m.vjp_lookups.iter().zip(cotangents.into_iter().zip(rest)) {
+            scatter_lookup(*l, pos, c, &self.columns, gp);
         }
     }
 

@@ -16,12 +16,12 @@ pub use interp::Interpreter;
 pub use report::derive_report;
 pub use single::{ExprPrinter, SHOWN_CHARS};
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 use crate::expr::eval::reachable;
 use crate::expr::{
-    BinaryOp, Differentiator, EventFunctions, ExprId, ExprStore, KnotFunctions, Lookup, LookupKind,
-    ModeFunctions, ModelFunctions, Node, SparseMat, SparseVec, UnaryOp, Var,
+    BinaryOp, Differentiator, EventFunctions, ExprId, ExprStore, FlowLookup, KnotFunctions, Lookup,
+    LookupKind, ModeFunctions, ModelFunctions, Node, SparseMat, SparseVec, UnaryOp, Var,
 };
 use crate::sema::{self, BinOp, CmpOp, Cond, Expr, Func, InputKind, Model, SharedDef};
 use crate::sim::{self, SystemInfo};
@@ -35,7 +35,7 @@ pub fn lower(model: &Model) -> ModelFunctions {
     let init: Vec<ExprId> = model.states.iter().map(|s| cx.expr(&s.init)).collect();
     let init_p = cx.jacobian(&init, Jac::Params);
 
-    let modes = model
+    let mut modes: Vec<ModeFunctions> = model
         .modes
         .iter()
         .map(|mode| {
@@ -44,6 +44,8 @@ pub fn lower(model: &Model) -> ModelFunctions {
                 flow_x: cx.jacobian(&flow, Jac::States),
                 flow_p: cx.jacobian(&flow, Jac::Params),
                 flow_t: cx.time_derivative(&flow),
+                // Filled last (below), so that their new nodes renumber none of the others.
+                lookups: Vec::new(),
                 flow,
             }
         })
@@ -96,6 +98,10 @@ pub fn lower(model: &Model) -> ModelFunctions {
     let output_x = cx.jacobian(&outputs, Jac::States);
     let output_p = cx.jacobian(&outputs, Jac::Params);
     let output_t = cx.time_derivative(&outputs);
+
+    for mode in &mut modes {
+        mode.lookups = cx.flow_lookups(&mode.flow);
+    }
 
     ModelFunctions {
         store: cx.store,
@@ -170,6 +176,35 @@ pub fn system_info(model: &Model, grad_params: &[sema::ParamIdx]) -> SystemInfo 
     }
 }
 
+/// The parents of each node of `under` (a row's reachable nodes) among them.
+fn parents_of(store: &ExprStore, under: &[ExprId]) -> HashMap<ExprId, Vec<ExprId>> {
+    let mut parents: HashMap<ExprId, Vec<ExprId>> = HashMap::new();
+    for &id in under {
+        for c in store.node(id).children() {
+            parents.entry(c).or_default().push(id);
+        }
+    }
+    parents
+}
+
+/// The nodes that depend on a variable whose leaves are `leaves`: the leaves and everything
+/// above them, ascending (the root last), as `Differentiator::diff_along` takes them.
+fn path_above(parents: &HashMap<ExprId, Vec<ExprId>>, leaves: Vec<ExprId>) -> Vec<ExprId> {
+    let mut seen: HashSet<ExprId> = leaves.iter().copied().collect();
+    let mut path = leaves;
+    let mut at = 0;
+    while at < path.len() {
+        for &p in parents.get(&path[at]).map(Vec::as_slice).unwrap_or(&[]) {
+            if seen.insert(p) {
+                path.push(p);
+            }
+        }
+        at += 1;
+    }
+    path.sort_unstable();
+    path
+}
+
 /// Which variables a Jacobian's columns are.
 #[derive(Clone, Copy)]
 enum Jac {
@@ -215,14 +250,10 @@ impl Lowerer {
         let mut entries = Vec::new();
         for (i, &row) in rows.iter().enumerate() {
             let under = reachable(&self.store, &[row]);
-            let mut parents: HashMap<ExprId, Vec<ExprId>> = HashMap::new();
+            let parents = parents_of(&self.store, &under);
             let mut mentioned: Vec<(u32, ExprId)> = Vec::new();
             for &id in &under {
-                let node = *self.store.node(id);
-                for c in node.children() {
-                    parents.entry(c).or_default().push(id);
-                }
-                match (node, jac) {
+                match (*self.store.node(id), jac) {
                     (Node::State(k), Jac::States) | (Node::Param(k), Jac::Params) if k < n_cols => {
                         mentioned.push((k, id))
                     }
@@ -242,19 +273,7 @@ impl Lowerer {
                 let leaves: Vec<ExprId> =
                     mentioned[at_leaf..].iter().take_while(|m| m.0 == k).map(|m| m.1).collect();
                 at_leaf += leaves.len();
-                // The nodes that depend on this variable: its leaves and everything above them.
-                let mut path = leaves.clone();
-                let mut seen: std::collections::HashSet<ExprId> = leaves.into_iter().collect();
-                let mut at = 0;
-                while at < path.len() {
-                    for &p in parents.get(&path[at]).map(Vec::as_slice).unwrap_or(&[]) {
-                        if seen.insert(p) {
-                            path.push(p);
-                        }
-                    }
-                    at += 1;
-                }
-                path.sort_unstable();
+                let path = path_above(&parents, leaves);
                 debug_assert_eq!(path.last(), Some(&row));
                 let d =
                     self.diff.diff_along(&mut self.store, &path, var(k)).expect("the leaf is on the path");
@@ -264,6 +283,67 @@ impl Lowerer {
             }
         }
         SparseMat { n_rows: rows.len() as u32, n_cols, entries }
+    }
+
+    /// The lookups of `flow` whose vectors it reads through lookups only, each with the flow's
+    /// derivative with respect to its value (`ModeFunctions::lookups`). A vector is read through
+    /// lookups only when none of its elements is a `Param` node under the flow (`sum`, `dot`, an
+    /// element written out, a knot window made of its elements) and no lookup of another range
+    /// overlaps it (sema makes none: a lookup reads a whole vector).
+    fn flow_lookups(&mut self, flow: &[ExprId]) -> Vec<FlowLookup> {
+        let under = reachable(&self.store, flow);
+        let mut read = HashSet::new();
+        let mut lookups = Vec::new();
+        for &id in &under {
+            match *self.store.node(id) {
+                Node::Param(i) => {
+                    read.insert(i);
+                }
+                Node::Lookup(l, pos) => lookups.push((id, l, pos)),
+                _ => {}
+            }
+        }
+        let range = |l: &Lookup| l.base..l.base + l.len;
+        let only_looked_up = |l: &Lookup| {
+            range(l).all(|i| !read.contains(&i))
+                && lookups.iter().all(|(_, o, _)| {
+                    (o.base, o.len) == (l.base, l.len) || o.base >= l.base + l.len || l.base >= o.base + o.len
+                })
+        };
+        let chosen: Vec<(ExprId, Lookup, ExprId)> =
+            lookups.iter().filter(|(_, l, _)| only_looked_up(l)).copied().collect();
+        let mut flow_l = vec![Vec::new(); chosen.len()];
+        if !chosen.is_empty() {
+            for (i, &row) in flow.iter().enumerate() {
+                let under = reachable(&self.store, &[row]);
+                let parents = parents_of(&self.store, &under);
+                for (q, &(node, _, _)) in chosen.iter().enumerate() {
+                    if under.binary_search(&node).is_err() {
+                        continue;
+                    }
+                    // Along the nodes above the lookup only, as `jacobian` differentiates.
+                    let path = path_above(&parents, vec![node]);
+                    let d = self
+                        .diff
+                        .diff_along(&mut self.store, &path, Var::Node(node))
+                        .expect("the lookup is on the path");
+                    if !self.store.is_zero(d) {
+                        flow_l[q].push((i as u32, d));
+                    }
+                }
+            }
+        }
+        chosen
+            .into_iter()
+            .zip(flow_l)
+            .filter(|(_, entries)| !entries.is_empty())
+            .map(|((node, lookup, position), entries)| FlowLookup {
+                node,
+                lookup,
+                position,
+                flow_l: SparseVec { entries },
+            })
+            .collect()
     }
 
     fn gradient(&mut self, f: ExprId, jac: Jac) -> SparseVec {

@@ -9,10 +9,22 @@
 //! - the transpose relations against the compiled `flow_sens` (`ds_j = f_x s_j + f_p_j`):
 //!   `w . (f_x v) == (f_x^T w) . v` and `w . f_p_j == gp_j`, to the round-off bound stated at
 //!   [`transpose_bound`]; with no differentiated parameter `flow_sens` carries no `f_x`, so
-//!   `f_x v` comes from the compiled `flow_jac` (the stiff kernel's symbolic `f_x`) there;
+//!   `f_x v` comes from the compiled `flow_jac` (the stiff kernel's symbolic `f_x`) there; for
+//!   an element of a control read through lookups only, whose `gp` entry is the host's scatter
+//!   of `c_L = sum_i w_i df_i/dL` (`ModeFunctions::lookups`), to the bound at [`scatter_bound`];
+//! - at random times, exact knots, before the first knot and after the last;
+//! - the scatter's weights (`expr::lookup_weights`) against `diff`'s element weights, bit for bit,
+//!   and a derivative with respect to a node (`Var::Node`) against its closed form;
 //! - the trait's default `flow_vjp` on a hand-written system against its closed-form Jacobian.
 
+use std::collections::HashSet;
+
 use hybc::codegen::{CompileOptions, CompiledModel};
+use hybc::expr::eval::reachable;
+use hybc::expr::{
+    apply_binary, apply_lookup, apply_select, apply_unary, lookup_weights, ExprId, ExprStore, Lookup,
+    LookupKind, ModelFunctions, Node, UnaryOp,
+};
 use hybc::lower::{lower, system_info, Interpreter};
 use hybc::sema::ParamIdx;
 use hybc::sim::{HybridSystem, ModeInfo, SystemInfo};
@@ -66,18 +78,153 @@ fn transpose_bound(n: usize, magnitude: f64) -> f64 {
     (4 * n + 4) as f64 * EPS * magnitude
 }
 
+/// `gamma_k = k eps / (1 - k eps)`, the classic bound on `k` rounded operations' relative error.
+fn gamma(k: usize) -> f64 {
+    let k = k as f64 * EPS;
+    k / (1.0 - k)
+}
+
+/// A derivative expression's value, its magnitude `M` and its depth `D` (Higham's running error
+/// analysis): the float value is within `gamma(D) M` of the value in exact arithmetic from the
+/// same leaves. Leaves (`D = 0`, `M = |value|`): the flow's own nodes (`exact`; both sides of a
+/// relation read the same floats there, hash-consing), constants, and every operation other than
+/// `+`, `*`, `/`, negation and `select`: the chain rule applies those to primal nodes only, which
+/// it builds the same way for every variable, so both sides share them too. Then `M(a + b) =
+/// M(a) + M(b)`, `M(a b) = M(a) M(b)`, `M(a / b) = (M(a) + |a/b| M(b)) / |b|`, `select` takes its
+/// branch's; `D` adds one per rounding, as relative errors add in products.
+fn magnitude(
+    store: &ExprStore,
+    root: ExprId,
+    exact: &HashSet<ExprId>,
+    t: f64,
+    x: &[f64],
+    p: &[f64],
+) -> (f64, usize) {
+    let nodes = reachable(store, &[root]);
+    let mut at: std::collections::HashMap<ExprId, (f64, f64, usize)> = Default::default();
+    for id in nodes {
+        let get = |c: ExprId| at[&c];
+        let node = *store.node(id);
+        let value = match node {
+            Node::Const(bits) => f64::from_bits(bits),
+            Node::State(i) => x[i as usize],
+            Node::Param(i) => p[i as usize],
+            Node::Time => t,
+            Node::Unary(op, a) => apply_unary(op, get(a).0),
+            Node::Binary(op, a, b) => apply_binary(op, get(a).0, get(b).0),
+            Node::Select(c, a, b) => apply_select(get(c).0, get(a).0, get(b).0),
+            Node::Lookup(l, pos) => {
+                apply_lookup(l.kind, get(pos).0, &p[l.base as usize..(l.base + l.len) as usize])
+            }
+        };
+        let leaf = (value, value.abs(), 0);
+        let entry = if exact.contains(&id) {
+            leaf
+        } else {
+            match node {
+                Node::Unary(UnaryOp::Neg, a) => (value, get(a).1, get(a).2),
+                Node::Binary(hybc::expr::BinaryOp::Add, a, b) => {
+                    (value, get(a).1 + get(b).1, get(a).2.max(get(b).2) + 1)
+                }
+                Node::Binary(hybc::expr::BinaryOp::Mul, a, b) => {
+                    (value, get(a).1 * get(b).1, get(a).2 + get(b).2 + 1)
+                }
+                Node::Binary(hybc::expr::BinaryOp::Div, a, b) => {
+                    let (vb, mb) = (get(b).0.abs(), get(b).1);
+                    (value, (get(a).1 + value.abs() * mb) / vb, get(a).2 + get(b).2 + 1)
+                }
+                Node::Select(c, a, b) => {
+                    let taken = if get(c).0 != 0.0 { get(a) } else { get(b) };
+                    (value, taken.1, taken.2)
+                }
+                _ => leaf,
+            }
+        };
+        at.insert(id, entry);
+    }
+    let (_, m, d) = at[&root];
+    (m, d)
+}
+
+/// The bound on `|w . f_p_j - gp_j|` for an element `u_j` of a control read through lookups
+/// only. The two sides are equal in exact arithmetic from the same leaves: `f_p_ij` is the chain
+/// rule from the leaf derivative `wt_jL` (the element's weight at lookup `L`'s position, the same
+/// float on both sides), `c_L` from the leaf derivative 1, so `f_p_ij = sum_L df_i/dL wt_jL`.
+/// The left side is `f_p_ij` evaluated (within `gamma(D_f) M_f`) and dotted with `w` (`n`
+/// roundings); the right `df_i/dL` evaluated (`gamma(D_a) M_a`), dotted with `w` (`n`), times the
+/// weight (1) and added into `gp_j` lookup by lookup (`lookups`). Hence, to first order,
+/// `gamma(D_f + n + 1) S_f + gamma(D_a + n + 2 + lookups) S_a`, with `S_f = sum_i |w_i| M_f(i)`
+/// and `S_a = sum_L |wt_jL| sum_i |w_i| M_a(i, L)`.
+fn scatter_bound(n: usize, m: &ScatterMagnitudes) -> f64 {
+    gamma(m.d_f + n + 1) * m.s_f + gamma(m.d_a + n + 2 + m.lookups) * m.s_a
+}
+
+/// The sums and depths of [`scatter_bound`] for one element, and how many lookups read it.
+struct ScatterMagnitudes {
+    s_f: f64,
+    d_f: usize,
+    s_a: f64,
+    d_a: usize,
+    lookups: usize,
+}
+
+/// The magnitudes of [`scatter_bound`] for the sensitivity column of parameter `param` in `mode`, when a
+/// lookup of the mode's `lookups` reads it; `None` otherwise (the kernel's own product).
+#[allow(clippy::too_many_arguments)]
+fn scatter_magnitudes(
+    funcs: &ModelFunctions,
+    mode: usize,
+    param: u32,
+    t: f64,
+    x: &[f64],
+    w: &[f64],
+    p: &[f64],
+) -> Option<ScatterMagnitudes> {
+    let mf = &funcs.modes[mode];
+    let reading: Vec<_> = mf.lookups.iter().filter(|fl| fl.lookup.reads(param)).collect();
+    if reading.is_empty() {
+        return None;
+    }
+    let store = &funcs.store;
+    let exact: HashSet<ExprId> = reachable(store, &mf.flow).into_iter().collect();
+    let (mut s_f, mut d_f) = (0.0, 0);
+    for &(i, _, e) in mf.flow_p.entries.iter().filter(|e| e.1 == param) {
+        let (m, d) = magnitude(store, e, &exact, t, x, p);
+        s_f += w[i as usize].abs() * m;
+        d_f = d_f.max(d);
+    }
+    let (mut s_a, mut d_a) = (0.0, 0);
+    for fl in &reading {
+        // The element's weight at this lookup's position, from the value's own definition:
+        // `apply_lookup` of the unit vector (it is linear in the vector).
+        let pos_value = hybc::expr::eval_one(store, fl.position, t, x, p);
+        let mut unit = vec![0.0; fl.lookup.len as usize];
+        unit[(param - fl.lookup.base) as usize] = 1.0;
+        let weight = apply_lookup(fl.lookup.kind, pos_value, &unit);
+        for &(i, e) in &fl.flow_l.entries {
+            let (m, d) = magnitude(store, e, &exact, t, x, p);
+            s_a += weight.abs() * w[i as usize].abs() * m;
+            d_a = d_a.max(d);
+        }
+    }
+    Some(ScatterMagnitudes { s_f, d_f, s_a, d_a, lookups: reading.len() })
+}
+
 /// Counts of the checks one model made, so that a model whose every point is singular cannot
 /// pass vacuously.
 #[derive(Default)]
 struct Checked {
     compared: usize,
     transposed: usize,
+    /// Points exactly on a knot of an input the mode's flow reads.
+    on_knots: usize,
 }
 
 /// For one compiled system and its reference: at random points, the kernel equals the
 /// interpreter and the transpose relations hold against `flow_sens` (or `flow_jac` when m = 0).
 fn check_system(
     name: &str,
+    funcs: &ModelFunctions,
     jit: &CompiledModel,
     reference: &Interpreter,
     p0: &[f64],
@@ -91,12 +238,13 @@ fn check_system(
         // Parameters near the model's values (their signs kept, so that the runs' region is
         // probed), states and times at random; `t` covers the input windows of the shipped models.
         let p: Vec<f64> = p0.iter().map(|&v| v + 0.25 * rng.next() * v.abs().max(1.0)).collect();
-        let t = 2.0 + 2.0 * rng.next();
         let x = rng.vec(n);
         let w = rng.vec(n);
         let v = rng.vec(n);
         for mode in 0..info.modes.len() {
-            let what = |f: &str| format!("{name} (m = {m}) trial {trial} mode {mode} {f}");
+            let (t, on_knot) = trial_time(jit, mode, trial, &p, rng);
+            checked.on_knots += usize::from(on_knot);
+            let what = |f: &str| format!("{name} (m = {m}) trial {trial} mode {mode} t = {t:e} {f}");
             let (gx, gp) = vjp(jit, mode, t, &x, &w, &p);
             let (rx, rp) = vjp(reference, mode, t, &x, &w, &p);
             assert_equal(&what("gx"), &gx, &rx);
@@ -142,8 +290,14 @@ fn check_system(
             for (j, &g) in gp.iter().enumerate() {
                 let col = &fp[j * n..(j + 1) * n];
                 let want = dot(&w, col);
-                let mag: f64 = w.iter().zip(col).map(|(a, b)| (a * b).abs()).sum();
-                let bound = transpose_bound(n, mag);
+                let param = info.grad_params[j] as u32;
+                let bound = match scatter_magnitudes(funcs, mode, param, t, &x, &w, &p) {
+                    Some(magnitudes) => scatter_bound(n, &magnitudes),
+                    None => transpose_bound(n, w.iter().zip(col).map(|(a, b)| (a * b).abs()).sum()),
+                };
+                if !bound.is_finite() {
+                    continue;
+                }
                 assert!(
                     (want - g).abs() <= bound,
                     "{}: w.f_p_{j} = {want:e}, gp = {g:e}, |diff| {:e} > {bound:e}",
@@ -155,6 +309,48 @@ fn check_system(
         }
     }
     checked
+}
+
+/// The time of `trial` in `mode`: at random in `[0, 4)` (the shipped models' input windows), or,
+/// where the mode's flow reads an input, in turn exactly on one of its knots (the position, as
+/// the compiled model computes it, equal to the knot's number: the time searched ulp by ulp
+/// near the affine position's root; whether it was found is returned), before its first knot,
+/// and after its last.
+fn trial_time(sys: &CompiledModel, mode: usize, trial: usize, p: &[f64], rng: &mut Rng) -> (f64, bool) {
+    let random = 2.0 + 2.0 * rng.next();
+    let sets: Vec<usize> =
+        (0..sys.info().knots.len()).filter(|&k| sys.info().knots[k].mode == mode).collect();
+    if sets.is_empty() || trial.is_multiple_of(4) {
+        return (random, false);
+    }
+    let set = sets[trial / 4 % sets.len()];
+    let knots = sys.info().knots[set].knots.clone();
+    let last = f64::from(knots.end - 1);
+    let pos = |t: f64| sys.knot_position(set, t, p);
+    let (b, a) = (pos(0.0), pos(1.0) - pos(0.0));
+    let at = |s: f64| (s - b) / a;
+    match trial % 4 {
+        1 => {
+            // A few knots, until one is hit exactly (a step of one ulp in `t` can move the
+            // position by more than one ulp, past the knot).
+            for _ in 0..8 {
+                let span = last - f64::from(knots.start);
+                let k = f64::from(knots.start) + ((rng.next() + 2.0) / 4.0 * span).round();
+                let mut t = at(k);
+                // Ulp by ulp towards the knot: the position is monotone in `t`.
+                for _ in 0..16 {
+                    let s = pos(t);
+                    if s == k {
+                        return (t, true);
+                    }
+                    t = if (s < k) == (a > 0.0) { t.next_up() } else { t.next_down() };
+                }
+            }
+            (random, false)
+        }
+        2 => (at(-0.5 - (rng.next() + 2.0)), false),
+        _ => (at(last + 0.5 + (rng.next() + 2.0)), false),
+    }
 }
 
 /// Every check of [`check_system`] on `source` with every parameter differentiated, with every
@@ -173,9 +369,12 @@ fn check_model_text(name: &str, source: &str, rng: &mut Rng) {
             let opts = CompileOptions { max_part_size, ..CompileOptions::default() };
             let jit =
                 CompiledModel::compile(&funcs, info.clone(), &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
-            let checked = check_system(name, &jit, &reference, &p, rng);
+            let checked = check_system(name, &funcs, &jit, &reference, &p, rng);
             let modes = info.modes.len();
             assert_eq!(checked.compared, 12 * modes, "{name}");
+            if !info.knots.is_empty() {
+                assert!(checked.on_knots > 0, "{name}: no point on a knot");
+            }
             // At least half the random points are regular enough for the relation.
             assert!(
                 2 * checked.transposed >= checked.compared,
@@ -496,5 +695,166 @@ fn the_compiled_flow_vjp_checks_its_lengths_and_its_mode() {
         let (mut gx, mut gp) = (vec![0.0; gx_len], vec![0.0; gp_len]);
         jit.flow_vjp(mode, 0.0, &x, &vec![1.0; w], &p, &mut gx, &mut gp);
         assert!(gx.iter().chain(&gp).all(|g| g.is_nan()), "w {w}, gx {gx_len}, gp {gp_len}, mode {mode}");
+    }
+}
+
+#[test]
+fn controls_read_through_lookups_have_the_transposed_products() {
+    // Mode a: `u` read by three lookups (one shared by two rows, two at other positions, one
+    // squared), `d` by a `pwc` whose window ends at the parameter `T` (whose own entry stays a
+    // normal one), `v` by a lookup and by `sum(v)` (today's path: an `f_p` product per element).
+    // Mode b: `u` by a `pwc`, `d` by a `pwl`. Every time of `check_system`: random, on knots,
+    // before the first and after the last.
+    let source = "model controls
+param T = 3 in [1, 5]
+param u[12] = 0.5
+param v[6] = 1
+param d[5] = 0.25
+state x = 1
+state y = 0.5
+initial mode a {
+    der(x) = pwl(t, 0, 1, u)^2 + pwl(t, 0, 2, u) - x * pwc(t, 0, T, d)
+    der(y) = y * pwl(t, 0, T, v) + sum(v) * x - pwl(t, 0, 1, u) * y + sin(pwl(t, 0.5, 3.5, u))
+    event flip when x crosses 2 -> b
+}
+mode b {
+    der(x) = -pwc(t, 0.5, 3, u) * x
+    der(y) = pwl(t, 1, 4, d) * x
+    event back when y crosses 0 -> a
+}
+";
+    let model = hybc::check_source(source).expect("checks");
+    let funcs = lower(&model);
+    // What the kernel scatters: mode a, `u`'s four lookups and `d`'s; mode b, `u`'s and `d`'s.
+    let vectors = |mode: usize| -> Vec<(LookupKind, u32)> {
+        funcs.modes[mode].lookups.iter().map(|fl| (fl.lookup.kind, fl.lookup.len)).collect()
+    };
+    let mut a = vectors(0);
+    a.sort();
+    assert_eq!(
+        a,
+        [(LookupKind::Pwl, 12), (LookupKind::Pwl, 12), (LookupKind::Pwl, 12), (LookupKind::Pwc, 5)]
+    );
+    let mut b = vectors(1);
+    b.sort();
+    assert_eq!(b, [(LookupKind::Pwl, 5), (LookupKind::Pwc, 12)]);
+    let shared = funcs.modes[0].lookups.iter().find(|fl| fl.flow_l.entries.len() == 2);
+    assert!(shared.is_some(), "pwl(t, 0, 1, u) is one node read by both rows");
+    check_model_text("controls", source, &mut Rng(0x5DEE_CE66_D1CE_4E5B));
+}
+
+#[test]
+fn a_control_of_many_knots_is_scattered_onto_the_elements_its_position_reads() {
+    // 1000 knots: at a time inside segment k, the gradient of `der(x) = pwl(t, 0, 999, u)` with
+    // weight 1 is `1 - s` on u[k], `s` on u[k+1] and exactly 0 elsewhere (s = pos - k), the same
+    // from the compiled model and the interpreter; before the window all on u[0], after it on
+    // u[999], on a knot all on it.
+    let source = "model many\nparam u[1000] = 1\nstate x = 0\nder(x) = pwl(t, 0, 999, u)\n";
+    let model = hybc::check_source(source).expect("checks");
+    let funcs = lower(&model);
+    let grad: Vec<ParamIdx> = (0..1000).map(ParamIdx).collect();
+    let info = system_info(&model, &grad);
+    let reference = Interpreter::new(funcs.clone(), info.clone());
+    let jit = CompiledModel::compile(&funcs, info, &CompileOptions::default()).expect("compiles");
+    let p = vec![1.0; 1000];
+    for (t, want) in [
+        (417.25, vec![(417, 0.75), (418, 0.25)]),
+        (3.0, vec![(3, 1.0)]),
+        (-2.0, vec![(0, 1.0)]),
+        (1e6, vec![(999, 1.0)]),
+        (998.5, vec![(998, 0.5), (999, 0.5)]),
+    ] {
+        for sys in [&jit as &dyn HybridSystem, &reference] {
+            let (gx, gp) = vjp(sys, 0, t, &[0.0], &[1.0], &p);
+            assert_eq!(gx, [0.0]);
+            let mut expected = vec![0.0; 1000];
+            for &(j, w) in &want {
+                expected[j] = w;
+            }
+            assert_eq!(gp, expected, "t = {t}");
+        }
+    }
+}
+
+#[test]
+fn the_scatter_weights_are_the_element_weights() {
+    // `lookup_weights` (the adjoint's scatter) against `diff`'s weight of each element (the
+    // forward sensitivities' `f_p`), bit for bit, and against the value's own definition
+    // (`apply_lookup` of a unit vector, linear in the vector): every kind, short and longer
+    // vectors, at knots, between them, before the first, after the last, at infinities.
+    let mut rng = Rng(0x0123_4567_89AB_CDEF);
+    for kind in [LookupKind::Pwl, LookupKind::Pwc, LookupKind::PwlSlope] {
+        for len in [2u32, 3, 7] {
+            let mut store = ExprStore::new();
+            let pos = store.param(len);
+            let l = Lookup { kind, base: 0, len };
+            let node = store.lookup(l, pos);
+            let weights: Vec<ExprId> =
+                (0..len).map(|j| hybc::expr::diff(&mut store, node, hybc::expr::Var::Param(j))).collect();
+            let mut positions: Vec<f64> = (-2..=len as i32 + 1).map(f64::from).collect();
+            positions.extend([-0.0, 0.5, f64::from(len) - 1.5, f64::INFINITY, f64::NEG_INFINITY, 1e300]);
+            positions.extend((0..40).map(|_| (rng.next() + 2.0) / 4.0 * (f64::from(len) + 2.0) - 1.0));
+            for s in positions {
+                let mut p = vec![0.0; len as usize + 1];
+                p[len as usize] = s;
+                let mut scatter = vec![0.0; len as usize];
+                for (j, w) in lookup_weights(kind, s, len as usize) {
+                    assert_ne!(w, 0.0, "{kind:?} len {len} at {s}: a zero weight listed");
+                    scatter[j] += w;
+                }
+                for j in 0..len as usize {
+                    let by_diff = hybc::expr::eval_one(&store, weights[j], 0.0, &[], &p);
+                    let mut unit = vec![0.0; len as usize];
+                    unit[j] = 1.0;
+                    let by_value = apply_lookup(kind, s, &unit);
+                    assert_eq!(scatter[j], by_diff, "{kind:?} len {len} u[{j}] at {s}: diff");
+                    assert_eq!(scatter[j], by_value, "{kind:?} len {len} u[{j}] at {s}: value");
+                }
+            }
+            // A NaN position shows: NaN on the element the value's clamped index reads.
+            let nan: Vec<(usize, f64)> = lookup_weights(kind, f64::NAN, len as usize).collect();
+            assert!(!nan.is_empty() && nan.iter().all(|(_, w)| w.is_nan()), "{kind:?} len {len}: {nan:?}");
+        }
+    }
+}
+
+#[test]
+fn a_derivative_with_respect_to_a_node_holds_its_operands_fixed() {
+    // d/dL of `L^2 x + sin(L) + L s` with L = pwl(s, u) and s read beside it: `2 L x + cos(L) + s`
+    // (the position s held fixed), while d/ds keeps the path through L (its slope).
+    let mut store = ExprStore::new();
+    let (x, s) = (store.state(0), store.param(3));
+    let l = store.lookup(Lookup { kind: LookupKind::Pwl, base: 0, len: 3 }, s);
+    let two = store.constant(2.0);
+    let sq = store.pow(l, two);
+    let a = store.mul(sq, x);
+    let sn = store.unary(UnaryOp::Sin, l);
+    let b = store.mul(l, s);
+    let ab = store.add(a, sn);
+    let f = store.add(ab, b);
+    let by_node = hybc::expr::diff(&mut store, f, hybc::expr::Var::Node(l));
+    let other = store.constant(1.0);
+    let constant = hybc::expr::diff(&mut store, other, hybc::expr::Var::Node(l));
+    assert!(store.is_zero(constant));
+    let by_s = hybc::expr::diff(&mut store, f, hybc::expr::Var::Param(3));
+    let u = [1.5, -0.5, 2.0];
+    for &(pos, xv) in &[(0.25, 0.7), (1.0, -1.25), (1.8, 3.0)] {
+        let p = [u[0], u[1], u[2], pos];
+        let lv = apply_lookup(LookupKind::Pwl, pos, &u);
+        let want = 2.0 * lv * xv + lv.cos() + pos;
+        let got = hybc::expr::eval_one(&store, by_node, 0.0, &[xv], &p);
+        assert!(
+            (got - want).abs() <= 8.0 * EPS * (2.0 * (lv * xv).abs() + 1.0 + pos.abs()),
+            "{got} vs {want}"
+        );
+        // d/ds = (df/dL) slope + L: the slope of the segment `pos` is in.
+        let k = (pos as usize).min(1);
+        let slope = u[k + 1] - u[k];
+        let want_s = want * slope + lv;
+        let got_s = hybc::expr::eval_one(&store, by_s, 0.0, &[xv], &p);
+        assert!(
+            (got_s - want_s).abs() <= 16.0 * EPS * (want.abs() * slope.abs() + lv.abs()),
+            "{got_s} vs {want_s}"
+        );
     }
 }

@@ -137,12 +137,12 @@ proptest! {
                     for &var in &vars {
                         let symbolic = group.entries.get(&(i, var)).map_or(0.0, |&d| eval_one(&f.store, d, t, &x, &p));
                         let (mut xs, mut ps, mut ts) = (x.clone(), p.clone(), t);
-                        let v = match var { Var::State(k) => &mut xs[k as usize], Var::Param(k) => &mut ps[k as usize], Var::Time => &mut ts };
+                        let v = match var { Var::State(k) => &mut xs[k as usize], Var::Param(k) => &mut ps[k as usize], Var::Time => &mut ts, Var::Node(_) => unreachable!("a report's columns are leaves") };
                         let h = 1e-6 * v.abs().max(1.0);
                         *v += h;
                         let up = eval_one(&f.store, row, ts, &xs, &ps);
                         let (mut xs, mut ps, mut ts) = (x.clone(), p.clone(), t);
-                        let v = match var { Var::State(k) => &mut xs[k as usize], Var::Param(k) => &mut ps[k as usize], Var::Time => &mut ts };
+                        let v = match var { Var::State(k) => &mut xs[k as usize], Var::Param(k) => &mut ps[k as usize], Var::Time => &mut ts, Var::Node(_) => unreachable!("a report's columns are leaves") };
                         *v -= h;
                         let down = eval_one(&f.store, row, ts, &xs, &ps);
                         let numeric = (up - down) / (2.0 * h);

@@ -114,6 +114,7 @@ fn shifted(at: Point, wrt: Var, d: f64) -> Point {
         Var::State(i) => q.x[i as usize] += d,
         Var::Param(i) => q.p[i as usize] += d,
         Var::Time => q.t += d,
+        Var::Node(_) => unreachable!("the strategy draws leaves only"),
     }
     q
 }
@@ -139,7 +140,7 @@ proptest! {
         // (truncation ~h^4); where the two differences disagree the function is too steep for a
         // difference to be an oracle at this step (near a pole of tan, say), and the point is
         // rejected: a judgement on the oracle alone, never on the symbolic result.
-        let x0 = match wrt { Var::State(i) => at.x[i as usize], Var::Param(i) => at.p[i as usize], Var::Time => at.t };
+        let x0 = match wrt { Var::State(i) => at.x[i as usize], Var::Param(i) => at.p[i as usize], Var::Time => at.t, Var::Node(_) => unreachable!("leaves only") };
         let h = 1e-4 * x0.abs().max(1.0);
         let f = |q: Point| eval(&s, &[e], q.t, &q.x, &q.p)[0];
         let central = |h: f64| (f(shifted(at, wrt, h)) - f(shifted(at, wrt, -h))) / (2.0 * h);

@@ -24,6 +24,7 @@ fn central_difference(store: &ExprStore, id: hybc::expr::ExprId, wrt: Var) -> f6
             Var::State(i) => x[i as usize] += d,
             Var::Param(i) => p[i as usize] += d,
             Var::Time => t += d,
+            Var::Node(_) => unreachable!("the rules are checked against leaves"),
         }
         eval_one(store, id, t, &x, &p)
     };

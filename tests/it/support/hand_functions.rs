@@ -61,6 +61,7 @@ pub fn ball() -> ModelFunctions {
             flow_x: mat(2, 2, vec![(0, 1, one)]),
             flow_p: mat(2, 3, vec![(1, 0, m_one)]),
             flow_t: vec_(vec![]),
+            lookups: Vec::new(),
         }],
         events: vec![EventFunctions {
             guard: h,
@@ -126,6 +127,7 @@ pub fn output_only(
             flow_x: mat(n_states, n_states, vec![]),
             flow_p: mat(n_states, n_params, vec![]),
             flow_t: vec_(vec![]),
+            lookups: Vec::new(),
         }],
         events: vec![],
         knots: vec![],
