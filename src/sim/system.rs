@@ -162,7 +162,10 @@ pub trait HybridSystem: Sync {
     /// `gp = f_p^T w` (m, one entry per differentiated parameter, `grad_params` order), both
     /// overwritten: what the adjoint's backward pass needs at every stage. A compiled model has a
     /// kernel, compiled on the first call, that sums each entry over the structurally nonzero
-    /// entries of its column of `f_x` or `f_p`, never forming `f_x`; a zero `w_i` annihilates an entry that is infinite or NaN
+    /// entries of its column of `f_x` or `f_p`, never forming `f_x`, except for a vector the flow
+    /// reads only through `pwl`/`pwc`: the kernel returns each lookup's cotangent and position and
+    /// the host adds it into the (at most two) elements read there, so the call's work does not
+    /// grow with the knots (`gp` is still overwritten whole); a zero `w_i` annihilates an entry that is infinite or NaN
     /// at a finite state, as a zero sensitivity does in [`Self::flow_sens`] (the default skips the
     /// rows whose `w_i` is zero).
     ///
