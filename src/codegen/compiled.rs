@@ -105,6 +105,8 @@ struct VjpKernels {
     lookups: Vec<Vec<Lookup>>,
     /// The sensitivity column of every parameter.
     columns: Vec<Option<usize>>,
+    /// Per mode, the sensitivity columns of the kernel's compact `gp`, in its order.
+    summed: Vec<Vec<usize>>,
 }
 
 /// The kernels a Rosenbrock stepper needs, per mode (see `codegen::stiff`).
@@ -125,6 +127,55 @@ impl std::fmt::Debug for CompiledModel {
 }
 
 impl CompiledModel {
+    /// `gx = f_x^T w` and `acc += f_p^T w` (m), the latter touching only the columns the kernel
+    /// sums and the elements the scattered lookups read (checked indices, safe code): what both
+    /// `flow_vjp` (on a zeroed `acc`) and `flow_vjp_add` are. False when the kernel cannot be had
+    /// or a length is wrong.
+    #[allow(clippy::too_many_arguments)]
+    fn vjp_into(
+        &self,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        w: &[f64],
+        p: &[f64],
+        gx: &mut [f64],
+        acc: &mut [f64],
+    ) -> bool {
+        let Ok(v) = self.vjp_kernels() else { return false };
+        let (Some(k), Some(lookups), Some(summed)) =
+            (v.flow_vjp.get(mode), v.lookups.get(mode), v.summed.get(mode))
+        else {
+            return false;
+        };
+        if acc.len() != self.info.n_grad() {
+            return false;
+        }
+        // The kernel writes the summed columns compactly and `[c_L, pos]` per scattered lookup.
+        let mut small = [0.0; 32];
+        let mut large = Vec::new();
+        let (len_g, len_l) = (summed.len(), 2 * lookups.len());
+        let buf = if len_g + len_l <= small.len() {
+            &mut small[..len_g + len_l]
+        } else {
+            large.resize(len_g + len_l, 0.0);
+            &mut large[..]
+        };
+        let (compact, pairs) = buf.split_at_mut(len_g);
+        if k.call(t, x, w, p, [gx, compact, pairs]).is_none() {
+            return false;
+        }
+        for (&c, &g) in summed.iter().zip(compact.iter()) {
+            if let Some(a) = acc.get_mut(c) {
+                *a += g;
+            }
+        }
+        for (l, pair) in lookups.iter().zip(pairs.chunks_exact(2)) {
+            scatter_lookup(*l, pair[1], pair[0], &v.columns, acc);
+        }
+        true
+    }
+
     /// Checks `funcs` against `info`, generates every kernel and finalizes them. Derivatives are
     /// compiled for `info.grad_params` only; all parameter values stay run-time inputs.
     pub fn compile(
@@ -217,6 +268,7 @@ impl CompiledModel {
             flow_vjp: kernels.pop().unwrap_or_default(),
             lookups: plan.lookups,
             columns: plan.columns,
+            summed: plan.summed,
         })
     }
 }
@@ -454,28 +506,24 @@ impl HybridSystem for CompiledModel {
 
     #[allow(clippy::too_many_arguments)]
     fn flow_vjp(&self, mode: usize, t: f64, x: &[f64], w: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) {
-        // `w` is the kernel's `s` input; `Kernel::call` checks every length. Compiled on the
-        // first call (NaN if that failed: the trait has no error channel).
-        let vjp = self.vjp_kernels().ok();
-        match vjp.and_then(|v| Some((v, v.flow_vjp.get(mode)?, v.lookups.get(mode)?))) {
-            Some((v, k, lookups)) => {
-                // The kernel writes `[c_L, pos]` per scattered lookup; the host adds `c_L` times
-                // the (at most two) nonzero weights into `gp` (checked indices, in safe code).
-                let mut small = [0.0; 16];
-                let mut large = Vec::new();
-                let pairs = if 2 * lookups.len() <= small.len() {
-                    &mut small[..2 * lookups.len()]
-                } else {
-                    large.resize(2 * lookups.len(), 0.0);
-                    &mut large[..]
-                };
-                if k.call(t, x, w, p, [gx, gp, pairs]).is_some() {
-                    for (l, pair) in lookups.iter().zip(pairs.chunks_exact(2)) {
-                        scatter_lookup(*l, pair[1], pair[0], &v.columns, gp);
-                    }
-                }
-            }
-            None => poison([gx, gp, &mut []]),
+        gp.fill(0.0);
+        if !self.vjp_into(mode, t, x, w, p, gx, gp) {
+            poison([gx, gp, &mut []]);
+        }
+    }
+
+    fn flow_vjp_add(
+        &self,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        w: &[f64],
+        p: &[f64],
+        gx: &mut [f64],
+        pbar: &mut [f64],
+    ) {
+        if !self.vjp_into(mode, t, x, w, p, gx, pbar) {
+            poison([gx, pbar, &mut []]);
         }
     }
 

@@ -498,6 +498,9 @@ pub(crate) struct VjpPlan {
     pub lookups: Vec<Vec<Lookup>>,
     /// The sensitivity column of every parameter, `None` where it is not differentiated.
     pub columns: Vec<Option<usize>>,
+    /// Per mode, the sensitivity columns of `gp` the kernel sums, in the order of its compact
+    /// second output (the others are zero, or the scattered lookups').
+    pub summed: Vec<Vec<usize>>,
 }
 
 /// The adjoint's kernels, one per mode ([`plan_flow_vjp`]). `CompiledModel` plans and compiles
@@ -507,16 +510,17 @@ pub(crate) fn plan_vjp(funcs: &ModelFunctions, info: &SystemInfo) -> Result<VjpP
     let dims = check_shape(funcs, info)?;
     let mut kernels = Vec::new();
     let mut lookups = Vec::new();
+    let mut summed = Vec::new();
     for (k, mode) in funcs.modes.iter().enumerate() {
-        let (mut plan, scattered) = plan_flow_vjp(k, mode, &dims)?;
-        // `gp`'s entries of a scattered vector are the host's: the kernel leaves the whole
-        // output to the caller's zero fill, so that its size does not follow the knots.
-        plan.write_small_zeros_in(if scattered.is_empty() { 0..2 } else { 0..1 });
+        let (mut plan, scattered, columns) = plan_flow_vjp(k, mode, &dims)?;
+        // Every entry of the compact `gp` is written; `gx`'s zeros are written when few.
+        plan.write_small_zeros_in(0..1);
         plan.check(&funcs.store)?;
         kernels.push(plan);
         lookups.push(scattered);
+        summed.push(columns);
     }
-    Ok(VjpPlan { kernels, lookups, columns: dims.grad_col })
+    Ok(VjpPlan { kernels, lookups, columns: dims.grad_col, summed })
 }
 
 /// `mode{k}_flow_vjp` (inputs `x` (n), `s = w` (n)): `gx = f_x^T w` (n) and `gp = f_p^T w` (m,
@@ -531,23 +535,20 @@ pub(crate) fn plan_vjp(funcs: &ModelFunctions, info: &SystemInfo) -> Result<VjpP
 /// with a differentiated element, the pair `[c_L, pos]`: `c_L = sum_i w_i df_i/dL` (a `SensDot`
 /// over `L`'s rows) and `L`'s position, which the host scatters onto the elements `L` reads
 /// there (returned, in the output's order). So the kernel's size does not grow with the knots.
+///
+/// `gp` is compact: one entry per sensitivity column that has products, in column order (the
+/// columns returned), so that a caller accumulating into the parameters' cotangent touches those
+/// and the scattered elements only, never all `m` (the adjoint's backward pass, at every stage).
 fn plan_flow_vjp(
     mode_idx: usize,
     mode: &ModeFunctions,
     dims: &Dims,
-) -> Result<(KernelPlan, Vec<Lookup>), CodegenError> {
+) -> Result<(KernelPlan, Vec<Lookup>, Vec<usize>), CodegenError> {
     let (n, m) = (dims.n, dims.n_grad);
     let differentiated = |l: &Lookup| (l.base..l.base + l.len).any(|i| dims.grad_col[i as usize].is_some());
     let scattered: Vec<&crate::expr::FlowLookup> =
         mode.lookups.iter().filter(|fl| differentiated(&fl.lookup)).collect();
     let name = format!("mode{mode_idx}_flow_vjp");
-    let mut vjp = KernelPlan::new(name, dims.lens(n, n, [n, m, 2 * scattered.len()]));
-    vjp.prefill = [true, true, false];
-    // The entries are sorted by (row, column): grouped by column, each keeps its rows ascending.
-    let mut fx_cols: Vec<Vec<(ExprId, u32)>> = vec![Vec::new(); n];
-    for &(i, c, e) in &mode.flow_x.entries {
-        fx_cols[c as usize].push((e, i));
-    }
     let by_lookup = |param: u32| mode.lookups.iter().any(|fl| fl.lookup.reads(param));
     let mut fp_cols: Vec<Vec<(ExprId, u32)>> = vec![Vec::new(); m];
     for &(i, param, e) in &mode.flow_p.entries {
@@ -556,19 +557,29 @@ fn plan_flow_vjp(
             _ => {}
         }
     }
-    for (out, cols) in [(0, fx_cols), (1, fp_cols)] {
-        for (j, products) in cols.into_iter().enumerate() {
-            if !products.is_empty() {
-                vjp.write(out, j, Term::SensDot { products, bias: None })?;
-            }
+    let summed: Vec<usize> = (0..m).filter(|&c| !fp_cols[c].is_empty()).collect();
+    let mut vjp = KernelPlan::new(name, dims.lens(n, n, [n, summed.len(), 2 * scattered.len()]));
+    vjp.prefill = [true, false, false];
+    // The entries are sorted by (row, column): grouped by column, each keeps its rows ascending.
+    let mut fx_cols: Vec<Vec<(ExprId, u32)>> = vec![Vec::new(); n];
+    for &(i, c, e) in &mode.flow_x.entries {
+        fx_cols[c as usize].push((e, i));
+    }
+    for (j, products) in fx_cols.into_iter().enumerate() {
+        if !products.is_empty() {
+            vjp.write(0, j, Term::SensDot { products, bias: None })?;
         }
+    }
+    let compact = fp_cols.into_iter().filter(|products| !products.is_empty());
+    for (q, products) in compact.enumerate() {
+        vjp.write(1, q, Term::SensDot { products, bias: None })?;
     }
     for (q, fl) in scattered.iter().enumerate() {
         let products: Vec<(ExprId, u32)> = fl.flow_l.entries.iter().map(|&(i, e)| (e, i)).collect();
         vjp.write(2, 2 * q, Term::SensDot { products, bias: None })?;
         vjp.write(2, 2 * q + 1, Term::Expr(fl.position))?;
     }
-    Ok((vjp, scattered.iter().map(|fl| fl.lookup).collect()))
+    Ok((vjp, scattered.iter().map(|fl| fl.lookup).collect(), summed))
 }
 
 pub(crate) fn index_u32(what: &str, index: usize) -> Result<u32, CodegenError> {

@@ -49,7 +49,8 @@ der(z) = x + y
 ",
     );
     let mode = &funcs.modes[0];
-    assert_eq!((plan.lens.x, plan.lens.s, plan.lens.out), (3, 3, [3, 3, 0]));
+    // `gp` compact: the columns with products (a's and b's; c enters no flow).
+    assert_eq!((plan.lens.x, plan.lens.s, plan.lens.out), (3, 3, [3, 2, 0]));
     // Small outputs: the kernel writes its zeros itself (`write_small_zeros`), no prefill.
     assert_eq!(plan.prefill, [false; 3]);
     for c in 0..3u32 {
@@ -61,13 +62,15 @@ der(z) = x + y
     assert_eq!(products(&plan, 0, 0).iter().map(|p| p.1).collect::<Vec<_>>(), [0, 1, 2]);
     assert!(products(&plan, 0, 2).is_empty());
     for (j, rows) in [(0, vec![0]), (1, vec![1]), (2, vec![])] {
-        let got = products(&plan, 1, j);
+        // Compact index = column here (columns 0 and 1 are the summed ones, in order).
+        let got = if j < 2 { products(&plan, 1, j) } else { Vec::new() };
         assert_eq!(got.iter().map(|p| p.1).collect::<Vec<_>>(), rows, "gp[{j}]");
         let want: Vec<(ExprId, u32)> =
             mode.flow_p.entries.iter().filter(|e| e.1 == j as u32).map(|&(i, _, e)| (e, i)).collect();
         assert_eq!(got, want, "gp[{j}]");
     }
-    assert_eq!(plan.size(), 3 + 6 + 3 + 2, "one per entry and one per product");
+    // gx: 3 entries, 6 products; the compact gp: 2 entries, 2 products (c's column is not one).
+    assert_eq!(plan.size(), 3 + 6 + 2 + 2, "one per entry and one per product");
 }
 
 /// `der(x) = pwl(t, 0, 1, u) - k x` (and `extra` added to it) with `u` of `knots` elements: the
@@ -94,13 +97,12 @@ fn a_control_read_through_lookups_only_gives_the_vjp_kernel_a_size_independent_o
     let mut seen = Vec::new();
     for knots in [10, 100, 1000] {
         let (plan, size, nodes) = pwl_kernel(knots, "");
-        assert_eq!(plan.lens.out, [1, knots + 1, 2], "{knots} knots");
-        assert_eq!(plan.prefill, [false, true, false], "{knots} knots");
+        // `gp` compact: k's column alone; the knots' entries are the host's scatter.
+        assert_eq!(plan.lens.out, [1, 1, 2], "{knots} knots");
+        assert_eq!(plan.prefill, [false, false, false], "{knots} knots");
         assert_eq!(products(&plan, 0, 0).len(), 1);
         assert_eq!(products(&plan, 1, 0).len(), 1, "k's own entry stays a normal one");
-        for j in 1..=knots {
-            assert!(!plan.writes.iter().any(|w| w.out == 1 && w.index as usize == j), "gp[{j}] written");
-        }
+        assert_eq!(plan.writes.iter().filter(|w| w.out == 1).count(), 1, "no knot's entry written");
         assert_eq!(products(&plan, 2, 0).iter().map(|p| p.1).collect::<Vec<_>>(), [0], "c_L over row 0");
         assert!(plan.writes.iter().any(|w| w.out == 2 && w.index == 1 && matches!(w.term, Term::Expr(_))));
         assert_eq!(size, 2 + 2 + 2 + 1, "{knots} knots");
@@ -135,8 +137,11 @@ fn a_control_not_differentiated_has_no_lookup_pair() {
     assert_eq!(funcs.modes[0].lookups.len(), 1, "the lookup is listed with the mode");
     let plan = plan_vjp(&funcs, &system_info(&model, &[ParamIdx(0)])).expect("plans");
     assert_eq!(plan.kernels[0].lens.out, [1, 1, 0]);
+    assert_eq!(plan.summed[0], [0]);
     assert!(plan.lookups[0].is_empty());
     let plan = plan_vjp(&funcs, &system_info(&model, &[ParamIdx(5)])).expect("plans");
-    assert_eq!(plan.kernels[0].lens.out, [1, 1, 2], "u[4] alone is enough");
+    // u[4] alone: no column summed by the kernel, one lookup pair.
+    assert_eq!(plan.kernels[0].lens.out, [1, 0, 2], "u[4] alone is enough");
+    assert!(plan.summed[0].is_empty());
     assert_eq!(plan.lookups[0].len(), 1);
 }

@@ -333,6 +333,27 @@ pub trait HybridSystem: Sync {
             *out = (a - b) / (2.0 * h);
         }
     }
+    /// As [`Self::flow_vjp`], with the parameters' part added into `pbar` (m) rather than
+    /// written: the adjoint's backward pass at every stage. A compiled model touches only the
+    /// columns its kernel sums and the elements a control's lookups read there, so the call does
+    /// not cost `m` (a control of 10,000 knots); the default adds `flow_vjp`'s `gp`.
+    #[allow(clippy::too_many_arguments)]
+    fn flow_vjp_add(
+        &self,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        w: &[f64],
+        p: &[f64],
+        gx: &mut [f64],
+        pbar: &mut [f64],
+    ) {
+        let mut gp = vec![0.0; pbar.len()];
+        self.flow_vjp(mode, t, x, w, p, gx, &mut gp);
+        for (a, b) in pbar.iter_mut().zip(&gp) {
+            *a += b;
+        }
+    }
     /// Guards of every event active in `mode`, in the order of `ModeInfo::events`.
     fn guards(&self, mode: usize, t: f64, x: &[f64], p: &[f64], g: &mut [f64]);
     /// Speeds `g_x f + g_t` of every guard active in `mode` (order of `ModeInfo::events`) along a

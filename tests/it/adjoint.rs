@@ -383,3 +383,38 @@ fn the_adjoint_gives_both_sides_of_the_cusp_of_an_event_at_t_end() {
     assert_eq!(fd[0], 0.0);
     assert!((ad[0] - 1.0).abs() < 1e-12);
 }
+
+#[test]
+fn flow_vjp_add_adds_what_flow_vjp_writes() {
+    // A control read through lookups only (scattered), one also summed, a plain parameter: the
+    // accumulating product touches the kernel's columns and the elements read, and gives
+    // `pbar + gp` of the overwriting one, at knots, between them and past the last.
+    use hybc::sim::HybridSystem;
+    let src = "model acc\nparam k = 0.7\nparam u[30] = 0\nparam w[12] = 0\nparam T = 1.5\n\
+               state x = 0.3\nstate v = -0.2\n\
+               der(x) = v + pwc(t, 0, T, w) * x\nder(v) = pwl(t, 0, 1, u) - k * v + 0.1 * sum(w)\n";
+    let u: Vec<f64> = (0..30).map(|j| (j as f64 * 0.37).sin()).collect();
+    let w: Vec<f64> = (0..12).map(|j| (j as f64 * 0.91).cos()).collect();
+    let (compiled, p) = compiled(src, &[("u", &u), ("w", &w)]);
+    let sys = compiled.system();
+    let m = sys.info().n_grad();
+    for (i, t) in [0.0, 0.2, 1.0 / 29.0 * 7.0, 0.5, 1.0, 1.2, 2.0].into_iter().enumerate() {
+        let x = [0.3 + 0.1 * i as f64, -0.2 + 0.05 * i as f64];
+        let wv = [0.8 - 0.1 * i as f64, 1.3];
+        let base: Vec<f64> = (0..m).map(|j| (j as f64 * 0.13).sin()).collect();
+        let (mut gx, mut gp) = ([0.0; 2], vec![0.0; m]);
+        sys.flow_vjp(0, t, &x, &wv, &p, &mut gx, &mut gp);
+        let (mut gx2, mut acc) = ([0.0; 2], base.clone());
+        sys.flow_vjp_add(0, t, &x, &wv, &p, &mut gx2, &mut acc);
+        assert_eq!(gx, gx2, "t = {t}");
+        for j in 0..m {
+            let want = base[j] + gp[j];
+            let scale = base[j].abs() + gp[j].abs();
+            assert!(
+                (acc[j] - want).abs() <= 4.0 * f64::EPSILON * scale,
+                "t = {t}, column {j}: {} vs {want}",
+                acc[j]
+            );
+        }
+    }
+}

@@ -52,10 +52,10 @@ pub(super) struct Scratch {
     kbar: Vec<f64>,
     xbar: Vec<f64>,
     gx: Vec<f64>,
-    gp: Vec<f64>,
 }
 
-/// The flow's vector-Jacobian products at a stage, added into `xbar` (n) and `pbar` (m).
+/// The flow's vector-Jacobian products at a stage, added into `xbar` (n) and `pbar` (m)
+/// (`HybridSystem::flow_vjp_add`: a control's knots cost only the two read there).
 #[allow(clippy::too_many_arguments)]
 fn add_vjp<S: HybridSystem + ?Sized>(
     sys: &S,
@@ -65,18 +65,14 @@ fn add_vjp<S: HybridSystem + ?Sized>(
     w: &[f64],
     p: &[f64],
     gx: &mut [f64],
-    gp: &mut [f64],
     xbar: &mut [f64],
     pbar: &mut [f64],
 ) {
     if w.iter().all(|&v| v == 0.0) {
         return;
     }
-    sys.flow_vjp(mode, t, x, w, p, gx, gp);
+    sys.flow_vjp_add(mode, t, x, w, p, gx, pbar);
     for (a, b) in xbar.iter_mut().zip(gx.iter()) {
-        *a += b;
-    }
-    for (a, b) in pbar.iter_mut().zip(gp.iter()) {
         *a += b;
     }
 }
@@ -202,12 +198,11 @@ fn row_backward<S: HybridSystem + ?Sized>(
         }
     }
     w.gx.resize(n, 0.0);
-    w.gp.resize(pbar.len(), 0.0);
     for i in (1..stages).rev() {
         let (xs, kbar, xbar) =
             (&w.xs[i * n..(i + 1) * n], &w.kbar[i * n..(i + 1) * n], &mut w.xbar[i * n..(i + 1) * n]);
         let ti = at(t0 + tab.c[i] * h);
-        add_vjp(sys, step.mode, ti, xs, kbar, p, &mut w.gx, &mut w.gp, xbar, pbar);
+        add_vjp(sys, step.mode, ti, xs, kbar, p, &mut w.gx, xbar, pbar);
         for (x0b, xb) in x0bar.iter_mut().zip(xbar.iter()) {
             *x0b += xb;
         }
@@ -218,7 +213,7 @@ fn row_backward<S: HybridSystem + ?Sized>(
             }
         }
     }
-    add_vjp(sys, step.mode, at(t0), step.x0, &w.kbar[..n], p, &mut w.gx, &mut w.gp, &mut x0bar, pbar);
+    add_vjp(sys, step.mode, at(t0), step.x0, &w.kbar[..n], p, &mut w.gx, &mut x0bar, pbar);
     lam.copy_from_slice(&x0bar);
 }
 
