@@ -73,6 +73,12 @@ pub(super) fn minimize(
             let gauss_newton = project(&x, &m.step(0.0), bounds);
             break if small(&gauss_newton, &x, &scale, opts.xtol) {
                 FitStop::Step
+            } else if last_nonsmooth.is_none() && at_floor(&cur, &gauss_newton, objective, opts.ftol) {
+                // The trials were refused on noise: even the Gauss-Newton step predicts a
+                // relative decrease below `ftol` (MINPACK's test on the predicted reduction), so
+                // the objective is at its floor, where the simulation's round-off decides
+                // whether a trial decreases it.
+                FitStop::Objective
             } else {
                 FitStop::Stalled(last_nonsmooth.clone().unwrap_or(StallCause::NoDecrease))
             };
@@ -284,6 +290,11 @@ fn actual_decrease(cur: &Evaluation, trial: &Evaluation) -> f64 {
 fn predicted_decrease(cur: &Evaluation, step: &[f64]) -> f64 {
     let change = &cur.jacobian * DVector::from_column_slice(step);
     -cur.residuals.iter().zip(change.iter()).map(|(r, c)| c * (r + 0.5 * c)).sum::<f64>()
+}
+
+/// Whether `step` predicts a relative decrease of `objective` of at most `ftol` (and not a rise).
+fn at_floor(cur: &Evaluation, step: &[f64], objective: f64, ftol: f64) -> bool {
+    (0.0..=ftol * objective).contains(&predicted_decrease(cur, step))
 }
 
 /// `sigma_max / sigma_min` of `j`; infinite when it has fewer rows than columns or is singular.

@@ -127,7 +127,7 @@ impl FitReport {
             }
             FitStop::Objective => format!(
                 "converged after {trials} trials: the residuals vanish or the objective stopped \
-                 decreasing (relative decrease below ftol {:e})",
+                 decreasing (relative decrease, or the Gauss-Newton step's predicted one, below ftol {:e})",
                 o.ftol
             ),
             FitStop::MaxIterations => format!("did not converge in {trials} trials (--max-iter)"),

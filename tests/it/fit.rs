@@ -709,6 +709,17 @@ fn the_soft_balls_damping_fitted_to_a_hard_bounce_tends_to_the_closed_form_as_1_
         let zeta = report["params"]["zeta"].as_f64().unwrap();
         let gap = zeta_closed - zeta;
         assert!(gap > 0.1 / wc && gap < 0.3 / wc, "wc = {wc}: zeta {zeta} against {zeta_closed}");
-        assert!(report["stats"]["runs"].as_u64().unwrap() <= 8, "{report}");
+        // Gauss-Newton on one well-conditioned residual converges quadratically: from 0.3 the
+        // objective is at its noise floor (1e-16 of the start's) by the fifth trial. The trials
+        // after that, which decide the step test on noise, are not counted.
+        let objectives: Vec<f64> = report["iterations"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|it| it["objective"].as_f64().unwrap())
+            .collect();
+        let floor = objectives.iter().position(|&o| o < 1e-16 * objectives[0]).expect("reaches the floor");
+        assert!(floor <= 5, "wc = {wc}: {objectives:?}");
+        assert!(report["stats"]["runs"].as_u64().unwrap() <= 10, "{report}");
     }
 }
