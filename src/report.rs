@@ -88,17 +88,31 @@ impl RunReport {
         Value::Object(m)
     }
 
-    fn named_rows(&self, names: &[String], a: Option<&[f64]>) -> Value {
+    /// `{name: {param: value}}` over the rows of `a` that the report holds (`keep`: all but
+    /// those `SimOptions::of` left out, whose keys are absent).
+    fn named_rows(&self, names: &[String], a: Option<&[f64]>, keep: impl Fn(usize) -> bool) -> Value {
         match a {
             None => Value::Null,
             Some(a) => Value::Object(
                 names
                     .iter()
                     .enumerate()
+                    .filter(|&(i, _)| keep(i))
                     .map(|(i, n)| (n.clone(), self.by_param(a, names.len(), i)))
                     .collect(),
             ),
         }
+    }
+
+    /// The final states' (`output` false) or outputs' rows of `a` the report holds.
+    fn final_rows(&self, output: bool, a: Option<&[f64]>) -> Value {
+        let names = if output { &self.info.output_names } else { &self.info.state_names };
+        self.named_rows(names, a, |i| self.result.reports_gradient(output, i))
+    }
+
+    /// Per event record, whether the report holds its time's gradient (`SimOptions::of`).
+    fn events_wanted(&self) -> Vec<bool> {
+        self.result.reports_event_gradients(&self.info)
     }
 
     /// A message for a run that stopped early (Zeno, max events, stuck, a fault), naming the
@@ -126,7 +140,10 @@ impl RunReport {
                 let value = match field {
                     JsonField::Value(v) => v,
                     JsonField::Events => {
-                        Value::Array(self.result.events.iter().map(|e| self.event_json(e)).collect())
+                        let wanted = self.events_wanted();
+                        Value::Array(
+                            self.result.events.iter().map(|e| self.event_json(e, wanted[e.index])).collect(),
+                        )
                     }
                     JsonField::Samples => {
                         Value::Array(self.result.samples.iter().map(|s| self.sample_json(&s)).collect())
@@ -153,7 +170,10 @@ impl RunReport {
             out.write_all(b":")?;
             match field {
                 JsonField::Value(v) => serde_json::to_writer(&mut *out, &v)?,
-                JsonField::Events => write_array(out, &self.result.events, |e| self.event_json(e))?,
+                JsonField::Events => {
+                    let wanted = self.events_wanted();
+                    write_array(out, &self.result.events, |e| self.event_json(e, wanted[e.index]))?
+                }
                 JsonField::Samples => write_array(out, self.result.samples.iter(), |s| self.sample_json(&s))?,
             }
         }
@@ -162,6 +182,8 @@ impl RunReport {
 
     /// One sample of the JSON contract (`--at`): values and derivatives at a fixed time.
     fn sample_json(&self, s: &Sample) -> Value {
+        let of = self.result.gradients_of.as_ref();
+        let keep = |output: bool, i: usize| of.is_none_or(|o| o.sample(output, i, s.time));
         let named = |names: &[String], v: &[f64]| -> Value {
             Value::Object(names.iter().zip(v).map(|(n, x)| (n.clone(), number_json(*x))).collect())
         };
@@ -172,15 +194,16 @@ impl RunReport {
             "after_events": s.after_events,
             "near_event": s.near_event,
             "state": named(&self.info.state_names, s.state),
-            "dstate": self.named_rows(&self.info.state_names, s.dstate),
+            "dstate": self.named_rows(&self.info.state_names, s.dstate, |i| keep(false, i)),
             "outputs": named(&self.info.output_names, s.outputs),
-            "doutputs": self.named_rows(&self.info.output_names, s.doutputs),
+            "doutputs": self.named_rows(&self.info.output_names, s.doutputs, |i| keep(true, i)),
         })
     }
 
-    /// One event record of the JSON contract.
-    fn event_json(&self, e: &EventRecord) -> Value {
-        json!({
+    /// One event record of the JSON contract; `dtime` absent where `SimOptions::of` left it
+    /// out (`wanted` false).
+    fn event_json(&self, e: &EventRecord, wanted: bool) -> Value {
+        let mut v = json!({
             "index": e.index,
             "name": e.name,
             "time": e.time,
@@ -190,7 +213,13 @@ impl RunReport {
             "grazing": e.grazing,
             "margin": e.margin,
             "denominator": e.denominator,
-        })
+        });
+        if !wanted {
+            if let Value::Object(m) = &mut v {
+                m.remove("dtime");
+            }
+        }
+        v
     }
 
     /// The JSON contract's top-level fields in their order, the events left to the writer: the one
@@ -208,13 +237,13 @@ impl RunReport {
             "time": f.time,
             "mode": self.mode_name(f.mode),
             "state": named(&self.info.state_names, &f.state),
-            "dstate": self.named_rows(&self.info.state_names, f.dstate.as_deref()),
+            "dstate": self.final_rows(false, f.dstate.as_deref()),
             "outputs": named(&self.info.output_names, &f.outputs),
-            "doutputs": self.named_rows(&self.info.output_names, f.doutputs.as_deref()),
+            "doutputs": self.final_rows(true, f.doutputs.as_deref()),
         });
         if let StopReason::Event { .. } = r.stopped_by {
-            fin["dstate_total"] = self.named_rows(&self.info.state_names, f.dstate_total.as_deref());
-            fin["doutputs_total"] = self.named_rows(&self.info.output_names, f.doutputs_total.as_deref());
+            fin["dstate_total"] = self.final_rows(false, f.dstate_total.as_deref());
+            fin["doutputs_total"] = self.final_rows(true, f.doutputs_total.as_deref());
         }
         if let Some(c) = &r.end_cusp {
             // The other side of a cusp at t_end: the final values had the events there not fired.
@@ -222,9 +251,9 @@ impl RunReport {
             fin["without_end_events"] = json!({
                 "events": events,
                 "state": named(&self.info.state_names, &c.state),
-                "dstate": self.named_rows(&self.info.state_names, c.dstate.as_deref()),
+                "dstate": self.final_rows(false, c.dstate.as_deref()),
                 "outputs": named(&self.info.output_names, &c.outputs),
-                "doutputs": self.named_rows(&self.info.output_names, c.doutputs.as_deref()),
+                "doutputs": self.final_rows(true, c.doutputs.as_deref()),
             });
         }
         let stopped_by = json!(r.stopped_by.name());
@@ -288,10 +317,14 @@ impl RunReport {
         if !r.events.is_empty() {
             writeln!(out, "  {:>4}  {:>18}  {:<14}  {:<22}{dcols}", "#", "time", "event", "mode")?;
         }
+        let wanted = self.events_wanted();
+        // A gradient `SimOptions::of` left out is blank; one that does not exist is `-`.
+        let blank: String = grad.iter().map(|_| format!("  {:>18}", "")).collect();
         for e in &r.events {
             let (before, after) = (self.mode_name(e.mode_before), self.mode_name(e.mode_after));
             let mode = if before == after { before.to_string() } else { format!("{before} -> {after}") };
             let d: String = match &e.dtime {
+                _ if !wanted[e.index] => blank.clone(),
                 Some(d) => d.iter().map(|v| format!("  {:>18}", grad_text(*v))).collect(),
                 None => grad.iter().map(|_| format!("  {:>18}", "-")).collect(),
             };
@@ -305,9 +338,12 @@ impl RunReport {
         let dcols: String = grad.iter().map(|p| format!("  {:>18}", format!("d/d{p}"))).collect();
         writeln!(out, "\nfinal: t = {}, mode {}", num(f.time), self.mode_name(f.mode))?;
         writeln!(out, "  {:<14}  {:>18}{dcols}", "", "value")?;
-        let rows = |out: &mut W, names: &[String], v: &[f64], d: &Option<Vec<f64>>| -> std::fmt::Result {
+        // The final states' (`output` false) or outputs' rows.
+        let rows = |out: &mut W, output: bool, v: &[f64], d: &Option<Vec<f64>>| -> std::fmt::Result {
+            let names = if output { &self.info.output_names } else { &self.info.state_names };
             for (i, (n, x)) in names.iter().zip(v).enumerate() {
                 let ds: String = match d {
+                    _ if !r.reports_gradient(output, i) => blank.clone(),
                     Some(d) => (0..grad.len())
                         .map(|j| format!("  {:>18}", grad_text(d[j * names.len() + i])))
                         .collect(),
@@ -317,8 +353,8 @@ impl RunReport {
             }
             Ok(())
         };
-        rows(out, &self.info.state_names, &f.state, &f.dstate)?;
-        rows(out, &self.info.output_names, &f.outputs, &f.doutputs)?;
+        rows(out, false, &f.state, &f.dstate)?;
+        rows(out, true, &f.outputs, &f.doutputs)?;
         if let Some(c) = &r.end_cusp {
             let names: Vec<&str> = c.events.iter().map(|&ev| self.info.events[ev].name.as_ref()).collect();
             writeln!(
@@ -327,13 +363,13 @@ impl RunReport {
                  values would be:",
                 names.join(", ")
             )?;
-            rows(out, &self.info.state_names, &c.state, &c.dstate)?;
-            rows(out, &self.info.output_names, &c.outputs, &c.doutputs)?;
+            rows(out, false, &c.state, &c.dstate)?;
+            rows(out, true, &c.outputs, &c.doutputs)?;
         }
         if let StopReason::Event { name, .. } = &r.stopped_by {
             writeln!(out, "\nstopped by event {name}; total derivatives at the stopping instant:")?;
-            rows(out, &self.info.state_names, &f.state, &f.dstate_total)?;
-            rows(out, &self.info.output_names, &f.outputs, &f.doutputs_total)?;
+            rows(out, false, &f.state, &f.dstate_total)?;
+            rows(out, true, &f.outputs, &f.doutputs_total)?;
         }
         if !r.samples.is_empty() {
             self.write_samples_table(out)?;

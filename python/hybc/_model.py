@@ -105,6 +105,7 @@ class Model:
         grad: Sequence[str] = (),
         trajectory: None | str | float = None,
         at: Sequence[float] | np.ndarray | None = None,
+        of: Sequence[str] | None = None,
         **options: Any,
     ) -> "_hybc.Run":
         """One run at ``params`` (the others at their defaults). A vector parameter (``param
@@ -116,7 +117,10 @@ class Model:
         sampling interval ``dt``. ``at``: ascending times within the run at which every output
         and state is reported with its derivatives, from the dense output (``run.samples``:
         ``values[time, name]``, ``dvalues[time, name, param]``; a time at an event instant gets
-        the values after its events). ``options``: ``t_end``, ``rtol``, ``atol``, ``max_events``,
+        the values after its events). ``of``: only these quantities get gradients (``hybc run
+        --of``): states and outputs by name, ``EVENT#K``, ``EVENT#last``, ``NAME@TIME`` (sampled
+        as ``at`` would); the others' are left out of ``dstate``, ``doutputs`` and the event
+        gradients, and ``sens="adjoint"`` runs one backward pass per quantity. ``options``: ``t_end``, ``rtol``, ``atol``, ``max_events``,
         ``max_steps``, ``method`` (``"auto"``, ``"dopri5"``, ``"dop853"``, or the Rosenbrock
         methods for stiff models ``"rodas5p"``, ``"rodas4"``), ``graze_tol``,
         ``sens_error_control``, ``quadrature_error_control`` (``True``: running costs under the
@@ -134,6 +138,7 @@ class Model:
             grad=_expand_names(_names(grad, "grad"), vectors),
             trajectory=trajectory,
             at=None if at is None else np.asarray(at, dtype=np.float64).ravel().tolist(),
+            of=None if of is None else _names(of, "of", "quantity names"),
             **options,
         )
 
@@ -724,18 +729,18 @@ def _column(values: Any) -> np.ndarray:
     return np.array(values, dtype=str) if isinstance(values, list) else values
 
 
-def _names(names: Any, what: str) -> list[str]:
-    """A sequence of parameter names. A single ``str`` is refused: ``list("h0")`` would read it as
-    the names ``h`` and ``0``."""
+def _names(names: Any, what: str, kind: str = "parameter names") -> list[str]:
+    """A sequence of names (of parameters, or of the ``kind`` given). A single ``str`` is refused:
+    ``list("h0")`` would read it as the names ``h`` and ``0``."""
     if isinstance(names, (str, bytes)):
-        raise TypeError(f"{what}: expected a sequence of parameter names such as [{str(names)!r}], found the string {names!r}")
+        raise TypeError(f"{what}: expected a sequence of {kind} such as [{str(names)!r}], found the string {names!r}")
     try:
         names = list(names)
     except TypeError:
-        raise TypeError(f"{what}: expected a sequence of parameter names, found {type(names).__name__}") from None
+        raise TypeError(f"{what}: expected a sequence of {kind}, found {type(names).__name__}") from None
     for name in names:
         if not isinstance(name, str):
-            raise TypeError(f"{what}: expected parameter names (str), found {name!r}")
+            raise TypeError(f"{what}: expected {kind} (str), found {name!r}")
     return names
 
 

@@ -149,7 +149,7 @@ impl Model {
     }
 
     /// One run; see `hybc.Model.simulate`.
-    #[pyo3(signature = (params = None, *, grad = None, trajectory = None, at = None, **sim))]
+    #[pyo3(signature = (params = None, *, grad = None, trajectory = None, at = None, of = None, **sim))]
     #[allow(clippy::too_many_arguments)]
     fn simulate(
         &self,
@@ -158,6 +158,7 @@ impl Model {
         grad: Option<Vec<String>>,
         trajectory: Option<&Bound<'_, PyAny>>,
         at: Option<Vec<f64>>,
+        of: Option<Vec<String>>,
         sim: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Run> {
         let keywords = SimKeywords::from_kwargs(sim)?;
@@ -165,6 +166,7 @@ impl Model {
         opts.trajectory = trajectory_request(trajectory)?;
         let values = self.param_values(params)?;
         let compiled = self.compiled(py, &grad.unwrap_or_default())?;
+        SimKeywords::gradients_of(of, compiled.info(), &mut opts)?;
         let t_end = opts.t_end;
         let run = py.detach(|| compiled.simulate(&values, &opts)).map_err(errors::to_py)?;
         Ok(Run::new(run, t_end))

@@ -21,7 +21,7 @@ pub struct SimKeywords {
 /// The keywords [`SimKeywords::from_kwargs`] takes, in the order an error lists them: the
 /// library's options but those above.
 fn keywords() -> impl Iterator<Item = &'static str> {
-    SimOverrides::OPTIONS.into_iter().filter(|o| !matches!(*o, "at" | "linear_solver"))
+    SimOverrides::OPTIONS.into_iter().filter(|o| !matches!(*o, "at" | "of" | "linear_solver"))
 }
 
 /// `v` if it is a finite number above 0, else a `ValueError` in the command line's words
@@ -110,6 +110,17 @@ impl SimKeywords {
     pub fn options_at(&self, model: &hybc::Model, at: Option<Vec<f64>>) -> PyResult<SimOptions> {
         let overrides = SimOverrides { at, ..self.overrides.clone() };
         overrides.apply(&model.sim_options(), Spelling::Keyword).map_err(value_error)
+    }
+
+    /// Sets `opts.of` from `of=` (`hybc run --of`), resolved against the compiled model's names
+    /// by the library (a `NAME@TIME` adds its sample time).
+    pub fn gradients_of(
+        of: Option<Vec<String>>,
+        info: &hybc::sim::SystemInfo,
+        opts: &mut SimOptions,
+    ) -> PyResult<()> {
+        let overrides = SimOverrides { of, ..SimOverrides::default() };
+        overrides.gradients_of(info, opts, Spelling::Keyword).map_err(value_error)
     }
 }
 

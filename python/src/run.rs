@@ -47,17 +47,22 @@ impl Run {
         Ok(dict)
     }
 
-    /// `names[i] -> ndarray (n_grad,)` from a column-per-parameter array (`d[j * n + i]`).
+    /// `names[i] -> ndarray (n_grad,)` from a column-per-parameter array (`d[j * n + i]`) over
+    /// the final states (`output` false) or outputs, for the names whose gradients the run
+    /// reports (all, unless `of=` named others).
     fn gradients<'py>(
         &self,
         py: Python<'py>,
-        names: &[String],
+        output: bool,
         d: Option<&[f64]>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let info = self.info();
+        let names = if output { &info.output_names } else { &info.state_names };
         let (n, m) = (names.len(), self.n_grad());
         let d = d.filter(|_| self.complete());
         let dict = PyDict::new(py);
-        for (i, name) in names.iter().enumerate() {
+        let result = self.run.result();
+        for (i, name) in names.iter().enumerate().filter(|&(i, _)| result.reports_gradient(output, i)) {
             let column: Vec<f64> = (0..m).map(|j| d.map_or(f64::NAN, |d| d[j * n + i])).collect();
             dict.set_item(name, PyArray1::from_vec(py, column))?;
         }
@@ -82,7 +87,8 @@ impl Run {
         self.run.events().iter().map(|e| e.name.to_string()).collect()
     }
 
-    /// `d t_k / d p_j`, shape (n_events, n_grad); NaN where the derivative does not exist.
+    /// `d t_k / d p_j`, shape (n_events, n_grad); NaN where the derivative does not exist, or
+    /// where `of=` did not ask for it.
     #[getter]
     fn event_dtime<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let m = self.n_grad();
@@ -122,7 +128,7 @@ impl Run {
     fn dstate<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let f = &self.run.result().final_state;
         let d = if self.by_event() { &f.dstate_total } else { &f.dstate };
-        self.gradients(py, &self.info().state_names, d.as_deref())
+        self.gradients(py, false, d.as_deref())
     }
 
     /// `d output / d grad`: output name -> ndarray (n_grad,).
@@ -130,7 +136,7 @@ impl Run {
     fn doutputs<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let f = &self.run.result().final_state;
         let d = if self.by_event() { &f.doutputs_total } else { &f.doutputs };
-        self.gradients(py, &self.info().output_names, d.as_deref())
+        self.gradients(py, true, d.as_deref())
     }
 
     /// Names of the differentiated parameters, in gradient column order.

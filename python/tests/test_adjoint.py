@@ -83,3 +83,28 @@ def test_stats_without_gradients_and_auto(ball):
 def test_a_bad_mode_names_the_three(ball):
     with pytest.raises(ValueError, match=r'sens: expected "forward", "adjoint" or "auto", found "backward"'):
         ball.simulate(grad=["e"], sens="backward")
+
+
+def test_of_keeps_only_the_gradients_asked_for_in_either_mode():
+    # `of=` (hybc run --of): the dicts hold the names asked for, the event gradients not asked
+    # for are NaN, the values are untouched; the adjoint's rows equal the full run's.
+    model = hybc.Model(CONTROLLED)
+    grad = ["e", "h0", "u"]
+    for sens in ("forward", "adjoint"):
+        full = model.simulate(grad=grad, sens=sens, sens_error_control=False)
+        some = model.simulate(grad=grad, sens=sens, sens_error_control=False, of=["v", "touchdown#2"])
+        assert some.sens == sens
+        assert list(some.dstate) == ["v"] and list(some.doutputs) == []
+        rel_close(some.dstate["v"], full.dstate["v"])
+        np.testing.assert_array_equal(some.event_times, full.event_times)
+        rel_close(some.event_dtime[1], full.event_dtime[1])
+        assert np.isnan(some.event_dtime[0]).all() and np.isnan(some.event_dtime[2:]).all()
+        assert some.state == full.state
+
+
+def test_of_names_that_are_not_quantities_are_refused():
+    model = hybc.Model(CONTROLLED)
+    with pytest.raises(ValueError, match="of: model has no output or state `w`"):
+        model.simulate(grad=["e"], of=["w"])
+    with pytest.raises(TypeError, match="of: expected a sequence of quantity names"):
+        model.simulate(grad=["e"], of="v")

@@ -4,8 +4,9 @@
 //! the one set of checks, so `hybc run --rtol=-1` and `simulate(rtol=-1)` are refused with the
 //! same words, each naming the option as its user wrote it.
 
+use crate::fit::Observable;
 use crate::limits;
-use crate::sim::{LinearSolver, Method, Sens, SimOptions, MAX_SAMPLED_ROWS};
+use crate::sim::{GradientsOf, LinearSolver, Method, Sens, SimOptions, SystemInfo, MAX_SAMPLED_ROWS};
 
 /// How a front end spells an option in its messages: `--t-start` on the command line, `t_start`
 /// in Python (the library's own name, a [`SimOptions`] field).
@@ -72,12 +73,16 @@ pub struct SimOverrides {
     pub at: Option<Vec<f64>>,
     /// How gradients are computed (`--sens`, `sens=`).
     pub sens: Option<Sens>,
+    /// The quantities whose gradients are wanted (`hybc run --of`, `simulate(of=...)`), as the
+    /// user names them: `NAME` (a state or an output), `EVENT#K`, `EVENT#last`, `NAME@TIME`.
+    /// Resolved against a compiled model's names by [`Self::gradients_of`], not by `apply`.
+    pub of: Option<Vec<String>>,
 }
 
 impl SimOverrides {
     /// The options' names, as [`SimOptions`] spells them, in the order a front end lists them
     /// (Python's message for an unknown keyword). A test holds each front end to this list.
-    pub const OPTIONS: [&'static str; 15] = [
+    pub const OPTIONS: [&'static str; 16] = [
         "t_end",
         "rtol",
         "atol",
@@ -93,6 +98,7 @@ impl SimOverrides {
         "linear_solver",
         "at",
         "sens",
+        "of",
     ];
 
     /// `base` (usually [`Model::sim_options`](super::Model::sim_options)) with these values laid
@@ -159,7 +165,50 @@ impl SimOverrides {
             trajectory: base.trajectory,
             at,
             sens: self.sens.unwrap_or(base.sens),
+            of: base.of.clone(),
         })
+    }
+
+    /// Sets `opts.of` from [`Self::of`], the names resolved against `info` (a compiled model's)
+    /// as every analysis spells a quantity ([`Observable`]); a `NAME@TIME` adds its time to
+    /// `opts.at` (the sample it reads), checked against the run's span. Nothing when `of` is
+    /// unset; an empty list asks for no gradient at all.
+    pub fn gradients_of(
+        &self,
+        info: &SystemInfo,
+        opts: &mut SimOptions,
+        spelling: Spelling,
+    ) -> Result<(), OptionError> {
+        let Some(names) = &self.of else { return Ok(()) };
+        let flag = spelling.of("of");
+        let refuse = |message: String| OptionError { option: "of", message };
+        let mut of = GradientsOf::default();
+        for name in names {
+            match Observable::parse(name, info).map_err(|e| refuse(format!("{flag}: {e}")))? {
+                Observable::State(i) => of.states.push(i),
+                Observable::Output(i) => of.outputs.push(i),
+                Observable::EventTime { name_event, occurrence } => {
+                    of.firings.push((name_event, Some(occurrence)))
+                }
+                Observable::LastFiring { name_event } => of.firings.push((name_event, None)),
+                Observable::At { output, index, time } => {
+                    sample_times_within(&[time], opts.t_start, opts.t_end, &flag).map_err(refuse)?;
+                    of.samples.push((output, index, time));
+                    if !opts.at.contains(&time) {
+                        let at = opts.at.partition_point(|&t| t < time);
+                        opts.at.insert(at, time);
+                    }
+                }
+            }
+        }
+        if opts.at.len() as f64 > MAX_SAMPLED_ROWS {
+            return Err(refuse(format!(
+                "{flag}: {} sample times, at most {MAX_SAMPLED_ROWS:.0}",
+                opts.at.len()
+            )));
+        }
+        opts.of = Some(of);
+        Ok(())
     }
 }
 

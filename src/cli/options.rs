@@ -120,7 +120,7 @@ pub(crate) struct SimFlags {
 /// commands' flags and against the options, so that a new option gets a flag (and a keyword in
 /// Python: python/tests).
 #[cfg(test)]
-pub(crate) const FLAG_OF_OPTION: [(&str, Option<&str>); 15] = [
+pub(crate) const FLAG_OF_OPTION: [(&str, Option<&str>); 16] = [
     ("t_end", Some("--t-end")),
     ("rtol", Some("--rtol")),
     ("atol", Some("--atol")),
@@ -137,6 +137,8 @@ pub(crate) const FLAG_OF_OPTION: [(&str, Option<&str>); 15] = [
     // `hybc run` only, as `simulate(at=...)` is Python's.
     ("at", Some("--at")),
     ("sens", Some("--sens")),
+    // `hybc run` only, as `simulate(of=...)` is Python's.
+    ("of", Some("--of")),
 ];
 
 impl SimFlags {
@@ -158,6 +160,7 @@ impl SimFlags {
             linear_solver: None,
             at: None,
             sens: self.sens.map(Into::into),
+            of: None,
         }
     }
 }
@@ -280,6 +283,7 @@ mod tests {
             linear_solver: _,
             at: _,
             sens: _,
+            of: _,
         } = SimOverrides::default();
         let listed: Vec<&str> = FLAG_OF_OPTION.iter().map(|(option, _)| *option).collect();
         assert_eq!(listed, SimOverrides::OPTIONS);
@@ -287,7 +291,7 @@ mod tests {
             let flags = flags(command);
             for (option, flag) in FLAG_OF_OPTION {
                 let Some(flag) = flag else { continue };
-                let expected = command == "run" || option != "at";
+                let expected = command == "run" || !matches!(option, "at" | "of");
                 assert_eq!(flags.contains(flag), expected, "hybc {command} {flag} ({option})");
             }
         }

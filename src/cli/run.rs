@@ -58,6 +58,12 @@ pub struct RunArgs {
     /// report then to stderr.
     #[arg(long, value_name = "FILE.csv", requires = "at")]
     samples_out: Option<PathBuf>,
+    /// Only these quantities get gradients (in either --sens mode; the adjoint then runs one
+    /// backward pass per quantity): states and outputs at the final time (NAME), event times
+    /// (EVENT#K, K from 1, or EVENT#last) and values at a time (NAME@TIME, sampled as --at
+    /// would). Default: every quantity the report holds.
+    #[arg(long, value_name = "Q1,Q2,..", value_delimiter = ',', requires = "grad")]
+    of: Option<Vec<String>>,
     /// Plot states and outputs against time, with event lines and mode bands, into this file.
     #[arg(long, value_name = "FILE.svg|.png")]
     plot: Option<PathBuf>,
@@ -135,6 +141,7 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
     let params = parameter_values(model, &args.set)?;
     let mut overrides = args.sim.overrides();
     overrides.at = args.at.as_deref().map(super::samples::parse_at).transpose()?;
+    overrides.of = args.of.clone();
     let mut opts = overrides.apply(&model.sim_options(), Spelling::Flag).map_err(|e| e.message)?;
     opts.trajectory = trajectory_request(args, &opts)?;
     plot_trajectory(args, &mut opts)?;
@@ -149,6 +156,7 @@ fn run_model(model: &Model, args: &RunArgs) -> Result<ExitCode, String> {
         Ok(c) => c,
         Err(code) => return Ok(code),
     };
+    overrides.gradients_of(compiled.info(), &mut opts, Spelling::Flag).map_err(|e| e.message)?;
     let report = match (&args.trajectory, &args.plot) {
         // Rows go to the file as the run records them.
         (Some(path), None) => run_streaming(&compiled, &params, &opts, path)?,

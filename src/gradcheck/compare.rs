@@ -73,8 +73,13 @@ impl Differences<'_> {
         self.out.steps = runs.map(|r| r.stats.steps + r.stats.rejected);
         let rtol = self.opts.rtol;
         let atol = self.opts.atol;
-        for k in 0..agree {
-            let e = &nominal.events[k];
+        // The event times whose gradients the run reports (all, unless `SimOptions::of` named
+        // others: those are not checked).
+        let wanted = nominal.reports_event_gradients(self.info);
+        for (k, e) in nominal.events.iter().enumerate().take(agree) {
+            if !wanted[k] {
+                continue;
+            }
             let Some(dtime) = &e.dtime else {
                 self.out.notes.push(format!(
                     "event #{k} ({}) grazes at t = {}: its gradient and all later ones do not exist; not checked",
@@ -123,13 +128,13 @@ impl Differences<'_> {
         };
         let (n, k) = (self.info.n_states(), self.info.n_outputs());
         let noise = Noise { floor: atol, origin: 0.0, rtol, steps, scale: self.stencil.scale };
-        for i in 0..n {
+        for i in (0..n).filter(|&i| nominal.reports_gradient(false, i)) {
             let label = format!("state {}", self.info.state_names[i]);
             let derivative = format!("d({})/d{}", self.info.state_names[i], self.out.name);
             let values = runs.map(|r| r.final_state.state[i]);
             self.compare_one(label, derivative, dstate[self.j * n + i], values, &noise);
         }
-        for i in 0..k {
+        for i in (0..k).filter(|&i| nominal.reports_gradient(true, i)) {
             let label = format!("output {}", self.info.output_names[i]);
             let derivative = format!("d({})/d{}", self.info.output_names[i], self.out.name);
             let values = runs.map(|r| r.final_state.outputs[i]);

@@ -99,6 +99,69 @@ impl Sens {
     }
 }
 
+/// The quantities whose gradients a run reports (`hybc run --of`, Python's `of=`): with
+/// [`SimOptions::of`] set, every other quantity keeps its value and has no gradient (the report
+/// leaves it out; in the result its entries are NaN), in either mode, and the adjoint runs one
+/// backward pass per quantity named, so it costs what they are. Indices into the system's names.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct GradientsOf {
+    /// States: at the final time, their total derivatives after a stop event, and the side
+    /// without the events at `t_end`.
+    pub states: Vec<usize>,
+    /// Outputs, likewise.
+    pub outputs: Vec<usize>,
+    /// Event times, by name: `(an event with the name, Some(k))` is the `k`-th firing of any
+    /// event of that name (from 1), `(.., None)` the last one.
+    pub firings: Vec<(usize, Option<usize>)>,
+    /// Values at a sample time of `SimOptions::at`: `(whether an output, its index, the time)`.
+    pub samples: Vec<(bool, usize, f64)>,
+}
+
+impl GradientsOf {
+    /// Whether state `i`'s gradients are asked for.
+    pub fn state(&self, i: usize) -> bool {
+        self.states.contains(&i)
+    }
+
+    /// Whether output `i`'s gradients are asked for.
+    pub fn output(&self, i: usize) -> bool {
+        self.outputs.contains(&i)
+    }
+
+    /// Whether the gradient of a sample's value is asked for: an output's (`output`) or a
+    /// state's `index` at `time`.
+    pub fn sample(&self, output: bool, index: usize, time: f64) -> bool {
+        self.samples.contains(&(output, index, time))
+    }
+
+    /// Which of a run's event records (`names[e]`: the name of record `e`'s event, in firing
+    /// order) have their time's gradient asked for, by the names of `info`.
+    pub fn events(&self, info: &super::SystemInfo, names: &[&str]) -> Vec<bool> {
+        let mut wanted = vec![false; names.len()];
+        for &(event, firing) in &self.firings {
+            let name = &*info.events[event].name;
+            let mut of_name = names.iter().enumerate().filter(|(_, n)| **n == name).map(|(e, _)| e);
+            let hit = match firing {
+                Some(k) => of_name.nth(k.saturating_sub(1)),
+                None => of_name.next_back(),
+            };
+            if let Some(e) = hit {
+                wanted[e] = true;
+            }
+        }
+        wanted
+    }
+
+    /// How many rows an adjoint runs for it in a run with `events` records, ending at a stop
+    /// event (`at_stop`) or with events at `t_end` (`cusp`): what `Sens::Auto` weighs.
+    pub fn rows(&self, events: usize, at_stop: bool, cusp: bool) -> usize {
+        let finals = self.states.len() + self.outputs.len();
+        self.firings.len().min(events)
+            + finals * (1 + usize::from(at_stop) + usize::from(cusp))
+            + self.samples.len()
+    }
+}
+
 /// Options of [`run`](super::run). Times are model time; tolerances are per component, applied
 /// as `atol + rtol * |x_i|` to states and (by default) to sensitivities.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -158,6 +221,8 @@ pub struct SimOptions {
     pub at: Vec<f64>,
     /// How gradients are computed.
     pub sens: Sens,
+    /// The quantities whose gradients are reported; `None`: every quantity the report holds.
+    pub of: Option<GradientsOf>,
 }
 
 /// The run defaults, the one set the CLI and the library share: a model's `simulate` line
@@ -181,6 +246,7 @@ impl Default for SimOptions {
             trajectory: TrajectoryRequest::None,
             at: Vec::new(),
             sens: Sens::Forward,
+            of: None,
         }
     }
 }

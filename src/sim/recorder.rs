@@ -145,6 +145,19 @@ pub enum TapeEntry<'a> {
         /// The flow's jump there.
         jump: &'a [f64],
     },
+    /// The state at `t` moved by `dt` along the flow of `mode` at `x`, its sensitivities by
+    /// `dt (f_x S + f_p)` there (`dt` a constant): an event's lateness carried to its crossing
+    /// and back (`Integrator::move_to_crossing`).
+    Drift {
+        /// How far along the flow (negative: back).
+        dt: f64,
+        /// The mode whose flow.
+        mode: usize,
+        /// The instant.
+        t: f64,
+        /// The state it moved from.
+        x: &'a [f64],
+    },
     /// Something the backward pass does not carry (yet): named for the refusal.
     Unsupported(&'static str),
 }

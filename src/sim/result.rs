@@ -10,6 +10,7 @@ use serde::Serialize;
 use std::fmt;
 use std::sync::Arc;
 
+use super::options::GradientsOf;
 use super::system::SystemInfo;
 
 /// Errors of a simulation: bad input (returned by `run`) and runtime faults (carried by
@@ -763,6 +764,74 @@ pub struct TrajectoryRow {
     pub outputs: Vec<f64>,
 }
 
+/// Sets row `i` of a column-per-parameter array over `rows` quantities to NaN where `keep(i)` is
+/// false.
+fn mask_rows(a: &mut [f64], rows: usize, keep: impl Fn(usize) -> bool) {
+    if rows == 0 {
+        return;
+    }
+    for column in a.chunks_mut(rows) {
+        for (i, v) in column.iter_mut().enumerate() {
+            if !keep(i) {
+                *v = f64::NAN;
+            }
+        }
+    }
+}
+
+impl SimResult {
+    /// Keeps only the gradients `of` asks for (`SimOptions::of`): the others' entries become
+    /// NaN and the event times' `None`, and `gradients_of` records the choice, so that a report
+    /// leaves them out rather than calling them missing.
+    pub(crate) fn keep_gradients_of(&mut self, of: &GradientsOf, info: &SystemInfo) {
+        let wanted = {
+            let names: Vec<&str> = self.events.iter().map(|e| &*e.name).collect();
+            of.events(info, &names)
+        };
+        for (e, wanted) in self.events.iter_mut().zip(wanted) {
+            if !wanted {
+                e.dtime = None;
+            }
+        }
+        let (n, k) = (info.n_states(), info.n_outputs());
+        let f = &mut self.final_state;
+        let (cusp_x, cusp_y) = match self.end_cusp.as_mut() {
+            Some(c) => (c.dstate.as_mut(), c.doutputs.as_mut()),
+            None => (None, None),
+        };
+        for d in [f.dstate.as_mut(), f.dstate_total.as_mut(), cusp_x].into_iter().flatten() {
+            mask_rows(d, n, |i| of.state(i));
+        }
+        for d in [f.doutputs.as_mut(), f.doutputs_total.as_mut(), cusp_y].into_iter().flatten() {
+            mask_rows(d, k, |i| of.output(i));
+        }
+        self.samples.keep_gradients(|output, i, time| of.sample(output, i, time));
+        self.gradients_of = Some(of.clone());
+    }
+
+    /// Per event record, whether the run reports its time's gradient: every one unless
+    /// `SimOptions::of` named others.
+    pub fn reports_event_gradients(&self, info: &SystemInfo) -> Vec<bool> {
+        match &self.gradients_of {
+            None => vec![true; self.events.len()],
+            Some(of) => {
+                let names: Vec<&str> = self.events.iter().map(|e| &*e.name).collect();
+                of.events(info, &names)
+            }
+        }
+    }
+
+    /// Whether the report holds the gradient of state (`output` false) or output `i`: every one
+    /// unless `SimOptions::of` named others.
+    pub fn reports_gradient(&self, output: bool, i: usize) -> bool {
+        match &self.gradients_of {
+            None => true,
+            Some(of) if output => of.output(i),
+            Some(of) => of.state(i),
+        }
+    }
+}
+
 /// Everything a run computed: events, final values and derivatives, why it stopped, warnings,
 /// what it cost, the trajectory and samples asked for.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -789,6 +858,8 @@ pub struct SimResult {
     /// Which method integrated which part of the run, in time order: one segment for a method
     /// asked for by name, one per switch under `Method::Auto`.
     pub methods: Vec<MethodSegment>,
+    /// The quantities whose gradients the run kept (`SimOptions::of`); `None`: all.
+    pub gradients_of: Option<GradientsOf>,
 }
 
 /// A stretch of a run integrated by one method (`SimResult::methods`): from `from` to `to`, with
@@ -909,6 +980,18 @@ impl Samples {
     /// The rows in time order.
     pub fn iter(&self) -> impl DoubleEndedIterator<Item = Sample<'_>> + ExactSizeIterator + '_ {
         (0..self.len()).map(|i| self.get(i).expect("in range"))
+    }
+
+    /// Sets the derivatives of the values `keep(output, index, time)` refuses to NaN
+    /// (`SimOptions::of`).
+    pub(crate) fn keep_gradients(&mut self, keep: impl Fn(bool, usize, f64) -> bool) {
+        let (n, m, k) = self.shape;
+        let (zw, dyw) = (n + n * m, k * m);
+        for (r, &time) in self.time.iter().enumerate() {
+            let ds = &mut self.z[r * zw + n..(r + 1) * zw];
+            mask_rows(ds, n, |i| keep(false, i, time));
+            mask_rows(&mut self.doutputs[r * dyw..(r + 1) * dyw], k, |i| keep(true, i, time));
+        }
     }
 
     /// The first row at time `t` (the times are ascending), if one was asked for.

@@ -149,6 +149,8 @@ impl<St: Stepper> ShapedWork<'_, St> {
             reset_onto_guard: Vec::new(),
             onto_guard_dte: Vec::new(),
             onto_guard_grad: (vec![0.0; n], vec![0.0; m]),
+            lateness: (vec![0.0; n], vec![0.0; n * m], vec![0.0; n], vec![0.0; m]),
+            lateness_guards: (Vec::new(), Vec::new()),
         }
     }
 }
@@ -266,7 +268,12 @@ impl<H: SystemRef> Runner<H> {
         let mut fell_back = None;
         if by_adjoint {
             match adjoint::run_by_adjoint(sys, p, &self.opts, self.opts.sens == Sens::Auto)? {
-                Ok(result) => return Ok(result),
+                Ok(mut result) => {
+                    if let Some(of) = &self.opts.of {
+                        result.keep_gradients_of(of, sys.info());
+                    }
+                    return Ok(result);
+                }
                 Err(e) if self.opts.sens == Sens::Adjoint => fell_back = Some(e),
                 Err(_) => {}
             }
@@ -282,6 +289,9 @@ impl<H: SystemRef> Runner<H> {
         };
         if let Some(what) = what {
             result.warnings.push(SimWarning::AdjointNotCarried { what });
+        }
+        if let (Some(of), true) = (&self.opts.of, m > 0) {
+            result.keep_gradients_of(of, self.sys.system().info());
         }
         Ok(result)
     }

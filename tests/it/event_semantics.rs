@@ -435,3 +435,49 @@ fn every_event_semantics_test_holds_landing_on_events_or_not() {
     }
     assert!(failed.is_empty(), "failures: {failed:?}");
 }
+
+/// Rule 1, the lateness: an event fires at the first floating-point time past its crossing, and
+/// the state after it is the trajectory's reset at the crossing itself, carried to that time. A
+/// relaxation `der(x) = 1000 (1 - x)` reset by `x := x - 0.8` at `x >= c` fires at
+/// `t_1 = ln(1 / (1 - c)) / 1000` and then every `T = ln((1.8 - c) / (1 - c)) / 1000`: about
+/// 1,046 events in a second. Started at `t = 1e6`, where a spacing of `t` is 1.2e-10 and `x`
+/// crosses at speed 500, resetting the late state would drift the phase by up to 6e-8 s over the
+/// run (the final `x` by up to 3e-5); carried, every time and `dt_k/dc` keeps the closed form
+/// whatever the start. From the other side, the same run at `t = 0` keeps it too.
+#[test]
+fn an_event_past_its_crossing_by_a_spacing_of_t_resets_the_state_of_the_crossing() {
+    let c: f64 = 0.5;
+    let first = (1.0 / (1.0 - c)).ln() / 1000.0;
+    let period = ((1.8 - c) / (1.0 - c)).ln() / 1000.0;
+    let (dfirst, dperiod) = (1.0 / (1.0 - c) / 1000.0, (1.0 / (1.0 - c) - 1.0 / (1.8 - c)) / 1000.0);
+    let text = "model relax\nparam c = 0.5\nstate x = 0\nder(x) = 1000 * (1 - x)\n\
+                event e when x >= c { x := x - 0.8 }\n";
+    for start in [0.0, 1e6] {
+        for method in [Method::Auto, Method::Dop853] {
+            let r = run(text, &["c"], |o| {
+                o.t_start = start;
+                o.t_end = start + 1.0;
+                o.rtol = 1e-10;
+                o.atol = 1e-12;
+                o.method = method;
+            });
+            let count = ((1.0 - first) / period).floor() as usize + 1;
+            assert_eq!(r.events().len(), count, "start {start}, {method:?}");
+            for (k, ev) in r.events().iter().enumerate() {
+                let want = first + k as f64 * period;
+                let got = ev.time - start;
+                assert!(
+                    (got - want).abs() <= 5e-9,
+                    "start {start}, {method:?}: event {k} at {got}, exact {want}"
+                );
+                let d = ev.dtime.as_ref().expect("a gradient")[0];
+                assert_relative_eq!(d, dfirst + k as f64 * dperiod, max_relative = 1e-6);
+            }
+            // The final state: relaxing since the last event from `c - 0.8`.
+            let since = 1.0 - (first + (count - 1) as f64 * period);
+            let want = 1.0 - (1.8 - c) * (-1000.0 * since).exp();
+            let got = r.state("x").unwrap();
+            assert!((got - want).abs() <= 2e-6, "start {start}, {method:?}: x = {got}, exact {want}");
+        }
+    }
+}

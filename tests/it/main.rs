@@ -26,6 +26,7 @@ mod flow_switches;
 mod frontend;
 mod frontend_props;
 mod gradient_existence;
+mod gradients_of;
 mod hostile_input;
 mod inputs;
 mod jit_ball;

@@ -3,7 +3,8 @@
 //! tests/data/sweep, written by the build before streaming; rewritten by `hybc sweep --threads 1`
 //! when the error norm became one per block, issue #25 item 5, which moved the values by about
 //! 1e-14, and when Zeno became a rule on the event sequence, issue #37 item 1.3, which stops the
-//! Zeno points at fewer bounces), for any thread count, and with a peak
+//! Zeno points at fewer bounces, and when events late by a spacing of `t` were applied at their
+//! crossings, issue #37's model 779, which moved the last Zeno bounces by an ulp), for any thread count, and with a peak
 //! memory that does not grow with the number of points.
 
 use crate::support::cli::hybc;

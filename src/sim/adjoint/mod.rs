@@ -80,6 +80,12 @@ enum Piece {
         t: f64,
         jump: usize,
     },
+    Drift {
+        dt: f64,
+        mode: usize,
+        t: f64,
+        x: usize,
+    },
 }
 
 /// A step's primal values, its start state at `x` in the tape's store.
@@ -167,6 +173,7 @@ impl Recorder for Tape {
                 Piece::Switch { event, t, mode, x, pre, post }
             }
             &TapeEntry::Knot { set, t, jump } => Piece::Knot { set, t, jump: self.keep(jump) },
+            &TapeEntry::Drift { dt, mode, t, x } => Piece::Drift { dt, mode, t, x: self.keep(x) },
             TapeEntry::Unsupported(what) => {
                 self.unsupported.get_or_insert(what);
                 return;
@@ -233,34 +240,35 @@ pub(crate) fn run_by_adjoint<S: HybridSystem + ?Sized>(
     let info = sys.info();
     let (n, m, k) = (info.n_states(), info.n_grad(), info.n_outputs());
     let at_stop = matches!(result.stopped_by, StopReason::Event { .. });
-    let mut seeds: Vec<Seed> =
-        (0..result.events.len()).map(|e| Seed { event_times: vec![(e, 1.0)], ..Seed::default() }).collect();
-    for total in [false, true] {
-        if total && !at_stop {
-            continue;
+    // The quantities asked for (`SimOptions::of`; all by default), a backward pass each.
+    let of = opts.of.as_ref();
+    let names: Vec<&str> = result.events.iter().map(|e| &*e.name).collect();
+    let events_wanted = of.map_or_else(|| vec![true; names.len()], |o| o.events(info, &names));
+    let states_wanted: Vec<bool> = (0..n).map(|i| of.is_none_or(|o| o.state(i))).collect();
+    let outputs_wanted: Vec<bool> = (0..k).map(|i| of.is_none_or(|o| o.output(i))).collect();
+    let unit = |len: usize, i: usize| {
+        let mut w = vec![0.0; len];
+        w[i] = 1.0;
+        w
+    };
+    let mut seeds: Vec<Seed> = (0..names.len())
+        .filter(|&e| events_wanted[e])
+        .map(|e| Seed { event_times: vec![(e, 1.0)], ..Seed::default() })
+        .collect();
+    let finals = |seeds: &mut Vec<Seed>, total: bool, before_end_events: bool| {
+        for i in (0..n).filter(|&i| states_wanted[i]) {
+            seeds.push(Seed { state: unit(n, i), total, before_end_events, ..Seed::default() });
         }
-        for i in 0..n {
-            let mut state = vec![0.0; n];
-            state[i] = 1.0;
-            seeds.push(Seed { state, total, ..Seed::default() });
+        for i in (0..k).filter(|&i| outputs_wanted[i]) {
+            seeds.push(Seed { outputs: unit(k, i), total, before_end_events, ..Seed::default() });
         }
-        for i in 0..k {
-            let mut outputs = vec![0.0; k];
-            outputs[i] = 1.0;
-            seeds.push(Seed { outputs, total, ..Seed::default() });
-        }
+    };
+    finals(&mut seeds, false, false);
+    if at_stop {
+        finals(&mut seeds, true, false);
     }
     if result.end_cusp.is_some() {
-        for i in 0..n {
-            let mut state = vec![0.0; n];
-            state[i] = 1.0;
-            seeds.push(Seed { state, before_end_events: true, ..Seed::default() });
-        }
-        for i in 0..k {
-            let mut outputs = vec![0.0; k];
-            outputs[i] = 1.0;
-            seeds.push(Seed { outputs, before_end_events: true, ..Seed::default() });
-        }
+        finals(&mut seeds, false, true);
     }
     if auto && !prefers_adjoint(seeds.len(), m) {
         return Ok(Err(AdjointError::Unsupported("(auto) a run with more quantities than parameters")));
@@ -271,24 +279,32 @@ pub(crate) fn run_by_adjoint<S: HybridSystem + ?Sized>(
     };
     let mut result = recorded.result;
     let mut rows = rows.into_iter();
-    for event in &mut result.events {
-        event.dtime = rows.next();
+    for (event, wanted) in result.events.iter_mut().zip(&events_wanted) {
+        event.dtime = if *wanted { rows.next() } else { None };
     }
-    let mut columns = |count: usize| -> Vec<f64> {
-        let block: Vec<Vec<f64>> = rows.by_ref().take(count).collect();
-        // Column per parameter: entry `j * count + i` is quantity `i`'s derivative by `j`.
-        (0..m).flat_map(|j| block.iter().map(move |row| row[j])).collect()
+    // Column per parameter: entry `j * count + i` is quantity `i`'s derivative by `j`, NaN for
+    // a quantity not asked for.
+    let mut columns = |wanted: &[bool]| -> Vec<f64> {
+        let count = wanted.len();
+        let mut a = vec![f64::NAN; count * m];
+        for i in (0..count).filter(|&i| wanted[i]) {
+            let row = rows.next().expect("a row per seed");
+            for j in 0..m {
+                a[j * count + i] = row[j];
+            }
+        }
+        a
     };
     let fin = &mut result.final_state;
-    fin.dstate = Some(columns(n));
-    fin.doutputs = Some(columns(k));
+    fin.dstate = Some(columns(&states_wanted));
+    fin.doutputs = Some(columns(&outputs_wanted));
     if at_stop {
-        fin.dstate_total = Some(columns(n));
-        fin.doutputs_total = Some(columns(k));
+        fin.dstate_total = Some(columns(&states_wanted));
+        fin.doutputs_total = Some(columns(&outputs_wanted));
     }
     if let Some(cusp) = &mut result.end_cusp {
-        cusp.dstate = Some(columns(n));
-        cusp.doutputs = Some(columns(k));
+        cusp.dstate = Some(columns(&states_wanted));
+        cusp.doutputs = Some(columns(&outputs_wanted));
     }
     result.stats.sens = Some(super::Sens::Adjoint);
     Ok(Ok(result))
@@ -373,6 +389,8 @@ impl Recorded {
             }
         }
         let mut scratch = Scratch::default();
+        // A drift's cotangent times `dt`, and `f_x^T` of it.
+        let mut drift = (vec![0.0; n], vec![0.0; n]);
         // Per row: the cotangent of the current instant's `dt/dp` gathered from the events that
         // cascade from its first event (they take its `dt/dp`), handed to that event.
         let mut pending = vec![0.0; rows];
@@ -449,6 +467,21 @@ impl Recorded {
                     for r in (0..rows).filter(|&r| !skips(r, index)) {
                         let (lam, pbar) = (&mut lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
                         switch_backward(sys, p, &switch, lam, pbar);
+                    }
+                }
+                Piece::Drift { dt, mode, t, x } => {
+                    // `S+ = S + dt (f_x S + f_p)` at `x`: `lam += dt f_x^T lam`, `pbar += dt f_p^T lam`.
+                    let x = &store[x..x + n];
+                    let (w, gx) = (&mut drift.0, &mut drift.1);
+                    for r in (0..rows).filter(|&r| !skips(r, index)) {
+                        let (lam, pbar) = (&mut lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
+                        for (w, l) in w.iter_mut().zip(lam.iter()) {
+                            *w = dt * l;
+                        }
+                        sys.flow_vjp_add(mode, t, x, w, p, gx, pbar);
+                        for (l, g) in lam.iter_mut().zip(gx.iter()) {
+                            *l += g;
+                        }
                     }
                 }
                 Piece::Knot { set, t, jump } => {

@@ -646,17 +646,9 @@ const CI_MODELS: usize = 300;
 /// `HYBC_RELATIONS=full HYBC_RELATIONS_FIRST=N HYBC_RELATIONS_MODELS=1 cargo test --release
 /// --test it relations -- --nocapture`). They belong to the event issue; the test fails on any
 /// violation not listed here and on any listed model that no longer violates, so the list stays
-/// true as they are fixed.
-const KNOWN: &[(u64, &str)] = &[(779, STIFF_TOP_SHIFTED)];
-
-/// A stiff top (`- 1000 x0`) with a flow switch and a time event, under `--t-start 1e6`, `auto`
-/// with every gradient: the final state 1.3e-4 off (12,640 tolerances), right unshifted. The
-/// cause is the time grid, not the run: its 2578 events each fire at the first floating-point
-/// time on the crossed side (rule 1), up to one spacing late (1.2e-10 at `t = 1e6`), with `x0`
-/// crossing at speed 410: 4.8e-8 per event, 1.2e-4 over the run; two tight DOP853 runs (rtol
-/// 1e-12) at shifts 0 and 1e6 differ by 6.9e-5 themselves. The relation needs a tolerance that
-/// holds the grid's resolution (the events' speeds times the spacing of `t`).
-const STIFF_TOP_SHIFTED: &str = "a stiff top off under a time shift: the time grid's resolution at t = 1e6";
+/// true as they are fixed. None since model 779 (a stiff top under a time shift of 1e6, whose 2,578 events each fired up
+/// to a spacing of `t` late) is applied at its crossings (docs/language.md rule 1, the lateness).
+const KNOWN: &[(u64, &str)] = &[];
 
 #[test]
 fn generated_models_keep_every_relation_under_every_stepper() {
