@@ -861,6 +861,7 @@ fn a_derivative_with_respect_to_a_node_holds_its_operands_fixed() {
 
 /// `HybridSystem::flow_vjp_dir` (`xbar += (w^T f_xx) v + a f_tx^T w`, `pbar += (w^T f_xp) v +
 /// a f_tp^T w`), what the adjoint of a Rosenbrock step reads for its `J` and `F_t`.
+#[allow(clippy::too_many_arguments)]
 fn vjp_dir(
     sys: &dyn HybridSystem,
     mode: usize,

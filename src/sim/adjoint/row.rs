@@ -144,10 +144,8 @@ fn row_backward<S: HybridSystem + ?Sized>(
     let s = tab.stages;
     let (t0, h, mode) = (step.t0, step.h, step.mode);
     let at = |t: f64| if t > step.ceiling { step.ceiling } else { t };
-    for v in [&mut w.kbar] {
-        v.clear();
-        v.resize(s * n, 0.0);
-    }
+    w.kbar.clear();
+    w.kbar.resize(s * n, 0.0);
     for v in [&mut w.x0bar, &mut w.lam, &mut w.ubar, &mut w.gbar, &mut w.g, &mut w.dir, &mut w.gx] {
         v.clear();
         v.resize(n, 0.0);
