@@ -11,7 +11,7 @@ use cranelift_module::{default_libcall_names, FuncId, Module};
 
 use super::plan::{plan_model, plan_vjp, KernelPlan, Lens, ModelKernels, N_OUTS};
 use super::runtime::Callee;
-use super::stiff::plan_stiff;
+use super::stiff::{plan_stiff, plan_vjp_dir};
 use super::translate::{declare_callees, define_driver, define_kernel};
 use super::{
     CodegenError, CompileOptions, OptLevel, RegAlloc, AUTO_REGALLOC_LIMIT, AUTO_REGALLOC_NODE_LIMIT,
@@ -96,6 +96,10 @@ pub struct CompiledModel {
     /// module is freed in `Drop`.
     vjp: OnceLock<Result<VjpKernels, String>>,
     vjp_module: Mutex<Option<JITModule>>,
+    /// Each mode's `flow_vjp_dir` kernel once built (`HybridSystem::flow_vjp_dir`'s first call:
+    /// the adjoint through a Rosenbrock step); their module is freed in `Drop`.
+    vjp_dir: OnceLock<Result<Vec<Kernel>, String>>,
+    vjp_dir_module: Mutex<Option<JITModule>>,
 }
 
 /// The adjoint's kernels, per mode, with what the host scatters after each (`plan::VjpPlan`).
@@ -213,6 +217,8 @@ impl CompiledModel {
                 stiff_module: Mutex::new(None),
                 vjp: OnceLock::new(),
                 vjp_module: Mutex::new(None),
+                vjp_dir: OnceLock::new(),
+                vjp_dir_module: Mutex::new(None),
             }),
             Err(e) => {
                 // SAFETY: no pointer into the module's memory was handed out: `build_kernels`
@@ -270,6 +276,28 @@ impl CompiledModel {
             columns: plan.columns,
             summed: plan.summed,
         })
+    }
+}
+
+impl CompiledModel {
+    /// The adjoint's second-order kernels, compiled on first use (`stiff::plan_vjp_dir`).
+    fn vjp_dir_kernels(&self) -> Result<&[Kernel], &str> {
+        self.vjp_dir
+            .get_or_init(|| self.build_vjp_dir().map_err(|e| e.to_string()))
+            .as_ref()
+            .map(Vec::as_slice)
+            .map_err(String::as_str)
+    }
+
+    fn build_vjp_dir(&self) -> Result<Vec<Kernel>, CodegenError> {
+        // A copy: the plan adds the second derivatives to its store.
+        let mut funcs = lock(&self.source)
+            .clone()
+            .ok_or(CodegenError::Internal { reason: "model functions already consumed" })?;
+        let plan = plan_vjp_dir(&mut funcs, &self.info)?;
+        let (module, mut kernels) = build_module(&self.opts, &funcs, &[&plan], "flow_vjp_dir")?;
+        *lock(&self.vjp_dir_module) = Some(module);
+        Ok(kernels.pop().unwrap_or_default())
     }
 }
 
@@ -353,6 +381,14 @@ impl Drop for CompiledModel {
         };
         if let Some(module) = vjp.take() {
             // SAFETY: as above, for the adjoint's kernels in `self.vjp`.
+            unsafe { module.free_memory() };
+        }
+        let vjp_dir = match self.vjp_dir_module.get_mut() {
+            Ok(slot) => slot,
+            Err(poisoned) => poisoned.into_inner(),
+        };
+        if let Some(module) = vjp_dir.take() {
+            // SAFETY: as above, for the adjoint's kernels in `self.vjp_dir`.
             unsafe { module.free_memory() };
         }
     }
@@ -524,6 +560,38 @@ impl HybridSystem for CompiledModel {
     ) {
         if !self.vjp_into(mode, t, x, w, p, gx, pbar) {
             poison([gx, pbar, &mut []]);
+        }
+    }
+
+    fn flow_vjp_dir(
+        &self,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        v: &[f64],
+        a: f64,
+        w: &[f64],
+        p: &[f64],
+        xbar: &mut [f64],
+        pbar: &mut [f64],
+    ) {
+        let n = x.len();
+        let (mut gx, mut gp) = (vec![0.0; n], vec![0.0; pbar.len()]);
+        match self.vjp_dir_kernels().ok().and_then(|k| k.get(mode)) {
+            Some(k) if v.len() == n => {
+                let mut xva = Vec::with_capacity(2 * n + 1);
+                xva.extend_from_slice(x);
+                xva.extend_from_slice(v);
+                xva.push(a);
+                k.call(t, &xva, w, p, [&mut gx, &mut gp, &mut []]);
+            }
+            _ => poison([&mut gx, &mut gp, &mut []]),
+        }
+        for (o, g) in xbar.iter_mut().zip(&gx) {
+            *o += g;
+        }
+        for (o, g) in pbar.iter_mut().zip(&gp) {
+            *o += g;
         }
     }
 

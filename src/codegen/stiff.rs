@@ -109,6 +109,48 @@ pub(crate) fn plan_stiff(funcs: &mut ModelFunctions, info: &SystemInfo) -> Resul
     Ok(plan)
 }
 
+/// The adjoint's second-order kernels, one per mode: `mode{k}_flow_vjp_dir` (inputs
+/// `x = [x, v, a]` (2n + 1), `s = w` (n)) writes `d phi/dx` (n) and `d phi/dp` (m, by
+/// sensitivity column) for `phi = w^T (f_x v + a f_t)` (`expr::flow_vjp_dir_terms`: one `SensDot`
+/// over the rows per entry), which `HybridSystem::flow_vjp_dir` adds into the cotangents. Planned
+/// and compiled on its first call, into a module of its own: only an adjoint through Rosenbrock
+/// steps pays for these second derivatives.
+pub(crate) fn plan_vjp_dir(
+    funcs: &mut ModelFunctions,
+    info: &SystemInfo,
+) -> Result<Vec<KernelPlan>, CodegenError> {
+    let n = info.n_states();
+    let m = info.n_grad();
+    let n_params = info.n_params();
+    let mut grad_col = vec![None; n_params];
+    for (c, &param) in info.grad_params.iter().enumerate() {
+        if let Some(slot) = grad_col.get_mut(param) {
+            *slot = Some(c);
+        }
+    }
+    let mut d = Differentiator::new();
+    let modes = funcs.modes.clone();
+    let store = &mut funcs.store;
+    let mut plans = Vec::new();
+    for (k, mode) in modes.iter().enumerate() {
+        let terms = crate::expr::flow_vjp_dir_terms(store, &mut d, mode, n, &grad_col, m);
+        let lens = Lens { x: 2 * n + 1, s: n, p: n_params, out: [n, m, 0] };
+        let mut plan = KernelPlan::new(format!("mode{k}_flow_vjp_dir"), lens);
+        plan.prefill = [true, true, false];
+        for (out, columns) in [(0, terms.x), (1, terms.p)] {
+            for (c, products) in columns.into_iter().enumerate() {
+                if !products.is_empty() {
+                    plan.write(out, c, Term::SensDot { products, bias: None })?;
+                }
+            }
+        }
+        plan.write_small_zeros();
+        plan.check(store)?;
+        plans.push(plan);
+    }
+    Ok(plans)
+}
+
 fn sens_term(products: Vec<(ExprId, u32)>, bias: Option<ExprId>) -> Term {
     if products.is_empty() && bias.is_none() {
         Term::Zero

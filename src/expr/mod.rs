@@ -10,6 +10,7 @@ pub mod functions;
 pub mod node;
 pub mod simplify;
 pub mod store;
+pub mod vjp_dir;
 
 pub use diff::{diff, Differentiator, Var};
 pub use display::{to_infix, to_infix_capped, to_infix_group, Group};
@@ -22,3 +23,4 @@ pub use finite::finite_at_finite_inputs;
 pub use functions::*;
 pub use node::*;
 pub use store::*;
+pub use vjp_dir::{flow_vjp_dir_terms, VjpDirTerms};

@@ -86,9 +86,21 @@ struct KnotKernels {
     grad: Kernel,
 }
 
+/// One mode's `flow_vjp_dir` (`expr::flow_vjp_dir_terms`): the products' expressions and, per
+/// root, `(output, entry, row)`: `output[entry] += w[row] * value`, the entries' products in the
+/// compiled kernel's order.
+#[derive(Clone, Debug)]
+struct VjpDirKernel {
+    tape: Tape,
+    dests: Vec<(usize, usize, usize)>,
+}
+
 /// Runs a model's functions with the reference evaluator.
 #[derive(Clone, Debug)]
 pub struct Interpreter {
+    /// The functions, kept for the adjoint's second-order kernels (built on their first call).
+    source: std::sync::Arc<ModelFunctions>,
+    vjp_dir: std::sync::OnceLock<Vec<VjpDirKernel>>,
     info: SystemInfo,
     /// The sensitivity column of every parameter, `None` where it is not differentiated.
     columns: Vec<Option<usize>>,
@@ -239,6 +251,7 @@ impl Interpreter {
         yparts.extend(v_parts(2, &funcs.output_t));
 
         Interpreter {
+            vjp_dir: std::sync::OnceLock::new(),
             columns: column.clone(),
             init: Tape::new(store, &funcs.init),
             init_sens: Kernel::new(store, p_parts(0, &funcs.init_p, n)),
@@ -248,7 +261,38 @@ impl Interpreter {
             outputs: Tape::new(store, &funcs.outputs),
             output_jac: Kernel::new(store, yparts),
             info,
+            source: std::sync::Arc::new(funcs),
         }
+    }
+}
+
+impl Interpreter {
+    /// Every mode's `flow_vjp_dir` from the same expressions as the compiled kernel's.
+    fn vjp_dir_kernels(&self) -> &[VjpDirKernel] {
+        self.vjp_dir.get_or_init(|| {
+            let mut funcs = (*self.source).clone();
+            let n = funcs.n_states as usize;
+            let m = self.info.n_grad();
+            let mut d = crate::expr::Differentiator::new();
+            let modes = funcs.modes.clone();
+            modes
+                .iter()
+                .map(|mode| {
+                    let terms =
+                        crate::expr::flow_vjp_dir_terms(&mut funcs.store, &mut d, mode, n, &self.columns, m);
+                    let (mut roots, mut dests) = (Vec::new(), Vec::new());
+                    for (out, columns) in [(0, &terms.x), (1, &terms.p)] {
+                        for (c, products) in columns.iter().enumerate() {
+                            for &(e, i) in products {
+                                roots.push(e);
+                                dests.push((out, c, i as usize));
+                            }
+                        }
+                    }
+                    VjpDirKernel { tape: Tape::new(&funcs.store, &roots), dests }
+                })
+                .collect()
+        })
     }
 }
 
@@ -305,6 +349,43 @@ impl HybridSystem for Interpreter {
         }
         for (&(i, j), v) in m.fp.iter().zip(fp) {
             ds[j * n + i] += v;
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn flow_vjp_dir(
+        &self,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        v: &[f64],
+        a: f64,
+        w: &[f64],
+        p: &[f64],
+        xbar: &mut [f64],
+        pbar: &mut [f64],
+    ) {
+        let Some(k) = self.vjp_dir_kernels().get(mode) else {
+            return;
+        };
+        let mut xva = x.to_vec();
+        xva.extend_from_slice(v);
+        xva.push(a);
+        let mut values = vec![0.0; k.tape.n_roots()];
+        k.tape.eval_into(t, &xva, p, &mut Vec::new(), &mut values);
+        // Each entry's products summed in order from zero, then added, as the kernel's output is.
+        let (mut gx, mut gp) = (vec![0.0; xbar.len()], vec![0.0; pbar.len()]);
+        for (&(out, c, i), value) in k.dests.iter().zip(values) {
+            let slot = if out == 0 { gx.get_mut(c) } else { gp.get_mut(c) };
+            if let (Some(slot), Some(wi)) = (slot, w.get(i)) {
+                *slot += value * wi;
+            }
+        }
+        for (o, g) in xbar.iter_mut().zip(&gx) {
+            *o += g;
+        }
+        for (o, g) in pbar.iter_mut().zip(&gp) {
+            *o += g;
         }
     }
 

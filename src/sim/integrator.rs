@@ -2071,10 +2071,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
 
     /// Records the current point as `kind`, if the recorder wants it.
     /// Tells the tape of the step from `tape_x0` planned as `plan` (taken with size `h`) and how
-    /// it ended; a Rosenbrock step is one the backward pass does not carry.
+    /// it ended.
     fn tape_step(&mut self, plan: Plan, h: f64, cut: Cut) {
         let Some(pair) = self.work.stepper.tape_pair() else {
-            self.recorder.tape(&TapeEntry::Unsupported("a step of a Rosenbrock method"));
+            self.recorder.tape(&TapeEntry::Unsupported("a step of a method without a tape form"));
             return;
         };
         let ceiling = if plan.on_knot { plan.t1.next_down() } else { f64::INFINITY };

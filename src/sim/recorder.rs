@@ -68,7 +68,7 @@ pub trait Recorder {
     }
 }
 
-/// A step of an explicit pair as the adjoint tape records it: from `(t0, x0)` of size `h` in
+/// A step (of an explicit pair or a Rosenbrock method) as the adjoint tape records it: from `(t0, x0)` of size `h` in
 /// `mode`, the flow read at `ceiling` at the latest (a step ending on an input knot).
 #[derive(Clone, Copy, Debug)]
 pub struct TapeStep<'a> {

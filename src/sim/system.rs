@@ -354,6 +354,50 @@ pub trait HybridSystem: Sync {
             *a += b;
         }
     }
+    /// The transposes of a Rosenbrock step's second-order terms (the adjoint's backward pass
+    /// through a stage, docs/design.md "The adjoint"): with `phi = w^T (f_x v + a f_t)` at
+    /// `(t, x)` in `mode`, adds `d phi/dx = (w^T f_xx) v + a f_tx^T w` into `xbar` (n) and
+    /// `d phi/dp = (w^T f_xp) v + a f_tp^T w` into `pbar` (m, `grad_params` order), never
+    /// forming `f_xx`. It is the transpose of [`Self::sens_dir`] (and of `flow_jac`'s `st`):
+    /// `w . sens_dir(v)_j = (w^T f_xx)[v, s_j] + (w^T f_xp_j) v`.
+    ///
+    /// A compiled model has a kernel per mode, compiled on the first call from the symbolic
+    /// second derivatives (`expr::flow_vjp_dir_terms`); the interpreter evaluates the same
+    /// expressions. The default, for hand-written systems in tests, takes a central difference
+    /// of [`Self::flow_vjp`] along `(v, a)` in `(x, t)` (about 1e-10 relative).
+    #[allow(clippy::too_many_arguments)]
+    fn flow_vjp_dir(
+        &self,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        v: &[f64],
+        a: f64,
+        w: &[f64],
+        p: &[f64],
+        xbar: &mut [f64],
+        pbar: &mut [f64],
+    ) {
+        let n = x.len();
+        let vmax = v.iter().fold(a.abs(), |m, b| m.max(b.abs()));
+        if vmax == 0.0 || w.iter().all(|&c| c == 0.0) {
+            return;
+        }
+        let xmax = x.iter().fold(t.abs().max(1.0), |m, b| m.max(b.abs()));
+        let h = FD_STEP * xmax / vmax;
+        let xp: Vec<f64> = x.iter().zip(v).map(|(x, v)| x + h * v).collect();
+        let xm: Vec<f64> = x.iter().zip(v).map(|(x, v)| x - h * v).collect();
+        let (mut gxp, mut gxm) = (vec![0.0; n], vec![0.0; n]);
+        let (mut gpp, mut gpm) = (vec![0.0; pbar.len()], vec![0.0; pbar.len()]);
+        self.flow_vjp(mode, t + h * a, &xp, w, p, &mut gxp, &mut gpp);
+        self.flow_vjp(mode, t - h * a, &xm, w, p, &mut gxm, &mut gpm);
+        for (o, (a, b)) in xbar.iter_mut().zip(gxp.iter().zip(&gxm)) {
+            *o += (a - b) / (2.0 * h);
+        }
+        for (o, (a, b)) in pbar.iter_mut().zip(gpp.iter().zip(&gpm)) {
+            *o += (a - b) / (2.0 * h);
+        }
+    }
     /// Guards of every event active in `mode`, in the order of `ModeInfo::events`.
     fn guards(&self, mode: usize, t: f64, x: &[f64], p: &[f64], g: &mut [f64]);
     /// Speeds `g_x f + g_t` of every guard active in `mode` (order of `ModeInfo::events`) along a

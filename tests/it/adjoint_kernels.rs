@@ -858,3 +858,225 @@ fn a_derivative_with_respect_to_a_node_holds_its_operands_fixed() {
         );
     }
 }
+
+/// `HybridSystem::flow_vjp_dir` (`xbar += (w^T f_xx) v + a f_tx^T w`, `pbar += (w^T f_xp) v +
+/// a f_tp^T w`), what the adjoint of a Rosenbrock step reads for its `J` and `F_t`.
+#[allow(clippy::too_many_arguments)]
+fn vjp_dir(
+    sys: &dyn HybridSystem,
+    mode: usize,
+    t: f64,
+    x: &[f64],
+    v: &[f64],
+    a: f64,
+    w: &[f64],
+    p: &[f64],
+) -> (Vec<f64>, Vec<f64>) {
+    let info = sys.info();
+    let (mut xbar, mut pbar) = (vec![0.0; info.n_states()], vec![0.0; info.n_grad()]);
+    sys.flow_vjp_dir(mode, t, x, v, a, w, p, &mut xbar, &mut pbar);
+    (xbar, pbar)
+}
+
+/// `|a - b| <= rel * scale`, NaN with NaN.
+fn within(what: &str, a: f64, b: f64, rel: f64, scale: f64) {
+    assert!(
+        (a - b).abs() <= rel * scale || (a.is_nan() && b.is_nan()),
+        "{what}: {a:e} vs {b:e} (|diff| {:e}, scale {scale:e})",
+        (a - b).abs()
+    );
+}
+
+/// Every shipped model, every mode, every parameter differentiated and none: the compiled
+/// `flow_vjp_dir` equals the interpreter's (the same expressions, `expr::flow_vjp_dir_terms`)
+/// to 1e-13 of the largest entry, and both are the transposes of the forward coupling
+/// `sens_dir` and of `flow_jac`'s `st`:
+/// - `pbar_j(v, a) = w . sens_dir(v; S = 0)_j + a w . st(S = 0)_j` (`f_xp_j v`, `f_pt_j`);
+/// - `xbar(v, 0) . s_j = w . (sens_dir(v; S)_j - sens_dir(v; 0)_j)` (`f_xx[s_j, v]`) and
+///   `xbar(0, 1) . s_j = w . (st(S)_j - st(0)_j)` (`f_xt s_j`),
+///
+/// each to 1e-12 of the sum of its terms' magnitudes (round-off of sums in different orders,
+/// with cancellations, far below it).
+#[test]
+fn the_second_order_products_are_the_transposes_of_the_forward_coupling() {
+    let mut rng = Rng(0x5DEE_CE66_D1CE_4E5B);
+    let mut compared = 0;
+    for shipped in shipped_models() {
+        let model = hybc::check_source(&shipped.source).unwrap_or_else(|e| panic!("{}: {e}", shipped.name));
+        let funcs = lower(&model);
+        let p0: Vec<f64> = model.params.iter().map(|p| p.default).collect();
+        let all: Vec<ParamIdx> = (0..model.n_params() as u32).map(ParamIdx).collect();
+        for grad in [all, Vec::new()] {
+            let info = system_info(&model, &grad);
+            let reference = Interpreter::new(funcs.clone(), info.clone());
+            let jit =
+                CompiledModel::compile(&funcs, info.clone(), &CompileOptions::default()).expect("compiles");
+            jit.prepare_jacobians().expect("stiff kernels");
+            let (n, m) = (info.n_states(), info.n_grad());
+            for trial in 0..6 {
+                let p: Vec<f64> = p0.iter().map(|&v| v + 0.25 * rng.next() * v.abs().max(1.0)).collect();
+                let (x, w, v, s) = (rng.vec(n), rng.vec(n), rng.vec(n), rng.vec(n * m));
+                let a = rng.next();
+                for mode in 0..info.modes.len() {
+                    let t = 2.0 + 2.0 * rng.next();
+                    let what = |f: &str| format!("{} (m = {m}) trial {trial} mode {mode} {f}", shipped.name);
+                    let (xb, pb) = vjp_dir(&jit, mode, t, &x, &v, a, &w, &p);
+                    let (rxb, rpb) = vjp_dir(&reference, mode, t, &x, &v, a, &w, &p);
+                    if !xb.iter().chain(&pb).all(|g| g.is_finite()) {
+                        continue;
+                    }
+                    let top = xb.iter().chain(&pb).fold(f64::MIN_POSITIVE, |m, g| m.max(g.abs()));
+                    for (i, (g, r)) in xb.iter().zip(&rxb).enumerate() {
+                        within(&what(&format!("xbar[{i}] jit vs interpreter")), *g, *r, 1e-13, top);
+                    }
+                    for (j, (g, r)) in pb.iter().zip(&rpb).enumerate() {
+                        within(&what(&format!("pbar[{j}] jit vs interpreter")), *g, *r, 1e-13, top);
+                    }
+                    let zero = vec![0.0; n * m];
+                    let dir = |s: &[f64]| {
+                        let mut xv = x.clone();
+                        xv.extend_from_slice(&v);
+                        let mut out = vec![0.0; n * m];
+                        jit.sens_dir(mode, t, &xv, s, &p, &mut out);
+                        out
+                    };
+                    let st = |s: &[f64]| {
+                        let (mut fx, mut ft, mut out) = (vec![0.0; n * n], vec![0.0; n], vec![0.0; n * m]);
+                        jit.flow_jac(mode, t, &x, s, &p, &mut fx, &mut ft, &mut out);
+                        out
+                    };
+                    let (dir0, dirs, st0, sts) = (dir(&zero), dir(&s), st(&zero), st(&s));
+                    let absdot =
+                        |u: &[f64], v: &[f64]| u.iter().zip(v).map(|(a, b)| (a * b).abs()).sum::<f64>();
+                    let (xv0, _) = vjp_dir(&jit, mode, t, &x, &v, 0.0, &w, &p);
+                    let (xt, _) = vjp_dir(&jit, mode, t, &x, &vec![0.0; n], 1.0, &w, &p);
+                    for j in 0..m {
+                        let col = |u: &[f64]| u[j * n..(j + 1) * n].to_vec();
+                        let want = dot(&w, &col(&dir0)) + a * dot(&w, &col(&st0));
+                        let scale =
+                            absdot(&w, &col(&dir0)) + (a * absdot(&w, &col(&st0))).abs() + pb[j].abs();
+                        within(&what(&format!("pbar[{j}] vs sens_dir")), pb[j], want, 1e-12, scale);
+                        let sj = col(&s);
+                        let want = dot(&w, &col(&dirs)) - dot(&w, &col(&dir0));
+                        let scale = absdot(&w, &col(&dirs)) + absdot(&w, &col(&dir0)) + absdot(&xv0, &sj);
+                        within(
+                            &what(&format!("xbar . s_{j} vs sens_dir")),
+                            dot(&xv0, &sj),
+                            want,
+                            1e-12,
+                            scale,
+                        );
+                        let want = dot(&w, &col(&sts)) - dot(&w, &col(&st0));
+                        let scale = absdot(&w, &col(&sts)) + absdot(&w, &col(&st0)) + absdot(&xt, &sj);
+                        within(&what(&format!("xbar_t . s_{j} vs st")), dot(&xt, &sj), want, 1e-12, scale);
+                    }
+                    compared += 1;
+                }
+            }
+        }
+    }
+    assert!(compared >= 100, "only {compared} points compared");
+}
+
+/// The trait's default (a central difference of `flow_vjp` along `(v, a)`) on the hand-written
+/// system against the compiled model of the same flow: 1e-7 of the largest entry.
+#[test]
+fn the_default_second_order_products_are_central_differences_of_the_vjp() {
+    let src = "model nl\nparam a = 0.7\nparam b = 1.3\nstate x = 1\nstate y = 0.5\n\
+               der(x) = a * x * y + sin(t) * b\nder(y) = -b * y^2 + a * x * t\n";
+    let model = hybc::check_source(src).expect("checks");
+    let funcs = lower(&model);
+    let grad: Vec<ParamIdx> = (0..2).map(ParamIdx).collect();
+    let info = system_info(&model, &grad);
+    let jit = CompiledModel::compile(&funcs, info.clone(), &CompileOptions::default()).expect("compiles");
+    /// Only the flow's own products: every other method is the trait's default.
+    struct Defaults<'a>(&'a CompiledModel);
+    impl HybridSystem for Defaults<'_> {
+        fn info(&self) -> &SystemInfo {
+            self.0.info()
+        }
+        fn initial_state(&self, p: &[f64], x0: &mut [f64]) {
+            self.0.initial_state(p, x0)
+        }
+        fn initial_sens(&self, p: &[f64], s0: &mut [f64]) {
+            self.0.initial_sens(p, s0)
+        }
+        fn flow(&self, mode: usize, t: f64, x: &[f64], p: &[f64], dx: &mut [f64]) {
+            self.0.flow(mode, t, x, p, dx)
+        }
+        fn flow_sens(
+            &self,
+            mode: usize,
+            t: f64,
+            x: &[f64],
+            s: &[f64],
+            p: &[f64],
+            dx: &mut [f64],
+            ds: &mut [f64],
+        ) {
+            self.0.flow_sens(mode, t, x, s, p, dx, ds)
+        }
+        fn flow_vjp(
+            &self,
+            mode: usize,
+            t: f64,
+            x: &[f64],
+            w: &[f64],
+            p: &[f64],
+            gx: &mut [f64],
+            gp: &mut [f64],
+        ) {
+            self.0.flow_vjp(mode, t, x, w, p, gx, gp)
+        }
+        fn guards(&self, mode: usize, t: f64, x: &[f64], p: &[f64], g: &mut [f64]) {
+            self.0.guards(mode, t, x, p, g)
+        }
+        fn guard_grad(
+            &self,
+            event: usize,
+            t: f64,
+            x: &[f64],
+            p: &[f64],
+            gx: &mut [f64],
+            gp: &mut [f64],
+        ) -> f64 {
+            self.0.guard_grad(event, t, x, p, gx, gp)
+        }
+        fn condition(&self, event: usize, t: f64, x: &[f64], p: &[f64]) -> bool {
+            self.0.condition(event, t, x, p)
+        }
+        fn reset(&self, event: usize, t: f64, x: &[f64], p: &[f64], r: &mut [f64]) {
+            self.0.reset(event, t, x, p, r)
+        }
+        fn reset_jac(
+            &self,
+            event: usize,
+            t: f64,
+            x: &[f64],
+            p: &[f64],
+            rx: &mut [f64],
+            rp: &mut [f64],
+            rt: &mut [f64],
+        ) {
+            self.0.reset_jac(event, t, x, p, rx, rp, rt)
+        }
+        fn outputs(&self, t: f64, x: &[f64], p: &[f64], y: &mut [f64]) {
+            self.0.outputs(t, x, p, y)
+        }
+        fn output_jac(&self, t: f64, x: &[f64], p: &[f64], yx: &mut [f64], yp: &mut [f64], yt: &mut [f64]) {
+            self.0.output_jac(t, x, p, yx, yp, yt)
+        }
+    }
+    let hand = Defaults(&jit);
+    let mut rng = Rng(77);
+    for _ in 0..20 {
+        let (x, w, v, p) = (rng.vec(2), rng.vec(2), rng.vec(2), rng.vec(2));
+        let (a, t) = (rng.next(), 1.0 + rng.next());
+        let (xb, pb) = vjp_dir(&jit, 0, t, &x, &v, a, &w, &p);
+        let (hx, hp) = vjp_dir(&hand, 0, t, &x, &v, a, &w, &p);
+        let top = xb.iter().chain(&pb).fold(1e-300, |m: f64, g| m.max(g.abs()));
+        for (g, h) in xb.iter().chain(&pb).zip(hx.iter().chain(&hp)) {
+            within("default vs compiled", *h, *g, 1e-7, top);
+        }
+    }
+}

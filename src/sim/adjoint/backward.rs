@@ -1,5 +1,6 @@
 //! Stage 5 (sim): the transposes of the pieces a run is made of, each the exact transpose of the
 //! linear map the forward sensitivities apply there (docs/design.md, "The adjoint"):
+//! - a step of a Rosenbrock method: `row.rs`;
 //! - a step of an explicit pair: its stages recomputed from the step's start (states only, the
 //!   same stage sums as the forward run, so the same numbers), then walked backward, each stage's
 //!   cotangent taken through the flow's vector-Jacobian products `f_x^T w`, `f_p^T w`;
@@ -8,16 +9,18 @@
 //!   the stages, transposed);
 //! - an event's saltation `S+ = R_x S- + R_p + v dt/dp`, `dt/dp = -(g_x S- + g_p) / d`.
 
+use super::row::{self, RowScratch};
 use crate::sim::method::stepper::TapePair;
 use crate::sim::method::sums::stage_sum;
 use crate::sim::method::tableau::{Tableau, DOP853, DOPRI5};
 use crate::sim::system::HybridSystem;
 
-/// The tableau of an explicit pair.
+/// The tableau of an explicit pair (a Rosenbrock method's steps go to `row.rs`).
 fn tableau(pair: TapePair) -> &'static Tableau {
     match pair {
         TapePair::Dopri5 => &DOPRI5,
         TapePair::Dop853 => &DOP853,
+        TapePair::Rodas5p | TapePair::Rodas4 => unreachable!("a Rosenbrock step is transposed in row.rs"),
     }
 }
 
@@ -52,12 +55,14 @@ pub(super) struct Scratch {
     kbar: Vec<f64>,
     xbar: Vec<f64>,
     gx: Vec<f64>,
+    /// The Rosenbrock steps' own.
+    pub row: RowScratch,
 }
 
 /// The flow's vector-Jacobian products at a stage, added into `xbar` (n) and `pbar` (m)
 /// (`HybridSystem::flow_vjp_add`: a control's knots cost only the two read there).
 #[allow(clippy::too_many_arguments)]
-fn add_vjp<S: HybridSystem + ?Sized>(
+pub(super) fn add_vjp<S: HybridSystem + ?Sized>(
     sys: &S,
     mode: usize,
     t: f64,
@@ -93,7 +98,8 @@ fn nested_weights(s: f64, count: usize) -> [f64; 8] {
 
 /// `lams` (rows of n): on entry the cotangents of the state the step hands on, on return those
 /// of its start; `pbars` (rows of m) gain the parameters' share. The stages are recomputed once
-/// for every row.
+/// for every row. One operation, two implementations: an explicit pair's step here, a
+/// Rosenbrock method's in `row.rs`.
 pub(super) fn step_backward<S: HybridSystem + ?Sized>(
     sys: &S,
     p: &[f64],
@@ -104,6 +110,10 @@ pub(super) fn step_backward<S: HybridSystem + ?Sized>(
 ) {
     let (n, rows) = (step.x0.len(), lams.len() / step.x0.len().max(1));
     if n == 0 || rows == 0 {
+        return;
+    }
+    if let Some(tab) = row::tableau(step.pair) {
+        row::step_backward(sys, p, step, tab, lams, pbars, &mut w.row);
         return;
     }
     let m = pbars.len() / rows;

@@ -6,15 +6,16 @@
 //! whose error test leaves the sensitivities out), on a [`Tape`]: each step's start, size and how
 //! it ended, each event's state before it. [`Recorded::gradient`] then walks the tape backward
 //! (`backward.rs`), one pass per quantity, and equals the forward sensitivities of that run to
-//! round-off. What the backward pass does not carry yet (a Rosenbrock step, a flow switch, a
-//! `pwc` knot, an event on a knot or cascading at another's instant, a grazing crossing, samples
-//! at `--at` times) is named in [`AdjointError::Unsupported`] rather than approximated.
+//! round-off. What the backward pass does not carry yet (a flow switch at another event's
+//! instant, an event on a knot, a grazing crossing, samples at `--at` times) is named in
+//! [`AdjointError::Unsupported`] rather than approximated.
 //!
 //! Memory: the tape keeps `n` numbers per step and `2n` per event (the forward run's
 //! `max_steps` and `max_events` bound it); the backward pass recomputes each step's stages.
 
 mod backward;
 mod plain;
+mod row;
 
 use super::recorder::{Point, PointKind, Recorder, TapeEntry, TapeStep};
 use super::result::{SimError, SimResult, StopReason};
@@ -106,6 +107,9 @@ pub struct Tape {
     /// States, `n` at a time, at the offsets the pieces name.
     store: Vec<f64>,
     unsupported: Option<&'static str>,
+    /// The factorisation the run's Rosenbrock steps used (the backward pass recomputes them
+    /// with it).
+    solver: super::LinearSolver,
 }
 
 impl Tape {
@@ -218,7 +222,7 @@ pub fn record<S: HybridSystem + ?Sized>(sys: &S, p: &[f64], opts: &SimOptions) -
     let mut opts = opts.clone();
     opts.sens_error_control = false;
     opts.trajectory = super::TrajectoryRequest::None;
-    let mut tape = Tape::default();
+    let mut tape = Tape { solver: opts.linear_solver, ..Tape::default() };
     if !opts.at.is_empty() {
         tape.unsupported = Some("samples at given times (--at)");
     }
@@ -389,6 +393,7 @@ impl Recorded {
             }
         }
         let mut scratch = Scratch::default();
+        scratch.row.solver = self.tape.solver;
         // A drift's cotangent times `dt`, and `f_x^T` of it.
         let mut drift = (vec![0.0; n], vec![0.0; n]);
         // Per row: the cotangent of the current instant's `dt/dp` gathered from the events that

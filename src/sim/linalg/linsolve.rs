@@ -506,6 +506,34 @@ impl Band {
         }
     }
 
+    /// Solves `W^T x = b` in place for one right-hand side in the banded order, with the
+    /// factors of [`Self::factor`] (LAPACK's `dgbtrs` transposed): `W^{-1}` is
+    /// `U^{-1} M_{n-1} .. M_0` with `M_j` row `j`'s exchange then its multipliers, so its
+    /// transpose is `U^{-T}` first, then each `M_j^T` from the last: the multipliers of column `j`
+    /// gathered into row `j`, then the exchange.
+    fn solve_transposed(&self, b: &mut [f64]) {
+        let (n, kl, ku2) = (self.n, self.kl, self.ku2);
+        // `U^T z = b`: row `j` of `U^T` is column `j` of `U`, contiguous in `ab`.
+        for j in 0..n {
+            let first = j.saturating_sub(ku2);
+            let u = &self.ab[self.idx(first, j)..self.idx(j, j)];
+            let dot: f64 = u.iter().zip(&b[first..j]).map(|(u, z)| u * z).sum();
+            b[j] = (b[j] - dot) * self.inv[j];
+        }
+        for j in (0..n).rev() {
+            let last = (j + kl).min(n - 1);
+            if last > j {
+                let l = &self.ab[self.idx(j + 1, j)..=self.idx(last, j)];
+                let dot: f64 = l.iter().zip(&b[j + 1..=last]).map(|(l, y)| l * y).sum();
+                b[j] -= dot;
+            }
+            let p = self.piv[j];
+            if p != j {
+                b.swap(j, p);
+            }
+        }
+    }
+
     /// [`Self::solve`] for rows of any width.
     fn solve_any(&self, b: &mut [f64], cols: usize) {
         let (n, kl, ku2) = (self.n, self.kl, self.ku2);
@@ -826,6 +854,76 @@ impl LinSolve {
     }
 }
 
+impl LinSolve {
+    /// Solves `W^T y = b` in place for one right-hand side, with the factorisation of the last
+    /// [`Self::factor`] (the adjoint's backward pass through a Rosenbrock stage: the same `W`
+    /// the forward step solved with, transposed); `false` when it is missing or singular.
+    pub(crate) fn solve_transposed(&mut self, b: &mut [f64]) -> bool {
+        let n = self.n;
+        if n == 0 {
+            return true;
+        }
+        let b = &mut b[..n];
+        match self.current {
+            Path::Band(key) => {
+                let Some(Some(Some(s))) = self.modes.get(key).map(|m| &m.band) else { return false };
+                // `W = Q^T W_Q Q` with `Q` the banded order: `W^T = Q^T W_Q^T Q`.
+                let mut work = std::mem::take(&mut self.band.work);
+                work.resize(n, 0.0);
+                for (&v, &at) in b.iter().zip(&s.perm) {
+                    work[at] = v;
+                }
+                self.band.solve_transposed(&mut work[..n]);
+                for (v, &at) in b.iter_mut().zip(&s.perm) {
+                    *v = work[at];
+                }
+                self.band.work = work;
+                true
+            }
+            Path::Sparse(key) if !self.sparse_in_dense => {
+                let Some(Some(Some(s))) = self.modes.get(key).map(|m| &m.sparse) else { return false };
+                self.sparse.solve_transposed(&s.sym, b);
+                true
+            }
+            Path::Sparse(_) | Path::Dense => match &self.lu {
+                Some(lu) => {
+                    // `P W = L U`, so `W^T = U^T L^T P`: two triangular solves, then `P^T`.
+                    let (p, l, u) = lu.clone().unpack();
+                    let mut v = DMatrixViewMut::from_slice(b, n, 1);
+                    if !u.tr_solve_upper_triangular_mut(&mut v) || !l.tr_solve_lower_triangular_mut(&mut v) {
+                        return false;
+                    }
+                    p.inv_permute_rows(&mut v);
+                    true
+                }
+                None => false,
+            },
+        }
+    }
+
+    /// `y += a f_x^T x` (`n` each) from the values in `fx` (dense or the pattern's), as of the
+    /// last [`Self::factor`]: the transpose of [`Self::mul_add`] for one block.
+    pub(crate) fn mul_add_transposed(&self, a: f64, x: &[f64], y: &mut [f64]) {
+        let n = self.n;
+        match self.rows() {
+            Some(s) => {
+                for (&(r, c), &v) in s.entries.iter().zip(&self.fx) {
+                    y[c] += a * v * x[r];
+                }
+            }
+            None => {
+                for (r, &xr) in x.iter().enumerate().take(n) {
+                    if xr != 0.0 {
+                        for (yc, f) in y.iter_mut().zip(&self.fx[r * n..(r + 1) * n]) {
+                            *yc += a * f * xr;
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -903,6 +1001,46 @@ mod tests {
         }
         // `y += a f_x x` and the row sums agree with the dense matrix's.
         products_match_the_dense(&lin, &dense, n, 3, &mut seed);
+        transposed_solves_hold(&mut lin, entries, &vals, hg, &mut seed);
+        transposed_solves_hold(&mut dense, entries, &vals, hg, &mut seed);
+    }
+
+    /// `W^T x = b` (the adjoint's solves) against the transpose of the pattern itself: the
+    /// residual `x - hg f_x^T x - b` is round-off (1e-11 of the largest `|x|`, as the forward
+    /// solves' test), and `y += a f_x^T x` is the pattern's transpose product to 1e-13.
+    fn transposed_solves_hold(
+        lin: &mut LinSolve,
+        entries: &[(u32, u32)],
+        vals: &[f64],
+        hg: f64,
+        seed: &mut u64,
+    ) {
+        let n = lin.n;
+        let wt_times = |x: &[f64]| {
+            let mut y = x.to_vec();
+            for (&(r, c), &v) in entries.iter().zip(vals) {
+                y[c as usize] -= hg * v * x[r as usize];
+            }
+            y
+        };
+        for _ in 0..3 {
+            let b: Vec<f64> = (0..n).map(|_| rnd(seed)).collect();
+            let mut x = b.clone();
+            assert!(lin.solve_transposed(&mut x));
+            let scale = x.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+            for (i, (a, b)) in wt_times(&x).iter().zip(&b).enumerate() {
+                assert!((a - b).abs() < 1e-11 * scale, "n {n}: W^T x - b = {:e} at {i}", a - b);
+            }
+            let mut y = b.clone();
+            lin.mul_add_transposed(-0.7, &x, &mut y);
+            let mut want = b.clone();
+            for (&(r, c), &v) in entries.iter().zip(vals) {
+                want[c as usize] += -0.7 * v * x[r as usize];
+            }
+            for (a, b) in y.iter().zip(&want) {
+                assert!((a - b).abs() <= 1e-13 * b.abs().max(scale), "{a} vs {b}");
+            }
+        }
     }
 
     /// A chain numbered in order: the model's own order is kept (no permutation) and the
@@ -1051,6 +1189,8 @@ mod tests {
             }
         }
         products_match_the_dense(&lin, &dense, n, 2, &mut seed);
+        transposed_solves_hold(&mut lin, entries, vals, hg, &mut seed);
+        transposed_solves_hold(&mut dense, entries, vals, hg, &mut seed);
         lin
     }
 

@@ -242,6 +242,30 @@ impl Numeric {
         self.work = work;
     }
 
+    /// Solves `W^T y = b` in place for one right-hand side (`n`), with the factors of the last
+    /// successful [`Self::factor`]: `U^T` forward (column `j` of `U` is row `j` of `U^T`, stored
+    /// contiguous), then `L^T` backward, in the elimination order.
+    pub(crate) fn solve_transposed(&mut self, s: &Symbolic, b: &mut [f64]) {
+        let n = s.n;
+        let mut work = std::mem::take(&mut self.work);
+        work.resize(n, 0.0);
+        for (&v, &at) in b.iter().zip(&s.perm) {
+            work[at] = v;
+        }
+        for j in 0..n {
+            let dot: f64 = (s.ptr[j]..s.diag[j]).map(|q| self.vals[q] * work[s.idx[q]]).sum();
+            work[j] = (work[j] - dot) * self.inv[j];
+        }
+        for j in (0..n).rev() {
+            let dot: f64 = (s.diag[j] + 1..s.ptr[j + 1]).map(|q| self.vals[q] * work[s.idx[q]]).sum();
+            work[j] -= dot;
+        }
+        for (v, &at) in b.iter_mut().zip(&s.perm) {
+            *v = work[at];
+        }
+        self.work = work;
+    }
+
     /// The substitutions of [`Self::solve`] on rows of `C` columns (the operations of
     /// [`Self::substitute_any`], in its order).
     fn substitute_rows<const C: usize>(&self, s: &Symbolic, x: &mut [[f64; C]]) {

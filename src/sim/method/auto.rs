@@ -357,7 +357,7 @@ impl Stepper for Auto {
 
     fn tape_pair(&self) -> Option<TapePair> {
         if self.stiff {
-            None
+            self.row.tape_pair()
         } else {
             self.rk.tape_pair()
         }

@@ -28,8 +28,8 @@
 
 use super::errnorm::{controlled, BlockNorm};
 use super::poly::CAP;
-use super::row_tableau::RowTableau;
-use super::stepper::{Interpolant, Rhs, Stepper};
+use super::row_tableau::{RowTableau, RODAS4, RODAS5P};
+use super::stepper::{Interpolant, Rhs, Stepper, TapePair};
 use crate::sim::linalg::linsolve::{LinSolve, LinearSolver};
 
 const SAFETY: f64 = 0.9;
@@ -500,6 +500,36 @@ impl Stepper for Rosenbrock {
         for (i, x) in self.stage_x.chunks_exact(n.max(1)).enumerate() {
             visit(self.tab.c[i + 1], x);
         }
+    }
+
+    fn tape_pair(&self) -> Option<TapePair> {
+        if std::ptr::eq(self.tab, &RODAS5P) {
+            Some(TapePair::Rodas5p)
+        } else if std::ptr::eq(self.tab, &RODAS4) {
+            Some(TapePair::Rodas4)
+        } else {
+            None
+        }
+    }
+}
+
+/// What the adjoint's backward pass reads of a Rosenbrock stepper's last attempt
+/// ([`Rosenbrock::last_attempt`], `sim/adjoint/row.rs`).
+pub(crate) struct LastAttempt<'a> {
+    /// The stages as slopes, `stages` blocks of `nz`.
+    pub k: &'a [f64],
+    /// The states of the stages `1..` (`n` each, stage `i` at `(i - 1) n`).
+    pub stage_x: &'a [f64],
+    /// The end state.
+    pub end: &'a [f64],
+    /// The factorisation of its `W` (whose `fx` holds the step's `J`).
+    pub lin: &'a mut LinSolve,
+}
+
+impl Rosenbrock {
+    /// The last attempt's stages, stage states, end state and factorisation.
+    pub(crate) fn last_attempt(&mut self) -> LastAttempt<'_> {
+        LastAttempt { k: &self.k, stage_x: &self.stage_x, end: &self.y_new, lin: &mut self.lin }
     }
 }
 

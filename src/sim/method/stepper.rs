@@ -161,14 +161,18 @@ pub trait Interpolant {
     }
 }
 
-/// An explicit pair, as the adjoint tape (`sim/recorder.rs`, `TapeEntry`) names the method of a
-/// step.
+/// The method of a step, as the adjoint tape (`sim/recorder.rs`, `TapeEntry`) names it: an
+/// explicit pair or a Rosenbrock method.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TapePair {
     /// Dormand-Prince 5(4).
     Dopri5,
     /// DOP853.
     Dop853,
+    /// The Rosenbrock method Rodas5P.
+    Rodas5p,
+    /// The Rosenbrock method Rodas4.
+    Rodas4,
 }
 
 /// A time-stepping method with error control and dense output.
@@ -251,8 +255,8 @@ pub trait Stepper {
     fn segments(&self, _t: f64) -> Option<Vec<crate::sim::result::MethodSegment>> {
         None
     }
-    /// The explicit pair the last attempt was taken with; `None` for a Rosenbrock method (the
-    /// adjoint's backward pass recomputes the explicit pairs' steps only).
+    /// The method the last attempt was taken with, for the adjoint's tape; `None` for a method
+    /// the backward pass does not recompute.
     fn tape_pair(&self) -> Option<TapePair> {
         None
     }
