@@ -6,6 +6,7 @@ mod support;
 
 mod adjoint;
 mod adjoint_kernels;
+mod arrays;
 mod check_grad;
 mod cli_cases;
 mod cli_run;
