@@ -1,5 +1,6 @@
 //! The front end on generated stress models (the ones `tests/it/stress_frontend.rs` checks):
-//! chained `let`s, `let`s that double their predecessor, a long chain of states. For each: the
+//! chained `let`s, `let`s that double their predecessor, a long chain of states (also written as a
+//! loop over an array, which `expand` flattens into the same model). For each: the
 //! time to check, to compile (lowering, every derivative, the JIT) and to run with a gradient,
 //! and the peak resident memory of each phase (VmHWM, reset before each through
 //! /proc/self/clear_refs). A plain bench binary: one run each, these take from milliseconds to
@@ -11,7 +12,7 @@ use hybc::Model;
 
 #[path = "support/stress_models.rs"]
 mod stress_models;
-use stress_models::{doubling_lets, let_chain, state_chain};
+use stress_models::{doubling_lets, let_chain, state_chain, state_chain_loop};
 
 /// Peak resident memory since the last reset, in MiB (0 where /proc is unavailable).
 fn peak_mib() -> f64 {
@@ -45,6 +46,7 @@ fn main() {
         ("30,000 chained lets", let_chain(30_000, true), "c"),
         ("60 doubling lets", doubling_lets(60), "p"),
         ("10,000 states", state_chain(10_000), "k"),
+        ("10,000 states, a loop", state_chain_loop(10_000), "k"),
     ];
     println!("{:<22} {:>16} {:>16} {:>16}", "model", "check", "compile", "run (1 gradient)");
     for (name, text, grad) in cases {

@@ -35,6 +35,7 @@ mod api;
 pub mod cli;
 pub mod codegen;
 pub mod diag;
+pub mod expand;
 pub mod expr;
 pub mod fit;
 pub mod gradcheck;

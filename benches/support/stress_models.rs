@@ -43,6 +43,15 @@ pub fn state_chain(n: usize) -> String {
     text
 }
 
+/// [`state_chain`] written with an array and two loops (`x[0]` for `x1`): flattening gives the
+/// same model under element names, so the two compare the cost of `expand`.
+pub fn state_chain_loop(n: usize) -> String {
+    format!(
+        "model chain\nconst N = {n}\nparam k = 1\nfor i in 0 .. 1 {{\n    state x[i] = 1\n    der(x[i]) = -k * x[i]\n}}\n\
+         for i in 1 .. N {{\n    state x[i] = 0\n    der(x[i]) = k * (x[i - 1] - x[i])\n}}\nsimulate t_end = 1\n"
+    )
+}
+
 /// `let a_k = a_(k-1) * a_(k-1) + c`, `n` times from `a0 = x`, and `der(x) = a_n`: each let uses
 /// its predecessor twice, and the derivative `da_n/dc = 1 + 2 a_(n-1) (1 + 2 a_(n-2) (...))` nests
 /// `n` deep (a text of `O(n)` characters, and `O(n^2)` if every partial text were kept). For

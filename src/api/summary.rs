@@ -37,6 +37,15 @@ fn summary(model: &sema::Model) -> String {
         plural(model.events.iter().filter(|e| !e.implicit).count(), "event"),
         plural(model.outputs.len(), "output"),
     );
+    // Arrays and event families in one line each (`x[0 .. 7]`); their elements follow below.
+    let states = array_ranges(model.states.iter().map(|s| s.name.as_str()));
+    let events = array_ranges(model.events.iter().filter(|e| !e.implicit).map(|e| e.name.as_str()));
+    if !states.is_empty() {
+        let _ = writeln!(out, "state arrays: {}", states.join(", "));
+    }
+    if !events.is_empty() {
+        let _ = writeln!(out, "event families: {}", events.join(", "));
+    }
     let show = ExprPrinter::new(model);
     let _ = writeln!(out, "parameters");
     // A vector is one line, as declared (its elements share default and range): a listing of
@@ -135,4 +144,47 @@ fn summary(model: &sema::Model) -> String {
         let _ = writeln!(out, "  {} = {}", o.name, show.show(&o.expr));
     }
     out
+}
+
+/// Element names (`x[3]`, `T[1][2]`) grouped by array in order of first appearance, each written
+/// as its ranges, `x[0 .. 7]`, `T[0 .. 2][0 .. 3]`, with the count when some elements of the
+/// ranges are missing. Names without brackets are left out.
+fn array_ranges<'a>(names: impl Iterator<Item = &'a str>) -> Vec<String> {
+    let mut order: Vec<(&str, Vec<u64>, usize)> = Vec::new();
+    let mut at: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
+    for name in names {
+        let Some(open) = name.find('[') else { continue };
+        let (base, mut rest) = name.split_at(open);
+        let mut idx = Vec::new();
+        while let Some(r) = rest.strip_prefix('[') {
+            let Some(close) = r.find(']') else { break };
+            let Ok(k) = r[..close].parse::<u64>() else { break };
+            idx.push(k);
+            rest = &r[close + 1..];
+        }
+        if idx.is_empty() || !rest.is_empty() {
+            continue;
+        }
+        let k = *at.entry(base).or_insert_with(|| {
+            order.push((base, vec![0; idx.len()], 0));
+            order.len() - 1
+        });
+        let entry = &mut order[k];
+        if entry.1.len() == idx.len() {
+            entry.1.iter_mut().zip(&idx).for_each(|(m, &i)| *m = (*m).max(i));
+            entry.2 += 1;
+        }
+    }
+    order
+        .into_iter()
+        .map(|(base, max, count)| {
+            let ranges: String = max.iter().map(|m| format!("[0 .. {m}]")).collect();
+            let full: u64 = max.iter().map(|m| m + 1).product();
+            if full == count as u64 {
+                format!("{base}{ranges}")
+            } else {
+                format!("{base}{ranges} ({count} elements)")
+            }
+        })
+        .collect()
 }

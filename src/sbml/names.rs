@@ -5,9 +5,9 @@
 use std::collections::{BTreeMap, HashSet};
 
 /// hybc's reserved words (docs/language.md, "Lines, comments, names").
-const KEYWORDS: [&str; 20] = [
+const KEYWORDS: [&str; 22] = [
     "model", "param", "state", "der", "let", "event", "when", "if", "then", "else", "mode", "initial",
-    "output", "simulate", "in", "and", "or", "not", "crosses", "stop",
+    "output", "simulate", "in", "and", "or", "not", "crosses", "stop", "const", "for",
 ];
 
 /// Built-in names that a model cannot declare: the time, `pi`, the vector functions and inputs

@@ -12,6 +12,10 @@ use crate::syntax::Span;
 
 /// Checks a parsed file. Returns the model, or every error found.
 pub fn check(file: &ast::File) -> Result<Model, Vec<CheckError>> {
+    // Arrays, constants and loops become a flat file first; a file without them is used as is.
+    let file = crate::expand::expand(file)
+        .map_err(|errors| errors.into_iter().map(|e| CheckError::Expand(Box::new(e))).collect::<Vec<_>>())?;
+    let file = &*file;
     let mut cx = Checker::default();
     let mut model = cx.check_file(file);
     for event in &model.events {
@@ -26,6 +30,8 @@ pub fn check(file: &ast::File) -> Result<Model, Vec<CheckError>> {
         Ok(model)
     } else {
         cx.errors.sort_by_key(|e| e.span().start);
+        // An item unrolled from a loop repeats its errors once per iteration, at one span.
+        cx.errors.dedup_by(|a, b| a.span() == b.span() && a.to_string() == b.to_string());
         Err(cx.errors)
     }
 }
@@ -100,6 +106,8 @@ impl<'a> Checker<'a> {
                     }
                     mode_decls.push(m);
                 }
+                // `expand` has unrolled every loop and evaluated every constant.
+                ast::Item::Const(_) | ast::Item::For(_) => {}
                 ast::Item::Simulate(s) => {
                     if let Some(first) = simulate_span {
                         self.errors.push(CheckError::Duplicate {

@@ -7,6 +7,9 @@ use crate::syntax::Span;
 /// [`CheckError::to_diagnostic`] words it for the user.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum CheckError {
+    /// A refusal of the flattening of arrays and loops (`crate::expand`).
+    #[error("{0}")]
+    Expand(Box<crate::expand::ExpandError>),
     /// A name declared in no enclosing scope.
     #[error("unknown name `{name}`")]
     UnknownName {
@@ -377,6 +380,7 @@ impl CheckError {
             | InputWindow { span, .. }
             | InputTooShort { span, .. }
             | PwcInGuard { span, .. } => *span,
+            Expand(e) => e.span,
         }
     }
 
@@ -388,6 +392,7 @@ impl CheckError {
             s.as_ref().map(|s| format!("did you mean `{s}`?")).into_iter().collect::<Vec<_>>()
         };
         let (label, notes) = match self {
+            Expand(e) => return e.to_diagnostic(source),
             UnknownName { suggestion, .. } => {
                 ("expected a parameter, state, `let`, `t` or `pi`".to_string(), did_you_mean(suggestion))
             }

@@ -299,7 +299,23 @@ pub fn resolve_names(
             let b = resolve_names(scopes, errors, b, scope);
             Expr::Binary(op, Box::new(a), Box::new(b))
         }
-        ast::ExprKind::Index(name, at) => resolve_index(scopes, errors, name, at, scope),
+        ast::ExprKind::Index(name, at) => match at.as_slice() {
+            [at] => resolve_index(scopes, errors, name, at, scope),
+            // More indices reach sema only as names of elements (`expand` writes `T[2][5]`).
+            _ => {
+                errors.push(CheckError::UnknownName {
+                    name: name.name.clone(),
+                    span: e.span,
+                    suggestion: None,
+                });
+                Expr::Num(0.0)
+            }
+        },
+        // `expand` unrolls every reduction before sema sees the file.
+        ast::ExprKind::Sum(_) => {
+            errors.push(CheckError::UnknownName { name: "sum".into(), span: e.span, suggestion: None });
+            Expr::Num(0.0)
+        }
         ast::ExprKind::Call(name, args) if VectorFunc::from_name(&name.name).is_some() => {
             let func = VectorFunc::from_name(&name.name).expect("matched above");
             resolve_vector_call(scopes, errors, func, args, e.span, scope)

@@ -49,6 +49,49 @@ pub enum Item {
     Output(OutputDecl),
     /// `simulate t_end = .., rtol = ..`.
     Simulate(SimulateDecl),
+    /// `const N = 8`: a compile-time integer, gone after `expand`.
+    Const(ConstDecl),
+    /// `for i in A .. B { ... }`: unrolled by `expand`.
+    For(Box<ForLoop>),
+}
+
+/// `const NAME = EXPR`, an integer expression of earlier constants.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ConstDecl {
+    /// The constant's name.
+    pub name: Ident,
+    /// Its value, evaluated by `expand`.
+    pub value: Expr,
+    /// Where it stands in the source.
+    pub span: Span,
+}
+
+/// `for VAR in LO .. HI { ITEMS }`: the items once for each `VAR = LO .. HI - 1`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ForLoop {
+    /// The loop variable.
+    pub var: Ident,
+    /// The first value.
+    pub lo: Expr,
+    /// One past the last value.
+    pub hi: Expr,
+    /// The items repeated: states, flows, `let`s, events, outputs, loops.
+    pub items: Vec<Item>,
+    /// Where it stands in the source.
+    pub span: Span,
+}
+
+/// `sum(VAR in LO .. HI: BODY)`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Reduction {
+    /// The summation variable.
+    pub var: Ident,
+    /// The first value.
+    pub lo: Expr,
+    /// One past the last value.
+    pub hi: Expr,
+    /// The term, read once for each value.
+    pub body: Expr,
 }
 
 /// `param NAME[N] = DEFAULT in [LO, HI]`.
@@ -67,9 +110,12 @@ pub struct ParamDecl {
 }
 
 /// The length written in `param u[N]`: its digits as written, and their value saturated at
-/// `u64::MAX` (sema caps it far below).
+/// `u64::MAX` (sema caps it far below). A length written as an expression of constants
+/// (`param m[N]`) has `expr` set until `expand` evaluates it into `len`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Size {
+    /// The length as an expression of constants, if not written as digits.
+    pub expr: Option<Expr>,
     /// The digits as written.
     pub text: String,
     /// Their value.
@@ -94,6 +140,9 @@ pub struct Range {
 pub struct StateDecl {
     /// The state's name.
     pub name: Ident,
+    /// `[i][j]` after the name: an element (in a loop) or the lengths (outside); empty after
+    /// `expand`.
+    pub index: Vec<Expr>,
     /// Its initial value.
     pub init: Expr,
     /// Where it stands in the source.
@@ -105,6 +154,9 @@ pub struct StateDecl {
 pub struct DerEq {
     /// The state.
     pub state: Ident,
+    /// `[i][j]` after the name: an element (in a loop) or the lengths (outside); empty after
+    /// `expand`.
+    pub index: Vec<Expr>,
     /// Its rate.
     pub rhs: Expr,
     /// Where it stands in the source.
@@ -116,6 +168,9 @@ pub struct DerEq {
 pub struct LetDecl {
     /// The name.
     pub name: Ident,
+    /// `[i][j]` after the name: an element (in a loop) or the lengths (outside); empty after
+    /// `expand`.
+    pub index: Vec<Expr>,
     /// What it stands for.
     pub value: Expr,
     /// Where it stands in the source.
@@ -127,6 +182,9 @@ pub struct LetDecl {
 pub struct OutputDecl {
     /// The output's name.
     pub name: Ident,
+    /// `[i][j]` after the name: an element (in a loop) or the lengths (outside); empty after
+    /// `expand`.
+    pub index: Vec<Expr>,
     /// Its value.
     pub value: Expr,
     /// Where it stands in the source.
@@ -173,6 +231,9 @@ pub enum GuardOp {
 pub struct EventDecl {
     /// The event's name.
     pub name: Ident,
+    /// `[i][j]` after the name: an element (in a loop) or the lengths (outside); empty after
+    /// `expand`.
+    pub index: Vec<Expr>,
     /// The guard's left side.
     pub lhs: Expr,
     /// The comparison.
@@ -196,6 +257,8 @@ pub enum EventStmt {
     Reset {
         /// The state reset.
         state: Ident,
+        /// Its element's indices, empty after `expand`.
+        index: Vec<Expr>,
         /// Its new value.
         value: Expr,
         /// Where it stands in the source.
@@ -271,8 +334,11 @@ pub enum ExprKind {
     Binary(BinOp, Box<Expr>, Box<Expr>),
     /// `f(a, ..)`.
     Call(Ident, Vec<Expr>),
-    /// `u[k]`: an element of a vector parameter.
-    Index(Ident, Box<Expr>),
+    /// `u[k]`, `T[i][j]`: an element of an array (after `expand`, of a vector parameter, with
+    /// one index).
+    Index(Ident, Vec<Expr>),
+    /// `sum(k in A .. B: e)`, gone after `expand`.
+    Sum(Box<Reduction>),
     /// `if C then A else B`.
     If(Box<Cond>, Box<Expr>, Box<Expr>),
 }

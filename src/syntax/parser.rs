@@ -36,6 +36,7 @@ const MAX_NESTING: usize = 64;
 fn check_limits(source: &str) -> Result<(), ParseError> {
     let mut line_start = 0;
     let mut depth = 0usize;
+    let mut braces = 0usize;
     for (i, c) in source.char_indices() {
         match c {
             // Line ends as the grammar's NEWLINE counts them: LF, CRLF, or a lone CR.
@@ -45,7 +46,17 @@ fn check_limits(source: &str) -> Result<(), ParseError> {
             }
             '(' => depth += 1,
             ')' => depth = depth.saturating_sub(1),
+            // Blocks span lines: `for` loops nest, and each level is a recursion of the parser.
+            '{' => braces += 1,
+            '}' => braces = braces.saturating_sub(1),
             _ => {}
+        }
+        if braces > MAX_NESTING {
+            return Err(ParseError {
+                span: Span::new(i, i + 1),
+                message: format!("blocks nested more than {MAX_NESTING} deep"),
+                expected: "fewer nested `for` loops".to_string(),
+            });
         }
         if depth > MAX_NESTING {
             return Err(ParseError {
@@ -123,9 +134,15 @@ fn build_item(pair: Pair<Rule>) -> Result<Item, ParseError> {
             let mut size = None;
             if next.as_rule() == Rule::size {
                 let count = next.into_inner().next().expect("grammar: size count");
-                // More digits than a u64 holds is simply too long; sema caps the length anyway.
-                let len = count.as_str().parse::<u64>().unwrap_or(u64::MAX);
-                size = Some(Size { text: count.as_str().to_string(), len, span: span_of(&count) });
+                if count.as_rule() == Rule::count {
+                    // More digits than a u64 holds is simply too long; sema caps the length anyway.
+                    let len = count.as_str().parse::<u64>().unwrap_or(u64::MAX);
+                    let (text, span) = (count.as_str().to_string(), span_of(&count));
+                    size = Some(Size { expr: None, text, len, span });
+                } else {
+                    let (text, span) = (count.as_str().to_string(), span_of(&count));
+                    size = Some(Size { expr: Some(build_expr(count)?), text, len: 0, span });
+                }
                 next = it.next().expect("grammar: param default");
             }
             let default = number(next)?;
@@ -142,18 +159,36 @@ fn build_item(pair: Pair<Rule>) -> Result<Item, ParseError> {
             Item::Param(ParamDecl { name, size, default, range, span })
         }
         Rule::state_decl => {
-            let mut it = pair.into_inner().skip(1);
+            let mut it = pair.into_inner().skip(1).peekable();
             let name = ident(it.next().expect("grammar: state name"));
+            let index = subscripts(&mut it)?;
             let init = build_expr(it.next().expect("grammar: state init"))?;
-            Item::State(StateDecl { name, init, span })
+            Item::State(StateDecl { name, index, init, span })
         }
         Rule::der_eq => Item::Der(build_der(pair)?),
         Rule::let_decl => Item::Let(build_let(pair)?),
         Rule::output_decl => {
-            let mut it = pair.into_inner().skip(1);
+            let mut it = pair.into_inner().skip(1).peekable();
             let name = ident(it.next().expect("grammar: output name"));
+            let index = subscripts(&mut it)?;
             let value = build_expr(it.next().expect("grammar: output value"))?;
-            Item::Output(OutputDecl { name, value, span })
+            Item::Output(OutputDecl { name, index, value, span })
+        }
+        Rule::const_decl => {
+            let mut it = pair.into_inner().skip(1);
+            let name = ident(it.next().expect("grammar: const name"));
+            let value = build_expr(it.next().expect("grammar: const value"))?;
+            Item::Const(ConstDecl { name, value, span })
+        }
+        Rule::for_loop => {
+            let mut it = pair
+                .into_inner()
+                .filter(|p| !matches!(p.as_rule(), Rule::kw_for | Rule::kw_in | Rule::dots | Rule::nl));
+            let var = ident(it.next().expect("grammar: loop variable"));
+            let lo = build_expr(it.next().expect("grammar: loop start"))?;
+            let hi = build_expr(it.next().expect("grammar: loop end"))?;
+            let items = it.map(build_item).collect::<Result<Vec<_>, _>>()?;
+            Item::For(Box::new(ForLoop { var, lo, hi, items, span }))
         }
         Rule::simulate_decl => {
             let mut settings = Vec::new();
@@ -172,27 +207,41 @@ fn build_item(pair: Pair<Rule>) -> Result<Item, ParseError> {
     })
 }
 
+/// The `[e]` subscripts that follow a declared name, if any.
+fn subscripts<'i>(
+    it: &mut std::iter::Peekable<impl Iterator<Item = Pair<'i, Rule>>>,
+) -> Result<Vec<Expr>, ParseError> {
+    let mut out = Vec::new();
+    while let Some(p) = it.next_if(|p| p.as_rule() == Rule::subscript) {
+        out.push(build_expr(p.into_inner().next().expect("grammar: subscript expression"))?);
+    }
+    Ok(out)
+}
+
 fn build_der(pair: Pair<Rule>) -> Result<DerEq, ParseError> {
     let span = span_of(&pair);
-    let mut it = pair.into_inner().skip(1);
+    let mut it = pair.into_inner().skip(1).peekable();
     let state = ident(it.next().expect("grammar: der state"));
+    let index = subscripts(&mut it)?;
     let rhs = build_expr(it.next().expect("grammar: der rhs"))?;
-    Ok(DerEq { state, rhs, span })
+    Ok(DerEq { state, index, rhs, span })
 }
 
 fn build_let(pair: Pair<Rule>) -> Result<LetDecl, ParseError> {
     let span = span_of(&pair);
-    let mut it = pair.into_inner().skip(1);
+    let mut it = pair.into_inner().skip(1).peekable();
     let name = ident(it.next().expect("grammar: let name"));
+    let index = subscripts(&mut it)?;
     let value = build_expr(it.next().expect("grammar: let value"))?;
-    Ok(LetDecl { name, value, span })
+    Ok(LetDecl { name, index, value, span })
 }
 
 fn build_event(pair: Pair<Rule>) -> Result<EventDecl, ParseError> {
     let span = span_of(&pair);
-    let mut it = pair.into_inner();
+    let mut it = pair.into_inner().peekable();
     it.next(); // kw_event
     let name = ident(it.next().expect("grammar: event name"));
+    let index = subscripts(&mut it)?;
     it.next(); // kw_when
     let lhs = build_expr(it.next().expect("grammar: guard lhs"))?;
     let op = match it.next().expect("grammar: guard op").as_str() {
@@ -203,7 +252,8 @@ fn build_event(pair: Pair<Rule>) -> Result<EventDecl, ParseError> {
         _ => GuardOp::Crosses,
     };
     let rhs = build_expr(it.next().expect("grammar: guard rhs"))?;
-    let mut event = EventDecl { name, lhs, op, rhs, condition: None, target: None, body: Vec::new(), span };
+    let mut event =
+        EventDecl { name, index, lhs, op, rhs, condition: None, target: None, body: Vec::new(), span };
     for p in it {
         match p.as_rule() {
             Rule::enable => {
@@ -218,10 +268,11 @@ fn build_event(pair: Pair<Rule>) -> Result<EventDecl, ParseError> {
                     let sspan = span_of(&s);
                     event.body.push(match s.as_rule() {
                         Rule::reset => {
-                            let mut si = s.into_inner();
+                            let mut si = s.into_inner().peekable();
                             let state = ident(si.next().expect("grammar: reset state"));
+                            let index = subscripts(&mut si)?;
                             let value = build_expr(si.next().expect("grammar: reset value"))?;
-                            EventStmt::Reset { state, value, span: sspan }
+                            EventStmt::Reset { state, index, value, span: sspan }
                         }
                         Rule::let_decl => EventStmt::Let(build_let(s)?),
                         Rule::stop => EventStmt::Stop { span: sspan },
@@ -322,10 +373,18 @@ fn build_primary(pair: Pair<Rule>) -> Result<Expr, ParseError> {
             ExprKind::Call(name, args)
         }
         Rule::index => {
-            let mut it = pair.into_inner();
+            let mut it = pair.into_inner().peekable();
             let name = ident(it.next().expect("grammar: index name"));
-            let at = build_expr(it.next().expect("grammar: index expression"))?;
-            ExprKind::Index(name, Box::new(at))
+            ExprKind::Index(name, subscripts(&mut it)?)
+        }
+        Rule::reduction => {
+            let mut it =
+                pair.into_inner().filter(|p| !matches!(p.as_rule(), Rule::kw_sum | Rule::kw_in | Rule::dots));
+            let var = ident(it.next().expect("grammar: sum variable"));
+            let lo = build_expr(it.next().expect("grammar: sum start"))?;
+            let hi = build_expr(it.next().expect("grammar: sum end"))?;
+            let body = build_expr(it.next().expect("grammar: sum term"))?;
+            ExprKind::Sum(Box::new(Reduction { var, lo, hi, body }))
         }
         Rule::if_expr => {
             let mut it = pair
@@ -378,6 +437,12 @@ fn build_cond(pair: Pair<Rule>) -> Result<Cond, ParseError> {
         .parse(pair.into_inner())
 }
 
+/// The grammar's `keyword` rule, word for word.
+const KEYWORDS: [&str; 22] = [
+    "model", "param", "state", "der", "let", "event", "when", "if", "then", "else", "mode", "initial",
+    "output", "simulate", "in", "and", "or", "not", "crosses", "stop", "const", "for",
+];
+
 const LINE_END: &str = "the end of the line";
 const FILE_END: &str = "the end of the file";
 
@@ -414,6 +479,10 @@ fn describe(rule: Rule) -> Option<&'static str> {
         Rule::setting => "a setting `name = value`",
         Rule::call => "a function call",
         Rule::index => "an element `u[k]`",
+        Rule::const_decl | Rule::kw_const => "a statement",
+        Rule::for_loop | Rule::kw_for => "a statement",
+        Rule::dots => "`..`",
+        Rule::reduction => "an expression",
         Rule::size | Rule::count => "a length `[N]`",
         Rule::if_expr => "an expression",
         Rule::EOI => FILE_END,
@@ -454,7 +523,15 @@ fn convert_error(source: &str, err: pest::error::Error<Rule>) -> ParseError {
     };
     let found = found_at(source, pos);
     let end = (pos + found.1).min(source.len());
-    ParseError { span: Span::new(pos, end.max(pos)), message: format!("unexpected {}", found.0), expected }
+    let word = found.0.trim_matches('`');
+    // A keyword where a name was wanted: say why the word is refused (`const` and `for` were
+    // names before arrays reserved them).
+    let message = if expected.contains("a name") && KEYWORDS.contains(&word) {
+        format!("`{word}` is a reserved keyword")
+    } else {
+        format!("unexpected {}", found.0)
+    };
+    ParseError { span: Span::new(pos, end.max(pos)), message, expected }
 }
 
 /// The furthest position the parser reached and what it wanted there, when that says more than
@@ -473,7 +550,13 @@ fn furthest_attempt(
     }
     let mut found: Vec<String> = Vec::new();
     for stack in attempts.call_stacks() {
-        if let Some(d) = stack.deepest.get_rule().and_then(|r| describe(*r)) {
+        // An optional `[i]` after a declared name is never what was missed: name the
+        // declaration it was part of (`state y 1`: "a statement or `=`").
+        let rule = match stack.deepest.get_rule() {
+            Some(Rule::subscript) => stack.parent.as_ref(),
+            r => r,
+        };
+        if let Some(d) = rule.and_then(|r| describe(*r)) {
             found.push(d.to_string());
         }
     }
@@ -495,7 +578,7 @@ fn furthest_attempt(
     }
     if has_operator {
         found.push("an operator".to_string());
-    } else if has_bracket {
+    } else if has_bracket && found.is_empty() {
         found.push("`[`".to_string());
     }
     found.dedup();

@@ -7,6 +7,7 @@ mod support;
 mod adjoint;
 mod adjoint_kernels;
 mod amici_events;
+mod arrays;
 mod check_grad;
 mod cli_cases;
 mod cli_run;

@@ -15,7 +15,7 @@ use crate::support::measured::{assert_bounded, hybc_measured};
 
 #[path = "../../benches/support/stress_models.rs"]
 mod stress_models;
-use stress_models::{doubling_lets, let_chain, shared_sum, squaring_lets, state_chain};
+use stress_models::{doubling_lets, let_chain, shared_sum, squaring_lets, state_chain, state_chain_loop};
 
 #[test]
 fn five_thousand_chained_lets_give_their_closed_form_in_either_order() {
@@ -120,6 +120,33 @@ fn states_reading_one_shared_sum_compile_in_time_linear_in_their_dense_jacobian(
         let name = format!("x{i}");
         assert_relative_eq!(run.state(&name).unwrap(), x, max_relative = 1e-6);
         assert_relative_eq!(run.dstate(&name, "k").unwrap(), -x, max_relative = 1e-6);
+    }
+}
+
+/// The same chain written as two loops over an array (`x[i - 1]` for `x{i}`) flattens to the same
+/// model: checked within the flat text's bounds, the same values and gradients.
+#[test]
+fn ten_thousand_states_written_as_a_loop_are_their_flat_model() {
+    let n = 10_000;
+    let (out, err, code, elapsed, peak) = hybc_measured(&state_chain_loop(n), &["check"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(
+        out.contains("10000 states") && out.contains("state arrays: x[0 .. 9999]"),
+        "{}",
+        &out[..out.len().min(200)]
+    );
+    assert_bounded("10,000 states as a loop, hybc check", elapsed, peak, Duration::from_secs(15), 300.0);
+    let n = 500;
+    let (flat, arr) =
+        (Model::parse(&state_chain(n)).expect("checks"), Model::parse(&state_chain_loop(n)).expect("checks"));
+    let rf =
+        flat.compile(&["k"]).expect("compiles").simulate(&flat.params(), &flat.sim_options()).expect("runs");
+    let ra =
+        arr.compile(&["k"]).expect("compiles").simulate(&arr.params(), &arr.sim_options()).expect("runs");
+    for i in 1..=n {
+        let (xf, xa) = (format!("x{i}"), format!("x[{}]", i - 1));
+        assert_eq!(ra.state(&xa), rf.state(&xf), "{xa}");
+        assert_eq!(ra.dstate(&xa, "k"), rf.dstate(&xf, "k"), "d{xa}/dk");
     }
 }
 
