@@ -109,7 +109,7 @@ const NEAR_BREAKPOINT: f64 = 1e-9;
 /// round-off of rule 11: an event at `t_end` is located a few spacings before it when round-off
 /// in the state puts the guard across early): there the event is on the breakpoint itself, a cusp.
 pub(crate) fn on_breakpoint(t: f64, at: f64) -> bool {
-    (at - t).abs() <= 16.0 * (at.abs().next_up() - at.abs())
+    (at - t).abs() <= 16.0 * super::spacing(at)
 }
 
 /// Events within `1e-9 max(|t|, 1)` before `t_end`, or of a time event they are not a time event with: their derivatives

@@ -60,3 +60,10 @@ pub use recorder::{
 pub use result::*;
 pub use run::{run, Driver, Runner, SystemRef, MAX_SAMPLED_ROWS, MIN_RTOL};
 pub use system::*;
+
+/// The distance from `|t|` to the next float: the resolution of time (or of any value) there.
+/// Every search that steps or tolerates "a few spacings of `t`" measures them with this.
+pub(crate) fn spacing(t: f64) -> f64 {
+    let a = t.abs().max(f64::MIN_POSITIVE);
+    a.next_up() - a
+}

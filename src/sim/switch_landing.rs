@@ -142,7 +142,7 @@ impl SwitchLanding {
             return false;
         };
         let (g, speed) = (det.g1[landing.pos], det.dg1[landing.pos]);
-        let spacing = t1.abs().next_up() - t1.abs();
+        let spacing = super::spacing(t1);
         let near =
             g.is_finite() && landing.sigma * g >= 0.0 && g.abs() <= SWITCH_NEAR * spacing * speed.abs();
         // With a breakpoint (a time event) before the predicted crossing, the next step lands on

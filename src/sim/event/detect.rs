@@ -413,7 +413,7 @@ impl Detector {
             }
             let (_, speed_noise) = self.noise_at(cx, 1, pos);
             let noise = self.carried_round_off(cx, ev);
-            let located = 4.0 * speed.abs() * (t.abs().next_up() - t.abs());
+            let located = 4.0 * speed.abs() * crate::sim::spacing(t);
             if g.abs() > noise + located {
                 continue;
             }
@@ -1034,7 +1034,7 @@ impl Detector {
                     && self.bounced[pos] == Some(-sigma)
                     && a.g.abs()
                         <= self.noise0[pos].max(self.noise1[pos])
-                            + 4.0 * a.dg.abs() * (a.t.abs().next_up() - a.t.abs());
+                            + 4.0 * a.dg.abs() * crate::sim::spacing(a.t);
                 if !returning {
                     return Finding::Bracket { a: a.t, ga: a.g, da: a.dg, b: b.t, gb: b.g, db: b.dg, sigma };
                 }
