@@ -1,11 +1,17 @@
 """Two hybc builds alternated on the shipped models' sweeps, in the same minutes.
 
     python3 benches/measure/alternate.py OLD_HYBC NEW_HYBC [ROUNDS]
+    python3 benches/measure/alternate.py OLD_HYBC NEW_HYBC --instructions [SCALE]
 
 Run from the repository root. For each workload the builds run one after the other ROUNDS times
 (default 5); printed per workload: the median CPU time (user + system, /usr/bin/time) of each
 build and the median of the pairwise ratios new / old with their range, as a Markdown row. The
 machines here move by 3x between days: only ratios measured this way are compared.
+
+With `--instructions`, each build runs each workload once under callgrind (valgrind) and the
+row gives the instructions executed by each and their ratio: deterministic, so a loaded machine
+does not move it, but blind to what instructions cost (cache misses, vector width). SCALE
+(default 0.1) shrinks the point counts, since callgrind runs some 50 times slower.
 """
 import subprocess, statistics, sys, re
 from pathlib import Path
@@ -25,6 +31,27 @@ for m in ['soft_ball.hyb','compass_gait.hyb','dosing.hyb','engine_redline.hyb','
     lo, hi = sorted([v*0.99, v*1.01])
     n = 2000 if m not in ('walker.hyb','compass_gait.hyb','juggler.hyb') else 300
     work[f'{m} sweep {p} x{n} grad all'] = ['sweep', f'models/{m}', '--vary', f'{p}={lo}:{hi}:{n}', '--grad', 'all', '--threads', '1', '-o', '/dev/null']
+instructions = len(sys.argv) > 3 and sys.argv[3] == '--instructions'
+if instructions:
+    import tempfile
+    scale = float(sys.argv[4]) if len(sys.argv) > 4 else 0.1
+    def shrink(args):
+        out = []
+        for a in args:
+            m = re.match(r'^(\w+=[^:]+:[^:]+:)(\d+)$', a)
+            out.append(m.group(1) + str(max(10, int(int(m.group(2)) * scale))) if m else a)
+        return out
+    def instr(b, args):
+        with tempfile.NamedTemporaryFile() as f:
+            r = subprocess.run(['valgrind', '--tool=callgrind', f'--callgrind-out-file={f.name}', b] + args,
+                               cwd=ROOT, capture_output=True, text=True)
+        return int(re.search(r'refs:\s+([\d,]+)', r.stderr).group(1).replace(',', ''))
+    for name, args in work.items():
+        args = shrink(args)
+        o, n = instr(OLD, args), instr(NEW, args)
+        label = ' '.join(a for a in args if '=' in a)
+        print(f'| {name} ({label}) | {o / 1e6:.0f}M | {n / 1e6:.0f}M | {n / o:.2f} |', flush=True)
+    sys.exit(0)
 rounds = int(sys.argv[3]) if len(sys.argv) > 3 else 5
 def cpu(b, args):
     r = subprocess.run(['/usr/bin/time','-f','%U %S', b] + args, cwd=ROOT, capture_output=True, text=True)
