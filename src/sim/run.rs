@@ -210,6 +210,9 @@ impl<H: SystemRef> Runner<H> {
         let info = sys.system().info();
         validate(info, opts)?;
         let (n, m) = (info.n_states(), info.n_grad());
+        if m > 0 {
+            sys.system().prepare_sensitivities().map_err(|reason| SimError::NoSensitivities { reason })?;
+        }
         let nz = n * (1 + m);
         let method = opts.method.resolve(opts.rtol);
         let n_err = if opts.sens_error_control { nz } else { n };
