@@ -308,7 +308,9 @@ fn link_chain(n: usize) -> String {
         }
         s.push_str(&format!("der(x{i}) = {rhs}\n"));
     }
-    s.push_str("initial mode fill {\n    event top_up when x0 <= 0.6 -> fill {\n        x0 := x0 + 0.3\n    }\n}\n");
+    s.push_str(
+        "initial mode fill {\n    event top_up when x0 <= 0.6 -> fill {\n        x0 := x0 + 0.3\n    }\n}\n",
+    );
     s.push_str(&format!("output y = x{}\n", n - 1));
     s
 }
