@@ -227,7 +227,8 @@ pub trait HybridSystem: Sync {
     }
     /// Makes [`Self::flow_sens`] ready (a compiled model with many states and differentiated
     /// parameters compiles its kernels here, once, rather than with the model); called before a
-    /// run that carries sensitivities. An error says why they cannot be had. The default needs
+    /// run that carries forward sensitivities (never before the adjoint's). An error says why
+    /// they cannot be had. The default needs
     /// nothing.
     fn prepare_sensitivities(&self) -> Result<(), String> {
         Ok(())
