@@ -4,16 +4,19 @@
 //! Dormand-Prince to T = 10 at rtol 1e-8 (the top-up event on `x0` included). For each N: a
 //! plain run (the model compiled without gradients), the adjoint of the last cell's output `y`
 //! (recording run and one backward pass), the process's peak memory after them, then forward
-//! sensitivities of all N - 1 columns (`sens_error_control` off: the same steps) and the gap
+//! sensitivities of all N - 1 columns (their kernel compiled first, timed apart) (`sens_error_control` off: the same steps) and the gap
 //! between the two gradients, relative to the largest final sensitivity of any state. Medians of `--repeat` runs (default 3).
 //!
 //! `cargo run --release --example adjoint_chain -- 100 1000`; one size per process for a clean
-//! peak memory. docs/performance.md, "Gradients by the adjoint", has the figures.
+//! peak memory. `--only plain` compiles and runs the model without gradients and nothing else,
+//! `--only adjoint` adds the adjoint and leaves forward mode out (for the peak memory of each,
+//! which `/usr/bin/time -v` confirms from outside). docs/performance.md, "Gradients by the
+//! adjoint", has the figures.
 
 use std::time::Instant;
 
 use hybc::sim::adjoint::{record, Seed};
-use hybc::sim::{run, Method, SimOptions};
+use hybc::sim::{run, HybridSystem, Method, SimOptions};
 use hybc::Model;
 
 /// The chain of `n` cells, a conductance per link, with the top-up event of W5.
@@ -62,6 +65,15 @@ fn main() {
         }
         None => 3,
     };
+    let only = match args.iter().position(|a| a == "--only") {
+        Some(i) => {
+            let v = args[i + 1].clone();
+            assert!(v == "plain" || v == "adjoint", "--only plain or --only adjoint");
+            args.drain(i..i + 2);
+            Some(v)
+        }
+        None => None,
+    };
     let sizes: Vec<usize> = args.iter().map(|a| a.parse().expect("a size")).collect();
     let opts = SimOptions {
         t_end: 10.0,
@@ -72,6 +84,22 @@ fn main() {
     for n in sizes {
         let model = Model::parse(&source(n)).expect("checks");
         let plain_model = model.compile::<&str>(&[]).expect("compiles");
+        if only.as_deref() == Some("plain") {
+            let mut plain = Vec::new();
+            let mut steps = 0;
+            for _ in 0..repeat {
+                let t = Instant::now();
+                let r = run(plain_model.system(), plain_model.params().values(), &opts).expect("runs");
+                plain.push(t.elapsed().as_secs_f64());
+                steps = r.stats.steps;
+            }
+            println!(
+                "N = {n}: plain {:.1} ms ({steps} steps), peak {:.0} MiB",
+                median(plain) * 1e3,
+                peak_mib()
+            );
+            continue;
+        }
         let with_grad = model.compile(&["d"]).expect("compiles");
         let p = with_grad.params().values().to_vec();
         let seed = Seed { outputs: vec![1.0], ..Seed::default() };
@@ -95,6 +123,23 @@ fn main() {
         }
         let peak = peak_mib();
         let (plain, adjoint) = (median(plain), median(adjoint));
+        if only.is_some() {
+            println!(
+                "N = {n} ({} parameters, {steps} steps, {events} events): plain {:.1} ms, adjoint {:.1} ms \
+                 ({:.1}x plain; first call {:.0} ms with the kernel's compile), tape {tape_mib:.1} MiB, \
+                 peak {peak:.0} MiB",
+                n - 1,
+                plain * 1e3,
+                adjoint * 1e3,
+                adjoint / plain,
+                first * 1e3,
+            );
+            continue;
+        }
+        // The forward sensitivity kernel is compiled on first use at these sizes: timed apart.
+        let t = Instant::now();
+        with_grad.system().prepare_sensitivities().expect("the forward kernel compiles");
+        let forward_compile = t.elapsed().as_secs_f64();
         let t = Instant::now();
         let r = run(with_grad.system(), &p, &opts).expect("runs");
         let forward = t.elapsed().as_secs_f64();
@@ -108,7 +153,7 @@ fn main() {
         println!(
             "N = {n} ({} parameters, {steps} steps, {events} events): plain {:.1} ms, adjoint {:.1} ms ({:.1}x plain; \
              first call {:.0} ms with the kernel's compile), tape {tape_mib:.1} MiB, peak {peak:.0} MiB; \
-             forward {:.0} ms ({:.0}x plain); gap {gap:.0e}",
+             forward {:.0} ms ({:.0}x plain; its kernel's compile {:.1} s before); gap {gap:.0e}",
             n - 1,
             plain * 1e3,
             adjoint * 1e3,
@@ -116,6 +161,7 @@ fn main() {
             first * 1e3,
             forward * 1e3,
             forward / plain,
+            forward_compile,
         );
     }
 }

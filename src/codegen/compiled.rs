@@ -9,7 +9,7 @@ use cranelift_frontend::FunctionBuilderContext;
 use cranelift_jit::{JITBuilder, JITModule};
 use cranelift_module::{default_libcall_names, FuncId, Module};
 
-use super::plan::{plan_model, plan_vjp, KernelPlan, Lens, ModelKernels, N_OUTS};
+use super::plan::{plan_flow_sens, plan_model, plan_vjp, KernelPlan, Lens, ModelKernels, N_OUTS};
 use super::runtime::Callee;
 use super::stiff::{plan_stiff, plan_vjp_dir};
 use super::translate::{declare_callees, define_driver, define_kernel};
@@ -89,6 +89,11 @@ pub struct CompiledModel {
     /// (their compile time is never repaid by the runs that do not use them).
     source: Mutex<Option<ModelFunctions>>,
     opts: CompileOptions,
+    /// Each mode's `flow_sens` kernel: compiled with the model when small, otherwise on the first
+    /// `prepare_sensitivities` or `flow_sens` call (`plan::EAGER_FLOW_SENS_LIMIT`), into a module
+    /// freed in `Drop`. Either way a call finds it behind one `OnceLock::get`.
+    flow_sens: OnceLock<Result<Vec<Kernel>, String>>,
+    flow_sens_module: Mutex<Option<JITModule>>,
     /// The stiff kernels once built (or why they could not be); their module is freed in `Drop`.
     stiff: OnceLock<Result<StiffKernels, String>>,
     stiff_module: Mutex<Option<JITModule>>,
@@ -199,7 +204,14 @@ impl CompiledModel {
             .unwrap_or(0);
         let mut module = new_module(opts, largest, most_nodes)?;
         match build_kernels(&mut module, funcs, &parts) {
-            Ok(kernels) => Ok(CompiledModel {
+            Ok(mut kernels) => Ok(CompiledModel {
+                // Planned with the model (small), or left to first use.
+                flow_sens: if kernels.flow_sens.len() == funcs.modes.len() {
+                    OnceLock::from(Ok(std::mem::take(&mut kernels.flow_sens)))
+                } else {
+                    OnceLock::new()
+                },
+                flow_sens_module: Mutex::new(None),
                 info,
                 reset_patterns: funcs
                     .events
@@ -229,8 +241,8 @@ impl CompiledModel {
         }
     }
 
-    /// Number of native functions generated (the stiff and the adjoint's kernels, built on
-    /// demand, not counted).
+    /// Number of native functions generated with the model (the kernels built on demand, the
+    /// stiff ones, the adjoint's and a large model's forward sensitivity kernels, not counted).
     pub fn n_kernels(&self) -> usize {
         self.n_kernels
     }
@@ -256,6 +268,37 @@ impl CompiledModel {
         let dir = kernels.pop().unwrap_or_default();
         let jac = kernels.pop().unwrap_or_default();
         Ok(StiffKernels { jac, dir, patterns: plan.patterns })
+    }
+
+    /// Every mode's `flow_sens` kernel, compiled on first use when the model did not include them.
+    /// The fast path, once they exist, is the `OnceLock`'s one load and compare; the build is
+    /// kept out of line so that `flow_sens` stays small enough to inline into the stage loop.
+    #[inline]
+    fn flow_sens_kernels(&self) -> Result<&[Kernel], &str> {
+        match self.flow_sens.get() {
+            Some(built) => built.as_ref().map(Vec::as_slice).map_err(String::as_str),
+            None => self.init_flow_sens(),
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn init_flow_sens(&self) -> Result<&[Kernel], &str> {
+        self.flow_sens
+            .get_or_init(|| self.build_flow_sens().map_err(|e| e.to_string()))
+            .as_ref()
+            .map(Vec::as_slice)
+            .map_err(String::as_str)
+    }
+
+    fn build_flow_sens(&self) -> Result<Vec<Kernel>, CodegenError> {
+        let source = lock(&self.source);
+        let funcs =
+            source.as_ref().ok_or(CodegenError::Internal { reason: "model functions already consumed" })?;
+        let plans = plan_flow_sens(funcs, &self.info)?;
+        let (module, mut kernels) = build_module(&self.opts, funcs, &[&plans], "flow_sens")?;
+        *lock(&self.flow_sens_module) = Some(module);
+        Ok(kernels.pop().unwrap_or_default())
     }
 
     /// The adjoint's kernels, compiled on first use: every mode's `flow_vjp` (`plan::plan_vjp`).
@@ -356,40 +399,28 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 
 impl Drop for CompiledModel {
     fn drop(&mut self) {
-        let slot = match self.module.get_mut() {
-            Ok(slot) => slot,
-            // Nothing ever panics while holding the lock (only `Drop` locks it), but a poisoned
-            // lock still owns the module, and the code must be freed either way.
-            Err(poisoned) => poisoned.into_inner(),
-        };
-        if let Some(module) = slot.take() {
-            // SAFETY: `&mut self` proves no kernel is running, and the pointers in
-            // `self.kernels` are never used after this: they are private and die with `self`.
-            unsafe { module.free_memory() };
-        }
-        let stiff = match self.stiff_module.get_mut() {
-            Ok(slot) => slot,
-            Err(poisoned) => poisoned.into_inner(),
-        };
-        if let Some(module) = stiff.take() {
-            // SAFETY: as above, for the stiff kernels in `self.stiff`.
-            unsafe { module.free_memory() };
-        }
-        let vjp = match self.vjp_module.get_mut() {
-            Ok(slot) => slot,
-            Err(poisoned) => poisoned.into_inner(),
-        };
-        if let Some(module) = vjp.take() {
-            // SAFETY: as above, for the adjoint's kernels in `self.vjp`.
-            unsafe { module.free_memory() };
-        }
-        let vjp_dir = match self.vjp_dir_module.get_mut() {
-            Ok(slot) => slot,
-            Err(poisoned) => poisoned.into_inner(),
-        };
-        if let Some(module) = vjp_dir.take() {
-            // SAFETY: as above, for the adjoint's kernels in `self.vjp_dir`.
-            unsafe { module.free_memory() };
+        // The model's module, then those of the kernels compiled on demand (`self.stiff`,
+        // `self.flow_sens`, `self.vjp`, `self.vjp_dir`).
+        let slots = [
+            &mut self.module,
+            &mut self.stiff_module,
+            &mut self.flow_sens_module,
+            &mut self.vjp_module,
+            &mut self.vjp_dir_module,
+        ];
+        for slot in slots {
+            let slot = match slot.get_mut() {
+                Ok(slot) => slot,
+                // Nothing ever panics while holding these locks, but a poisoned lock still owns
+                // its module, and the code must be freed either way.
+                Err(poisoned) => poisoned.into_inner(),
+            };
+            if let Some(module) = slot.take() {
+                // SAFETY: `&mut self` proves no kernel is running, and the pointers into this
+                // module (in `self.kernels` or the `OnceLock` beside its slot) are never used
+                // after this: they are private and die with `self`.
+                unsafe { module.free_memory() };
+            }
         }
     }
 }
@@ -532,12 +563,16 @@ impl HybridSystem for CompiledModel {
         dx: &mut [f64],
         ds: &mut [f64],
     ) {
-        match self.kernels.flow_sens.get(mode) {
+        match self.flow_sens_kernels().ok().and_then(|k| k.get(mode)) {
             Some(k) => {
                 k.call(t, x, s, p, [dx, ds, &mut []]);
             }
             None => poison([dx, ds, &mut []]),
         }
+    }
+
+    fn prepare_sensitivities(&self) -> Result<(), String> {
+        self.flow_sens_kernels().map(|_| ()).map_err(str::to_owned)
     }
 
     #[allow(clippy::too_many_arguments)]

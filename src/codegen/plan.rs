@@ -201,6 +201,8 @@ impl KernelPlan {
 pub(crate) struct ModelKernels<K> {
     /// Per mode.
     pub flow: Vec<K>,
+    /// Per mode, or empty: a large model's are planned and compiled on first use
+    /// ([`EAGER_FLOW_SENS_LIMIT`]).
     pub flow_sens: Vec<K>,
     pub guards: Vec<K>,
     /// `g_x f + g_t` of every guard of the mode, with the flow `f` passed as the `s` input.
@@ -307,10 +309,35 @@ impl Dims {
     }
 }
 
-/// Builds and checks the plan of every kernel of `funcs` under the shape `info`.
+/// Largest [`flow_sens_size`] whose kernels are compiled with the model; larger ones are planned
+/// and compiled on their first use ([`plan_flow_sens`], `CompiledModel::prepare_sensitivities`),
+/// so that a run without forward sensitivities (a plain run of a model compiled with gradients,
+/// the adjoint's recording run) never pays their compile time nor their memory: `n m` entries
+/// and `m nnz(f_x)` products, 3 million of them for a 1000-state chain with 999 differentiated
+/// parameters, which took about 61 s of CPU and 560 MiB to compile. Below the limit a module of
+/// their own would add its fixed cost to the first forward run for no memory worth saving, and a
+/// plain run (`m = 0`, size 0) calls `flow_sens` too; the shipped models' kernels are all below it
+/// (docs/design.md).
+pub(crate) const EAGER_FLOW_SENS_LIMIT: usize = 5_000;
+
+/// The [`KernelPlan::size`] of every mode's `flow_sens` together, computed without planning them:
+/// per mode, `m` times (`n` entries plus the flow Jacobian's structural nonzeros).
+pub(crate) fn flow_sens_size(funcs: &ModelFunctions, info: &SystemInfo) -> usize {
+    let (n, m) = (info.n_states(), info.n_grad());
+    funcs
+        .modes
+        .iter()
+        .map(|mode| m.saturating_mul(n + mode.flow_x.entries.len()))
+        .fold(0, usize::saturating_add)
+}
+
+/// Builds and checks the plan of every kernel of `funcs` under the shape `info`; the forward
+/// sensitivity kernels only when small ([`EAGER_FLOW_SENS_LIMIT`]; `flow_sens` is left empty
+/// otherwise).
 pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<ModelPlan, CodegenError> {
     let dims = check_shape(funcs, info)?;
     let (n, m) = (dims.n, dims.n_grad);
+    let with_flow_sens = flow_sens_size(funcs, info) <= EAGER_FLOW_SENS_LIMIT;
     let mut plan = ModelPlan {
         flow: Vec::new(),
         flow_sens: Vec::new(),
@@ -333,29 +360,11 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
 
     for (mode_idx, (mode, mode_info)) in funcs.modes.iter().zip(&info.modes).enumerate() {
         let mut flow = KernelPlan::new(format!("mode{mode_idx}_flow"), dims.lens(n, 0, [n, 0, 0]));
-        let mut sens =
-            KernelPlan::new(format!("mode{mode_idx}_flow_sens"), dims.lens(n, n * m, [n, n * m, 0]));
         for (i, &f) in mode.flow.iter().enumerate() {
             flow.write(0, i, Term::Expr(f))?;
-            sens.write(0, i, Term::Expr(f))?;
         }
-        let fx_rows = rows(&mode.flow_x, n);
-        let fp_rows = rows(&mode.flow_p, n);
-        for j in 0..m {
-            for i in 0..n {
-                let products: Vec<(ExprId, u32)> = fx_rows[i]
-                    .iter()
-                    .map(|&(k, e)| Ok((e, index_u32(&sens.name, j * n + k)?)))
-                    .collect::<Result<_, CodegenError>>()?;
-                let bias =
-                    fp_rows[i].iter().find(|&&(param, _)| dims.grad_col[param] == Some(j)).map(|&(_, e)| e);
-                let term = if products.is_empty() && bias.is_none() {
-                    Term::Zero
-                } else {
-                    Term::SensDot { products, bias }
-                };
-                sens.write(1, j * n + i, term)?;
-            }
+        if with_flow_sens {
+            plan.flow_sens.push(plan_mode_flow_sens(mode_idx, mode, &dims)?);
         }
         let mut guards = KernelPlan::new(
             format!("mode{mode_idx}_guards"),
@@ -385,7 +394,6 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
             speeds.write(0, k, term)?;
         }
         plan.flow.push(flow);
-        plan.flow_sens.push(sens);
         plan.guards.push(guards);
         plan.guard_speeds.push(speeds);
     }
@@ -486,6 +494,56 @@ pub(crate) fn plan_model(funcs: &ModelFunctions, info: &SystemInfo) -> Result<Mo
         kernel.check(&funcs.store)?;
     }
     Ok(plan)
+}
+
+/// Every mode's `flow_sens`, checked: what [`plan_model`] leaves out of a large model, planned on
+/// the first run with forward sensitivities.
+pub(crate) fn plan_flow_sens(
+    funcs: &ModelFunctions,
+    info: &SystemInfo,
+) -> Result<Vec<KernelPlan>, CodegenError> {
+    let dims = check_shape(funcs, info)?;
+    let mut plans = Vec::with_capacity(funcs.modes.len());
+    for (mode_idx, mode) in funcs.modes.iter().enumerate() {
+        let mut sens = plan_mode_flow_sens(mode_idx, mode, &dims)?;
+        sens.write_small_zeros();
+        sens.check(&funcs.store)?;
+        plans.push(sens);
+    }
+    Ok(plans)
+}
+
+/// `mode{k}_flow_sens` (inputs `x` (n), `s` (n m)): the flow (n) and the sensitivities' right-hand
+/// side `f_x S + f_p` (n m), each entry one `SensDot` over its row of `f_x`, columns ascending.
+fn plan_mode_flow_sens(
+    mode_idx: usize,
+    mode: &ModeFunctions,
+    dims: &Dims,
+) -> Result<KernelPlan, CodegenError> {
+    let (n, m) = (dims.n, dims.n_grad);
+    let mut sens = KernelPlan::new(format!("mode{mode_idx}_flow_sens"), dims.lens(n, n * m, [n, n * m, 0]));
+    for (i, &f) in mode.flow.iter().enumerate() {
+        sens.write(0, i, Term::Expr(f))?;
+    }
+    let fx_rows = rows(&mode.flow_x, n);
+    let fp_rows = rows(&mode.flow_p, n);
+    for j in 0..m {
+        for i in 0..n {
+            let products: Vec<(ExprId, u32)> = fx_rows[i]
+                .iter()
+                .map(|&(k, e)| Ok((e, index_u32(&sens.name, j * n + k)?)))
+                .collect::<Result<_, CodegenError>>()?;
+            let bias =
+                fp_rows[i].iter().find(|&&(param, _)| dims.grad_col[param] == Some(j)).map(|&(_, e)| e);
+            let term = if products.is_empty() && bias.is_none() {
+                Term::Zero
+            } else {
+                Term::SensDot { products, bias }
+            };
+            sens.write(1, j * n + i, term)?;
+        }
+    }
+    Ok(sens)
 }
 
 /// The adjoint's kernels ([`plan_vjp`]) and what the host needs to finish their `gp`.

@@ -140,6 +140,15 @@ pub enum SimError {
         /// Why the Jacobian is missing.
         reason: String,
     },
+    /// Forward sensitivities asked for, and the kernel of their right-hand side could not be
+    /// compiled.
+    #[error(
+        "the forward sensitivities need their right-hand side, which this model could not provide: {reason}"
+    )]
+    NoSensitivities {
+        /// Why it is missing.
+        reason: String,
+    },
     #[error(
         "a trajectory sampled every {dt:e} from t = {t_start} to {t_end} has {rows:.0} rows, more than the \
          {cap:.0} a run keeps in memory (sample more coarsely)"

@@ -192,6 +192,15 @@ impl<H: SystemRef> std::fmt::Debug for Runner<H> {
     }
 }
 
+/// Makes `sys`'s forward sensitivities ready when it has any (`HybridSystem::prepare_sensitivities`:
+/// once; afterwards a load and a compare).
+fn ready_for_sensitivities<S: HybridSystem + ?Sized>(sys: &S) -> Result<(), SimError> {
+    if sys.info().n_grad() == 0 {
+        return Ok(());
+    }
+    sys.prepare_sensitivities().map_err(|reason| SimError::NoSensitivities { reason })
+}
+
 /// The states left out of the step-size error test: the quadrature states (running costs that
 /// nothing but outputs reads; `SystemInfo::quadrature`), their sensitivities with them, unless
 /// every state is one (then the error test needs them all). Empty: none.
@@ -210,6 +219,11 @@ impl<H: SystemRef> Runner<H> {
         let info = sys.system().info();
         validate(info, opts)?;
         let (n, m) = (info.n_states(), info.n_grad());
+        // A run by the adjoint carries no sensitivities: a large model's forward kernel is
+        // compiled only where a run may take them (`Self::run_with` when it falls back).
+        if opts.sens == Sens::Forward {
+            ready_for_sensitivities(sys.system())?;
+        }
         let nz = n * (1 + m);
         let method = opts.method.resolve(opts.rtol);
         let n_err = if opts.sens_error_control { nz } else { n };
@@ -278,6 +292,7 @@ impl<H: SystemRef> Runner<H> {
                 Err(_) => {}
             }
         }
+        ready_for_sensitivities(sys)?;
         let mut result = self.run_forward(p, recorder);
         if m > 0 {
             result.stats.sens = Some(Sens::Forward);
@@ -314,6 +329,7 @@ impl<H: SystemRef> Runner<H> {
         recorder: &mut R,
     ) -> Result<SimResult, SimError> {
         check_params(self.sys.system().info(), p)?;
+        ready_for_sensitivities(self.sys.system())?;
         Ok(self.run_forward(p, recorder))
     }
 
@@ -326,6 +342,7 @@ impl<H: SystemRef> Runner<H> {
     ) -> Result<Driver<'s, H::System, R>, SimError> {
         let sys = self.sys.system();
         check_params(sys.info(), p)?;
+        ready_for_sensitivities(sys)?;
         Ok(match &mut self.work {
             Work::Explicit(w) => Driver::Explicit(Integrator::new(sys, p, &self.opts, w, recorder)),
             Work::Rosenbrock(w) => Driver::Rosenbrock(Integrator::new(sys, p, &self.opts, w, recorder)),

@@ -225,6 +225,14 @@ pub trait HybridSystem: Sync {
             *g = (0..n).filter(|&i| w[i] != 0.0).map(|i| w[i] * fx[i * n + c]).sum();
         }
     }
+    /// Makes [`Self::flow_sens`] ready (a compiled model with many states and differentiated
+    /// parameters compiles its kernels here, once, rather than with the model); called before a
+    /// run that carries forward sensitivities (never before the adjoint's). An error says why
+    /// they cannot be had. The default needs
+    /// nothing.
+    fn prepare_sensitivities(&self) -> Result<(), String> {
+        Ok(())
+    }
     /// Makes [`Self::flow_jac`] and [`Self::sens_dir`] ready (a compiled model compiles their
     /// kernels here, once); called before a run with an implicit method. An error says why
     /// they cannot be had. The default (the central differences below) needs nothing.

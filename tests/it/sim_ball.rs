@@ -335,3 +335,98 @@ fn a_rosenbrock_method_without_jacobians_is_an_error_naming_the_method_and_why()
     // The explicit methods need nothing of the kind.
     assert!(run(&sys, &[G, E, 1.0], &opts(2.5, Method::Dopri5, true)).is_ok());
 }
+
+/// The ball, with a sensitivity right-hand side that cannot be prepared (as a compiled model's
+/// kernel that failed to compile on first use would say).
+struct NoSensitivities(Ball);
+
+impl hybc::sim::HybridSystem for NoSensitivities {
+    fn info(&self) -> &hybc::sim::SystemInfo {
+        self.0.info()
+    }
+    fn initial_state(&self, p: &[f64], x0: &mut [f64]) {
+        self.0.initial_state(p, x0)
+    }
+    fn initial_sens(&self, p: &[f64], s0: &mut [f64]) {
+        self.0.initial_sens(p, s0)
+    }
+    fn flow(&self, mode: usize, t: f64, x: &[f64], p: &[f64], dx: &mut [f64]) {
+        self.0.flow(mode, t, x, p, dx)
+    }
+    fn flow_sens(
+        &self,
+        mode: usize,
+        t: f64,
+        x: &[f64],
+        s: &[f64],
+        p: &[f64],
+        dx: &mut [f64],
+        ds: &mut [f64],
+    ) {
+        self.0.flow_sens(mode, t, x, s, p, dx, ds)
+    }
+    fn prepare_sensitivities(&self) -> Result<(), String> {
+        Err("the kernel did not compile".into())
+    }
+    fn guards(&self, mode: usize, t: f64, x: &[f64], p: &[f64], g: &mut [f64]) {
+        self.0.guards(mode, t, x, p, g)
+    }
+    fn guard_grad(&self, event: usize, t: f64, x: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) -> f64 {
+        self.0.guard_grad(event, t, x, p, gx, gp)
+    }
+    fn condition(&self, event: usize, t: f64, x: &[f64], p: &[f64]) -> bool {
+        self.0.condition(event, t, x, p)
+    }
+    fn reset(&self, event: usize, t: f64, x: &[f64], p: &[f64], r: &mut [f64]) {
+        self.0.reset(event, t, x, p, r)
+    }
+    fn reset_jac(
+        &self,
+        event: usize,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+        rx: &mut [f64],
+        rp: &mut [f64],
+        rt: &mut [f64],
+    ) {
+        self.0.reset_jac(event, t, x, p, rx, rp, rt)
+    }
+    fn outputs(&self, t: f64, x: &[f64], p: &[f64], y: &mut [f64]) {
+        self.0.outputs(t, x, p, y)
+    }
+    fn output_jac(&self, t: f64, x: &[f64], p: &[f64], yx: &mut [f64], yp: &mut [f64], yt: &mut [f64]) {
+        self.0.output_jac(t, x, p, yx, yp, yt)
+    }
+}
+
+#[test]
+fn forward_sensitivities_that_cannot_be_prepared_are_an_error_saying_why() {
+    let sys = NoSensitivities(Ball::new());
+    let o = opts(2.5, Method::Dopri5, false);
+    let err = run(&sys, &[G, E, 1.0], &o).expect_err("refused");
+    assert!(matches!(err, SimError::NoSensitivities { .. }), "{err:?}");
+    let text = err.to_string();
+    assert!(text.contains("forward sensitivities") && text.contains("the kernel did not compile"), "{text}");
+    // The adjoint's recording run carries no sensitivities and asks for none: its gradient of
+    // the final height is the forward one of the ball itself (same steps, round-off apart).
+    let recorded = hybc::sim::adjoint::record(&sys, &[G, E, 1.0], &o).expect("records");
+    let seed = hybc::sim::adjoint::Seed { state: vec![1.0, 0.0], ..Default::default() };
+    let grad = recorded.gradient(&sys, &[G, E, 1.0], &seed).expect("a gradient");
+    let forward = run(&Ball::new(), &[G, E, 1.0], &o).expect("runs");
+    let dy = forward.final_state.dstate.expect("sensitivities");
+    let m = 3;
+    for j in 0..m {
+        let want = dy[j * 2];
+        assert!((grad[j] - want).abs() <= 1e-12 * want.abs().max(1.0), "d y / d p{j}: {} vs {want}", grad[j]);
+    }
+    // A run asked of the adjoint does not ask either (its simulator is built before it knows
+    // which mode will run); where the adjoint declines (samples at given times) and the run
+    // falls back to forward, the refusal is the same error.
+    let by_adjoint = SimOptions { sens: hybc::sim::Sens::Adjoint, ..o.clone() };
+    let r = run(&sys, &[G, E, 1.0], &by_adjoint).expect("the adjoint runs");
+    assert_eq!(r.stats.sens, Some(hybc::sim::Sens::Adjoint));
+    let declined = SimOptions { at: vec![1.0], ..by_adjoint };
+    let err = run(&sys, &[G, E, 1.0], &declined).expect_err("falls back to forward, refused");
+    assert!(matches!(err, SimError::NoSensitivities { .. }), "{err:?}");
+}
