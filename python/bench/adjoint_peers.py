@@ -143,7 +143,7 @@ def knots_diffrax(k: int, bounces: int, solver_name: str = "Dopri8"):
 
     term, solver = diffrax.ODETerm(f), getattr(diffrax, solver_name)()
     controller = diffrax.PIDController(rtol=KNOTS_RTOL, atol=KNOTS_ATOL, jump_ts=knots_t)
-    event = diffrax.Event(lambda t, x, u, **kw: x[0], optx.Newton(rtol=1e-13, atol=1e-14), direction=False)
+    event = diffrax.Event(lambda t, y, args, **kw: y[0], optx.Newton(rtol=1e-13, atol=1e-14), direction=False)
     max_steps = 4 * k + 4096
 
     def final(u):
@@ -325,7 +325,8 @@ def knots(binary: str, counts, repeat: int, peers, amici_counts) -> None:
                 table.missing("AMICI", f"not built at K = {k} (--amici-knots): see the report")
                 continue
             try:
-                model, build = amici_build(knots_sbml(k), f"ball{k}" = amici_gradient(model, KNOTS_T, KNOTS_RTOL, KNOTS_ATOL, [f"u{j}" for j in range(k)])
+                model, build = amici_build(knots_sbml(k), f"ball{k}")
+                go = amici_gradient(model, KNOTS_T, KNOTS_RTOL, KNOTS_ATOL, [f"u{j}" for j in range(k)])
                 t, g = best_of(go, repeat)
                 table.add("AMICI CVODES adjoint", t, grad_err(g, ref), f"model build {build:.0f} s")
             except ImportError as e:
@@ -372,7 +373,7 @@ def chain_diffrax(n: int):
 
     term, solver = diffrax.ODETerm(f), diffrax.Dopri5()
     controller = diffrax.PIDController(rtol=CHAIN_RTOL, atol=CHAIN_ATOL)
-    event = diffrax.Event(lambda t, x, d, **kw: x[0] - 0.6, optx.Newton(rtol=1e-12, atol=1e-14), direction=False)
+    event = diffrax.Event(lambda t, y, args, **kw: y[0] - 0.6, optx.Newton(rtol=1e-12, atol=1e-14), direction=False)
     x0 = jnp.zeros(n).at[0].set(1.0)
 
     def final(d):
