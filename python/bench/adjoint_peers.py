@@ -35,6 +35,7 @@ import argparse
 import json
 import os
 import pathlib
+import re
 import subprocess
 import tempfile
 import time
@@ -73,7 +74,9 @@ class Table:
         print(title)
 
     def add(self, tool: str, seconds: float, err, note: str = "") -> None:
-        if tool.startswith("hybc adjoint"):
+        # The denominator: hybc's adjoint in process (the examples, warm as the peers are) when
+        # measured, else the CLI's (whose run includes the lazy compile of the adjoint's kernel).
+        if tool.startswith("hybc adjoint") and (self.hybc is None or "in process" in tool):
             self.hybc = seconds
         ratio = "-" if self.hybc is None else f"{seconds / self.hybc:.1f}"
         err_s = "-" if err is None else f"{err:.1e}"
@@ -82,6 +85,22 @@ class Table:
 
     def missing(self, tool: str, why: str) -> None:
         print(f"  {tool:<40} missing: {why}", flush=True)
+        self.rows.append((tool, None, "-", "-", f"missing: {why}"))
+
+    def summary(self) -> None:
+        """The table again as markdown, each time over hybc's adjoint in process (if measured)
+        and over its CLI run."""
+        cli = next((r[1] for r in self.rows if r[0] == "hybc adjoint"), None)
+        warm = next((r[1] for r in self.rows if r[0] == "hybc adjoint in process"), None)
+        print(f"\n{self.title}\n\n| tool | time (ms) | / hybc adjoint in process | / hybc adjoint CLI | gradient error | note |")
+        print("| --- | --- | --- | --- | --- | --- |")
+        for tool, sec, _, err, note in self.rows:
+            if sec is None:
+                print(f"| {tool} | - | - | - | - | {note} |")
+                continue
+            over = lambda base: "-" if base is None else f"{sec / base:.1f}"  # noqa: E731
+            print(f"| {tool} | {sec * 1e3:.3f} | {over(warm)} | {over(cli)} | {err} | {note} |")
+        print(flush=True)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -110,6 +129,28 @@ def hybc_grad(report: dict, of: str, names: list[str]) -> np.ndarray:
     final = report["final"]
     block = final["doutputs"].get(of) if of in final.get("doutputs", {}) else final["dstate"][of]
     return np.array([block[n] for n in names])
+
+
+def example_knots(examples: str | None, k: int, repeat: int):
+    """hybc's adjoint and plain run warm, in process: `adjoint_knots` (medians of `repeat`), in
+    seconds, or None without --examples."""
+    if not examples:
+        return None
+    out = subprocess.run([str(pathlib.Path(examples) / "adjoint_knots"), "--repeat", str(repeat), "--forward-upto",
+                          "0", str(k)], check=True, capture_output=True, text=True).stdout
+    cells = [c.strip() for c in out.strip().splitlines()[-1].strip("|").split("|")]
+    return float(cells[3]) * 1e-3, float(cells[2]) * 1e-3
+
+
+def example_chain(examples: str | None, n: int, repeat: int):
+    """As `example_knots`, from `adjoint_chain` (which also runs forward sensitivities once)."""
+    if not examples:
+        return None
+    out = subprocess.run([str(pathlib.Path(examples) / "adjoint_chain"), "--repeat", str(repeat), str(n)],
+                         check=True, capture_output=True, text=True).stdout
+    plain = float(re.search(r"plain ([0-9.]+) ms", out).group(1))
+    adjoint = float(re.search(r"adjoint ([0-9.]+) ms", out).group(1))
+    return adjoint * 1e-3, plain * 1e-3
 
 
 # ---------------------------------------------------------------------------------------------
@@ -285,7 +326,20 @@ def amici_gradient(model, t_end: float, rtol: float, atol: float, params: list[s
     return go
 
 
-def knots(binary: str, counts, repeat: int, peers, amici_counts) -> None:
+def amici_row(table: Table, build, t_end: float, rtol: float, atol: float, params, ref, repeat: int) -> None:
+    """AMICI's row: the model built (timed apart), its adjoint gradient timed, or why not."""
+    try:
+        model, build_s = build()
+        go = amici_gradient(model, t_end, rtol, atol, params)
+        t, g = best_of(go, repeat)
+        table.add("AMICI CVODES adjoint", t, grad_err(g, ref), f"model build {build_s:.0f} s")
+    except ImportError as e:
+        table.missing("AMICI", str(e))
+    except Exception as e:  # noqa: BLE001 - a peer's failure is a row, not a crash
+        table.missing("AMICI", f"failed: {e}")
+
+
+def knots(binary: str, counts, repeat: int, peers, amici_counts, examples=None) -> None:
     WORK.mkdir(parents=True, exist_ok=True)
     opts = ["--t-end", str(KNOTS_T), "--rtol", str(KNOTS_RTOL), "--atol", str(KNOTS_ATOL)]
     for k in counts:
@@ -309,6 +363,10 @@ def knots(binary: str, counts, repeat: int, peers, amici_counts) -> None:
         table.add("hybc adjoint", adj_s, grad_err(hybc_grad(report, "energy", names), ref),
                   f"compile {adj_c:.2f} s, {report['stats']['steps']} steps")
         table.add("hybc plain run", plain_s, None, f"compile {plain_c:.2f} s")
+        warm = example_knots(examples, k, repeat)
+        if warm is not None:
+            table.add("hybc adjoint in process", warm[0], None, "adjoint_knots, median")
+            table.add("hybc plain run in process", warm[1], None, "adjoint_knots, median")
         if "diffrax" in peers:
             try:
                 plain, grad, first, times, steps = knots_diffrax(k, len(hybc_events))
@@ -322,17 +380,11 @@ def knots(binary: str, counts, repeat: int, peers, amici_counts) -> None:
                 table.missing("diffrax", str(e))
         if "amici" in peers:
             if k not in amici_counts:
-                table.missing("AMICI", f"not built at K = {k} (--amici-knots): see the report")
-                continue
-            try:
-                model, build = amici_build(knots_sbml(k), f"ball{k}")
-                go = amici_gradient(model, KNOTS_T, KNOTS_RTOL, KNOTS_ATOL, [f"u{j}" for j in range(k)])
-                t, g = best_of(go, repeat)
-                table.add("AMICI CVODES adjoint", t, grad_err(g, ref), f"model build {build:.0f} s")
-            except ImportError as e:
-                table.missing("AMICI", str(e))
-            except Exception as e:  # noqa: BLE001 - a peer's failure is a row, not a crash
-                table.missing("AMICI", f"failed: {e}")
+                table.missing("AMICI", f"not built at K = {k} (--amici-knots)")
+            else:
+                amici_row(table, lambda: amici_build(knots_sbml(k), f"ball{k}"), KNOTS_T, KNOTS_RTOL, KNOTS_ATOL,
+                          [f"u{j}" for j in range(k)], ref, repeat)
+        table.summary()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -420,7 +472,7 @@ def chain_sbml(n: int):
     return doc
 
 
-def chain(binary: str, sizes, repeat: int, peers, amici_sizes) -> None:
+def chain(binary: str, sizes, repeat: int, peers, amici_sizes, examples=None) -> None:
     WORK.mkdir(parents=True, exist_ok=True)
     opts = ["--t-end", str(CHAIN_T), "--rtol", str(CHAIN_RTOL), "--atol", str(CHAIN_ATOL), "--method", "dopri5"]
     for n in sizes:
@@ -441,6 +493,10 @@ def chain(binary: str, sizes, repeat: int, peers, amici_sizes) -> None:
         table.add("hybc adjoint", adj_s, grad_err(hybc_grad(report, "y", names), ref),
                   f"compile {adj_c:.2f} s, {report['stats']['steps']} steps")
         table.add("hybc plain run", plain_s, None, f"compile {plain_c:.2f} s")
+        warm = example_chain(examples, n, repeat)
+        if warm is not None:
+            table.add("hybc adjoint in process", warm[0], None, "adjoint_chain, median")
+            table.add("hybc plain run in process", warm[1], None, "adjoint_chain, median")
         if "diffrax" in peers:
             try:
                 plain, grad, first, t_event, steps = chain_diffrax(n)
@@ -454,17 +510,11 @@ def chain(binary: str, sizes, repeat: int, peers, amici_sizes) -> None:
                 table.missing("diffrax", str(e))
         if "amici" in peers:
             if n not in amici_sizes:
-                table.missing("AMICI", f"not built at N = {n} (--amici-sizes): see the report")
-                continue
-            try:
-                model, build = amici_build(chain_sbml(n), f"link_chain{n}")
-                go = amici_gradient(model, CHAIN_T, CHAIN_RTOL, CHAIN_ATOL, [f"d{j}" for j in range(n - 1)])
-                t, g = best_of(go, repeat)
-                table.add("AMICI CVODES adjoint", t, grad_err(g, ref), f"model build {build:.0f} s")
-            except ImportError as e:
-                table.missing("AMICI", str(e))
-            except Exception as e:  # noqa: BLE001
-                table.missing("AMICI", f"failed: {e}")
+                table.missing("AMICI", f"not built at N = {n} (--amici-sizes)")
+            else:
+                amici_row(table, lambda: amici_build(chain_sbml(n), f"link_chain{n}"), CHAIN_T, CHAIN_RTOL,
+                          CHAIN_ATOL, [f"d{j}" for j in range(n - 1)], ref, repeat)
+        table.summary()
 
 
 def main() -> None:
@@ -476,15 +526,17 @@ def main() -> None:
     parser.add_argument("--peers", default="hybc,diffrax,amici")
     parser.add_argument("--amici-knots", default="10,100", help="K at which AMICI's model is built")
     parser.add_argument("--amici-sizes", default="100", help="N at which AMICI's model is built")
+    parser.add_argument("--examples", help="a directory with the release examples adjoint_knots and adjoint_chain "
+                        "(cargo build --release --example ...): hybc's adjoint warm, in process")
     parser.add_argument("--hybc", default=os.environ.get("HYBC", str(ROOT / "target/release/hybc")))
     args = parser.parse_args()
     ints = lambda s: tuple(int(x) for x in s.split(",") if x)  # noqa: E731
     peers = tuple(args.peers.split(","))
     for name in args.workloads:
         if name == "knots":
-            knots(args.hybc, ints(args.knots), args.repeat, peers, ints(args.amici_knots))
+            knots(args.hybc, ints(args.knots), args.repeat, peers, ints(args.amici_knots), args.examples)
         elif name == "chain":
-            chain(args.hybc, ints(args.sizes), args.repeat, peers, ints(args.amici_sizes))
+            chain(args.hybc, ints(args.sizes), args.repeat, peers, ints(args.amici_sizes), args.examples)
         else:
             raise SystemExit(f"unknown workload {name}")
 
