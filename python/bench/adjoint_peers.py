@@ -66,6 +66,12 @@ def grad_err(got, want) -> float:
     return float(np.linalg.norm(got - want) / np.linalg.norm(want))
 
 
+def abs_err(got, want) -> str:
+    """The largest absolute error, for the chain's far cell, whose value (1e-21 at N = 300) lies
+    far below atol: there a relative error measures round-off, not the method."""
+    return f"max abs err {np.max(np.abs(np.asarray(got, dtype=float) - np.asarray(want, dtype=float))):.1e}"
+
+
 class Table:
     """The rows of one workload size: tool, time, time / hybc's adjoint, gradient error."""
 
@@ -332,7 +338,7 @@ def amici_row(table: Table, build, t_end: float, rtol: float, atol: float, param
         model, build_s = build()
         go = amici_gradient(model, t_end, rtol, atol, params)
         t, g = best_of(go, repeat)
-        table.add("AMICI CVODES adjoint", t, grad_err(g, ref), f"model build {build_s:.0f} s")
+        table.add("AMICI CVODES adjoint", t, grad_err(g, ref), f"model build {build_s:.0f} s, {abs_err(g, ref)}")
     except ImportError as e:
         table.missing("AMICI", str(e))
     except Exception as e:  # noqa: BLE001 - a peer's failure is a row, not a crash
@@ -490,8 +496,9 @@ def chain(binary: str, sizes, repeat: int, peers, amici_sizes, examples=None) ->
         hybc_event = report["events"][0]["time"]
         adj_s, adj_c, report = hybc_best(binary, path, opts + ["--grad", "d", "--sens", "adjoint", "--of", "y"],
                                          repeat)
-        table.add("hybc adjoint", adj_s, grad_err(hybc_grad(report, "y", names), ref),
-                  f"compile {adj_c:.2f} s, {report['stats']['steps']} steps")
+        g = hybc_grad(report, "y", names)
+        table.add("hybc adjoint", adj_s, grad_err(g, ref),
+                  f"compile {adj_c:.2f} s, {report['stats']['steps']} steps, {abs_err(g, ref)}")
         table.add("hybc plain run", plain_s, None, f"compile {plain_c:.2f} s")
         warm = example_chain(examples, n, repeat)
         if warm is not None:
@@ -502,7 +509,7 @@ def chain(binary: str, sizes, repeat: int, peers, amici_sizes, examples=None) ->
                 plain, grad, first, t_event, steps = chain_diffrax(n)
                 t, g = best_of(grad, repeat)
                 table.add("diffrax Dopri5 jax.grad", t, grad_err(g, ref),
-                          f"JIT + first call {first:.1f} s, {steps} steps, "
+                          f"JIT + first call {first:.1f} s, {steps} steps, {abs_err(g, ref)}, "
                           f"event at {t_event:.6f} (hybc {hybc_event:.6f})")
                 t, _ = best_of(plain, repeat)
                 table.add("diffrax Dopri5 plain", t, None)
