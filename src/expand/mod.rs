@@ -12,11 +12,13 @@
 
 mod error;
 mod index;
+mod sites;
 
 use std::borrow::Cow;
 use std::collections::{HashMap, HashSet};
 
-pub use error::{ExpandError, Problem};
+pub use error::{quote_head, ExpandError, Problem};
+pub use sites::{loop_sites, LoopSite};
 
 use crate::syntax::ast::*;
 use crate::syntax::Span;
@@ -31,7 +33,17 @@ pub fn expand(file: &File) -> Result<Cow<'_, File>, Vec<ExpandError>> {
     if !file.items.iter().any(item_needs) {
         return Ok(Cow::Borrowed(file));
     }
-    let mut x = Expander::default();
+    flatten(file, Expander::default()).map(|(file, _)| Cow::Owned(file))
+}
+
+/// [`expand`] that also returns, for each flat item, the loop values it was unrolled at (empty
+/// outside loops): what [`loop_sites`] reads, run again only when `sema` has refused the model.
+fn trace(file: &File) -> Option<(File, Vec<Vec<(String, i64)>>)> {
+    let (flat, x) = flatten(file, Expander { origins: Some(Vec::new()), ..Expander::default() }).ok()?;
+    Some((flat, x.origins.unwrap_or_default()))
+}
+
+fn flatten(file: &File, mut x: Expander) -> Result<(File, Expander), Vec<ExpandError>> {
     for item in &file.items {
         if let Item::Const(c) = item {
             x.define_const(c);
@@ -43,7 +55,7 @@ pub fn expand(file: &File) -> Result<Cow<'_, File>, Vec<ExpandError>> {
         let mut items = Vec::new();
         x.emit(&file.items, 0, &mut items);
         if x.errors.is_empty() {
-            return Ok(Cow::Owned(File { model: file.model.clone(), items }));
+            return Ok((File { model: file.model.clone(), items }, x));
         }
     }
     x.errors.sort_by_key(|e| e.span.start);
@@ -138,6 +150,8 @@ struct Expander {
     size: usize,
     /// The size cap was hit: nothing more is unrolled.
     fatal: bool,
+    /// When tracing ([`trace`]): the loop values each emitted top-level item was unrolled at.
+    origins: Option<Vec<Vec<(String, i64)>>>,
 }
 
 impl index::Env for Expander {
@@ -353,6 +367,15 @@ impl Expander {
             if self.fatal || !self.grow(1, item_span(item), || "the items".to_string()) {
                 return;
             }
+            self.emit_one(item, depth, out);
+            if let Some(origins) = &mut self.origins {
+                origins.resize(out.len(), self.loops.clone());
+            }
+        }
+    }
+
+    fn emit_one(&mut self, item: &Item, depth: usize, out: &mut Vec<Item>) {
+        {
             match item {
                 Item::Param(p) => {
                     let mut p = p.clone();
@@ -407,7 +430,7 @@ impl Expander {
                 Item::Simulate(s) => out.push(Item::Simulate(s.clone())),
                 Item::Const(_) => {}
                 Item::For(f) => {
-                    let Some(values) = self.range(&f.var, &f.lo, &f.hi) else { continue };
+                    let Some(values) = self.range(&f.var, &f.lo, &f.hi) else { return };
                     for v in values {
                         self.loops.push((f.var.name.clone(), v));
                         self.emit(&f.items, depth + 1, out);
