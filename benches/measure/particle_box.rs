@@ -35,7 +35,8 @@ fn main() {
     let started = Instant::now();
     let compiled = model.compile::<&str>(&[]).expect("compiles");
     let t_compile = started.elapsed().as_secs_f64();
-    let opts = SimOptions { t_end, rtol: 1e-10, atol: 1e-12, max_events: 10_000_000, ..SimOptions::default() };
+    let opts =
+        SimOptions { t_end, rtol: 1e-10, atol: 1e-12, max_events: 10_000_000, ..SimOptions::default() };
     let started = Instant::now();
     let run = compiled.simulate(&model.params(), &opts).expect("runs");
     let t_run = started.elapsed().as_secs_f64();

@@ -112,4 +112,3 @@ pub fn box_closed_form(n: usize, t_end: f64) -> (Events, Particles) {
     last.sort_by(|p, q| p.0.total_cmp(&q.0));
     (events, last)
 }
-
