@@ -26,7 +26,12 @@ impl Model {
     /// --only`): each name is a state, event or output (`v[3]`, `low[3]`, `ke`), an array or
     /// family whole (`v`, `low`), or elements by ranges, inclusive as `hybc check` prints them
     /// (`low[2..5]`, `T[1][0..2]`). A name that selects nothing is an error naming it.
-    pub fn derivatives_only(&self, wrt: &[ParamIdx], mode: Option<ModeId>, names: &[&str]) -> Result<String, String> {
+    pub fn derivatives_only(
+        &self,
+        wrt: &[ParamIdx],
+        mode: Option<ModeId>,
+        names: &[&str],
+    ) -> Result<String, String> {
         let checked = self.checked();
         let only = select(checked, names)?;
         Ok(derive_report_only(checked, &lower(checked), wrt, mode, &only))
@@ -66,11 +71,13 @@ fn select(model: &sema::Model, names: &[&str]) -> Result<Only, String> {
                 "--only: `{name}` is not a name, an element (`v[3]`) or a range of elements (`low[2..5]`)"
             ));
         };
-        let exact = brackets.is_empty() && [&states, &events, &outputs].iter().any(|l| l.contains(&name.trim()));
+        let exact =
+            brackets.is_empty() && [&states, &events, &outputs].iter().any(|l| l.contains(&name.trim()));
         let matches = |element: &str| {
             if exact || brackets.is_empty() {
                 // A plain name: itself, or every element of the array or family it names.
-                return element == base || (!exact && pattern(element).is_some_and(|(b, i)| b == base && !i.is_empty()));
+                return element == base
+                    || (!exact && pattern(element).is_some_and(|(b, i)| b == base && !i.is_empty()));
             }
             pattern(element).is_some_and(|(b, idx)| {
                 b == base
@@ -88,7 +95,10 @@ fn select(model: &sema::Model, names: &[&str]) -> Result<Only, String> {
             }
         }
         if !found {
-            return Err(format!("--only: `{name}` names no state, event or output of model `{}`", model.name));
+            return Err(format!(
+                "--only: `{name}` names no state, event or output of model `{}`",
+                model.name
+            ));
         }
     }
     let [states, events, outputs] = picked.map(|p| p.into_iter().collect());

@@ -133,8 +133,12 @@ pub fn derive_report_only(
             let mut block = Block::new(&format!("mode {name}"));
             block.scalar("f", mode_fns.flow.get(i).copied());
             let row = |mat: &SparseMat| {
-                let mut row: Vec<(u32, ExprId)> =
-                    mat.entries.iter().filter(|&&(r, _, _)| r as usize == i).map(|&(_, k, e)| (k, e)).collect();
+                let mut row: Vec<(u32, ExprId)> = mat
+                    .entries
+                    .iter()
+                    .filter(|&&(r, _, _)| r as usize == i)
+                    .map(|&(_, k, e)| (k, e))
+                    .collect();
                 row.sort_by_key(|&(k, _)| k);
                 row
             };
@@ -359,7 +363,13 @@ impl Reporter<'_> {
 
     /// Output `k`'s block: `h`, `h_x`, `h_p` for each differentiated parameter, `h_t` if
     /// non-zero; `output_x` and `output_p` are the rows of those matrices.
-    fn output(&self, out: &mut String, k: usize, output_x: &[Vec<(u32, ExprId)>], output_p: &[Vec<(u32, ExprId)>]) {
+    fn output(
+        &self,
+        out: &mut String,
+        k: usize,
+        output_x: &[Vec<(u32, ExprId)>],
+        output_p: &[Vec<(u32, ExprId)>],
+    ) {
         let (Some(output), Some(&h)) = (self.model.outputs.get(k), self.funcs.outputs.get(k)) else {
             return;
         };
@@ -407,7 +417,11 @@ impl Reporter<'_> {
                     let cells: Vec<String> = r
                         .iter()
                         .map(|&(k, e)| {
-                            format!("{}: {}", states.get(k as usize).map_or("?", |s| s.as_str()), next(&Some(e)))
+                            format!(
+                                "{}: {}",
+                                states.get(k as usize).map_or("?", |s| s.as_str()),
+                                next(&Some(e))
+                            )
                         })
                         .collect();
                     let _ = writeln!(out, "{inner}{label} = {{{}}}", cells.join(", "));
