@@ -491,7 +491,7 @@ fn check_prints_arrays_and_families_compactly() {
 
 // ---- whole arrays where a list is meant ------------------------------------------------------
 
-/// `--set h=..` sets a vector parameter whole, here the initial heights of the drops (a state
+/// `--set h=1.2,2,0.5` sets a vector parameter whole, here the initial heights of the drops (a state
 /// array's initial values are set through parameters): each ball's first floor event moves to
 /// `sqrt(2 h_i (i + 1) / g)`. `--of y` asks for the gradients of every element of the state
 /// array `y` (and of nothing else): the same numbers as the full report's; `--of y@0.25` every
@@ -499,10 +499,18 @@ fn check_prints_arrays_and_families_compactly() {
 #[test]
 fn whole_arrays_work_in_set_and_of() {
     let g = 9.81;
-    let h = [0.5, 2.0, 1.5];
+    let h = [1.2, 2.0, 0.5];
     let run = |extra: &[&str]| {
-        let mut args =
-            vec!["run", "tests/data/run/drops.hyb", "--set", "h=0.5,2,1.5", "--grad", "h", "--format", "json"];
+        let mut args = vec![
+            "run",
+            "tests/data/run/drops.hyb",
+            "--set",
+            "h=1.2,2,0.5",
+            "--grad",
+            "h",
+            "--format",
+            "json",
+        ];
         args.extend_from_slice(extra);
         json_of(&crate::support::cli::hybc(&args))
     };
@@ -516,11 +524,11 @@ fn whole_arrays_work_in_set_and_of() {
         assert!((num(&ev["time"]) - t).abs() < 1e-9, "{name} at {} vs {t}", ev["time"]);
     }
     let some = run(&["--of", "y"]);
-    let dstate = some["dstate"].as_object().expect("dstate");
+    let dstate = some["final"]["dstate"].as_object().expect("dstate");
     let keys: Vec<&str> = dstate.keys().map(String::as_str).collect();
     assert_eq!(keys, ["y[0]", "y[1]", "y[2]"], "--of y: every element of y, nothing else");
     for k in keys {
-        assert_eq!(dstate[k], full["dstate"][k], "d{k}: --of y against the full report");
+        assert_eq!(dstate[k], full["final"]["dstate"][k], "d{k}: --of y against the full report");
     }
     let at = run(&["--of", "y@0.25"]);
     let sample = &at["samples"][0]["dstate"];
@@ -534,7 +542,7 @@ fn whole_arrays_work_in_set_and_of() {
     assert!(sample.get("v[0]").is_none_or(|v| v.is_null()), "--of y@0.25 asks for no v: {sample}");
     // An element and a name that is neither: as before.
     let one = run(&["--of", "y[1]"]);
-    let keys: Vec<&String> = one["dstate"].as_object().expect("dstate").keys().collect();
+    let keys: Vec<&String> = one["final"]["dstate"].as_object().expect("dstate").keys().collect();
     assert_eq!(keys, ["y[1]"]);
     let out = crate::support::cli::hybc(&["run", "tests/data/run/drops.hyb", "--grad", "h", "--of", "w"]);
     assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
@@ -552,7 +560,11 @@ fn derive_only(only: &str) -> (Option<i32>, String, String) {
 fn titles(report: &str) -> Vec<&str> {
     report
         .lines()
-        .filter(|l| ["state ", "event ", "output ", "mode ", "top-level"].iter().any(|p| l.trim_start().starts_with(p)))
+        .filter(|l| {
+            ["state ", "event ", "output ", "mode ", "top-level"]
+                .iter()
+                .any(|p| l.trim_start().starts_with(p))
+        })
         .map(str::trim)
         .collect()
 }
@@ -563,10 +575,24 @@ fn derive_only_shows_the_elements_asked_for() {
     assert_eq!(code, Some(0), "{err}");
     assert!(text.starts_with("model box\nonly: x[3], low[3]\ndifferentiated: s, L\n"), "{text}");
     assert_eq!(titles(&text), ["state x[3]", "mode main", "top-level", "event low[3] (falling)"], "{text}");
-    // x[3]' = v[3]: one entry of f_x, no parameter; x[3](0) = L (3.5 + 0.3 sin(12.4)) / 8.
-    for line in ["  f = v[3]", "  f_x = {v[3]: 1}", "  f_s = 0", "  f_L = 0", "  g = x[3]", "  g_x:", "    (6) x[3]: 1"]
-    {
-        assert!(text.lines().any(|l| l.trim_end() == format!("  {line}").trim_end() || l == line), "no `{line}` in\n{text}");
+    // x[3]' = v[3]: one entry of f_x, no parameter; x[3](0) = L (3.5 + 0.3 sin(12.4)) / 8, so
+    // dx[3](0)/dL = x[3](0) at L = 1; low[3]'s guard is x[3], its reset flips v[3] alone.
+    let x0 = (3.5 + 0.3 * 12.4f64.sin()) / 8.0;
+    let x0_l: f64 =
+        text.lines().find_map(|l| l.strip_prefix("  x0_L = ")).expect("x0_L").parse().expect("a number");
+    assert!((x0_l - x0).abs() < 1e-15, "x0_L = {x0_l} vs {x0}");
+    let lines: Vec<&str> = text.lines().map(str::trim).collect();
+    for line in [
+        "x0_s = 0",
+        "f = v[3]",
+        "f_x = {v[3]: 1}",
+        "f_s = 0",
+        "f_L = 0",
+        "g = x[3]",
+        "(6) x[3]: 1",
+        "(7) v[3]: -v[3]",
+    ] {
+        assert_eq!(lines.iter().filter(|l| **l == line).count(), 1, "`{line}` once in\n{text}");
     }
     // Its lines are those of the whole report (the event's block is the same text).
     let whole = crate::support::cli::hybc(&["derive", "models/box.hyb", "--wrt", "s,L"]);
@@ -578,7 +604,15 @@ fn derive_only_shows_the_elements_asked_for() {
     let (code, text, _) = derive_only("low[2..5]");
     assert_eq!(code, Some(0));
     let events: Vec<&str> = titles(&text).into_iter().filter(|t| t.starts_with("event")).collect();
-    assert_eq!(events, ["event low[2] (falling)", "event low[3] (falling)", "event low[4] (falling)", "event low[5] (falling)"]);
+    assert_eq!(
+        events,
+        [
+            "event low[2] (falling)",
+            "event low[3] (falling)",
+            "event low[4] (falling)",
+            "event low[5] (falling)"
+        ]
+    );
     let (_, text, _) = derive_only("v,ke");
     let states: Vec<&str> = titles(&text).into_iter().filter(|t| t.starts_with("state")).collect();
     assert_eq!(states, (0..8).map(|i| format!("state v[{i}]")).collect::<Vec<_>>());
