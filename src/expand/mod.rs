@@ -32,6 +32,9 @@ pub use sites::{loop_sites, LoopSite};
 use crate::syntax::ast::*;
 use crate::syntax::Span;
 
+/// The loop variables' values at one place, outermost first.
+type LoopValues = Vec<(String, i64)>;
+
 /// The most items and expression nodes a file may flatten to (each unrolled item and each node
 /// of its expressions counts one): a few hundred megabytes of syntax tree at most, and far above
 /// any model the later stages handle in reasonable time.
@@ -47,7 +50,7 @@ pub fn expand(file: &File) -> Result<Cow<'_, File>, Vec<ExpandError>> {
 
 /// [`expand`] that also returns, for each flat item, the loop values it was unrolled at (empty
 /// outside loops): what [`loop_sites`] reads, run again only when `sema` has refused the model.
-fn trace(file: &File) -> Option<(File, Vec<Vec<(String, i64)>>)> {
+fn trace(file: &File) -> Option<(File, Vec<LoopValues>)> {
     let (flat, x) = flatten(file, Expander { origins: Some(Vec::new()), ..Expander::default() }).ok()?;
     Some((flat, x.origins.unwrap_or_default()))
 }
@@ -99,7 +102,7 @@ struct Expander {
     /// The size cap was hit: nothing more is unrolled.
     fatal: bool,
     /// When tracing ([`trace`]): the loop values each emitted top-level item was unrolled at.
-    origins: Option<Vec<Vec<(String, i64)>>>,
+    origins: Option<Vec<LoopValues>>,
 }
 
 impl index::Env for Expander {
