@@ -183,7 +183,8 @@ impl SimOverrides {
         let flag = spelling.of("of");
         let refuse = |message: String| OptionError { option: "of", message };
         let mut of = GradientsOf::default();
-        for name in names {
+        let names: Vec<String> = names.iter().flat_map(|n| whole_array(n, info)).collect();
+        for name in &names {
             match Observable::parse(name, info).map_err(|e| refuse(format!("{flag}: {e}")))? {
                 Observable::State(i) => of.states.push(i),
                 Observable::Output(i) => of.outputs.push(i),
@@ -209,6 +210,30 @@ impl SimOverrides {
         }
         opts.of = Some(of);
         Ok(())
+    }
+}
+
+/// `x` or `x@T` for an array of states or outputs (`x` itself no state or output, but `x[0]`, `x[1]`,
+/// .. are): each element, in the model's order; any other name as it is. A list of gradients
+/// takes a whole array where it takes its elements (docs/cli.md).
+fn whole_array(name: &str, info: &SystemInfo) -> Vec<String> {
+    let (value, at) = name.split_once('@').map_or((name.trim(), None), |(v, t)| (v.trim(), Some(t)));
+    let is_element = |n: &str| {
+        n.strip_prefix(value)
+            .is_some_and(|rest| rest.starts_with('[') && rest.ends_with(']') && !rest.contains('#'))
+    };
+    let names = info.state_names.iter().chain(&info.output_names);
+    if value.is_empty() || value.contains(['[', '#']) || names.clone().any(|n| n == value) {
+        return vec![name.to_string()];
+    }
+    let elements: Vec<String> = names
+        .filter(|n| is_element(n))
+        .map(|n| at.map_or_else(|| n.clone(), |t| format!("{n}@{t}")))
+        .collect();
+    if elements.is_empty() {
+        vec![name.to_string()]
+    } else {
+        elements
     }
 }
 

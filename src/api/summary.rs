@@ -5,7 +5,7 @@
 use std::fmt::Write;
 
 use super::Model;
-use crate::lower::{derive_report, lower, ExprPrinter};
+use crate::lower::{derive_report, derive_report_only, lower, ExprPrinter, Only};
 use crate::sema::{self, Direction, ModeId, ParamIdx};
 
 impl Model {
@@ -21,6 +21,88 @@ impl Model {
         let checked = self.checked();
         derive_report(checked, &lower(checked), wrt, mode)
     }
+
+    /// [`Self::derivatives`] of only the states, events and outputs `names` select (`hybc derive
+    /// --only`): each name is a state, event or output (`v[3]`, `low[3]`, `ke`), an array or
+    /// family whole (`v`, `low`), or elements by ranges, inclusive as `hybc check` prints them
+    /// (`low[2..5]`, `T[1][0..2]`). A name that selects nothing is an error naming it.
+    pub fn derivatives_only(
+        &self,
+        wrt: &[ParamIdx],
+        mode: Option<ModeId>,
+        names: &[&str],
+    ) -> Result<String, String> {
+        let checked = self.checked();
+        let only = select(checked, names)?;
+        Ok(derive_report_only(checked, &lower(checked), wrt, mode, &only))
+    }
+}
+
+/// One bracket of a `--only` pattern: an index or an inclusive range.
+type Bracket = std::ops::RangeInclusive<i64>;
+
+/// `low[2..5]` -> `("low", [2..=5])`, `v[3]` -> `("v", [3..=3])`, `ke` -> `("ke", [])`; `None` if
+/// the brackets do not read as indices or ranges.
+fn pattern(text: &str) -> Option<(&str, Vec<Bracket>)> {
+    let text = text.trim();
+    let (base, mut rest) = text.split_once('[').map_or((text, ""), |(b, _)| (b, &text[b.len()..]));
+    let mut brackets = Vec::new();
+    while let Some(inner) = rest.strip_prefix('[') {
+        let (inside, after) = inner.split_once(']')?;
+        let int = |s: &str| s.trim().parse::<i64>().ok();
+        brackets.push(match inside.split_once("..") {
+            Some((lo, hi)) => int(lo)?..=int(hi)?,
+            None => int(inside)?..=int(inside)?,
+        });
+        rest = after;
+    }
+    (rest.is_empty() && !base.trim().is_empty()).then_some((base.trim(), brackets))
+}
+
+/// The states, events and outputs `names` select, each list in the model's order.
+fn select(model: &sema::Model, names: &[&str]) -> Result<Only, String> {
+    let states: Vec<&str> = model.states.iter().map(|s| s.name.as_str()).collect();
+    let events: Vec<&str> = model.events.iter().map(|e| e.name.as_str()).collect();
+    let outputs: Vec<&str> = model.outputs.iter().map(|o| o.name.as_str()).collect();
+    let mut picked: [std::collections::BTreeSet<usize>; 3] = Default::default();
+    for &name in names {
+        let Some((base, brackets)) = pattern(name) else {
+            return Err(format!(
+                "--only: `{name}` is not a name, an element (`v[3]`) or a range of elements (`low[2..5]`)"
+            ));
+        };
+        let exact =
+            brackets.is_empty() && [&states, &events, &outputs].iter().any(|l| l.contains(&name.trim()));
+        let matches = |element: &str| {
+            if exact || brackets.is_empty() {
+                // A plain name: itself, or every element of the array or family it names.
+                return element == base
+                    || (!exact && pattern(element).is_some_and(|(b, i)| b == base && !i.is_empty()));
+            }
+            pattern(element).is_some_and(|(b, idx)| {
+                b == base
+                    && idx.len() == brackets.len()
+                    && idx.iter().zip(&brackets).all(|(i, r)| r.contains(i.start()))
+            })
+        };
+        let mut found = false;
+        for (list, set) in [&states, &events, &outputs].into_iter().zip(picked.iter_mut()) {
+            for (i, element) in list.iter().enumerate() {
+                if matches(element) {
+                    set.insert(i);
+                    found = true;
+                }
+            }
+        }
+        if !found {
+            return Err(format!(
+                "--only: `{name}` names no state, event or output of model `{}`",
+                model.name
+            ));
+        }
+    }
+    let [states, events, outputs] = picked.map(|p| p.into_iter().collect());
+    Ok(Only { states, events, outputs })
 }
 
 /// The text `hybc check` prints for the checked model `model`.

@@ -1,4 +1,5 @@
-//! `hybc derive FILE [--wrt P,...] [--mode M]`: print every symbolic derivative of a model.
+//! `hybc derive FILE [--wrt P,...] [--mode M] [--only NAMES]`: print every symbolic derivative of a
+//! model, or those of some states, events and outputs.
 
 use std::process::ExitCode;
 
@@ -15,6 +16,10 @@ pub struct DeriveArgs {
     /// Show only this mode (top-level events are always shown).
     #[arg(long, value_name = "MODE")]
     mode: Option<String>,
+    /// Show only these states, events and outputs: names (`v[3]`, `low[3]`, `ke`), whole arrays
+    /// and families (`v`, `low`), or ranges of elements, inclusive (`low[2..5]`, `T[1][0..2]`).
+    #[arg(long, value_name = "N1,N2,..", value_delimiter = ',')]
+    only: Option<Vec<String>>,
 }
 
 pub fn run(args: &DeriveArgs) -> ExitCode {
@@ -41,6 +46,16 @@ pub fn run(args: &DeriveArgs) -> ExitCode {
             }
         },
     };
-    super::print_out(&model.derivatives(&wrt, mode));
+    let text = match &args.only {
+        None => model.derivatives(&wrt, mode),
+        Some(names) => {
+            let names: Vec<&str> = names.iter().map(String::as_str).collect();
+            match model.derivatives_only(&wrt, mode, &names) {
+                Ok(text) => text,
+                Err(message) => return usage_error(&message),
+            }
+        }
+    };
+    super::print_out(&text);
     ExitCode::SUCCESS
 }

@@ -34,6 +34,15 @@ fn trim_head(text: &str) -> &str {
     text.strip_suffix("when").map_or(text, str::trim_end)
 }
 
+/// The text of a declaration's head as a message quotes it (`der(v[i])`), if it is short and on
+/// one line.
+pub fn quote_head(source: &str, within: Span) -> Option<&str> {
+    source
+        .get(within.start..within.end)
+        .map(trim_head)
+        .filter(|text| !text.is_empty() && !text.contains(['\n', '\r']) && text.len() <= 80)
+}
+
 /// `2000000` as `2,000,000`.
 fn thousands(n: usize) -> String {
     let digits = n.to_string();
@@ -204,9 +213,7 @@ impl ExpandError {
     pub fn to_diagnostic(&self, source: &str) -> Diagnostic {
         let quoted = self
             .within
-            .and_then(|w| source.get(w.start..w.end))
-            .map(trim_head)
-            .filter(|text| !text.is_empty() && !text.contains(['\n', '\r']) && text.len() <= 80)
+            .and_then(|w| quote_head(source, w))
             .map(|text| format!("in `{text}` "))
             .unwrap_or_default();
         let message = if quoted.is_empty() { self.to_string() } else { format!("{quoted}{self}") };

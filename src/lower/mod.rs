@@ -13,7 +13,7 @@ mod single;
 
 pub use events::classify_events;
 pub use interp::Interpreter;
-pub use report::derive_report;
+pub use report::{derive_report, derive_report_only, Only};
 pub use single::{ExprPrinter, SHOWN_CHARS};
 
 use std::collections::{HashMap, HashSet};

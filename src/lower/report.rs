@@ -74,22 +74,107 @@ pub fn derive_report(
 
     // Grouped once: a row looked up per output would scan every entry per output.
     let (output_x, output_p) = (rows(&funcs.output_x), rows(&funcs.output_p));
-    for (k, output) in model.outputs.iter().enumerate() {
-        let Some(&h) = funcs.outputs.get(k) else {
-            continue;
-        };
-        let mut block = Block::new(&format!("output {}", output.name));
-        block.scalar("h", Some(h));
-        block.vector("h_x", dense_row(output_x.get(k), funcs.n_states));
-        let h_p = dense_row(output_p.get(k), funcs.n_params);
+    for k in 0..model.outputs.len() {
+        r.output(&mut out, k, &output_x, &output_p);
+    }
+    out
+}
+
+/// What `hybc derive --only` keeps: states (their initial value and their rows of each mode's
+/// flow), events and outputs, each an index into the model's list.
+#[derive(Debug, Default, Clone, PartialEq, Eq)]
+pub struct Only {
+    /// States, by index.
+    pub states: Vec<usize>,
+    /// Events, by index.
+    pub events: Vec<usize>,
+    /// Outputs, by index.
+    pub outputs: Vec<usize>,
+}
+
+/// The part of [`derive_report`] about the states, events and outputs `only` names: for each
+/// state its initial value and, in each mode (`mode` only, when given), its flow with that row's
+/// derivatives, each non-zero entry named by its state (`f_x = {v[3]: 1}`); each event and
+/// output as the whole report prints it.
+pub fn derive_report_only(
+    model: &Model,
+    funcs: &ModelFunctions,
+    wrt: &[ParamIdx],
+    mode: Option<ModeId>,
+    only: &Only,
+) -> String {
+    let r = Reporter { model, funcs, wrt };
+    let name_of = |names: &[usize], f: &dyn Fn(usize) -> String| -> Vec<String> {
+        names.iter().map(|&i| f(i)).collect()
+    };
+    let mut shown = name_of(&only.states, &|i| model.states[i].name.clone());
+    shown.extend(name_of(&only.events, &|i| model.events[i].name.clone()));
+    shown.extend(name_of(&only.outputs, &|i| model.outputs[i].name.clone()));
+    let wrt_names: Vec<&str> = wrt.iter().map(|&p| r.param_name(p)).collect();
+    let mut out = String::new();
+    let _ = writeln!(out, "model {}", model.name);
+    let _ = writeln!(out, "only: {}", shown.join(", "));
+    let _ = writeln!(out, "differentiated: {}", list_or_none(&wrt_names));
+
+    let init_p = rows(&funcs.init_p);
+    for &i in &only.states {
+        let mut block = Block::new(&format!("state {}", model.states[i].name));
+        block.scalar("x0", funcs.init.get(i).copied());
         for &p in wrt {
-            let entry = h_p.get(p.0 as usize).copied().flatten();
-            block.scalar(&format!("h_{}", r.param_name(p)), entry);
-        }
-        if let Some(&(_, t)) = funcs.output_t.entries.iter().find(|&&(i, _)| i as usize == k) {
-            block.scalar("h_t", Some(t));
+            let entry = init_p.get(i).and_then(|row| row.iter().find(|&&(k, _)| k == p.0)).map(|&(_, e)| e);
+            block.scalar(&format!("x0_{}", r.param_name(p)), entry);
         }
         r.emit(&mut out, block, "");
+        for (m, mode_fns) in funcs.modes.iter().enumerate() {
+            if mode.is_some_and(|only| only.0 as usize != m) {
+                continue;
+            }
+            let name = model.modes.get(m).map_or("?", |x| x.name.as_str());
+            let mut block = Block::new(&format!("mode {name}"));
+            block.scalar("f", mode_fns.flow.get(i).copied());
+            let row = |mat: &SparseMat| {
+                let mut row: Vec<(u32, ExprId)> = mat
+                    .entries
+                    .iter()
+                    .filter(|&&(r, _, _)| r as usize == i)
+                    .map(|&(_, k, e)| (k, e))
+                    .collect();
+                row.sort_by_key(|&(k, _)| k);
+                row
+            };
+            block.lines.push(("f_x".to_string(), Shape::Row(row(&mode_fns.flow_x))));
+            let f_p = row(&mode_fns.flow_p);
+            for &p in wrt {
+                let entry = f_p.iter().find(|&&(k, _)| k == p.0).map(|&(_, e)| e);
+                block.scalar(&format!("f_{}", r.param_name(p)), entry);
+            }
+            if let Some(&(_, t)) = mode_fns.flow_t.entries.iter().find(|&&(k, _)| k as usize == i) {
+                block.scalar("f_t", Some(t));
+            }
+            r.emit(&mut out, block, "  ");
+        }
+    }
+
+    // Events under their mode's heading, or the top level's, in the model's order.
+    let mut heading = None;
+    for &e in &only.events {
+        let owner = model.events[e].owner;
+        if owner.is_some() && mode.is_some_and(|m| owner != Some(m)) {
+            continue;
+        }
+        if heading != Some(owner) {
+            let title = owner.map_or("top-level".to_string(), |m| {
+                format!("mode {}", model.modes.get(m.0 as usize).map_or("?", |x| x.name.as_str()))
+            });
+            let _ = write!(out, "\n{title}");
+            heading = Some(owner);
+        }
+        r.event(&mut out, e, "  ");
+    }
+
+    let (output_x, output_p) = (rows(&funcs.output_x), rows(&funcs.output_p));
+    for &k in &only.outputs {
+        r.output(&mut out, k, &output_x, &output_p);
     }
     out
 }
@@ -158,6 +243,9 @@ enum Shape {
     /// Rows of `(column, entry)`, `n_cols` columns: a matrix with `n` states has up to `n^2`
     /// entries, and a dense grid of a sparse one would cost `n^2` for few.
     Matrix(Vec<Vec<(u32, ExprId)>>, u32),
+    /// One row's non-zero entries `(column, entry)`, printed with the columns' state names
+    /// (`{x[3]: 1, v[3]: -1}`) at any size: `hybc derive --only`'s flow rows.
+    Row(Vec<(u32, ExprId)>),
 }
 
 /// A titled group of lines that shares one set of `let`s.
@@ -186,6 +274,7 @@ impl Block {
                 Shape::Scalar(e) => roots.extend(e),
                 Shape::Vector(v) => roots.extend(v.iter().flatten()),
                 Shape::Matrix(m, _) => roots.extend(m.iter().flatten().map(|&(_, e)| e)),
+                Shape::Row(r) => roots.extend(r.iter().map(|&(_, e)| e)),
             }
         }
         roots
@@ -272,6 +361,33 @@ impl Reporter<'_> {
         self.emit(out, block, indent);
     }
 
+    /// Output `k`'s block: `h`, `h_x`, `h_p` for each differentiated parameter, `h_t` if
+    /// non-zero; `output_x` and `output_p` are the rows of those matrices.
+    fn output(
+        &self,
+        out: &mut String,
+        k: usize,
+        output_x: &[Vec<(u32, ExprId)>],
+        output_p: &[Vec<(u32, ExprId)>],
+    ) {
+        let (Some(output), Some(&h)) = (self.model.outputs.get(k), self.funcs.outputs.get(k)) else {
+            return;
+        };
+        let funcs = self.funcs;
+        let mut block = Block::new(&format!("output {}", output.name));
+        block.scalar("h", Some(h));
+        block.vector("h_x", dense_row(output_x.get(k), funcs.n_states));
+        let h_p = dense_row(output_p.get(k), funcs.n_params);
+        for &p in self.wrt {
+            let entry = h_p.get(p.0 as usize).copied().flatten();
+            block.scalar(&format!("h_{}", self.param_name(p)), entry);
+        }
+        if let Some(&(_, t)) = funcs.output_t.entries.iter().find(|&&(i, _)| i as usize == k) {
+            block.scalar("h_t", Some(t));
+        }
+        self.emit(out, block, "");
+    }
+
     /// Prints a block: title, `let`s, then its lines.
     fn emit(&self, out: &mut String, block: Block, indent: &str) {
         let states: Vec<String> = self.model.states.iter().map(|s| s.name.clone()).collect();
@@ -293,6 +409,22 @@ impl Reporter<'_> {
             match shape {
                 Shape::Scalar(e) => {
                     let _ = writeln!(out, "{inner}{label} = {}", next(e));
+                }
+                Shape::Row(r) if r.is_empty() => {
+                    let _ = writeln!(out, "{inner}{label} = 0");
+                }
+                Shape::Row(r) => {
+                    let cells: Vec<String> = r
+                        .iter()
+                        .map(|&(k, e)| {
+                            format!(
+                                "{}: {}",
+                                states.get(k as usize).map_or("?", |s| s.as_str()),
+                                next(&Some(e))
+                            )
+                        })
+                        .collect();
+                    let _ = writeln!(out, "{inner}{label} = {{{}}}", cells.join(", "));
                 }
                 Shape::Vector(v) if dense_ok => {
                     let cells: Vec<String> = v.iter().map(&mut next).collect();

@@ -11,10 +11,11 @@ use crate::syntax::ast;
 use crate::syntax::Span;
 
 /// Checks a parsed file. Returns the model, or every error found.
-pub fn check(file: &ast::File) -> Result<Model, Vec<CheckError>> {
+pub fn check(original: &ast::File) -> Result<Model, Vec<CheckError>> {
     // Arrays, constants and loops become a flat file first; a file without them is used as is.
-    let file = crate::expand::expand(file)
+    let file = crate::expand::expand(original)
         .map_err(|errors| errors.into_iter().map(|e| CheckError::Expand(Box::new(e))).collect::<Vec<_>>())?;
+    let flattened = matches!(file, std::borrow::Cow::Owned(_));
     let file = &*file;
     let mut cx = Checker::default();
     let mut model = cx.check_file(file);
@@ -32,7 +33,22 @@ pub fn check(file: &ast::File) -> Result<Model, Vec<CheckError>> {
         cx.errors.sort_by_key(|e| e.span().start);
         // An item unrolled from a loop repeats its errors once per iteration, at one span.
         cx.errors.dedup_by(|a, b| a.span() == b.span() && a.to_string() == b.to_string());
+        if flattened {
+            name_loop_values(original, &mut cx.errors);
+        }
         Err(cx.errors)
+    }
+}
+
+/// Each error in an item unrolled from a loop, with the loop values where it first arose.
+fn name_loop_values(original: &ast::File, errors: &mut [CheckError]) {
+    let found: Vec<(Span, String)> = errors.iter().map(|e| (e.span(), e.to_string())).collect();
+    let sites = crate::expand::loop_sites(original, &found);
+    for (e, site) in errors.iter_mut().zip(sites) {
+        if let Some(site) = site {
+            let error = Box::new(std::mem::replace(e, CheckError::NoInitialMode { span: Span::new(0, 0) }));
+            *e = CheckError::InLoop { error, at: site.at, within: site.within };
+        }
     }
 }
 

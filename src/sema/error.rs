@@ -10,6 +10,17 @@ pub enum CheckError {
     /// A refusal of the flattening of arrays and loops (`crate::expand`).
     #[error("{0}")]
     Expand(Box<crate::expand::ExpandError>),
+    /// An error in an item unrolled from a loop, with the loop values of the first unrolled item
+    /// where it arose and the declaration it stands in.
+    #[error("at `{}`: {error}", at.iter().map(|(n, v)| format!("{n} = {v}")).collect::<Vec<_>>().join(", "))]
+    InLoop {
+        /// The error.
+        error: Box<CheckError>,
+        /// The loop variables' values, outermost first.
+        at: Vec<(String, i64)>,
+        /// The declaration's head (`der(x[i]) = `), quoted in the message.
+        within: Span,
+    },
     /// A name declared in no enclosing scope.
     #[error("unknown name `{name}`")]
     UnknownName {
@@ -381,6 +392,7 @@ impl CheckError {
             | InputTooShort { span, .. }
             | PwcInGuard { span, .. } => *span,
             Expand(e) => e.span,
+            InLoop { error, .. } => error.span(),
         }
     }
 
@@ -393,6 +405,15 @@ impl CheckError {
         };
         let (label, notes) = match self {
             Expand(e) => return e.to_diagnostic(source),
+            InLoop { error, within, .. } => {
+                let mut d = error.to_diagnostic(source);
+                let quoted = crate::expand::quote_head(source, *within);
+                d.message = match quoted {
+                    Some(text) => format!("in `{text}` {self}"),
+                    None => self.to_string(),
+                };
+                return d;
+            }
             UnknownName { suggestion, .. } => {
                 ("expected a parameter, state, `let`, `t` or `pi`".to_string(), did_you_mean(suggestion))
             }

@@ -31,6 +31,10 @@ pub fn proptest_config(cases: u32) -> Config {
 #[path = "../../../benches/support/chain.rs"]
 pub mod chain;
 
+/// Particles in a box written with arrays, and their closed form, shared with the benches.
+#[path = "../../../benches/support/particle_box.rs"]
+pub mod particle_box;
+
 /// `run`, made with `opts`, passes `hybc::gradcheck` at `opts.rtol`: every reported derivative
 /// against central differences of re-runs of its compiled model with the same options.
 pub fn assert_gradients_check(run: &hybc::Run, opts: &hybc::SimOptions) {
