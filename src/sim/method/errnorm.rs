@@ -6,6 +6,91 @@
 //! let a block exceed its tolerance by `sqrt(1 + m)` while the others were quiet: with 10
 //! parameters the states, the derivatives through an event time, or one parameter's column
 //! could be 3.3 times less accurate than asked.
+//!
+//! The scales ([`Scales`]): `atol + rtol max(|z0_i|, |z1_i|)` over the step's ends, except that a
+//! sensitivity's relative part `rtol |s_ij|` is held to at most [`RELATIVE_SENSITIVITY_CAP`] times
+//! its state's own scale per unit of the parameter, `K (atol + rtol |x_i|) / |p_j|`: where
+//! `|p_j s_ij|` exceeds `K |x_i|`, the derivative is held to the state's tolerance (`K` times
+//! it) rather than to its own size. Why: a derivative that grows by orders of magnitude and
+//! shrinks back (across a relaxation oscillation's fast jump, `dx/dx0` grows by 1e9 and returns to
+//! 1) keeps part of the errors made at its peak, which `rtol |s|` scales with the peak: Van der
+//! Pol at `mu = 1e3` came out of each jump with its derivatives 1e4 tolerances off
+//! (docs/accuracy.md). A model whose relative sensitivities `|p_j s_ij / x_i|` stay below `K`
+//! takes exactly the steps it took without the cap.
+
+/// `K`: a sensitivity's relative tolerance applies to at most `K` times its state's scale per
+/// unit of the parameter (see the module documentation).
+pub const RELATIVE_SENSITIVITY_CAP: f64 = 1e3;
+
+/// The error scales of `z = [x, S]` (blocks of `n`: the states, then each parameter's column).
+#[derive(Clone, Debug)]
+pub(crate) struct Scales {
+    atol: f64,
+    rtol: f64,
+    n: usize,
+    /// Per sensitivity column, `|p_j| / K` (0: no cap, for a parameter at 0 or an unknown one).
+    caps: Vec<f64>,
+    /// Some column has a cap.
+    capped: bool,
+}
+
+impl Scales {
+    pub(crate) fn new(atol: f64, rtol: f64, n: usize) -> Scales {
+        Scales { atol, rtol, n, caps: Vec::new(), capped: false }
+    }
+
+    /// This run's parameters `p` and the indices of the differentiated ones (one per
+    /// sensitivity column, in order).
+    pub(crate) fn set_params(&mut self, p: &[f64], grad: &[usize]) {
+        self.caps.clear();
+        self.caps.extend(grad.iter().map(|&j| p[j]).map(|p| {
+            if p.is_finite() {
+                p.abs() / RELATIVE_SENSITIVITY_CAP
+            } else {
+                0.0
+            }
+        }));
+        self.capped = self.caps.iter().any(|&c| c > 0.0);
+    }
+
+    /// `visit(i, scale_i)` for the first `ne` components of `z`, whose ends are `z0` and `z1`, in
+    /// order.
+    #[inline(always)]
+    pub(crate) fn visit(&self, z0: &[f64], z1: &[f64], ne: usize, mut visit: impl FnMut(usize, f64)) {
+        let (atol, rtol, n) = (self.atol, self.rtol, self.n);
+        let own = |i: usize| rtol * z0[i].abs().max(z1[i].abs());
+        if !self.capped || ne <= n {
+            for i in 0..ne {
+                visit(i, atol + own(i));
+            }
+            return;
+        }
+        for i in 0..n {
+            visit(i, atol + own(i));
+        }
+        for (j, &cap) in self.caps.iter().enumerate() {
+            let start = n * (j + 1);
+            if start >= ne {
+                break;
+            }
+            for k in 0..n.min(ne - start) {
+                let i = start + k;
+                let mut rel = own(i);
+                // `cap rel > sc` is `rel > K sc / |p|`, without dividing (a NaN stays NaN).
+                if cap > 0.0 {
+                    let state = atol + own(k);
+                    if cap * rel > state {
+                        rel = state / cap;
+                    }
+                }
+                visit(i, atol + rel);
+            }
+        }
+        for i in (n * (self.caps.len() + 1)).min(ne)..ne {
+            visit(i, atol + own(i));
+        }
+    }
+}
 
 /// Whether component `i` of `z = [x, S]` (blocks of `block`) is in the step-size control: not
 /// at a position `excluded` marks (empty: every component is).
@@ -117,6 +202,55 @@ fn hairer(sum5: f64, sum3: f64, count: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The scales `Scales::visit` gives for `z0 = z1 = z`.
+    fn scales(s: &Scales, z: &[f64]) -> Vec<f64> {
+        let mut out = vec![f64::NAN; z.len()];
+        s.visit(z, z, z.len(), |i, sc| out[i] = sc);
+        out
+    }
+
+    #[test]
+    fn a_sensitivity_is_held_to_its_own_size_below_the_cap_and_to_its_state_above() {
+        let (atol, rtol) = (1e-10, 1e-8);
+        // Two states, two parameters at 2 and 0.5: columns capped at 500 and 2000 times the
+        // states' scales (`K / |p|`).
+        let mut s = Scales::new(atol, rtol, 2);
+        s.set_params(&[7.0, 2.0, 0.5], &[1, 2]);
+        let x = [3.0, -1e3];
+        let state = |i: usize| atol + rtol * f64::abs(x[i]);
+        // Below the cap (relative sensitivities up to 1e3 |x| / |p|): exactly the former
+        // `atol + rtol |s|`, bit for bit.
+        let below = [x[0], x[1], 1400.0, -2e5, 5000.0, 1e6];
+        let got = scales(&s, &below);
+        for i in 0..6 {
+            assert_eq!(got[i], atol + rtol * f64::abs(below[i]), "component {i}");
+        }
+        // Above it: `atol + K sc_x / |p|`.
+        let above = [x[0], x[1], 1e4, 2e9, -1e5, 3e9];
+        let got = scales(&s, &above);
+        assert_eq!(got[2], atol + state(0) / (2.0 / RELATIVE_SENSITIVITY_CAP));
+        assert_eq!(got[3], atol + state(1) / (2.0 / RELATIVE_SENSITIVITY_CAP));
+        assert_eq!(got[4], atol + state(0) / (0.5 / RELATIVE_SENSITIVITY_CAP));
+        assert_eq!(got[5], atol + state(1) / (0.5 / RELATIVE_SENSITIVITY_CAP));
+        assert!(got[3] < 1e-3 * (atol + rtol * 2e9));
+        // The states' own scales never change.
+        assert_eq!(&got[..2], &[state(0), state(1)]);
+    }
+
+    #[test]
+    fn a_parameter_at_zero_or_not_finite_has_no_cap_and_a_nan_stays_nan() {
+        let mut s = Scales::new(1e-10, 1e-8, 1);
+        s.set_params(&[0.0, f64::INFINITY, 1.0], &[0, 1, 2]);
+        let got = scales(&s, &[1.0, 1e12, 1e12, f64::NAN]);
+        assert_eq!(got[1], 1e-10 + 1e-8 * 1e12);
+        assert_eq!(got[2], 1e-10 + 1e-8 * 1e12);
+        assert!(got[3].is_nan());
+        // No parameter (or none differentiated): the states alone, unchanged.
+        let mut s = Scales::new(1e-10, 1e-8, 2);
+        s.set_params(&[1.0], &[]);
+        assert_eq!(scales(&s, &[5.0, -5.0]), vec![1e-10 + 5e-8; 2]);
+    }
 
     #[test]
     fn the_largest_block_counts() {
