@@ -30,7 +30,7 @@ fn opts(method: Method, rtol: f64) -> SimOptions {
 
 /// `(x, y)` at `t = 1000` for `x0`, without gradients.
 fn final_state(x0: f64, method: Method, rtol: f64) -> [f64; 2] {
-    let c = Model::parse(VDP).expect("parses").compile(&[]).expect("compiles");
+    let c = Model::parse(VDP).expect("parses").compile::<&str>(&[]).expect("compiles");
     let mut p = c.params();
     p.set("x0", x0).unwrap();
     let run = c.simulate(&p, &opts(method, rtol)).expect("runs");
