@@ -308,7 +308,6 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let info = sys.info();
         let (n, m) = (info.n_states(), info.n_grad());
         work.stepper.reset();
-        work.stepper.set_params(p, &info.grad_params);
         work.breakpoints.reset(opts.t_end, info.modes.len());
         sys.initial_state(p, &mut work.z[..n]);
         sys.initial_sens(p, &mut work.z[n..]);

@@ -167,11 +167,6 @@ impl Auto {
 impl Stepper for Auto {
     type Interpolant = AutoDense;
 
-    fn set_params(&mut self, p: &[f64], grad: &[usize]) {
-        self.rk.set_params(p, grad);
-        self.row.set_params(p, grad);
-    }
-
     fn reset(&mut self) {
         self.rk.reset();
         self.row.reset();

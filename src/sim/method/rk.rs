@@ -4,8 +4,7 @@
 //! which leading components enter the error norm.
 //!
 //! Error norm: `err = sqrt(mean_i (e_i / sc_i)^2)` over the controlled components with
-//! `sc_i = atol + rtol * max(|z_i|, |z_new_i|)` (a sensitivity's relative part capped,
-//! `errnorm::Scales`); a step is accepted when `err <= 1`. DOP853
+//! `sc_i = atol + rtol * max(|z_i|, |z_new_i|)`; a step is accepted when `err <= 1`. DOP853
 //! combines its 5th- and 3rd-order estimates as Hairer does,
 //! `err = err5^2 / sqrt(err5^2 + 0.01 err3^2)`, which behaves like an 8th-order estimate.
 //!
@@ -20,7 +19,7 @@
 //! and `h1 = (0.01 / max(d1, d2))^(1/q)`; the estimate is `min(100 h0, h1)`.
 
 use super::dense::Dense;
-use super::errnorm::{controlled, BlockNorm, Scales};
+use super::errnorm::{controlled, BlockNorm};
 use super::stepper::{Rhs, Stepper, TapePair};
 use super::sums::{centred_sum, stage_sum};
 #[cfg(doc)]
@@ -76,8 +75,6 @@ pub struct Rk {
     excluded: Vec<bool>,
     /// The last attempt's largest scaled error among them, and the state (`BlockNorm::outside`).
     outside: (f64, usize),
-    /// The error norm's scales (`errnorm::Scales`).
-    scales: Scales,
 }
 
 impl Rk {
@@ -103,7 +100,6 @@ impl Rk {
             masked: false,
             rtol,
             atol,
-            scales: Scales::new(atol, rtol, n_states),
             k: vec![0.0; tab.all_stages * nz],
             h: 0.0,
             y_new: vec![0.0; nz],
@@ -201,27 +197,24 @@ impl Rk {
         centred_sum(&self.k, self.nz, &self.tab.e, &mut self.err5[..ne]);
         let with3 = self.tab.e3.is_some();
         let mut norm = BlockNorm::new(n_states, &self.excluded);
-        let (y1, err5) = (&self.y_new, &self.err5);
+        let scales = y[..ne].iter().zip(&self.y_new[..ne]);
         let skip =
             |i: usize, values: [f64; 4]| MASKED && i >= n_states && values.iter().any(|v| !v.is_finite());
         match &self.tab.e3 {
             Some(e3) => {
-                let err3 = &mut self.err3[..ne];
-                centred_sum(&self.k, self.nz, e3, err3);
-                let err3 = &*err3;
-                self.scales.visit(y, y1, ne, |i, sc| {
-                    let (e5, e3) = (err5[i], err3[i]);
-                    let h_sc = h / sc;
-                    let r = (!skip(i, [y[i], y1[i], e5, e3])).then(|| (e5 * h_sc, e3 * h_sc));
+                centred_sum(&self.k, self.nz, e3, &mut self.err3[..ne]);
+                for (i, ((y0, y1), (e5, e3))) in scales.zip(self.err5.iter().zip(&self.err3)).enumerate() {
+                    let h_sc = h / (self.atol + self.rtol * y0.abs().max(y1.abs()));
+                    let r = (!skip(i, [*y0, *y1, *e5, *e3])).then(|| (e5 * h_sc, e3 * h_sc));
                     norm.add(i, r, true);
-                });
+                }
             }
             None => {
-                self.scales.visit(y, y1, ne, |i, sc| {
-                    let e5 = err5[i];
-                    let r = (!skip(i, [y[i], y1[i], e5, 0.0])).then(|| (h * e5 / sc, 0.0));
+                for (i, ((y0, y1), e5)) in scales.zip(&self.err5).enumerate() {
+                    let sc = self.atol + self.rtol * y0.abs().max(y1.abs());
+                    let r = (!skip(i, [*y0, *y1, *e5, 0.0])).then(|| (h * e5 / sc, 0.0));
                     norm.add(i, r, false);
-                });
+                }
             }
         }
         self.outside = norm.outside();
@@ -231,10 +224,6 @@ impl Rk {
 
 impl Stepper for Rk {
     type Interpolant = Dense;
-
-    fn set_params(&mut self, p: &[f64], grad: &[usize]) {
-        self.scales.set_params(p, grad);
-    }
 
     /// Forgets everything of an earlier run (the buffers are overwritten before they are read):
     /// a run on a reused stepper is bit-for-bit a run on a new one.

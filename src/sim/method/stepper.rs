@@ -187,10 +187,6 @@ pub trait Stepper {
 
     /// Forgets an earlier run entirely (statistics included).
     fn reset(&mut self);
-    /// The parameters `p` of the run about to start and the indices of the differentiated ones
-    /// (one per sensitivity column, in order): the error norm's scales read their values
-    /// (`errnorm::Scales`).
-    fn set_params(&mut self, p: &[f64], grad: &[usize]);
     /// A new start point `(t, z)`: evaluates what the method keeps of it (the derivative there)
     /// and forgets the step-size controller's memory, which was learnt before a jump.
     fn restart<R: Rhs>(&mut self, t: f64, z: &[f64], rhs: &mut R);
