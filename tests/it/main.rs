@@ -47,6 +47,7 @@ mod periodic;
 mod plot;
 mod quadrature;
 mod relations;
+mod relaxation;
 mod run_gradients;
 mod samples;
 mod sbml;
