@@ -263,21 +263,27 @@ fn ball_bounces_match_closed_form_rosenbrock_on_central_difference_jacobians() {
     check_first_point(Method::Rodas4, true);
 }
 
-/// The ball, with Jacobians that cannot be had.
-struct NoJacobians(Ball);
+/// The ball, with kernels that cannot be had: Jacobians (as a model whose second derivatives
+/// are out of reach would say) or the sensitivities' right-hand side (as a compiled model's
+/// kernel that failed to compile on first use would say).
+struct Refusing {
+    ball: Ball,
+    jacobians: Option<&'static str>,
+    sensitivities: Option<&'static str>,
+}
 
-impl hybc::sim::HybridSystem for NoJacobians {
+impl hybc::sim::HybridSystem for Refusing {
     fn info(&self) -> &hybc::sim::SystemInfo {
-        self.0.info()
+        self.ball.info()
     }
     fn initial_state(&self, p: &[f64], x0: &mut [f64]) {
-        self.0.initial_state(p, x0)
+        self.ball.initial_state(p, x0)
     }
     fn initial_sens(&self, p: &[f64], s0: &mut [f64]) {
-        self.0.initial_sens(p, s0)
+        self.ball.initial_sens(p, s0)
     }
     fn flow(&self, mode: usize, t: f64, x: &[f64], p: &[f64], dx: &mut [f64]) {
-        self.0.flow(mode, t, x, p, dx)
+        self.ball.flow(mode, t, x, p, dx)
     }
     fn flow_sens(
         &self,
@@ -289,22 +295,25 @@ impl hybc::sim::HybridSystem for NoJacobians {
         dx: &mut [f64],
         ds: &mut [f64],
     ) {
-        self.0.flow_sens(mode, t, x, s, p, dx, ds)
+        self.ball.flow_sens(mode, t, x, s, p, dx, ds)
     }
     fn prepare_jacobians(&self) -> Result<(), String> {
-        Err("no second derivatives here".into())
+        self.jacobians.map_or(Ok(()), |why| Err(why.into()))
+    }
+    fn prepare_sensitivities(&self) -> Result<(), String> {
+        self.sensitivities.map_or(Ok(()), |why| Err(why.into()))
     }
     fn guards(&self, mode: usize, t: f64, x: &[f64], p: &[f64], g: &mut [f64]) {
-        self.0.guards(mode, t, x, p, g)
+        self.ball.guards(mode, t, x, p, g)
     }
     fn guard_grad(&self, event: usize, t: f64, x: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) -> f64 {
-        self.0.guard_grad(event, t, x, p, gx, gp)
+        self.ball.guard_grad(event, t, x, p, gx, gp)
     }
     fn condition(&self, event: usize, t: f64, x: &[f64], p: &[f64]) -> bool {
-        self.0.condition(event, t, x, p)
+        self.ball.condition(event, t, x, p)
     }
     fn reset(&self, event: usize, t: f64, x: &[f64], p: &[f64], r: &mut [f64]) {
-        self.0.reset(event, t, x, p, r)
+        self.ball.reset(event, t, x, p, r)
     }
     fn reset_jac(
         &self,
@@ -316,19 +325,20 @@ impl hybc::sim::HybridSystem for NoJacobians {
         rp: &mut [f64],
         rt: &mut [f64],
     ) {
-        self.0.reset_jac(event, t, x, p, rx, rp, rt)
+        self.ball.reset_jac(event, t, x, p, rx, rp, rt)
     }
     fn outputs(&self, t: f64, x: &[f64], p: &[f64], y: &mut [f64]) {
-        self.0.outputs(t, x, p, y)
+        self.ball.outputs(t, x, p, y)
     }
     fn output_jac(&self, t: f64, x: &[f64], p: &[f64], yx: &mut [f64], yp: &mut [f64], yt: &mut [f64]) {
-        self.0.output_jac(t, x, p, yx, yp, yt)
+        self.ball.output_jac(t, x, p, yx, yp, yt)
     }
 }
 
 #[test]
 fn a_rosenbrock_method_without_jacobians_is_an_error_naming_the_method_and_why() {
-    let sys = NoJacobians(Ball::new());
+    let sys =
+        Refusing { ball: Ball::new(), jacobians: Some("no second derivatives here"), sensitivities: None };
     let err = run(&sys, &[G, E, 1.0], &opts(2.5, Method::Rodas5p, true)).expect_err("refused");
     let text = err.to_string();
     assert!(text.contains("rodas5p") && text.contains("no second derivatives here"), "{text}");
@@ -336,73 +346,10 @@ fn a_rosenbrock_method_without_jacobians_is_an_error_naming_the_method_and_why()
     assert!(run(&sys, &[G, E, 1.0], &opts(2.5, Method::Dopri5, true)).is_ok());
 }
 
-/// The ball, with a sensitivity right-hand side that cannot be prepared (as a compiled model's
-/// kernel that failed to compile on first use would say).
-struct NoSensitivities(Ball);
-
-impl hybc::sim::HybridSystem for NoSensitivities {
-    fn info(&self) -> &hybc::sim::SystemInfo {
-        self.0.info()
-    }
-    fn initial_state(&self, p: &[f64], x0: &mut [f64]) {
-        self.0.initial_state(p, x0)
-    }
-    fn initial_sens(&self, p: &[f64], s0: &mut [f64]) {
-        self.0.initial_sens(p, s0)
-    }
-    fn flow(&self, mode: usize, t: f64, x: &[f64], p: &[f64], dx: &mut [f64]) {
-        self.0.flow(mode, t, x, p, dx)
-    }
-    fn flow_sens(
-        &self,
-        mode: usize,
-        t: f64,
-        x: &[f64],
-        s: &[f64],
-        p: &[f64],
-        dx: &mut [f64],
-        ds: &mut [f64],
-    ) {
-        self.0.flow_sens(mode, t, x, s, p, dx, ds)
-    }
-    fn prepare_sensitivities(&self) -> Result<(), String> {
-        Err("the kernel did not compile".into())
-    }
-    fn guards(&self, mode: usize, t: f64, x: &[f64], p: &[f64], g: &mut [f64]) {
-        self.0.guards(mode, t, x, p, g)
-    }
-    fn guard_grad(&self, event: usize, t: f64, x: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) -> f64 {
-        self.0.guard_grad(event, t, x, p, gx, gp)
-    }
-    fn condition(&self, event: usize, t: f64, x: &[f64], p: &[f64]) -> bool {
-        self.0.condition(event, t, x, p)
-    }
-    fn reset(&self, event: usize, t: f64, x: &[f64], p: &[f64], r: &mut [f64]) {
-        self.0.reset(event, t, x, p, r)
-    }
-    fn reset_jac(
-        &self,
-        event: usize,
-        t: f64,
-        x: &[f64],
-        p: &[f64],
-        rx: &mut [f64],
-        rp: &mut [f64],
-        rt: &mut [f64],
-    ) {
-        self.0.reset_jac(event, t, x, p, rx, rp, rt)
-    }
-    fn outputs(&self, t: f64, x: &[f64], p: &[f64], y: &mut [f64]) {
-        self.0.outputs(t, x, p, y)
-    }
-    fn output_jac(&self, t: f64, x: &[f64], p: &[f64], yx: &mut [f64], yp: &mut [f64], yt: &mut [f64]) {
-        self.0.output_jac(t, x, p, yx, yp, yt)
-    }
-}
-
 #[test]
 fn forward_sensitivities_that_cannot_be_prepared_are_an_error_saying_why() {
-    let sys = NoSensitivities(Ball::new());
+    let sys =
+        Refusing { ball: Ball::new(), jacobians: None, sensitivities: Some("the kernel did not compile") };
     let o = opts(2.5, Method::Dopri5, false);
     let err = run(&sys, &[G, E, 1.0], &o).expect_err("refused");
     assert!(matches!(err, SimError::NoSensitivities { .. }), "{err:?}");
