@@ -8,7 +8,9 @@
 //! (`enclose.rs`): the step is walked in time order piece by piece; a piece whose enclosure of
 //! the guard is clear of zero (beyond round-off) holds no sign change and no touch; a piece whose
 //! enclosure of the guard's time derivative is clear of zero is monotone and holds a sign change
-//! exactly when its ends differ in sign; any other piece is halved, down to `2^-40` of the step.
+//! exactly when its ends differ in sign; an affine guard's piece is decided first by the signs of
+//! its Bernstein coefficients (`enclose::Signs`: one sign, or a single change, which crosses
+//! once); any other piece is halved, down to `2^-40` of the step.
 //! The ends of the pieces that may hold a sign change become samples, with the extremum inside a
 //! piece the walk could not prove monotone. The walk of a guard stops at its first crossing.
 //!
@@ -23,7 +25,7 @@
 //! and `16 eps (sum_i |g_x,i f_i| + |g_t|)` for its speed, so a large state the guard does not
 //! read changes nothing.
 
-use super::enclose::{bernstein, poly_hull, Pieces};
+use super::enclose::{bernstein, poly_hull, Pieces, Signs};
 use super::guards::Guards;
 use super::roots::{extremum_time, hermite_root, illinois};
 use crate::interval::{Dual, Interval};
@@ -755,9 +757,31 @@ impl Detector {
             let e = if shape == GuardShape::Nonlinear {
                 self.enclose_piece(cx, ev, dense, a, b)
             } else {
-                // The rate only where the value does not already decide the piece; split where
-                // the rate's control polygon changes sign.
                 let piece = bernstein(&guard_poly.0, guard_poly.1, a, b);
+                // The coefficients' signs decide most pieces without the hull or the rate: a
+                // single sign change is decided by the ends, as a monotone piece is; at the walk's
+                // start, a guard on zero that leaves it and never returns holds nothing to sample,
+                // and one that leaves and crosses once is cut at its extremum into two such pieces
+                // (a ball's whole flight, from one bounce to the next, in one step).
+                let at_start = a == s_from && self.samples.len() == 1;
+                match piece.signs(self.g0[pos], margin) {
+                    Signs::Clear => continue,
+                    Signs::FromZero { changes: 0 } if at_start => continue,
+                    Signs::OneChange => {
+                        if self.sample_piece(cx, pos, dense, (a, b), true, margin) {
+                            self.pieces.stop();
+                        }
+                        continue;
+                    }
+                    Signs::FromZero { changes: 1 }
+                        if at_start && self.pieces.split_in_two(a, b, piece.extremum_estimate(), depth) =>
+                    {
+                        continue
+                    }
+                    _ => {}
+                }
+                // Else the hull, and the rate where the hull does not decide; split where the
+                // rate's control polygon changes sign.
                 let v = piece.value() + Interval::point(self.g0[pos]);
                 if v.clear_of_zero(margin) {
                     continue;

@@ -144,6 +144,50 @@ impl Bernstein {
 }
 
 impl Bernstein {
+    /// The signs of the Bernstein coefficients of `offset + q` on the piece ([`Signs`]): each
+    /// counted when it is beyond `band` plus the rounding of the conversion (the bound the hull
+    /// uses) and of the sum with `offset`.
+    pub fn signs(&self, offset: f64, band: f64) -> Signs {
+        let len = self.len;
+        if len < 2 {
+            return Signs::Undecided;
+        }
+        let start = offset + self.base;
+        let size = self.beta[..len].iter().fold(start.abs() + offset.abs(), |m, b| m.max(b.abs()));
+        let tol = band + self.base_err + self.moving_err + 4.0 * EPS * size;
+        let sign = |c: f64| {
+            if c > tol {
+                1
+            } else if c < -tol {
+                -1
+            } else {
+                0
+            }
+        };
+        let first = sign(start);
+        let mut changes = 0u8;
+        let mut prev = first;
+        for &b in &self.beta[1..len] {
+            let s = sign(start + b);
+            if s == 0 {
+                return Signs::Undecided;
+            }
+            if prev != 0 && s != prev {
+                changes += 1;
+                if changes > 1 {
+                    return Signs::Undecided;
+                }
+            }
+            prev = s;
+        }
+        match (first, changes) {
+            (0, c) => Signs::FromZero { changes: c },
+            (_, 0) => Signs::Clear,
+            (_, 1) => Signs::OneChange,
+            _ => Signs::Undecided,
+        }
+    }
+
     /// Where on the piece (in the step's units) the derivative's control polygon first changes
     /// sign: an estimate of the polynomial's first extremum there (NaN where it keeps its sign),
     /// the point a walk splits a piece at that its rate does not prove monotone. A tiny bounce at
@@ -168,6 +212,30 @@ impl Bernstein {
         }
         f64::NAN
     }
+}
+
+/// The signs of a piece's Bernstein coefficients ([`Bernstein::signs`]), each beyond its rounding
+/// and a band about zero. By the variation-diminishing property of the Bernstein basis (a
+/// polynomial has at most as many roots inside a piece as its coefficients change sign, and as
+/// many modulo 2), they decide a piece without its rate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Signs {
+    /// All coefficients clear of the band with one sign: so is the polynomial on the piece.
+    Clear,
+    /// Both end coefficients (the values at the piece's ends) and all others clear of the band,
+    /// changing sign exactly once: the polynomial crosses zero, and each level of the band, exactly
+    /// once inside the piece, so it is decided by its ends as a monotone piece is.
+    OneChange,
+    /// The first coefficient (the value at the piece's start) within the band, all others clear of
+    /// it, changing sign `changes` times (0 or 1) among themselves: beyond the band's neighbourhood
+    /// of the start the polynomial keeps the sign of the second coefficient (0), or crosses zero
+    /// once (1).
+    FromZero {
+        /// Sign changes among the coefficients after the first.
+        changes: u8,
+    },
+    /// Anything else: a coefficient within the band, or more sign changes.
+    Undecided,
 }
 
 /// The hull over `s` in `[a, b]` (within `[0, 1]`) of the polynomial `q` (power basis,
@@ -243,6 +311,21 @@ impl Pieces {
         true
     }
 
+    /// Splits `[a, b]` in two at `m` (its middle when `m` is NaN), kept [`EDGE`] of the piece from
+    /// its ends, the earlier part examined first; `false` (nothing split) as [`Self::split_at`].
+    /// For a piece whose decision needs only the cut at `m` (a guard leaving zero at the piece's
+    /// start, then crossing it once: cut at its extremum, each part is decided by its signs).
+    pub fn split_in_two(&mut self, a: f64, b: f64, m: f64, depth: u8) -> bool {
+        let w = b - a;
+        let m = if m.is_nan() { 0.5 * (a + b) } else { m.clamp(a + w * EDGE, b - w * EDGE) };
+        if w <= MIN_WIDTH || depth >= MAX_DEPTH || self.exhausted() || !(m > a && m < b) {
+            return false;
+        }
+        self.stack.push((m, b, depth + 1));
+        self.stack.push((a, m, depth + 1));
+        true
+    }
+
     /// Ends the walk.
     pub fn stop(&mut self) {
         self.stack.clear();
@@ -292,6 +375,91 @@ mod tests {
         // Its rate goes from 1 to -2: not monotone on the step, monotone on [0.5, 1].
         assert!(!r.clear_of_zero(0.0));
         assert!(poly_hull(&c, 3, 0.5, 1.0).1.clear_of_zero(0.0));
+    }
+
+    /// The signs of the coefficients claim a number of roots on a piece: check every claim on
+    /// thousands of random polynomials (degrees 2 to 7, roots inside the step and out) against
+    /// the sign changes of dense samples of the polynomial itself.
+    #[test]
+    fn coefficient_signs_never_claim_fewer_roots_than_the_polynomial_has() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut uniform = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut claims = [0usize; 4];
+        for _ in 0..4000 {
+            // A product of linear factors with roots in [-0.5, 1.5] times a scale: the roots
+            // where the signs must see them.
+            let degree = 2 + (uniform() * 6.0) as usize;
+            let mut c = [0.0; CAP];
+            c[0] = 1.0;
+            for k in 0..degree {
+                let root = -0.5 + 2.0 * uniform();
+                for j in (0..=k + 1).rev() {
+                    c[j] = if j > 0 { c[j - 1] } else { 0.0 } - root * c[j];
+                }
+            }
+            let scale = 10f64.powf(6.0 * uniform() - 3.0) * if uniform() < 0.5 { -1.0 } else { 1.0 };
+            c.iter_mut().for_each(|v| *v *= scale);
+            // The guard less its start value, as the walk hands it over: the offset is `q(0)`.
+            let offset = c[0];
+            let mut q = c;
+            q[0] = 0.0;
+            let a = 0.8 * uniform();
+            let b = a + (1.0 - a) * uniform().max(1e-3);
+            let piece = bernstein(&q, degree + 1, a, b);
+            let values: Vec<f64> =
+                (0..=2000).map(|k| eval(&c[..=degree], a + (b - a) * k as f64 / 2000.0)).collect();
+            let changes = values.windows(2).filter(|w| w[0] * w[1] < 0.0).count();
+            match piece.signs(offset, 0.0) {
+                Signs::Clear => {
+                    claims[0] += 1;
+                    assert_eq!(changes, 0, "{c:?} on [{a}, {b}]");
+                }
+                Signs::OneChange => {
+                    claims[1] += 1;
+                    assert_eq!(changes, 1, "{c:?} on [{a}, {b}]");
+                }
+                Signs::FromZero { changes: n } => {
+                    claims[2] += 1;
+                    // Beyond the start, at most `n` changes (within round-off of the start the
+                    // sign is the band's).
+                    let beyond = values[1..].windows(2).filter(|w| w[0] * w[1] < 0.0).count();
+                    assert!(beyond <= n as usize, "{c:?} on [{a}, {b}]: {beyond} > {n}");
+                }
+                Signs::Undecided => claims[3] += 1,
+            }
+        }
+        // Each kind of claim is exercised.
+        assert!(claims[0] > 100 && claims[1] > 100 && claims[3] > 100, "{claims:?}");
+    }
+
+    #[test]
+    fn a_guard_leaving_zero_is_told_from_one_that_returns() {
+        // s (1 - s) on [0, 1]: leaves zero and comes back to it at the end; the end coefficient
+        // is zero, so nothing is claimed. s (1.2 - s): leaves, never returns on [0, 1].
+        // s (0.8 - s): leaves and crosses once.
+        let cases = [(1.0, None), (1.2, Some(0u8)), (0.8, Some(1u8))];
+        for (r, claim) in cases {
+            let mut c = [0.0; CAP];
+            c[..3].copy_from_slice(&[0.0, r, -1.0]);
+            let signs = bernstein(&c, 3, 0.0, 1.0).signs(0.0, 1e-12);
+            match claim {
+                Some(n) => assert_eq!(signs, Signs::FromZero { changes: n }, "r = {r}"),
+                None => assert_eq!(signs, Signs::Undecided, "r = {r}"),
+            }
+        }
+        // Cut at the extremum, the piece that crosses gives two decided parts.
+        let mut c = [0.0; CAP];
+        c[..3].copy_from_slice(&[0.0, 0.8, -1.0]);
+        let piece = bernstein(&c, 3, 0.0, 1.0);
+        let m = piece.extremum_estimate();
+        assert!((m - 0.4).abs() < 1e-12, "{m}");
+        assert_eq!(bernstein(&c, 3, 0.0, m).signs(0.0, 1e-12), Signs::FromZero { changes: 0 });
+        assert_eq!(bernstein(&c, 3, m, 1.0).signs(0.0, 1e-12), Signs::OneChange);
     }
 
     #[test]
