@@ -1,4 +1,4 @@
-//! A fuzz test over the whole front end and run path, with a fixed seed and a time budget: the
+//! A fuzz test over the whole front end and run path, with a fixed seed and a fixed count: the
 //! shipped models mutated by byte flips, token edits, control and invisible characters, line-end
 //! changes, long lines, deep nesting, extreme numbers and long `let` chains. Every input must give
 //! either a located diagnostic (file:line:column and a caret) or a model that compiles and runs
@@ -6,17 +6,17 @@
 //! memory) kills the test binary, which fails the test as well.
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use rand_chacha::ChaCha8Rng;
 use rand_core::{Rng, SeedableRng};
 
 /// The generator's seed: CI fuzzes the same inputs on every run (a failure names its case).
 const SEED: u64 = 20261124;
-/// Wall-clock budget for generating and running inputs (debug build).
-const BUDGET: Duration = Duration::from_secs(20);
-/// Fewer inputs than this within the budget would make the test meaningless.
-const MIN_CASES: usize = 300;
+/// Inputs generated and run: the same ones on every run whatever the machine's load (a time
+/// budget made the count, and so the inputs, depend on it): 4,247 inputs took 20 s in a debug build
+/// run alone, so these take about 3 s.
+const CASES: usize = 600;
 
 /// Control, invisible and otherwise awkward characters.
 const NASTY: &[char] = &[
@@ -167,7 +167,7 @@ fn mutated_models_are_refused_with_a_location_or_run() {
     let start = Instant::now();
     let (mut cases, mut refused, mut ran) = (0usize, 0usize, 0usize);
     let mut failures = Vec::new();
-    while start.elapsed() < BUDGET {
+    while cases < CASES {
         let base = pick(&mut rng, &models).clone();
         let mut text = base;
         let mut applied = Vec::new();
@@ -189,7 +189,6 @@ fn mutated_models_are_refused_with_a_location_or_run() {
     }
     eprintln!("fuzzed {cases} inputs in {:.1?}: {refused} refused, {ran} ran", start.elapsed());
     assert!(failures.is_empty(), "{}", failures.join("\n\n"));
-    assert!(cases >= MIN_CASES, "only {cases} inputs within {BUDGET:?}");
     assert!(refused > 0 && ran > 0, "{refused} refused, {ran} ran: the mutations miss one side");
 }
 
