@@ -10,12 +10,13 @@
 //! `cargo run --release --example adjoint_chain -- 100 1000`; one size per process for a clean
 //! peak memory. `--only plain` compiles and runs the model without gradients and nothing else,
 //! `--only adjoint` adds the adjoint and leaves forward mode out (for the peak memory of each,
-//! which `/usr/bin/time -v` confirms from outside). docs/performance.md, "Gradients by the
-//! adjoint", has the figures.
+//! which `/usr/bin/time -v` confirms from outside). `--full-tape` keeps every step's start state
+//! (`Checkpoints::Every(1)`, the tape before checkpoints) rather than the default checkpoints.
+//! docs/performance.md, "Gradients by the adjoint", has the figures.
 
 use std::time::Instant;
 
-use hybc::sim::adjoint::{record, Seed};
+use hybc::sim::adjoint::{record_with, Checkpoints, Seed};
 use hybc::sim::{run, HybridSystem, Method, SimOptions};
 use hybc::Model;
 
@@ -74,6 +75,13 @@ fn main() {
         }
         None => None,
     };
+    let checkpoints = match args.iter().position(|a| a == "--full-tape") {
+        Some(i) => {
+            args.remove(i);
+            Checkpoints::Every(1)
+        }
+        None => Checkpoints::default(),
+    };
     let sizes: Vec<usize> = args.iter().map(|a| a.parse().expect("a size")).collect();
     let opts = SimOptions {
         t_end: 10.0,
@@ -107,7 +115,7 @@ fn main() {
         let (mut steps, mut events, mut grad, mut tape_mib) = (0, 0, Vec::new(), 0.0);
         // The first adjoint compiles the flow's vector-Jacobian kernel: timed apart.
         let started = Instant::now();
-        let recorded = record(with_grad.system(), &p, &opts).expect("records");
+        let recorded = record_with(with_grad.system(), &p, &opts, checkpoints).expect("records");
         recorded.gradient(with_grad.system(), &p, &seed).expect("carried");
         let first = started.elapsed().as_secs_f64();
         for _ in 0..repeat {
@@ -116,7 +124,7 @@ fn main() {
             plain.push(t.elapsed().as_secs_f64());
             (steps, events) = (r.stats.steps, r.events.len());
             let t = Instant::now();
-            let recorded = record(with_grad.system(), &p, &opts).expect("records");
+            let recorded = record_with(with_grad.system(), &p, &opts, checkpoints).expect("records");
             grad = recorded.gradient(with_grad.system(), &p, &seed).expect("carried");
             adjoint.push(t.elapsed().as_secs_f64());
             tape_mib = recorded.tape.bytes() as f64 / (1024.0 * 1024.0);

@@ -2077,7 +2077,18 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             return;
         };
         let ceiling = if plan.on_knot { plan.t1.next_down() } else { f64::INFINITY };
-        let step = TapeStep { pair, t0: plan.t0, h, ceiling, mode: self.mode, x0: &self.tape_x0 };
+        let (n, stepper) = (self.n, &self.work.stepper);
+        let step = TapeStep {
+            pair,
+            t0: plan.t0,
+            h,
+            ceiling,
+            mode: self.mode,
+            x0: &self.tape_x0,
+            f0: &stepper.start_derivative()[..n],
+            x1: &stepper.end_state()[..n],
+            f1: &stepper.end_derivative()[..n],
+        };
         self.recorder.tape(&match cut {
             Cut::End => TapeEntry::Step(step),
             Cut::Landed(dt) => TapeEntry::Landed(step, dt),

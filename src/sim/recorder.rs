@@ -84,6 +84,14 @@ pub struct TapeStep<'a> {
     pub mode: usize,
     /// The states at its start.
     pub x0: &'a [f64],
+    /// The derivative its first stage took at the start (the step before's end derivative, or
+    /// a restart's): the tape keeps it where it recomputes steps from a checkpoint.
+    pub f0: &'a [f64],
+    /// The states at the end of the attempt it is (before any cut).
+    pub x1: &'a [f64],
+    /// The derivative at that end (what the next step takes as its first stage if the stepper
+    /// carries it on).
+    pub f1: &'a [f64],
 }
 
 /// One piece of a run as the adjoint tape sees it: the primal values the backward pass

@@ -5,6 +5,7 @@
 mod support;
 
 mod adjoint;
+mod adjoint_checkpoints;
 mod adjoint_kernels;
 mod amici_events;
 mod arrays;

@@ -10,11 +10,14 @@
 //! instant, an event on a knot, a grazing crossing, samples at `--at` times) is named in
 //! [`AdjointError::Unsupported`] rather than approximated.
 //!
-//! Memory: the tape keeps `n` numbers per step and `2n` per event (the forward run's
-//! `max_steps` and `max_events` bound it); the backward pass recomputes each step's stages.
+//! Memory: the tape keeps a few scalars per step, the start state (`n` numbers) only at
+//! checkpoints ([`Checkpoints`]: by default about `2 sqrt(steps)` of them), and `2n` per event
+//! (the forward run's `max_steps` and `max_events` bound it); the backward pass recomputes the
+//! states between checkpoints (`replay.rs`), then each step's stages.
 
 mod backward;
 mod plain;
+mod replay;
 mod row;
 
 use super::recorder::{Point, PointKind, Recorder, TapeEntry, TapeStep};
@@ -26,6 +29,38 @@ use backward::{
     jump_backward, knot_backward, step_backward, switch_backward, Jump, Scratch, Step, StepEnd, Switch,
 };
 pub(crate) use plain::WithoutSens;
+use replay::Replay;
+
+/// Which steps' start states the tape keeps (the others are recomputed in the backward pass
+/// from the checkpoint before them: bit for bit the same states, so the same gradients).
+///
+/// A step is always a checkpoint where the one before it is not a plain step it follows on from
+/// exactly (the run's first step, a step after an event, a flow switch, an input knot, a landed
+/// or interpolated end, a restart of the stepper); otherwise every `K`-th step of such a chain is.
+/// Docs/design.md, "Checkpoints of the adjoint tape", has the choice and its cost.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Checkpoints {
+    /// `K = ceil(sqrt(j))` at the run's `j`-th step: about `2 sqrt(steps)` checkpoints and at
+    /// most `sqrt(steps)` recomputed states held at once, for one recomputed step per step.
+    #[default]
+    Sqrt,
+    /// Every `K`-th step of a chain (`Every(1)`: every step's, the full tape; 0 counts as 1).
+    Every(usize),
+}
+
+impl Checkpoints {
+    /// The longest segment (a checkpoint and the steps recomputed from it) at the `j`-th step.
+    fn interval(self, j: usize) -> usize {
+        match self {
+            Checkpoints::Sqrt => (j as f64).sqrt().ceil() as usize,
+            Checkpoints::Every(k) => k,
+        }
+        .max(1)
+    }
+}
+
+/// The offset of a state the tape did not keep.
+const NOT_KEPT: usize = usize::MAX;
 
 /// `Sens::Auto` takes the adjoint when the quantities reported (rows) are fewer than this
 /// fraction of the differentiated parameters: a backward pass per row costs about what a forward
@@ -89,7 +124,9 @@ enum Piece {
     },
 }
 
-/// A step's primal values, its start state at `x` in the tape's store.
+/// A step's primal values, its start state at `x` in the tape's store ([`NOT_KEPT`]: recomputed
+/// from the checkpoint before it); at a checkpoint the next steps are recomputed from, `f0` is its
+/// first stage's derivative there.
 #[derive(Clone, Copy, Debug)]
 struct StepAt {
     pair: super::method::stepper::TapePair,
@@ -98,6 +135,32 @@ struct StepAt {
     ceiling: f64,
     mode: usize,
     x: usize,
+    f0: usize,
+}
+
+/// The tape's view of the chain of steps it is recording: whether the next step may be
+/// recomputed from the last checkpoint.
+#[derive(Debug, Default)]
+struct Chain {
+    /// The last piece is a step with a whole end (`StepEnd::End`); `x1`/`f1` hold its end and
+    /// end derivative.
+    open: bool,
+    x1: Vec<f64>,
+    f1: Vec<f64>,
+    /// The current segment's checkpoint (a piece index), its start derivative while not yet
+    /// kept (`f0_kept` false), and its length in steps.
+    checkpoint: usize,
+    f0: Vec<f64>,
+    f0_kept: bool,
+    len: usize,
+    /// Steps recorded so far.
+    steps: usize,
+}
+
+/// Bit for bit equal (a `-0.0` is not `0.0` here: the recomputation must be the same
+/// arithmetic).
+fn same_bits(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
 /// The adjoint tape: a [`Recorder`] that keeps the pieces of a run for the backward pass.
@@ -110,6 +173,9 @@ pub struct Tape {
     /// The factorisation the run's Rosenbrock steps used (the backward pass recomputes them
     /// with it).
     solver: super::LinearSolver,
+    /// Which steps' start states are kept.
+    checkpoints: Checkpoints,
+    chain: Chain,
 }
 
 impl Tape {
@@ -119,9 +185,75 @@ impl Tape {
         at
     }
 
-    fn step_at(&mut self, s: &TapeStep<'_>) -> StepAt {
-        let x = self.keep(s.x0);
-        StepAt { pair: s.pair, t0: s.t0, h: s.h, ceiling: s.ceiling, mode: s.mode, x }
+    /// The step `s`, ended as `end`, about to be pushed as the next piece: its start state
+    /// kept at a checkpoint, else left to the backward pass to recompute.
+    fn step_at(&mut self, s: &TapeStep<'_>, end: StepEnd) -> StepAt {
+        let mut at = StepAt {
+            pair: s.pair,
+            t0: s.t0,
+            h: s.h,
+            ceiling: s.ceiling,
+            mode: s.mode,
+            x: NOT_KEPT,
+            f0: NOT_KEPT,
+        };
+        if self.checkpoints == Checkpoints::Every(1) || self.checkpoints == Checkpoints::Every(0) {
+            // The full tape: nothing to recompute, nothing to check.
+            at.x = self.keep(s.x0);
+            return at;
+        }
+        let chain = &mut self.chain;
+        chain.steps += 1;
+        // Recomputable from the step before only where this step starts from exactly its end,
+        // with its end derivative as the first stage (no restart, no jump, no cut between).
+        let follows = chain.open && same_bits(s.x0, &chain.x1) && same_bits(s.f0, &chain.f1);
+        let index = self.pieces.len();
+        if follows && chain.len < self.checkpoints.interval(chain.steps) {
+            chain.len += 1;
+            if !chain.f0_kept {
+                // The checkpoint's first stage, which the recomputation starts from.
+                let f0 = std::mem::take(&mut chain.f0);
+                let offset = self.keep(&f0);
+                self.chain.f0 = f0;
+                self.chain.f0_kept = true;
+                if let Some(Piece::Step { at, .. }) = self.pieces.get_mut(self.chain.checkpoint) {
+                    at.f0 = offset;
+                }
+            }
+        } else {
+            at.x = self.keep(s.x0);
+            let chain = &mut self.chain;
+            chain.checkpoint = index;
+            chain.len = 1;
+            chain.f0.clear();
+            chain.f0.extend_from_slice(s.f0);
+            chain.f0_kept = false;
+        }
+        let chain = &mut self.chain;
+        chain.open = matches!(end, StepEnd::End);
+        if chain.open {
+            chain.x1.clear();
+            chain.x1.extend_from_slice(s.x1);
+            chain.f1.clear();
+            chain.f1.extend_from_slice(s.f1);
+        }
+        at
+    }
+
+    /// How many step start states it keeps (the checkpoints).
+    pub fn kept_states(&self) -> usize {
+        self.pieces.iter().filter(|p| matches!(p, Piece::Step { at, .. } if at.x != NOT_KEPT)).count()
+    }
+
+    /// How many numbers its store holds (states at checkpoints and jumps, first-stage
+    /// derivatives at checkpoints steps are recomputed from).
+    pub fn stored_numbers(&self) -> usize {
+        self.store.len()
+    }
+
+    /// How many steps it holds.
+    pub fn steps(&self) -> usize {
+        self.pieces.iter().filter(|p| matches!(p, Piece::Step { .. })).count()
     }
 
     /// How many pieces (steps and events) the tape holds.
@@ -152,32 +284,33 @@ impl Recorder for Tape {
         true
     }
     fn tape(&mut self, entry: &TapeEntry<'_>) {
-        let piece = match entry {
-            TapeEntry::Step(s) => Piece::Step { at: self.step_at(s), end: StepEnd::End },
-            TapeEntry::Landed(s, dt) => Piece::Step { at: self.step_at(s), end: StepEnd::Landed(*dt) },
-            TapeEntry::Dense(s, t) => Piece::Step { at: self.step_at(s), end: StepEnd::Dense(*t) },
-            &TapeEntry::Jump {
-                event,
-                t,
-                mode_before,
-                mode_after,
-                x,
-                velocity,
-                cascade,
-                first_of_instant,
-            } => {
+        // Any piece but a step breaks the chain of steps recomputed from one checkpoint.
+        if !matches!(entry, TapeEntry::Step(_) | TapeEntry::Landed(..) | TapeEntry::Dense(..)) {
+            self.chain.open = false;
+        }
+        let piece = match *entry {
+            TapeEntry::Step(ref s) => Piece::Step { at: self.step_at(s, StepEnd::End), end: StepEnd::End },
+            TapeEntry::Landed(ref s, dt) => {
+                let end = StepEnd::Landed(dt);
+                Piece::Step { at: self.step_at(s, end), end }
+            }
+            TapeEntry::Dense(ref s, t) => {
+                let end = StepEnd::Dense(t);
+                Piece::Step { at: self.step_at(s, end), end }
+            }
+            TapeEntry::Jump { event, t, mode_before, mode_after, x, velocity, cascade, first_of_instant } => {
                 let x = self.keep(x);
                 let velocity = velocity.map(|v| self.keep(v));
                 Piece::Jump { event, t, mode_before, mode_after, x, velocity, cascade, first_of_instant }
             }
-            &TapeEntry::Switch { event, t, mode, x, pre, post } => {
+            TapeEntry::Switch { event, t, mode, x, pre, post } => {
                 let x = self.keep(x);
                 let pre = (pre.0, self.keep(pre.1));
                 let post = (post.0, self.keep(post.1));
                 Piece::Switch { event, t, mode, x, pre, post }
             }
-            &TapeEntry::Knot { set, t, jump } => Piece::Knot { set, t, jump: self.keep(jump) },
-            &TapeEntry::Drift { dt, mode, t, x } => Piece::Drift { dt, mode, t, x: self.keep(x) },
+            TapeEntry::Knot { set, t, jump } => Piece::Knot { set, t, jump: self.keep(jump) },
+            TapeEntry::Drift { dt, mode, t, x } => Piece::Drift { dt, mode, t, x: self.keep(x) },
             TapeEntry::Unsupported(what) => {
                 self.unsupported.get_or_insert(what);
                 return;
@@ -216,13 +349,24 @@ pub struct Recorded {
 }
 
 /// Runs `sys` at `p` under `opts` (sensitivities out of the error test whatever `opts` says)
-/// without sensitivity columns, keeping the tape.
+/// without sensitivity columns, keeping the tape (checkpoints by the default rule,
+/// [`Checkpoints::Sqrt`]).
 pub fn record<S: HybridSystem + ?Sized>(sys: &S, p: &[f64], opts: &SimOptions) -> Result<Recorded, SimError> {
+    record_with(sys, p, opts, Checkpoints::default())
+}
+
+/// [`record`], keeping the step start states `checkpoints` says.
+pub fn record_with<S: HybridSystem + ?Sized>(
+    sys: &S,
+    p: &[f64],
+    opts: &SimOptions,
+    checkpoints: Checkpoints,
+) -> Result<Recorded, SimError> {
     let plain = WithoutSens::new(sys);
     let mut opts = opts.clone();
     opts.sens_error_control = false;
     opts.trajectory = super::TrajectoryRequest::None;
-    let mut tape = Tape { solver: opts.linear_solver, ..Tape::default() };
+    let mut tape = Tape { solver: opts.linear_solver, checkpoints, ..Tape::default() };
     if !opts.at.is_empty() {
         tape.unsupported = Some("samples at given times (--at)");
     }
@@ -407,16 +551,38 @@ impl Recorded {
         let last_step = self.tape.pieces.iter().rposition(|p| matches!(p, Piece::Step { .. }));
         let skips =
             |r: usize, index: usize| seeds[r].before_end_events && last_step.is_none_or(|s| index > s);
-        for (index, piece) in self.tape.pieces.iter().enumerate().rev() {
+        let pieces = &self.tape.pieces;
+        let mut replay = Replay::new(self.tape.solver);
+        for (index, piece) in pieces.iter().enumerate().rev() {
             match *piece {
                 Piece::Step { at, end } => {
+                    let x0 = if at.x != NOT_KEPT {
+                        &store[at.x..at.x + n]
+                    } else {
+                        if replay.state(index, n).is_none() {
+                            // The segment this step ends: from its checkpoint (the last step
+                            // before it whose start was kept; only steps lie between) to here.
+                            let steps = segment(pieces, index);
+                            let first = index + 1 - steps.len();
+                            let c = steps[0];
+                            replay.run(
+                                sys,
+                                p,
+                                first + 1,
+                                &steps,
+                                &store[c.x..c.x + n],
+                                &store[c.f0..c.f0 + n],
+                            );
+                        }
+                        replay.state(index, n).expect("the segment's states were just recomputed")
+                    };
                     let step = Step {
                         pair: at.pair,
                         t0: at.t0,
                         h: at.h,
                         ceiling: at.ceiling,
                         mode: at.mode,
-                        x0: &store[at.x..at.x + n],
+                        x0,
                         end,
                     };
                     step_backward(sys, p, &step, &mut lams, &mut pbars, &mut scratch);
@@ -510,4 +676,21 @@ impl Recorded {
         }
         Ok(out)
     }
+}
+
+/// The steps of the segment whose last step is the piece `last`: from the checkpoint before it
+/// (its start state and start derivative kept) to `last`, all steps (the tape breaks a chain at
+/// any other piece).
+fn segment(pieces: &[Piece], last: usize) -> Vec<StepAt> {
+    let mut steps = Vec::new();
+    for piece in pieces[..=last].iter().rev() {
+        let Piece::Step { at, .. } = *piece else { unreachable!("a segment holds only steps") };
+        steps.push(at);
+        if at.x != NOT_KEPT {
+            debug_assert!(at.f0 != NOT_KEPT, "a checkpoint steps are recomputed from keeps its f0");
+            break;
+        }
+    }
+    steps.reverse();
+    steps
 }
