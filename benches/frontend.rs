@@ -14,16 +14,9 @@ use hybc::Model;
 mod stress_models;
 use stress_models::{doubling_lets, let_chain, state_chain, state_chain_loop};
 
-/// Peak resident memory since the last reset, in MiB (0 where /proc is unavailable).
-fn peak_mib() -> f64 {
-    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
-    let kib = status
-        .lines()
-        .find_map(|l| l.strip_prefix("VmHWM:"))
-        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<f64>().ok())
-        .unwrap_or(0.0);
-    kib / 1024.0
-}
+#[path = "support/memory.rs"]
+mod memory;
+use memory::peak_mib;
 
 fn reset_peak() {
     // Writing 5 resets the peak resident set size to the current one (Linux 4.0 and newer).

@@ -21,14 +21,9 @@ fn best<T>(n: usize, mut f: impl FnMut() -> T) -> (f64, T) {
     (best, out.expect("at least one run"))
 }
 
-fn peak_mib() -> f64 {
-    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
-    status
-        .lines()
-        .find_map(|l| l.strip_prefix("VmHWM:"))
-        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<f64>().ok())
-        .map_or(f64::NAN, |kb| kb / 1024.0)
-}
+#[path = "../support/memory.rs"]
+mod memory;
+use memory::peak_mib;
 
 fn measure(name: &str, xml: &str) {
     let (import_ms, import) = best(3, || hybc::sbml::import(xml).expect("imports"));
