@@ -558,7 +558,7 @@ impl Selector {
         };
         match self {
             Selector::EventTime { event, occurrence } => named(event).nth(occurrence - 1),
-            Selector::LastFiring { event } => named(event).last(),
+            Selector::LastFiring { event } => named(event).next_back(),
             Selector::Output(_) | Selector::State(_) => None,
         }
     }
