@@ -338,7 +338,10 @@ def function(
 
     - ``params``: names of the input parameters, the order of ``p``'s entries (and of gradients);
       a vector parameter's name stands for its N elements.
-    - ``outputs``: names of outputs (or states) read at the end of the run.
+    - ``outputs``: names of outputs (or states) read at the end of the run, or of event times
+      as ``hybc fit`` spells them: ``EVENT#K`` (the K-th firing, K from 1) and ``EVENT#last``;
+      an event family's element counts its own firings (``low[1]#2``). An event that fired fewer
+      times reads NaN with derivative 0, as an unfired slot does; not with ``at=``.
     - ``events``: number K of event slots (``"event_times"`` has shape (K,)).
     - ``values``: values of the other parameters (their defaults otherwise; a vector parameter
       takes an array).

@@ -24,14 +24,24 @@ use rayon::prelude::*;
 
 use super::status;
 use hybc::sim::adjoint::{self, Seed};
-use hybc::sim::{SimOptions, SimResult};
+use hybc::sim::{EventRecord, SimOptions, SimResult, SystemInfo};
 use hybc::{Sens, StopReason};
 
-/// What a value column reads from the final state.
+/// What a value column reads: an output or a state at the end, or the time of one firing of the
+/// events of a name (an event family's element counts its own firings: `low[1]#2`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Selector {
     Output(usize),
     State(usize),
+    /// `EVENT#K`: the `occurrence`-th firing (from 1) of the events named as `event` is.
+    EventTime {
+        event: usize,
+        occurrence: usize,
+    },
+    /// `EVENT#last`: the last firing of the events named as `event` is.
+    LastFiring {
+        event: usize,
+    },
 }
 
 /// A compiled model with options checked and simulators kept for reuse: one for values only
@@ -418,14 +428,8 @@ impl Function {
             .iter()
             .map(|pull| {
                 let (mut state, mut outputs) = (vec![0.0; n_states], vec![0.0; n_outputs]);
-                for (col, &c) in self.columns.iter().zip(pull.ct_values) {
-                    match *col {
-                        Selector::Output(i) => outputs[i] += c,
-                        Selector::State(i) => state[i] += c,
-                    }
-                }
-                // A pad (an unfired slot) is a constant: its cotangent goes nowhere.
-                let event_times = pull
+                // A pad (an unfired slot or event column) is a constant: its cotangent goes nowhere.
+                let mut event_times: Vec<(usize, f64)> = pull
                     .ct_times
                     .iter()
                     .take(fired)
@@ -433,6 +437,17 @@ impl Function {
                     .enumerate()
                     .filter(|&(_, c)| c != 0.0)
                     .collect();
+                for (col, &c) in self.columns.iter().zip(pull.ct_values) {
+                    match *col {
+                        Selector::Output(i) => outputs[i] += c,
+                        Selector::State(i) => state[i] += c,
+                        Selector::EventTime { .. } | Selector::LastFiring { .. } => {
+                            if let Some(e) = col.firing(info, &result.events).filter(|_| c != 0.0) {
+                                event_times.push((e, c));
+                            }
+                        }
+                    }
+                }
                 Seed { state, outputs, event_times, total, ..Seed::default() }
             })
             .collect();
@@ -463,9 +478,16 @@ impl Function {
         let complete = result.stopped_by.is_complete();
         let fin = &result.final_state;
         let c = self.columns.len();
+        let info = self.plain.compiled.info();
         let (end_values, sample_values) = slot.values.split_at_mut(c);
         for (v, col) in end_values.iter_mut().zip(&self.columns) {
-            *v = if complete { col.read(&fin.outputs, &fin.state) } else { f64::NAN };
+            *v = match col.firing(info, &result.events) {
+                // An event time is read as the slots are, also from a run that ended early.
+                Some(e) => result.events[e].time,
+                None if col.is_event() => f64::NAN,
+                None if complete => col.read(&fin.outputs, &fin.state),
+                None => f64::NAN,
+            };
         }
         for (row, sample) in sample_values.chunks_mut(c.max(1)).zip(result.samples.iter()) {
             for (v, col) in row.iter_mut().zip(&self.columns) {
@@ -481,10 +503,21 @@ impl Function {
         let (end_rows, sample_rows) = dvalues.split_at_mut(c * m);
         let (n_states, n_outputs) = (fin.state.len(), fin.outputs.len());
         for (i, col) in self.columns.iter().enumerate() {
-            for j in 0..m {
+            let row = &mut end_rows[i * m..(i + 1) * m];
+            if col.is_event() {
+                // As an event slot: an unfired event's pad is a constant (derivative 0), a time
+                // without a derivative (grazing) NaN.
+                match col.firing(info, &result.events).map(|e| result.events[e].dtime.as_deref()) {
+                    None => row.fill(0.0),
+                    Some(Some(d)) => row.copy_from_slice(&d[..m]),
+                    Some(None) => row.fill(f64::NAN),
+                }
+                continue;
+            }
+            for (j, r) in row.iter_mut().enumerate() {
                 let d =
                     if complete { col.derivative(doutputs, dstate, (n_outputs, n_states), j) } else { None };
-                end_rows[i * m + j] = d.unwrap_or(f64::NAN);
+                *r = d.unwrap_or(f64::NAN);
             }
         }
         // A sample's derivative is at its fixed time (the interpolated sensitivity).
@@ -510,11 +543,32 @@ impl Function {
 }
 
 impl Selector {
-    /// The column's value among `outputs` and `states`.
+    /// Whether the column is an event's time (which has no value at the sample times).
+    pub fn is_event(self) -> bool {
+        matches!(self, Selector::EventTime { .. } | Selector::LastFiring { .. })
+    }
+
+    /// The index in `events` (a run's firings) of the firing an event column reads; `None` for a
+    /// value column and for an event that fired fewer times. Firings are counted by name, as
+    /// `hybc fit`'s `EVENT#K` counts them.
+    fn firing(self, info: &SystemInfo, events: &[EventRecord]) -> Option<usize> {
+        let named = |event: usize| {
+            let name = &info.events[event].name;
+            events.iter().enumerate().filter(move |(_, e)| e.name == *name).map(|(i, _)| i)
+        };
+        match self {
+            Selector::EventTime { event, occurrence } => named(event).nth(occurrence - 1),
+            Selector::LastFiring { event } => named(event).next_back(),
+            Selector::Output(_) | Selector::State(_) => None,
+        }
+    }
+
+    /// The column's value among `outputs` and `states` (NaN for an event column).
     fn read(self, outputs: &[f64], states: &[f64]) -> f64 {
         match self {
             Selector::Output(i) => outputs[i],
             Selector::State(i) => states[i],
+            Selector::EventTime { .. } | Selector::LastFiring { .. } => f64::NAN,
         }
     }
 
@@ -530,6 +584,7 @@ impl Selector {
         match self {
             Selector::Output(i) => doutputs.map(|d| d[j * k + i]),
             Selector::State(i) => dstates.map(|d| d[j * n + i]),
+            Selector::EventTime { .. } | Selector::LastFiring { .. } => None,
         }
     }
 }

@@ -85,7 +85,14 @@ pub fn jax_register(
         }
         base.set(name, value).map_err(|e| errors::to_py(e.into()))?;
     }
-    let selectors = columns.iter().map(|name| selector(inner, name)).collect::<PyResult<Vec<_>>>()?;
+    let selectors = columns.iter().map(|name| selector(py, &model, name)).collect::<PyResult<Vec<_>>>()?;
+    if let Some(i) = selectors.iter().position(|s| s.is_event()).filter(|_| !opts.at.is_empty()) {
+        return Err(PyValueError::new_err(format!(
+            "outputs: `{}` is an event's time, which has no value at the `at=` times: read it from a \
+             function without `at=`",
+            columns[i]
+        )));
+    }
 
     let key =
         format!("{:?}", (inner.file_name(), inner.source(), &params, &columns, events, base.values(), &opts));
@@ -130,8 +137,25 @@ fn inner_name(compiled: &hybc::Compiled) -> String {
     format!("model `{}`", compiled.model().name())
 }
 
-/// An output or a state, by name (outputs first: a model cannot declare both with one name).
-fn selector(model: &hybc::Model, name: &str) -> PyResult<Selector> {
+/// An output or a state, by name (outputs first: a model cannot declare both with one name), or
+/// an event's firing, `EVENT#K` (K from 1) or `EVENT#last`, as `hybc fit` and `hybc sobol` spell
+/// it (an event family's element counts its own firings: `low[1]#2`).
+fn selector(py: Python<'_>, native: &Model, name: &str) -> PyResult<Selector> {
+    let model = native.inner();
+    if name.contains('#') {
+        let plain = native.compiled(py, &[])?;
+        let parsed = hybc::fit::Observable::parse(name, plain.info())
+            .map_err(|e| PyValueError::new_err(format!("outputs: {e}")))?;
+        return match parsed {
+            hybc::fit::Observable::EventTime { name_event, occurrence } => {
+                Ok(Selector::EventTime { event: name_event, occurrence })
+            }
+            hybc::fit::Observable::LastFiring { name_event } => {
+                Ok(Selector::LastFiring { event: name_event })
+            }
+            _ => Err(PyValueError::new_err(format!("outputs: `{name}` is not EVENT#K or EVENT#last"))),
+        };
+    }
     if let Some(i) = model.output_names().position(|o| o == name) {
         return Ok(Selector::Output(i));
     }
