@@ -138,11 +138,8 @@ output y = x[N - 1]
 
 #[test]
 fn the_w5_chain_with_arrays_is_its_flat_model() {
-    // `tests/data/run/chain.hyb` is the same chain of 20 cells, with comments (not in models/:
-    // the adjoint's agreement with forward sensitivities on it under Dormand-Prince at rtol 1e-10
-    // is 1.3e-11, above the 1e-11 every shipped model is held to; see the report of #41).
-    let file =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/run/chain.hyb")).unwrap();
+    // `models/chain.hyb` is the same chain of 20 cells, with comments.
+    let file = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/models/chain.hyb")).unwrap();
     for (n, source) in [(10, chain_with_arrays(10)), (30, chain_with_arrays(30)), (20, file)] {
         let flat = Model::parse(&diffusion_source(n, true)).expect("flat checks");
         let arr = Model::parse(&source).expect("array checks");

@@ -689,7 +689,8 @@ fn auto_switches_back_to_the_explicit_pair_when_the_rate_relaxes() {
 #[test]
 fn auto_never_switches_on_the_non_stiff_shipped_models() {
     for m in shipped_models() {
-        if m.name == "soft_ball" {
+        // The two stiff ones: the soft ball at rest on its spring, the diffusion chain.
+        if m.name == "soft_ball" || m.name == "chain" {
             continue;
         }
         let model = Model::parse(&m.source).expect("parses");
