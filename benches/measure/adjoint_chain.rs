@@ -20,31 +20,14 @@ use hybc::sim::adjoint::{record_with, Checkpoints, Seed};
 use hybc::sim::{run, HybridSystem, Method, SimOptions};
 use hybc::Model;
 
-/// The chain of `n` cells, a conductance per link, with the top-up event of W5.
-fn source(n: usize) -> String {
-    let mut s = format!("model link_chain\nparam d[{}] = 50 in [0.1, 1000]\nparam c = 0.1\n", n - 1);
-    for i in 0..n {
-        s.push_str(&format!("state x{i} = {}\n", if i == 0 { 1.0 } else { 0.0 }));
-    }
-    for i in 0..n {
-        let mut rhs = format!("-c * x{i}");
-        if i > 0 {
-            rhs.push_str(&format!(" + d[{}] * (x{} - x{i})", i - 1, i - 1));
-        }
-        if i + 1 < n {
-            rhs.push_str(&format!(" - d[{i}] * (x{i} - x{})", i + 1));
-        }
-        s.push_str(&format!("der(x{i}) = {rhs}\n"));
-    }
-    s.push_str("initial mode fill {\n    event top_up when x0 <= 0.6 -> rest {\n        x0 := x0 + 0.3\n    }\n}\nmode rest {\n}\n");
-    s.push_str(&format!("output y = x{}\n", n - 1));
-    s
-}
-
 fn median(mut xs: Vec<f64>) -> f64 {
     xs.sort_by(f64::total_cmp);
     xs[xs.len() / 2]
 }
+
+#[path = "../support/chain.rs"]
+mod chain;
+use chain::link_chain_source;
 
 #[path = "../support/memory.rs"]
 mod memory;
@@ -84,7 +67,7 @@ fn main() {
         ..SimOptions::default()
     };
     for n in sizes {
-        let model = Model::parse(&source(n)).expect("checks");
+        let model = Model::parse(&link_chain_source(n, 50.0, false)).expect("checks");
         let plain_model = model.compile::<&str>(&[]).expect("compiles");
         if only.as_deref() == Some("plain") {
             let mut plain = Vec::new();

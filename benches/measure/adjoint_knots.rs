@@ -7,11 +7,14 @@
 //! largest K given to `--forward-upto` (default 2000; they grow as K). Times are medians of
 //! `--repeat` runs (default 7), interleaved per K so the machine's drift hits every mode alike.
 //!
+//! `--svg PATH` also draws both modes' cost over a plain run's against K on log-log axes.
+//!
 //! `cargo run --release --example adjoint_knots -- 10 100 1000 10000`
 //! docs/performance.md, "Gradients by the adjoint", has the figures.
 
 use std::time::Instant;
 
+use hybc::plot::{plot_curves, CurveFigure, CurveSeries};
 use hybc::sim::adjoint::{record, Seed};
 use hybc::sim::{run, SimOptions};
 use hybc::Model;
@@ -33,6 +36,11 @@ fn median(mut xs: Vec<f64>) -> f64 {
 
 fn main() {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let svg = args.iter().position(|a| a == "--svg").map(|i| {
+        let path = std::path::PathBuf::from(&args[i + 1]);
+        args.drain(i..i + 2);
+        path
+    });
     let mut take = |flag: &str, default: usize| -> usize {
         match args.iter().position(|a| a == flag) {
             Some(i) => {
@@ -55,6 +63,7 @@ fn main() {
     };
     println!("| K | compile (s) | plain run (ms) | adjoint (ms) | adjoint / plain | forward (ms) | forward / plain | events | gap |");
     println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    let (mut adjoint_curve, mut forward_curve) = (Vec::new(), Vec::new());
     for &k in &counts {
         let model = Model::parse(&source(k)).expect("checks");
         let plain_model = model.compile::<&str>(&[]).expect("compiles");
@@ -86,10 +95,12 @@ fn main() {
             }
         }
         let (plain, adjoint) = (median(plain), median(adjoint));
+        adjoint_curve.push((k as f64, adjoint / plain));
         let (fwd, ratio, gap) = if forward.is_empty() {
             ("-".to_string(), "-".to_string(), "-".to_string())
         } else {
             let f = median(forward);
+            forward_curve.push((k as f64, f / plain));
             let scale = grad_fwd.iter().fold(0.0f64, |a, b| a.max(b.abs()));
             let gap = grad_adj.iter().zip(&grad_fwd).fold(0.0f64, |a, (x, y)| a.max((x - y).abs())) / scale;
             (format!("{:.2}", f * 1e3), format!("{:.1}", f / plain), format!("{gap:.0e}"))
@@ -100,5 +111,17 @@ fn main() {
             adjoint * 1e3,
             adjoint / plain
         );
+    }
+    if let Some(path) = svg {
+        let figure = CurveFigure {
+            title: "The ball under a pwl control of K knots: one gradient's cost".into(),
+            x_desc: "knots K (parameters)".into(),
+            y_desc: "time over a plain run".into(),
+            series: vec![
+                CurveSeries { name: "adjoint (--sens adjoint)".into(), points: adjoint_curve },
+                CurveSeries { name: "forward sensitivities".into(), points: forward_curve },
+            ],
+        };
+        plot_curves(&figure, &path).expect("draws");
     }
 }

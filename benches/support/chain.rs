@@ -1,7 +1,8 @@
 //! The generated chain models shared by the benches, the examples and the tests
 //! (`tests/it/support`): `chain_source` (`benches/jit.rs`), `diffusion_source` (workload W5),
 //! `refill_source` (the W5 chain refilled: landing on events),
-//! `hub_source` and `grid_source` (the sparse LU, `benches/measure/sparse_hub.rs`).
+//! `hub_source` and `grid_source` (the sparse LU, `benches/measure/sparse_hub.rs`), and
+//! `link_chain_source` (a conductance per link: the adjoint's measurements and tests).
 // Each includer (benches, examples, tests) uses only some of the generators.
 #![allow(dead_code)]
 
@@ -166,6 +167,37 @@ pub fn grid_source(side: usize, with_event: bool) -> String {
     }
     if with_event {
         s.push_str("initial mode fill {\n    event top_up when x0 <= 0.6 -> rest {\n        x0 := x0 + 0.3\n    }\n}\nmode rest {\n}\n");
+    }
+    s.push_str(&format!("output y = x{}\n", n - 1));
+    s
+}
+
+/// A chain of `n` cells with a conductance per link, `d[i] = d` between cells i and i + 1 (`n - 1`
+/// parameters), every cell leaking at rate `c = 0.1`; cell 0 starts at 1 and is topped up by 0.3
+/// when it has leaked down to 0.6: once (then mode `rest`), or every time (`top_up_again`). The
+/// shape whose forward sensitivity kernel grows as `n m` and whose gradient the adjoint gets at
+/// the cost of a few plain runs.
+pub fn link_chain_source(n: usize, d: f64, top_up_again: bool) -> String {
+    let mut s = format!("model link_chain\nparam d[{}] = {d} in [0.1, 1000]\nparam c = 0.1\n", n - 1);
+    for i in 0..n {
+        s.push_str(&format!("state x{i} = {}\n", if i == 0 { 1.0 } else { 0.0 }));
+    }
+    for i in 0..n {
+        let mut rhs = format!("-c * x{i}");
+        if i > 0 {
+            rhs.push_str(&format!(" + d[{}] * (x{} - x{i})", i - 1, i - 1));
+        }
+        if i + 1 < n {
+            rhs.push_str(&format!(" - d[{i}] * (x{i} - x{})", i + 1));
+        }
+        s.push_str(&format!("der(x{i}) = {rhs}\n"));
+    }
+    let after = if top_up_again { "fill" } else { "rest" };
+    s.push_str(&format!(
+        "initial mode fill {{\n    event top_up when x0 <= 0.6 -> {after} {{\n        x0 := x0 + 0.3\n    }}\n}}\n"
+    ));
+    if !top_up_again {
+        s.push_str("mode rest {\n}\n");
     }
     s.push_str(&format!("output y = x{}\n", n - 1));
     s

@@ -162,7 +162,9 @@ class Model:
         converts to float64 is accepted (it is normalised to C-ordered float64 first). For a full
         grid see :func:`hybc.grid`. ``events``: event slots per row (``event<k>``, ``t<k>``,
         ``dt<k>/d<p>``); ``threads``: worker threads (0: one per core). ``options`` as in
-        :meth:`simulate` (no trajectory).
+        :meth:`simulate` (no trajectory), but ``sens`` defaults to ``"auto"`` as for ``hybc sweep``
+        (the adjoint at points whose reported quantities are fewer than a fifth of the ``grad``
+        parameters).
 
         Columns: float64 (NaN where ``hybc sweep`` leaves a cell empty), ``events`` int64,
         ``status``/``event<k>``/``error`` str ("" where empty).

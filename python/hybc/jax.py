@@ -24,11 +24,11 @@ what suits it:
   recorded run and one backward pass, and no sensitivity column whatever the number of inputs
   (what a backward pass costs: docs/performance.md). Where the adjoint does
   not carry a run (what ``hybc run --sens adjoint`` does not carry yet, docs/cli.md: a
-  Rosenbrock step, a grazing crossing, ...; also samples at ``at=`` times, a run that ended
+  grazing crossing, ...; also samples at ``at=`` times, a run that ended
   early, or a pulled-back number that is not finite) the handler pulls back through the forward
   Jacobians instead: the numbers are right either way. ``sens="forward"`` makes reverse mode always go
-  through the forward Jacobians, ``sens="auto"`` takes the adjoint from three inputs on
-  (``hybc run --sens auto``'s rule for one row).
+  through the forward Jacobians, ``sens="auto"`` takes the adjoint from six inputs on
+  (``hybc run --sens auto``'s rule for one row: fewer rows than a fifth of the parameters).
 
 The values come from the plain run (no sensitivities) in every mode. The adjoint differentiates
 the steps that run took, so it equals the forward sensitivities of a run with
@@ -352,7 +352,7 @@ def function(
       ``quadrature_error_control``, ``land_events``, ``h_max`` (the model's ``simulate`` line and the run defaults otherwise).
     - ``sens``: how reverse mode computes: ``"adjoint"`` (the default: one backward pass per
       cotangent, the forward Jacobians where the adjoint does not carry the run), ``"forward"``
-      (always through the forward Jacobians) or ``"auto"`` (the adjoint from three inputs on).
+      (always through the forward Jacobians) or ``"auto"`` (the adjoint from six inputs on).
       Forward mode always runs forward sensitivities.
 
     The model is compiled here (twice: without and with sensitivities, each cached per model).

@@ -222,7 +222,8 @@ impl Model {
         sim: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let keywords = SimKeywords::from_kwargs(sim)?;
-        let opts = keywords.options(&self.model)?;
+        // Gradients by the cheaper mode, as `hybc sweep` (docs/sweep.md).
+        let opts = keywords.analysis_options(&self.model)?;
         sweep::check_counts(events, threads)?;
         if let Some(name) = names.iter().find(|n| fixed.as_ref().is_some_and(|f| f.contains_key(*n))) {
             return Err(ParameterError::new_err(format!(

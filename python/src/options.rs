@@ -99,7 +99,7 @@ impl SimKeywords {
         self.overrides.apply(&model.sim_options(), Spelling::Keyword).map_err(value_error)
     }
 
-    /// [`Self::options`] for `fit` and `optimize`, whose gradients default to the cheaper mode
+    /// [`Self::options`] for `sweep`, `fit` and `optimize`, whose gradients default to the cheaper mode
     /// (`hybc::Model::analysis_sim_options`).
     pub fn analysis_options(&self, model: &hybc::Model) -> PyResult<SimOptions> {
         self.overrides.apply(&model.analysis_sim_options(), Spelling::Keyword).map_err(value_error)

@@ -121,7 +121,7 @@ impl Model {
         }
     }
 
-    /// The options of an analysis's runs that differentiate (`fit`, `optimize`): as
+    /// The options of an analysis's runs that differentiate (`sweep`, `fit`, `optimize`): as
     /// [`Self::sim_options`], with gradients by the cheaper mode (`Sens::Auto`: the adjoint when
     /// the quantities are far fewer than the free parameters) unless the caller says otherwise.
     pub fn analysis_sim_options(&self) -> SimOptions {

@@ -110,7 +110,8 @@ pub(crate) struct SimFlags {
     land_events: bool,
     /// How gradients are computed: forward sensitivities, the discrete adjoint (the derivative of
     /// the steps a run with --no-sens-error-control takes), or whichever is cheaper (docs/cli.md,
-    /// gradients). Default: forward for run, sweep, sobol and periodic; auto for fit and optimize.
+    /// gradients). Default: forward for run and periodic; auto for sweep, fit and optimize (sobol
+    /// differentiates nothing).
     #[arg(long, value_enum)]
     sens: Option<SensArg>,
 }
@@ -171,7 +172,7 @@ pub(crate) fn sim_options(model: &Model, flags: &SimFlags) -> Result<SimOptions,
     flags.overrides().apply(&model.sim_options(), Spelling::Flag).map_err(|e| e.message)
 }
 
-/// [`sim_options`] for `fit` and `optimize`, whose gradients default to the cheaper mode
+/// [`sim_options`] for `sweep`, `fit` and `optimize`, whose gradients default to the cheaper mode
 /// (`Model::analysis_sim_options`).
 pub(crate) fn analysis_sim_options(model: &Model, flags: &SimFlags) -> Result<SimOptions, String> {
     flags.overrides().apply(&model.analysis_sim_options(), Spelling::Flag).map_err(|e| e.message)

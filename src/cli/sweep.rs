@@ -9,7 +9,7 @@ use std::process::ExitCode;
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::options::{parameter_values, parse_param_list, sim_options, SimFlags};
+use super::options::{analysis_sim_options, parameter_values, parse_param_list, SimFlags};
 use super::{compile_model, load_model, usage_error, ModelArg, EXIT_SIM_STOPPED};
 use crate::plot::{self, Shown, SweepFigure};
 use crate::sema::ParamIdx;
@@ -220,7 +220,7 @@ fn sweep_model(model: &Model, args: &SweepArgs) -> Result<ExitCode, String> {
     // error rather than an out-of-memory abort.
     SweepRequest::check_counts(args.events, args.threads, Spelling::Flag)?;
     let (points, varied) = points(model, args)?;
-    let opts = sim_options(model, &args.sim)?;
+    let opts = analysis_sim_options(model, &args.sim)?;
     if let Some(path) = &args.plot {
         plot::ImageFormat::from_path(path).map_err(|e| format!("--plot: {e}"))?;
         for name in args.show.iter().flat_map(|list| list.split(',')).map(str::trim) {

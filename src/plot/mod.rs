@@ -1,5 +1,6 @@
 //! Plots of a run (states and outputs against time, with event markers and mode bands) and of a
-//! sweep (each output against a varied parameter, with gradient tangents), as SVG or PNG chosen
+//! sweep (each output against a varied parameter, with gradient tangents), and measured curves on
+//! log-log axes (a benchmark's cost against size), as SVG or PNG chosen
 //! by the file extension. Knows plotters (only here) and the results of `sim` and `sweep`; text is
 //! drawn with an embedded font so that no system font library is needed.
 //!
@@ -7,6 +8,7 @@
 //! variable, stacked. Data lines, event markers and tangents have their own colours
 //! ([`DATA_COLOR`], [`EVENT_COLOR`], [`TANGENT_COLOR`]), which tests use to count them.
 
+mod curve_plot;
 mod font;
 mod run_plot;
 mod sobol_plot;
@@ -17,6 +19,7 @@ use std::path::{Path, PathBuf};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+pub use curve_plot::{plot_curves, CurveFigure, CurveSeries};
 pub use run_plot::{plot_run, RunFigure};
 pub use sobol_plot::{plot_sobol, SobolFigure, SobolPanel};
 pub use sweep_plot::{plot_sweep, Shown, SweepFigure, SweepSeries, Tangent};

@@ -436,6 +436,30 @@ fn every_event_semantics_test_holds_landing_on_events_or_not() {
     assert!(failed.is_empty(), "failures: {failed:?}");
 }
 
+/// The adjoint through every rule (issue #40, section 3): each test above, under each method and
+/// landing on event instants or not, with every run that has gradients also run by the adjoint
+/// and by forward sensitivities taking the same steps (`support::runs::check_adjoint`: equal
+/// to 1e-10, the same entries not existing, or the refusal named). The tests' own assertions
+/// hold as before; what the adjoint does not carry yet is counted, and most runs are carried.
+#[test]
+fn every_event_semantics_test_gives_the_same_gradients_by_the_adjoint() {
+    use crate::support::runs::{every_test_landing, every_test_with, with_adjoint_check};
+    use hybc::sim::Method;
+    let mut failed = Vec::new();
+    let (checked, carried) = with_adjoint_check(|| {
+        for method in [Method::Dopri5, Method::Dop853, Method::Rodas5p, Method::Rodas4, Method::Auto] {
+            failed.extend(every_test_with(method, ALL));
+        }
+        for (method, land) in [(Method::Rodas5p, false), (Method::Dopri5, true), (Method::Dop853, true)] {
+            failed.extend(every_test_landing(method, land, ALL));
+        }
+    });
+    assert!(failed.is_empty(), "failures: {failed:?}");
+    eprintln!("the adjoint against forward: {checked} runs with gradients, {carried} carried by the adjoint");
+    assert!(checked >= 40, "only {checked} runs with gradients were checked");
+    assert!(2 * carried >= checked, "the adjoint carried only {carried} of {checked} runs");
+}
+
 /// Rule 1, the lateness: an event fires at the first floating-point time past its crossing, and
 /// the state after it is the trajectory's reset at the crossing itself, carried to that time. A
 /// relaxation `der(x) = 1000 (1 - x)` reset by `x := x - 0.8` at `x >= c` fires at

@@ -8,6 +8,7 @@
 //! `+0.0`, the JIT starts from the first product, so `-0.0` there may come out as `+0.0`; those
 //! entries are compared with `==`.
 
+use crate::support::chain::link_chain_source;
 use crate::support::hand_functions::same;
 use crate::support::models::shipped_models;
 use hybc::codegen::{CompileOptions, CompiledModel};
@@ -291,37 +292,13 @@ fn every_shipped_model_matches_the_interpreter() {
     }
 }
 
-/// A chain of `n` cells with a conductance per link, `d[i]` between cells i and i + 1, and an
-/// event: the shape whose forward sensitivity kernel grows as `n m`.
-fn link_chain(n: usize) -> String {
-    let mut s = format!("model link_chain\nparam d[{}] = 2 in [0.1, 10]\nparam c = 0.1\n", n - 1);
-    for i in 0..n {
-        s.push_str(&format!("state x{i} = {}\n", if i == 0 { 1.0 } else { 0.0 }));
-    }
-    for i in 0..n {
-        let mut rhs = format!("-c * x{i}");
-        if i > 0 {
-            rhs.push_str(&format!(" + d[{}] * (x{} - x{i})", i - 1, i - 1));
-        }
-        if i + 1 < n {
-            rhs.push_str(&format!(" - d[{i}] * (x{i} - x{})", i + 1));
-        }
-        s.push_str(&format!("der(x{i}) = {rhs}\n"));
-    }
-    s.push_str(
-        "initial mode fill {\n    event top_up when x0 <= 0.6 -> fill {\n        x0 := x0 + 0.3\n    }\n}\n",
-    );
-    s.push_str(&format!("output y = x{}\n", n - 1));
-    s
-}
-
 #[test]
 fn a_large_forward_sensitivity_kernel_is_compiled_on_first_use_and_matches_the_interpreter() {
     // 40 cells, the 40 parameters differentiated: `flow_sens` has 40 * (40 + 118) = 6,320 in size,
     // over the limit of 5,000 (`plan::EAGER_FLOW_SENS_LIMIT`), so it is not among the kernels
     // compiled with the model: flow, guards, guard speeds, the event's guard gradient and
     // reset and reset Jacobian, init, init_sens, outputs, output_jac.
-    let source = link_chain(40);
+    let source = link_chain_source(40, 2.0, true);
     let model = hybc::check_source(&source).expect("checks");
     let funcs = lower(&model);
     let all: Vec<ParamIdx> = (0..model.n_params() as u32).map(ParamIdx).collect();

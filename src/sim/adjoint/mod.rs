@@ -63,9 +63,11 @@ impl Checkpoints {
 const NOT_KEPT: usize = usize::MAX;
 
 /// `Sens::Auto` takes the adjoint when the quantities reported (rows) are fewer than this
-/// fraction of the differentiated parameters: a backward pass per row costs about what a forward
-/// sensitivity column does (docs/design.md, "The adjoint").
-pub const AUTO_ROWS_PER_PARAM: f64 = 0.5;
+/// fraction of the differentiated parameters: measured, a backward row costs 0.45 to 4 plain
+/// runs and a forward column 0.05 to 1.1, and the adjoint pays 1.4 to 6 plain runs more; the
+/// break-even lies between 3 and 19 parameters a row (`examples/sens_rule`, docs/design.md,
+/// "`--sens auto`").
+pub const AUTO_ROWS_PER_PARAM: f64 = 0.2;
 
 /// Whether `Sens::Auto` takes the adjoint for `rows` quantities and `params` parameters.
 pub fn prefers_adjoint(rows: usize, params: usize) -> bool {
@@ -383,10 +385,20 @@ pub(crate) fn run_by_adjoint<S: HybridSystem + ?Sized>(
     opts: &SimOptions,
     auto: bool,
 ) -> Result<Result<SimResult, AdjointError>, SimError> {
-    let recorded = record(sys, p, opts)?;
-    let result = &recorded.result;
     let info = sys.info();
     let (n, m, k) = (info.n_states(), info.n_grad(), info.n_outputs());
+    // The final states and outputs asked for are rows whatever the run does (events and a stop
+    // only add rows): where they alone outweigh the parameters, `auto` is forward before any
+    // recording run, so choosing costs nothing where forward mode wins anyway.
+    let finals_wanted = opts
+        .of
+        .as_ref()
+        .map_or(n + k, |o| (0..n).filter(|&i| o.state(i)).count() + (0..k).filter(|&i| o.output(i)).count());
+    if auto && !prefers_adjoint(finals_wanted, m) {
+        return Ok(Err(AdjointError::Unsupported("(auto) a run with more quantities than parameters")));
+    }
+    let recorded = record(sys, p, opts)?;
+    let result = &recorded.result;
     let at_stop = matches!(result.stopped_by, StopReason::Event { .. });
     // The quantities asked for (`SimOptions::of`; all by default), a backward pass each.
     let of = opts.of.as_ref();
@@ -553,6 +565,8 @@ impl Recorded {
             |r: usize, index: usize| seeds[r].before_end_events && last_step.is_none_or(|s| index > s);
         let pieces = &self.tape.pieces;
         let mut replay = Replay::new(self.tape.solver);
+        // Made on the first segment recomputed: a tape of checkpoints only never needs it.
+        let mut plain = None;
         for (index, piece) in pieces.iter().enumerate().rev() {
             match *piece {
                 Piece::Step { at, end } => {
@@ -566,7 +580,7 @@ impl Recorded {
                             let first = index + 1 - steps.len();
                             let c = steps[0];
                             replay.run(
-                                sys,
+                                plain.get_or_insert_with(|| WithoutSens::new(sys)),
                                 p,
                                 first + 1,
                                 &steps,

@@ -60,9 +60,11 @@ impl Replay {
     /// Recomputes the steps `steps` (the pieces from `first - 1` on: a checkpoint step that
     /// starts at `x0` with the derivative `f0`, then the steps chained to it), keeping the start
     /// states of all but the first, those of the pieces `first..first + steps.len() - 1`.
+    /// `plain` is the system without sensitivities, made once per backward pass (it copies the
+    /// system's description, whose names are as many as the parameters).
     pub(super) fn run<S: HybridSystem + ?Sized>(
         &mut self,
-        sys: &S,
+        plain: &WithoutSens<'_, S>,
         p: &[f64],
         first: usize,
         steps: &[StepAt],
@@ -70,7 +72,6 @@ impl Replay {
         f0: &[f64],
     ) {
         let n = x0.len();
-        let plain = WithoutSens::new(sys);
         self.x.clear();
         self.x.extend_from_slice(x0);
         self.f.clear();
@@ -79,7 +80,7 @@ impl Replay {
         self.first = first;
         self.count = steps.len().saturating_sub(1);
         for s in &steps[..self.count] {
-            let mut rhs = rhs_for(&plain, p, n, s.mode).with_ceiling(s.ceiling);
+            let mut rhs = rhs_for(plain, p, n, s.mode).with_ceiling(s.ceiling);
             match s.pair {
                 TapePair::Dopri5 | TapePair::Dop853 => {
                     if !matches!(&self.rk, Some((pair, size, _)) if *pair == s.pair && *size == n) {
