@@ -46,6 +46,7 @@ import tempfile
 import time
 
 import numpy as np
+from timing import best_of
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 WORK = pathlib.Path(tempfile.gettempdir()) / "hybc_adjoint_peers"
@@ -53,17 +54,6 @@ WORK = pathlib.Path(tempfile.gettempdir()) / "hybc_adjoint_peers"
 KNOTS_T, KNOTS_RTOL, KNOTS_ATOL = 2.5, 1e-10, 1e-12
 G, E, Y0, U0 = 9.81, 0.8, 1.0, 0.5
 CHAIN_T, CHAIN_RTOL, CHAIN_ATOL, CHAIN_D, CHAIN_C = 10.0, 1e-8, 1e-10, 50.0, 0.1
-
-
-def best_of(fn, repeat: int) -> tuple[float, object]:
-    """Best wall time of `repeat` calls after one warm-up call, and the last result."""
-    result = fn()
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        result = fn()
-        times.append(time.perf_counter() - start)
-    return min(times), result
 
 
 def grad_err(got, want) -> float:

@@ -29,6 +29,7 @@ import pathlib
 import time
 
 import numpy as np
+from timing import best_of
 
 import hybc
 
@@ -53,17 +54,6 @@ event faster when y1 <= 0.5 {
 """
 ROBERTSON_P = (0.04, 3e7, 1e4)
 ROBERTSON_T, RTOL, ATOL = 1e5, 1e-8, 1e-14
-
-
-def best_of(fn, repeat: int) -> tuple[float, object]:
-    """Best wall time of `repeat` calls after one warm-up call, and the last result."""
-    result = fn()
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        result = fn()
-        times.append(time.perf_counter() - start)
-    return min(times), result
 
 
 def rel_err(got, want) -> float:
