@@ -156,6 +156,27 @@ fn a_grazing_crossing_voids_in_the_adjoint_what_it_voids_forward_per_parameter()
     assert!(ds[..4].iter().all(|v| v.is_nan()) && ds[4..].iter().all(|v| v.is_finite()), "{ds:?}");
 }
 
+/// The graze with a cascade: `top`'s reset puts v across `mark`'s guard, which fires at the
+/// instant and records its time in `w` (its `R_t`): w moves with the touch's time.
+#[test]
+fn a_cascade_from_a_grazing_event_carries_the_grazes_missing_time() {
+    let src = GRAZE
+        .replace("state v = v0\n", "state v = v0\nstate w = 0\nder(w) = 0\n")
+        .replace("event rest", "event mark when v <= -0.25 {\n    w := t\n}\nevent rest");
+    for method in [Method::Auto, Method::Dopri5, Method::Rodas5p] {
+        let label = format!("graze cascade {method:?}");
+        // To 0.92: after `rest` v falls past -0.25 again at 0.93125.
+        let (r, marks) = both(&label, &src, &[], &SimOptions { method, ..options(0.92) });
+        assert_eq!(marks, ExistenceMarks { grazes: 1, ..ExistenceMarks::default() }, "{label}");
+        assert_eq!(r.events.iter().map(|e| &*e.name).collect::<Vec<_>>(), ["top", "mark", "rest"]);
+        assert_eq!(r.events[1].time, r.events[0].time, "{label}: one instant");
+        // States [y, v, w] per parameter [v0, c, k]: w = t_top, NaN by v0 and c, 0 by k.
+        let ds = r.final_state.dstate.as_ref().expect("some exist");
+        let w: Vec<f64> = (0..3).map(|j| ds[j * 3 + 2]).collect();
+        assert!(w[0].is_nan() && w[1].is_nan() && w[2] == 0.0, "{label}: {ds:?}");
+    }
+}
+
 #[test]
 fn the_ceiling_just_above_the_apex_is_carried_as_before() {
     // The other side: no touch, no mark, every derivative exists and agrees.
