@@ -23,8 +23,8 @@ what suits it:
   ``jax.jacrev`` share one run and one pass), so ``jax.grad`` of one loss runs a plain run, a
   recorded run and one backward pass, and no sensitivity column whatever the number of inputs
   (what a backward pass costs: docs/performance.md). Where the adjoint does
-  not carry a run (what ``hybc run --sens adjoint`` does not carry yet, docs/cli.md: a
-  grazing crossing, ...; also samples at ``at=`` times, a run that ended
+  not carry a run (what ``hybc run --sens adjoint`` does not carry yet, docs/cli.md: an
+  event on an input knot, ...; also samples at ``at=`` times, a run that ended
   early, or a pulled-back number that is not finite) the handler pulls back through the forward
   Jacobians instead: the numbers are right either way. ``sens="forward"`` makes reverse mode always go
   through the forward Jacobians, ``sens="auto"`` takes the adjoint from six inputs on

@@ -247,7 +247,8 @@ def test_a_run_the_adjoint_refuses_gets_the_right_grad(ball_model):
     """Rosenbrock steps, refused by the adjoint when this was written (the handler then pulls back
     through the forward Jacobians) and carried since: `check_path` follows whichever path the
     library says it takes; the ball's closed form dE/de = 8 g h0 e^7 either way. A run the
-    adjoint still refuses (`--at` samples, a reset onto a guard) would test the fallback again."""
+    adjoint still refuses (`--at` samples, an event on an input knot) would test the fallback
+    again."""
     f = hj.function(ball_model, params=["e", "h0"], outputs=["energy"], events=4, method="rodas5p")
     before = f.counts()
     grad = jax.grad(lambda p: f(p)["energy"])(P0)

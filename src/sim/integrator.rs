@@ -1693,9 +1693,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 _ => None,
             };
             if self.tapes {
-                let entry = if onto_guard {
-                    TapeEntry::Unsupported("an event whose guard a reset put the state on")
-                } else if self.left_of_knot {
+                let entry = if self.left_of_knot {
                     TapeEntry::Unsupported("an event on an input knot")
                 } else {
                     TapeEntry::Jump {
@@ -1710,6 +1708,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                     }
                 };
                 self.recorder.tape(&entry);
+                if onto_guard && self.instant.is_some() && !self.left_of_knot {
+                    // Its `dt/dp` is `onto_guard_dte`: the backward pass voids what it reaches.
+                    self.recorder.tape(&TapeEntry::OntoGuard);
+                }
             }
             let out = self.work.jump.apply(
                 self.sys,
@@ -1733,7 +1735,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 self.work.instant_dte.extend_from_slice(&self.work.jump.dte);
             }
             if out.grazing && self.tapes {
-                self.recorder.tape(&TapeEntry::Unsupported("a grazing crossing"));
+                self.recorder.tape(&TapeEntry::Grazed);
             }
             self.note_conditioning(ev, t, out);
             self.events.push(EventRecord {
@@ -1876,12 +1878,18 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     fn cross_switch(&mut self, ev: usize, pos: usize, crossing: Crossing, after_an_event: bool) {
         let (n, t) = (self.n, self.t);
         self.stats.switches += 1;
-        if self.tapes && (after_an_event || crossing.on_guard || self.left_of_knot) {
+        let voids = after_an_event || crossing.on_guard;
+        if self.tapes && voids {
+            self.recorder.tape(&TapeEntry::VoidAll);
+        } else if self.tapes && self.left_of_knot {
             self.recorder.tape(&TapeEntry::Unsupported("a flow switch at another event's instant"));
         }
-        if after_an_event || crossing.on_guard {
-            // The flow before the switch is not known: no sensitivity survives it.
-            if self.work.z[n..].iter().any(|v| !v.is_nan()) {
+        if voids {
+            // The flow before the switch is not known: no sensitivity survives it. A run for the
+            // adjoint carries no columns: it warns where forward mode's first void does (once:
+            // after it every column is NaN until a reset gives one a value again).
+            let warned = || self.warnings.iter().any(|w| matches!(w, SimWarning::SwitchAtEvent { .. }));
+            if self.work.z[n..].iter().any(|v| !v.is_nan()) || (self.tapes && !warned()) {
                 self.work.z[n..].fill(f64::NAN);
                 let name = self.info.events[ev].name.clone();
                 self.warnings.push(SimWarning::SwitchAtEvent { name, time: t });
@@ -1941,8 +1949,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             self.recorder.tape(&TapeEntry::Switch { event: ev, t, mode: self.mode, x, pre, post });
         }
         let out = self.work.jump.apply_switch(self.sys, ev, self.mode, t, x, sides, s, self.p, context);
-        if self.tapes && (out.grazing || self.work.jump.benign) {
-            self.recorder.tape(&TapeEntry::Unsupported("a grazing flow switch"));
+        if self.tapes && self.work.jump.benign {
+            self.recorder.tape(&TapeEntry::BenignGraze(self.work.jump.benign_limit()));
+        } else if self.tapes && out.grazing {
+            self.recorder.tape(&TapeEntry::Grazed);
         }
         self.note_conditioning(ev, t, out);
     }

@@ -166,6 +166,18 @@ pub enum TapeEntry<'a> {
         /// The state it moved from.
         x: &'a [f64],
     },
+    /// The crossing of the piece just recorded (a `Jump` or a `Switch`) grazed: its time's
+    /// derivative does not exist for the parameters that move its guard (`g_x S + g_p != 0`),
+    /// nor does what depends on it.
+    Grazed,
+    /// The `Jump` just recorded is an event whose guard a reset put the state on (rule 7): its
+    /// time's derivative does not exist for the parameters that move its guard or its instant.
+    OntoGuard,
+    /// The `Switch` just recorded grazed with a flow jump that vanishes with the crossing speed:
+    /// its saltation is `-c (g_x S + g_p)` with this limit `c` of `J / d` (n).
+    BenignGraze(&'a [f64]),
+    /// No sensitivity survives this point (a flow switch at another event's instant).
+    VoidAll,
     /// Something the backward pass does not carry (yet): named for the refusal.
     Unsupported(&'static str),
 }

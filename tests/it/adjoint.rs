@@ -137,7 +137,7 @@ fn compare<S: hybc::sim::HybridSystem>(
 }
 
 /// [`compare`], panicking on a gap above `bound`.
-fn compare_within<S: hybc::sim::HybridSystem>(
+pub(crate) fn compare_within<S: hybc::sim::HybridSystem>(
     label: &str,
     sys: &S,
     p: &[f64],

@@ -6,6 +6,7 @@ mod support;
 
 mod adjoint;
 mod adjoint_checkpoints;
+mod adjoint_existence;
 mod adjoint_kernels;
 mod amici_events;
 mod arrays;

@@ -6,9 +6,10 @@
 //! whose error test leaves the sensitivities out), on a [`Tape`]: each step's start, size and how
 //! it ended, each event's state before it. [`Recorded::gradient`] then walks the tape backward
 //! (`backward.rs`), one pass per quantity, and equals the forward sensitivities of that run to
-//! round-off. What the backward pass does not carry yet (a flow switch at another event's
-//! instant, an event on a knot, a grazing crossing, samples at `--at` times) is named in
-//! [`AdjointError::Unsupported`] rather than approximated.
+//! round-off. Where forward mode says a derivative does not exist (a grazing crossing, a reset
+//! onto a guard, a flow switch at another event's instant) it says the same, per parameter
+//! (`exist.rs`). What the backward pass does not carry yet (an event on a knot, samples at
+//! `--at` times) is named in [`AdjointError::Unsupported`] rather than approximated.
 //!
 //! Memory: the tape keeps a few scalars per step, the start state (`n` numbers) only at
 //! checkpoints ([`Checkpoints`]: by default about `2 sqrt(steps)` of them), and `2n` per event
@@ -16,6 +17,7 @@
 //! states between checkpoints (`replay.rs`), then each step's stages.
 
 mod backward;
+mod exist;
 mod plain;
 mod replay;
 mod row;
@@ -124,6 +126,8 @@ enum Piece {
         t: f64,
         x: usize,
     },
+    /// No sensitivity survives this point (a flow switch at another event's instant).
+    Void,
 }
 
 /// A step's primal values, its start state at `x` in the tape's store ([`NOT_KEPT`]: recomputed
@@ -165,6 +169,19 @@ fn same_bits(a: &[f64], b: &[f64]) -> bool {
     a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
+/// What [`Tape::existence_marks`] counts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ExistenceMarks {
+    /// Grazing crossings (events and flow switches).
+    pub grazes: usize,
+    /// Events whose guard a reset put the state on.
+    pub onto_guard: usize,
+    /// Flow switches that grazed with a jump vanishing with their speed.
+    pub benign: usize,
+    /// Flow switches at another event's instant (every sensitivity voided).
+    pub voids: usize,
+}
+
 /// The adjoint tape: a [`Recorder`] that keeps the pieces of a run for the backward pass.
 #[derive(Debug, Default)]
 pub struct Tape {
@@ -172,6 +189,9 @@ pub struct Tape {
     /// States, `n` at a time, at the offsets the pieces name.
     store: Vec<f64>,
     unsupported: Option<&'static str>,
+    /// What the tape says of the existence of some pieces' derivatives (`exist.rs`), by piece,
+    /// in order.
+    marks: Vec<(usize, exist::Mark)>,
     /// The factorisation the run's Rosenbrock steps used (the backward pass recomputes them
     /// with it).
     solver: super::LinearSolver,
@@ -253,6 +273,23 @@ impl Tape {
         self.store.len()
     }
 
+    /// How many of its pieces forward mode gives no derivative through, by kind: grazing
+    /// crossings, events a reset put on their guard, flow switches that grazed with a jump
+    /// vanishing with their speed (their derivative exists), and flow switches at another
+    /// event's instant (`exist.rs`).
+    pub fn existence_marks(&self) -> ExistenceMarks {
+        let mut marks = ExistenceMarks::default();
+        for (_, mark) in &self.marks {
+            match mark {
+                exist::Mark::Graze => marks.grazes += 1,
+                exist::Mark::OntoGuard => marks.onto_guard += 1,
+                exist::Mark::Benign(_) => marks.benign += 1,
+            }
+        }
+        marks.voids = self.pieces.iter().filter(|p| matches!(p, Piece::Void)).count();
+        marks
+    }
+
     /// How many steps it holds.
     pub fn steps(&self) -> usize {
         self.pieces.iter().filter(|p| matches!(p, Piece::Step { .. })).count()
@@ -313,6 +350,19 @@ impl Recorder for Tape {
             }
             TapeEntry::Knot { set, t, jump } => Piece::Knot { set, t, jump: self.keep(jump) },
             TapeEntry::Drift { dt, mode, t, x } => Piece::Drift { dt, mode, t, x: self.keep(x) },
+            TapeEntry::VoidAll => Piece::Void,
+            // Marks of the piece just recorded.
+            TapeEntry::Grazed | TapeEntry::OntoGuard | TapeEntry::BenignGraze(_) => {
+                let Some(last) = self.pieces.len().checked_sub(1) else { return };
+                let mark = match *entry {
+                    TapeEntry::Grazed => exist::Mark::Graze,
+                    TapeEntry::OntoGuard => exist::Mark::OntoGuard,
+                    TapeEntry::BenignGraze(c) => exist::Mark::Benign(self.keep(c)),
+                    _ => unreachable!("a mark"),
+                };
+                self.marks.push((last, mark));
+                return;
+            }
             TapeEntry::Unsupported(what) => {
                 self.unsupported.get_or_insert(what);
                 return;
@@ -440,7 +490,7 @@ pub(crate) fn run_by_adjoint<S: HybridSystem + ?Sized>(
     let mut result = recorded.result;
     let mut rows = rows.into_iter();
     for (event, wanted) in result.events.iter_mut().zip(&events_wanted) {
-        event.dtime = if *wanted { rows.next() } else { None };
+        event.dtime = if *wanted { rows.next().and_then(existing) } else { None };
     }
     // Column per parameter: entry `j * count + i` is quantity `i`'s derivative by `j`, NaN for
     // a quantity not asked for.
@@ -456,15 +506,15 @@ pub(crate) fn run_by_adjoint<S: HybridSystem + ?Sized>(
         a
     };
     let fin = &mut result.final_state;
-    fin.dstate = Some(columns(&states_wanted));
-    fin.doutputs = Some(columns(&outputs_wanted));
+    fin.dstate = existing(columns(&states_wanted));
+    fin.doutputs = existing(columns(&outputs_wanted));
     if at_stop {
-        fin.dstate_total = Some(columns(&states_wanted));
-        fin.doutputs_total = Some(columns(&outputs_wanted));
+        fin.dstate_total = existing(columns(&states_wanted));
+        fin.doutputs_total = existing(columns(&outputs_wanted));
     }
     if let Some(cusp) = &mut result.end_cusp {
-        cusp.dstate = Some(columns(&states_wanted));
-        cusp.doutputs = Some(columns(&outputs_wanted));
+        cusp.dstate = existing(columns(&states_wanted));
+        cusp.doutputs = existing(columns(&outputs_wanted));
     }
     result.stats.sens = Some(super::Sens::Adjoint);
     Ok(Ok(result))
@@ -516,8 +566,13 @@ impl Recorded {
         if m == 0 || rows == 0 {
             return Ok(vec![Vec::new(); rows]);
         }
-        let mut lams = vec![0.0; rows * n];
-        let mut pbars = vec![0.0; rows * m];
+        // The seeds' rows, then the auxiliary rows of the events whose time's derivative may not
+        // exist (`exist.rs`): `all` in every piece's transpose.
+        let plan = exist::Plan::new(&self.tape);
+        let all = rows + plan.auxes();
+        let mut voids = exist::Voids::new(all);
+        let mut lams = vec![0.0; all * n];
+        let mut pbars = vec![0.0; all * m];
         let mut end_time_bars = vec![0.0; rows];
         if seeds.iter().any(|s| s.before_end_events) && self.result.end_cusp.is_none() {
             return Err(AdjointError::Seed("no event fired at t_end".into()));
@@ -554,15 +609,19 @@ impl Recorded {
         let mut drift = (vec![0.0; n], vec![0.0; n]);
         // Per row: the cotangent of the current instant's `dt/dp` gathered from the events that
         // cascade from its first event (they take its `dt/dp`), handed to that event.
-        let mut pending = vec![0.0; rows];
+        let mut pending = vec![0.0; all];
+        // Whether a cascade's share in `pending` was not zero (a sum can cancel where forward
+        // mode's NaN does not).
+        let mut pending_touched = vec![false; all];
         let mut event = events;
         let store = &self.tape.store;
         let last_jump = self.tape.pieces.iter().rposition(|p| matches!(p, Piece::Jump { .. }));
         // The pieces after the last step: the instant at the end. A row before the events at
         // `t_end` starts below them (they still count for the event indices).
         let last_step = self.tape.pieces.iter().rposition(|p| matches!(p, Piece::Step { .. }));
-        let skips =
-            |r: usize, index: usize| seeds[r].before_end_events && last_step.is_none_or(|s| index > s);
+        let skips = |r: usize, index: usize| {
+            seeds.get(r).is_some_and(|s| s.before_end_events) && last_step.is_none_or(|s| index > s)
+        };
         let pieces = &self.tape.pieces;
         let mut replay = Replay::new(self.tape.solver);
         // Made on the first segment recomputed: a tape of checkpoints only never needs it.
@@ -620,24 +679,46 @@ impl Recorded {
                         x: &store[x..x + n],
                         velocity: velocity.map(|v| &store[v..v + n]),
                     };
-                    for (r, seed) in seeds.iter().enumerate() {
-                        if skips(r, index) {
-                            continue;
-                        }
-                        let is_stop_end = at_stop && seed.total && Some(index) == last_jump;
-                        let mut time_bar =
-                            seed.event_times.iter().filter(|e| e.0 == event).map(|e| e.1).sum::<f64>();
+                    let mark = plan.mark(index);
+                    for r in (0..all).filter(|&r| !skips(r, index)) {
+                        let seed = seeds.get(r);
+                        let is_stop_end =
+                            at_stop && seed.is_some_and(|s| s.total) && Some(index) == last_jump;
+                        let mut time_bar = seed.map_or(0.0, |s| {
+                            s.event_times.iter().filter(|e| e.0 == event).map(|e| e.1).sum::<f64>()
+                        });
                         if is_stop_end {
                             time_bar += end_time_bars[r];
                         }
+                        let mut touched = false;
                         if first_of_instant {
                             time_bar += std::mem::take(&mut pending[r]);
+                            touched = std::mem::take(&mut pending_touched[r]);
                         }
                         let (lam, pbar) = (&mut lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
-                        let dte_bar = jump_backward(sys, p, &jump, time_bar, is_stop_end, cascade, lam, pbar);
-                        if cascade {
-                            pending[r] += dte_bar;
+                        match mark {
+                            // Its time's derivative is not carried: the reset's own transpose
+                            // (`given`: nothing through the guard) and its time's cotangent `u`.
+                            Some((exist::Mark::Graze | exist::Mark::OntoGuard, voiders)) => {
+                                let u = jump_backward(sys, p, &jump, time_bar, is_stop_end, true, lam, pbar);
+                                if u != 0.0 || touched {
+                                    voids.add(r, voiders);
+                                }
+                            }
+                            _ => {
+                                let dte_bar =
+                                    jump_backward(sys, p, &jump, time_bar, is_stop_end, cascade, lam, pbar);
+                                if cascade {
+                                    pending[r] += dte_bar;
+                                    pending_touched[r] |= dte_bar != 0.0;
+                                }
+                            }
                         }
+                    }
+                    for a in plan.seeded_at(index) {
+                        let r = rows + a;
+                        let (lam, pbar) = (&mut lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
+                        exist::seed_guard(sys, p, ev, t, jump.x, lam, pbar);
                     }
                 }
                 Piece::Switch { event: ev, t, mode, x, pre, post } => {
@@ -649,16 +730,39 @@ impl Recorded {
                         pre: (pre.0, &store[pre.1..pre.1 + n]),
                         post: (post.0, &store[post.1..post.1 + n]),
                     };
-                    for r in (0..rows).filter(|&r| !skips(r, index)) {
+                    let mark = plan.mark(index);
+                    for r in (0..all).filter(|&r| !skips(r, index)) {
                         let (lam, pbar) = (&mut lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
-                        switch_backward(sys, p, &switch, lam, pbar);
+                        match mark {
+                            Some((exist::Mark::Benign(c), _)) => {
+                                exist::benign_backward(sys, p, &switch, &store[c..c + n], lam, pbar)
+                            }
+                            Some((_, voiders)) => {
+                                if exist::switch_time_bar(sys, p, &switch, lam) != 0.0 {
+                                    voids.add(r, voiders);
+                                }
+                            }
+                            None => switch_backward(sys, p, &switch, lam, pbar),
+                        }
+                    }
+                    for a in plan.seeded_at(index) {
+                        let r = rows + a;
+                        let (lam, pbar) = (&mut lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
+                        exist::seed_guard(sys, p, ev, t, switch.x, lam, pbar);
+                    }
+                }
+                Piece::Void => {
+                    for r in (0..all).filter(|&r| !skips(r, index)) {
+                        if lams[r * n..(r + 1) * n].iter().any(|&l| l != 0.0) {
+                            voids.void_all(r);
+                        }
                     }
                 }
                 Piece::Drift { dt, mode, t, x } => {
                     // `S+ = S + dt (f_x S + f_p)` at `x`: `lam += dt f_x^T lam`, `pbar += dt f_p^T lam`.
                     let x = &store[x..x + n];
                     let (w, gx) = (&mut drift.0, &mut drift.1);
-                    for r in (0..rows).filter(|&r| !skips(r, index)) {
+                    for r in (0..all).filter(|&r| !skips(r, index)) {
                         let (lam, pbar) = (&mut lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
                         for (w, l) in w.iter_mut().zip(lam.iter()) {
                             *w = dt * l;
@@ -670,7 +774,7 @@ impl Recorded {
                     }
                 }
                 Piece::Knot { set, t, jump } => {
-                    for r in (0..rows).filter(|&r| !skips(r, index)) {
+                    for r in (0..all).filter(|&r| !skips(r, index)) {
                         let (lam, pbar) = (&lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
                         knot_backward(sys, p, set, t, &store[jump..jump + n], lam, pbar);
                     }
@@ -680,16 +784,21 @@ impl Recorded {
         // The initial state's own dependence on the parameters.
         let mut s0 = vec![0.0; n * m];
         sys.initial_sens(p, &mut s0);
-        let mut out = Vec::with_capacity(rows);
-        for r in 0..rows {
+        for r in 0..all {
             let (lam, pbar) = (&lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
             for (j, pb) in pbar.iter_mut().enumerate() {
                 *pb += (0..n).map(|i| s0[j * n + i] * lam[i]).sum::<f64>();
             }
-            out.push(pbar.to_vec());
         }
-        Ok(out)
+        voids.resolve(rows, m, &mut pbars);
+        Ok(pbars[..rows * m].chunks_exact(m).map(<[f64]>::to_vec).collect())
     }
+}
+
+/// A gradient where some entry exists: forward mode reports one whose every entry is NaN (no
+/// derivative exists) as none.
+fn existing(d: Vec<f64>) -> Option<Vec<f64>> {
+    (d.is_empty() || d.iter().any(|v| !v.is_nan())).then_some(d)
 }
 
 /// The steps of the segment whose last step is the piece `last`: from the checkpoint before it

@@ -442,6 +442,12 @@ impl Jump {
         outcome
     }
 
+    /// The limit `c` of `J / d` at the last flow switch applied, where it grazed benignly
+    /// ([`Self::benign`]): what the adjoint tape keeps to transpose `-c (g_x S + g_p)`.
+    pub fn benign_limit(&self) -> &[f64] {
+        &self.v
+    }
+
     /// The crossing speed `d = g_x f- + g_t` (with `f-` already in `f_minus`, or the measured
     /// velocity when `measured`), its conditioning, and `dt_e/dp` into `dte`: NaN where it does
     /// not exist (a grazing crossing, or a missing derivative in `S` that the guard reads), 0
