@@ -564,6 +564,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let cx = self.guards();
         let ceiling = if plan.on_knot { plan.t1.next_down() } else { f64::INFINITY };
         let mut rhs = rhs_for(self.sys, self.p, self.n, self.mode).with_ceiling(ceiling);
+        // The stages' states are read only where a flow switch's stray stages are checked.
+        let keep = self.work.det.checks_stages(&cx);
+        self.work.stepper.keep_stage_states(keep);
         let err = self.work.stepper.attempt(plan.t0, &self.work.z, plan.h, &mut rhs);
         if err > 1.0 && !self.rounding_explains(plan, err) || err.is_nan() {
             return self.reject(&cx, plan, err, &mut rhs);
@@ -769,8 +772,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         } else if for_events {
             // The states' part first: most steps with a candidate guard and no crossing between
             // their ends fire nothing, and only a step cut at an instant reads the sensitivities
-            // there (`complete_interpolant`).
-            self.work.stepper.build_states_interpolant(t0, &self.work.z, rhs);
+            // there (`complete_interpolant`); and of the states, those the walk reads, when the
+            // mode's guards read fewer than all (`select_events` completes them if it finds).
+            match self.work.det.walk_states(cx) {
+                Some(states) => self.work.stepper.build_guard_interpolant(t0, &self.work.z, rhs, states),
+                None => self.work.stepper.build_states_interpolant(t0, &self.work.z, rhs),
+            }
         }
         Ok(Look { for_events, sample_due })
     }
@@ -789,6 +796,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let (t0, t1) = (plan.t0, plan.t1);
         let mut selection = if look.for_events {
             self.work.det.scan(cx, self.work.stepper.interpolant(), t1);
+            if self.work.det.found_any() {
+                // Whatever is done with a finding reads whole states.
+                self.work.stepper.complete_states_interpolant(t0, &self.work.z);
+            }
             if self.work.det.exhausted && plan.h > GUARD_WALK_FLOOR * t0.abs().max(1.0) {
                 // A guard too intricate over this step for the walk's pieces: a shorter step.
                 self.work.det.forget_findings();

@@ -123,6 +123,9 @@ pub(crate) struct Detector {
     affine: Vec<(u32, u32, f64, u64)>,
     affine_gx: Vec<(u32, f64)>,
     run: u64,
+    /// Per mode: the states its walk reads (`Self::walk_states`), valid where the stamp is
+    /// `run`.
+    walk_states: Vec<(u64, Option<Vec<u32>>, bool)>,
     /// Per state: `P_i(s) - P_i(0)` of the current interpolant in the power basis
     /// (`Interpolant::component_form`), valid where `poly_stamp` is `stamp`.
     polys: Vec<[f64; CAP]>,
@@ -248,6 +251,7 @@ impl Detector {
             affine: vec![(0, 0, 0.0, 0); info.events.len()],
             affine_gx: Vec::new(),
             run: 1,
+            walk_states: vec![(0, None, false); info.modes.len()],
             polys: vec![[0.0; CAP]; nx],
             poly_len: vec![0; nx],
             poly_stamp: vec![0; nx],
@@ -284,6 +288,57 @@ impl Detector {
     pub fn start_run(&mut self) {
         self.run += 1;
         self.affine_gx.clear();
+    }
+
+    /// The states the walk over the mode's guards reads of the dense output, when they are fewer
+    /// than all and the walk reads nothing else of it: every guard affine or a time event (their
+    /// polynomials and speeds read the states of their gradients, a subset of the states they
+    /// read) and none a flow switch (whose stray stages are checked on whole states); `None`
+    /// otherwise. Once per mode and run.
+    pub fn walk_states<S: HybridSystem + ?Sized>(&mut self, cx: &Guards<S>) -> Option<&[u32]> {
+        self.mode_facts(cx);
+        self.walk_states[cx.mode].1.as_deref()
+    }
+
+    /// Whether the mode has a flow switch whose stray stages [`Self::stray_stage`] checks: the
+    /// stepper keeps its stages' states then (`Stepper::keep_stage_states`).
+    pub fn checks_stages<S: HybridSystem + ?Sized>(&mut self, cx: &Guards<S>) -> bool {
+        self.mode_facts(cx);
+        self.walk_states[cx.mode].2
+    }
+
+    /// [`Self::walk_states`] and [`Self::checks_stages`] of the mode, once per mode and run.
+    fn mode_facts<S: HybridSystem + ?Sized>(&mut self, cx: &Guards<S>) {
+        let mode = cx.mode;
+        if self.walk_states[mode].0 == self.run {
+            return;
+        }
+        let mut states: Vec<u32> = Vec::new();
+        let mut lazy = true;
+        for &ev in cx.events() {
+            let e = &cx.info.events[ev];
+            match cx.sys.guard_states(ev) {
+                Some(read) if e.guard != GuardShape::Nonlinear && !e.implicit => states.extend(read),
+                _ => lazy = false,
+            }
+        }
+        states.sort_unstable();
+        states.dedup();
+        let lazy = lazy && states.len() < cx.n;
+        let switches = cx.events().iter().any(|&ev| Self::is_switch(cx, ev));
+        self.walk_states[mode] = (self.run, lazy.then_some(states), switches);
+    }
+
+    /// Whether event `ev` is a flow switch whose stages [`Self::stray_stage`] checks.
+    fn is_switch<S: HybridSystem + ?Sized>(cx: &Guards<S>, ev: usize) -> bool {
+        let e = &cx.info.events[ev];
+        e.implicit && e.guard != GuardShape::Time
+    }
+
+    /// Whether the last scan found anything (a crossing, a touch, a stuck contact, a guard that
+    /// stops being finite): what follows reads whole states of the dense output.
+    pub fn found_any(&self) -> bool {
+        self.candidates.iter().any(|&pos| !matches!(self.found[pos], Finding::Nothing))
     }
 
     /// Whether the guard of event `ev` has a gradient constant over the run (affine or a time
@@ -1328,11 +1383,8 @@ impl Detector {
         t0: f64,
         h: f64,
     ) -> Option<(usize, f64, f64)> {
-        let (info, evs) = (cx.info, cx.events());
-        let is_switch = |ev: usize| {
-            let e = &info.events[ev];
-            e.implicit && e.guard != GuardShape::Time
-        };
+        let evs = cx.events();
+        let is_switch = |ev: usize| Self::is_switch(cx, ev);
         if !evs.iter().any(|&ev| is_switch(ev)) {
             return None;
         }

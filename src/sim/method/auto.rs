@@ -297,6 +297,21 @@ impl Stepper for Auto {
         }
     }
 
+    fn build_guard_interpolant<R: Rhs>(&mut self, t0: f64, z: &[f64], rhs: &mut R, states: &[u32]) {
+        if !self.stiff {
+            self.rk.build_guard_interpolant(t0, z, rhs, states);
+            std::mem::swap(&mut self.rk.dense, &mut self.dense.rk);
+        }
+    }
+
+    fn complete_states_interpolant(&mut self, t0: f64, z: &[f64]) {
+        if !self.stiff {
+            std::mem::swap(&mut self.rk.dense, &mut self.dense.rk);
+            self.rk.complete_states_interpolant(t0, z);
+            std::mem::swap(&mut self.rk.dense, &mut self.dense.rk);
+        }
+    }
+
     fn complete_interpolant<R: Rhs>(&mut self, t0: f64, z: &[f64], rhs: &mut R) {
         if !self.stiff {
             // The explicit pair's dense output lives in `dense.rk` since it was built.
@@ -345,6 +360,10 @@ impl Stepper for Auto {
         } else {
             self.rk.outside_error()
         }
+    }
+
+    fn keep_stage_states(&mut self, keep: bool) {
+        self.rk.keep_stage_states(keep);
     }
 
     fn visit_stage_states<V: FnMut(f64, &[f64])>(&self, visit: V) {

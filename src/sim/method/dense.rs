@@ -12,7 +12,7 @@
 
 use super::poly::CAP;
 use super::stepper::Interpolant;
-use super::sums::centred_sum;
+use super::sums::{centred_sum, centred_sum_at};
 use super::tableau::{DenseKind, Tableau};
 
 /// Most coefficient vectors of any method (DOP853; Dopri5 uses 5).
@@ -76,6 +76,51 @@ impl Dense {
             centred_sum(k, nz, d, &mut self.row[..upto]);
             for (r, v) in self.r.chunks_exact_mut(MAX_COEF).zip(&self.row[..upto]) {
                 r[4 + row] = h * v;
+            }
+        }
+    }
+
+    /// Builds the interpolant of the same step as [`Self::build`] for the components `comps`
+    /// alone (ascending, each below `y0.len()`), with the same arithmetic per component, so their
+    /// polynomials are [`Self::build`]'s to the bit; the other components among the first
+    /// `y0.len()` read as the constant `y0` (a finite stand-in, never stale values, for the
+    /// readers of whole states that do not depend on them: a guard that does not read them).
+    /// The first `y0.len()` components are declared readable; [`Self::build`] completes them.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn build_some(
+        &mut self,
+        tab: &Tableau,
+        t0: f64,
+        h: f64,
+        y0: &[f64],
+        y1: &[f64],
+        k: &[f64],
+        comps: &[u32],
+    ) {
+        let nz = self.nz;
+        let upto = y0.len().min(nz);
+        self.valid = upto;
+        self.t0 = t0;
+        self.h = h;
+        self.n_coef = match tab.dense {
+            DenseKind::Dopri5 => 5,
+            DenseKind::Dop853 => 8,
+        };
+        let nc = self.n_coef;
+        for (r, &y) in self.r.chunks_exact_mut(MAX_COEF).zip(&y0[..upto]) {
+            r[0] = y;
+            r[1..nc].fill(0.0);
+        }
+        let f1 = (tab.stages - 1) * nz;
+        for &i in comps {
+            let i = i as usize;
+            let r = &mut self.r[i * MAX_COEF..(i + 1) * MAX_COEF];
+            let (y0, y1, f0, f1) = (y0[i], y1[i], k[i], k[f1 + i]);
+            let ydiff = y1 - y0;
+            let bspl = h * f0 - ydiff;
+            r[..4].copy_from_slice(&[y0, ydiff, bspl, ydiff - h * f1 - bspl]);
+            for (row, d) in tab.d.iter().enumerate() {
+                r[4 + row] = h * centred_sum_at(k, nz, d, i);
             }
         }
     }

@@ -19,7 +19,7 @@
 //! and `h1 = (0.01 / max(d1, d2))^(1/q)`; the estimate is `min(100 h0, h1)`.
 
 use super::dense::Dense;
-use super::errnorm::{controlled, BlockNorm};
+use super::errnorm::{controlled, plain_block_norm, BlockNorm};
 use super::stepper::{Rhs, Stepper, TapePair};
 use super::sums::{centred_sum, stage_sum};
 #[cfg(doc)]
@@ -55,14 +55,22 @@ pub struct Rk {
     /// The dense output was built for the states alone (`Stepper::build_states_interpolant`),
     /// from the attempt numbered so: its extra stages' sensitivity blocks are not computed yet.
     partial: Option<u64>,
+    /// The dense output's states were built only for some of them
+    /// (`Stepper::build_guard_interpolant`), from the attempt numbered so:
+    /// `Stepper::complete_states_interpolant` builds the rest from the same stages.
+    states_partial: Option<u64>,
     /// Attempts so far (a dense output is completed from its own attempt's stages only).
     attempts: u64,
     /// Scratch: one stage's whole right-hand side, for completing a dense output.
     k_whole: Vec<f64>,
     /// The states of the last attempt's stages `1..stage_count` (`n_states` each, stage `i` at
-    /// `(i - 1) n_states`): `Stepper::visit_stage_states`.
+    /// `(i - 1) n_states`): `Stepper::visit_stage_states`. Kept only while `keep_stages`
+    /// (`Stepper::keep_stage_states`: a mode with flow switches), and `stages_kept` says whether
+    /// they were for the last attempt: the copies cost the hopper's sweep 5M instructions.
     stage_x: Vec<f64>,
     stage_count: usize,
+    keep_stages: bool,
+    stages_kept: bool,
     /// The error estimates of the last attempt (5th- and 3rd-order for DOP853).
     err5: Vec<f64>,
     err3: Vec<f64>,
@@ -106,9 +114,12 @@ impl Rk {
             ytmp: vec![0.0; nz],
             dense: Dense::new(nz),
             partial: None,
+            states_partial: None,
             attempts: 0,
             k_whole: vec![0.0; nz],
             stage_x: vec![0.0; tab.all_stages * n_states],
+            keep_stages: true,
+            stages_kept: false,
             stage_count: 0,
             err5: vec![0.0; n_err],
             err3: vec![0.0; n_err],
@@ -177,15 +188,39 @@ impl Rk {
         rhs: &mut R,
     ) {
         let nz = self.nz;
-        let n = self.n_states;
         for i in from..to {
             self.stage_input(y, i, h);
-            self.stage_x[(i - 1) * n..i * n].copy_from_slice(&self.ytmp[..n]);
-            self.stage_count = i + 1;
+            self.keep_stage(i);
             let ti = t + self.tab.c[i] * h;
             rhs.eval(ti, &self.ytmp, &mut self.k[i * nz..(i + 1) * nz]);
             self.rhs_calls += 1;
         }
+    }
+
+    /// Notes stage `i`'s input (in `ytmp`) as evaluated, and keeps its states if asked.
+    #[inline(always)]
+    fn keep_stage(&mut self, i: usize) {
+        self.stage_count = i + 1;
+        if self.keep_stages {
+            let n = self.n_states;
+            self.stage_x[(i - 1) * n..i * n].copy_from_slice(&self.ytmp[..n]);
+        }
+    }
+
+    /// DOP853's three extra stages of the last attempt (from `(t0, y)`) for the states alone
+    /// (`Rhs::eval_states`); returns how many leading components their sums covered.
+    fn extra_state_stages<R: Rhs>(&mut self, t0: f64, y: &[f64], rhs: &mut R) -> usize {
+        let (tab, n, nz, h) = (self.tab, self.n_states, self.nz, self.h);
+        // The sums run over whole blocks of four components (`sums.rs`: a block costs about what
+        // one component does alone); what they give past the states is not read.
+        let upto = n.div_ceil(4).saturating_mul(4).min(nz);
+        for i in tab.stages..tab.all_stages {
+            stage_sum(&self.k, nz, &tab.a[i], h, |c| y[c], &mut self.ytmp[..upto]);
+            self.keep_stage(i);
+            rhs.eval_states(t0 + tab.c[i] * h, &self.ytmp, &mut self.k[i * nz..(i + 1) * nz]);
+            self.rhs_calls += 1;
+        }
+        upto
     }
 
     /// The scaled error of the last attempt from `y`. `MASKED` leaves out the sensitivities (the
@@ -196,6 +231,38 @@ impl Rk {
         let n_states = self.n_states;
         centred_sum(&self.k, self.nz, &self.tab.e, &mut self.err5[..ne]);
         let with3 = self.tab.e3.is_some();
+        if !MASKED && self.excluded.is_empty() {
+            // Every component counts: the blocks' sums directly (`errnorm::plain_block_norm`).
+            let (atol, rtol) = (self.atol, self.rtol);
+            self.outside = (0.0, 0);
+            let (y, y1, e5) = (&y[..ne], &self.y_new[..ne], &self.err5[..ne]);
+            return match &self.tab.e3 {
+                Some(e3) => {
+                    centred_sum(&self.k, self.nz, e3, &mut self.err3[..ne]);
+                    plain_block_norm(n_states, ne, true, |range| {
+                        let (mut sum5, mut sum3) = (0.0, 0.0);
+                        let ends = y[range.clone()].iter().zip(&y1[range.clone()]);
+                        for ((y0, y1), (e5, e3)) in ends.zip(e5[range.clone()].iter().zip(&self.err3[range]))
+                        {
+                            let h_sc = h / (atol + rtol * y0.abs().max(y1.abs()));
+                            let (r5, r3) = (e5 * h_sc, e3 * h_sc);
+                            sum5 += r5 * r5;
+                            sum3 += r3 * r3;
+                        }
+                        (sum5, sum3)
+                    })
+                }
+                None => plain_block_norm(n_states, ne, false, |range| {
+                    let mut sum5 = 0.0;
+                    for ((y0, y1), e5) in y[range.clone()].iter().zip(&y1[range.clone()]).zip(&e5[range]) {
+                        let sc = atol + rtol * y0.abs().max(y1.abs());
+                        let r5 = h * e5 / sc;
+                        sum5 += r5 * r5;
+                    }
+                    (sum5, 0.0)
+                }),
+            };
+        }
         let mut norm = BlockNorm::new(n_states, &self.excluded);
         let scales = y[..ne].iter().zip(&self.y_new[..ne]);
         let skip =
@@ -251,13 +318,12 @@ impl Stepper for Rk {
         let s = self.tab.stages;
         self.h = h;
         self.attempts += 1;
+        self.stages_kept = self.keep_stages;
         // The last stage's input is y + h sum b_j k_j = y_new (its row equals b).
         self.eval_stages(t, y, 1, s - 1, h, rhs);
         self.stage_input(y, s - 1, h);
         self.y_new.copy_from_slice(&self.ytmp);
-        let n = self.n_states;
-        self.stage_x[(s - 2) * n..(s - 1) * n].copy_from_slice(&self.ytmp[..n]);
-        self.stage_count = s;
+        self.keep_stage(s - 1);
         let nz = self.nz;
         rhs.eval(t + h, &self.y_new, &mut self.k[(s - 1) * nz..s * nz]);
         self.rhs_calls += 1;
@@ -289,6 +355,7 @@ impl Stepper for Rk {
         }
         self.dense.build(tab, t0, self.h, y, &self.y_new, &self.k, self.nz);
         self.partial = None;
+        self.states_partial = None;
     }
 
     /// DOP853's three extra stages for the states alone (`Rhs::eval_states`), and the dense
@@ -300,26 +367,59 @@ impl Stepper for Rk {
         if n == nz || tab.all_stages == tab.stages {
             return self.build_interpolant(t0, y, rhs);
         }
-        let h = self.h;
-        // The sums run over whole blocks of four components (`sums.rs`: a block costs about what
-        // one component does alone); what they give past the states is not read.
-        let upto = n.div_ceil(4).saturating_mul(4).min(nz);
-        for i in tab.stages..tab.all_stages {
-            stage_sum(&self.k, nz, &tab.a[i], h, |c| y[c], &mut self.ytmp[..upto]);
-            self.stage_x[(i - 1) * n..i * n].copy_from_slice(&self.ytmp[..n]);
-            self.stage_count = i + 1;
-            rhs.eval_states(t0 + tab.c[i] * h, &self.ytmp, &mut self.k[i * nz..(i + 1) * nz]);
-            self.rhs_calls += 1;
-        }
-        self.dense.build(tab, t0, h, y, &self.y_new, &self.k, upto);
+        let upto = self.extra_state_stages(t0, y, rhs);
+        self.dense.build(tab, t0, self.h, y, &self.y_new, &self.k, upto);
         self.dense.restrict(n);
         self.partial = Some(self.attempts);
+        self.states_partial = None;
+    }
+
+    /// The extra stages for the states, as [`Self::build_states_interpolant`], and the
+    /// polynomials of the states `states` alone: on the hopper's sweep the states' dense output
+    /// was built on 16,000 steps for a walk that reads one state's.
+    fn build_guard_interpolant<R: Rhs>(&mut self, t0: f64, y: &[f64], rhs: &mut R, states: &[u32]) {
+        let (tab, n, nz) = (self.tab, self.n_states, self.nz);
+        if n == nz || tab.all_stages == tab.stages {
+            // Without sensitivities or extra stages: the states' polynomials of the whole.
+            if tab.all_stages > tab.stages {
+                self.eval_stages(t0, y, tab.stages, tab.all_stages, self.h, rhs);
+            }
+            self.dense.build_some(tab, t0, self.h, &y[..n], &self.y_new[..n], &self.k, states);
+            self.partial = (n < nz).then_some(self.attempts);
+            self.states_partial = Some(self.attempts);
+            return;
+        }
+        self.extra_state_stages(t0, y, rhs);
+        self.dense.build_some(tab, t0, self.h, &y[..n], &self.y_new[..n], &self.k, states);
+        self.partial = Some(self.attempts);
+        self.states_partial = Some(self.attempts);
+    }
+
+    /// The polynomials of the states [`Self::build_guard_interpolant`] left out, from the same
+    /// stages: the states' dense output whole, to the bit as if built at once.
+    fn complete_states_interpolant(&mut self, t0: f64, y: &[f64]) {
+        let Some(attempt) = self.states_partial.take() else { return };
+        assert_eq!(attempt, self.attempts, "a dense output completed from another attempt's stages");
+        let (tab, n) = (self.tab, self.n_states);
+        if self.partial.is_none() {
+            // The whole dense output is the states': built as `build_interpolant` builds it.
+            self.dense.build(tab, t0, self.h, y, &self.y_new, &self.k, self.nz);
+            return;
+        }
+        let upto = n.div_ceil(4).saturating_mul(4).min(self.nz);
+        self.dense.build(tab, t0, self.h, y, &self.y_new, &self.k, upto);
+        self.dense.restrict(n);
     }
 
     /// The extra stages' sensitivity blocks, from the states' stage inputs already computed
     /// (the states' blocks of `k` stay as they were, so the states' dense output does not move
     /// by a rounding), then the whole dense output.
     fn complete_interpolant<R: Rhs>(&mut self, t0: f64, y: &[f64], rhs: &mut R) {
+        if self.partial.is_none() {
+            // The states alone are the whole (no sensitivities, or no extra stages).
+            return self.complete_states_interpolant(t0, y);
+        }
+        self.states_partial = None;
         let Some(attempt) = self.partial.take() else { return };
         assert_eq!(attempt, self.attempts, "a dense output completed from another attempt's stages");
         let (tab, n, nz, h) = (self.tab, self.n_states, self.nz, self.h);
@@ -348,7 +448,12 @@ impl Stepper for Rk {
         self.outside
     }
 
+    fn keep_stage_states(&mut self, keep: bool) {
+        self.keep_stages = keep;
+    }
+
     fn visit_stage_states<V: FnMut(f64, &[f64])>(&self, mut visit: V) {
+        assert!(self.stages_kept, "the stages' states read from an attempt that did not keep them");
         let n = self.n_states;
         for i in 1..self.stage_count {
             visit(self.tab.c[i], &self.stage_x[(i - 1) * n..i * n]);
@@ -532,6 +637,8 @@ fn all_finite(v: &[f64]) -> bool {
 
 #[cfg(test)]
 mod tests {
+    use super::super::poly::CAP;
+    use super::super::stepper::Interpolant;
     use super::super::tableau::{DOP853, DOPRI5};
     use super::*;
 
@@ -575,6 +682,84 @@ mod tests {
             assert_eq!(rk.attempt(0.0, &[0.0], 0.1, &mut rhs), f64::INFINITY, "order {}", tab.order);
         }
         assert!(all_finite(&[1.0; 19]) && !all_finite(&[1.0, f64::NAN]) && !all_finite(&[f64::INFINITY; 9]));
+    }
+
+    /// The values and derivatives of the first `n` components of `rk`'s dense output at eleven
+    /// points of its step, as bits.
+    fn dense_bits(rk: &Rk, n: usize) -> Vec<u64> {
+        let dense = rk.interpolant();
+        let (mut v, mut d) = (vec![0.0; n], vec![0.0; n]);
+        let mut bits = Vec::new();
+        for i in 0..=10 {
+            let t = dense.t0() + dense.h() * i as f64 / 10.0;
+            dense.eval(t, &mut v);
+            dense.eval_deriv(t, &mut d);
+            bits.extend(v.iter().chain(&d).map(|x| x.to_bits()));
+        }
+        bits
+    }
+
+    #[test]
+    fn a_dense_output_built_for_some_states_is_the_whole_one_to_the_bit() {
+        // Three states with two sensitivity columns (nz = 9) and without (nz = 3), both pairs:
+        // the states the walk reads (here the second) come out as a whole build's, the others
+        // as their start values until completed, then every component as a whole build's.
+        let mut rhs = |t: f64, z: &[f64], dz: &mut [f64]| {
+            dz[0] = z[1];
+            dz[1] = -z[0] * (1.0 + 0.3 * t.sin()) - 0.1 * z[1] * z[2];
+            dz[2] = z[0] * z[0] - 0.5 * z[2];
+            for c in (3..z.len()).step_by(3) {
+                dz[c] = z[c + 1];
+                dz[c + 1] = -(1.0 + 0.3 * t.sin()) * z[c] - 0.1 * (z[c + 1] * z[2] + z[1] * z[c + 2]);
+                dz[c + 2] = 2.0 * z[0] * z[c] - 0.5 * z[c + 2];
+            }
+        };
+        for tab in [&DOPRI5, &DOP853] {
+            for nz in [3, 9] {
+                let z: Vec<f64> = (0..nz).map(|i| 0.9 - 0.35 * i as f64).collect();
+                let (t0, h) = (0.2, 0.45);
+                fn fresh<R: Rhs>(tab: &'static Tableau, z: &[f64], (t0, h): (f64, f64), rhs: &mut R) -> Rk {
+                    let mut rk = Rk::new(tab, z.len(), 3, z.len(), 1e-8, 1e-8);
+                    rk.restart(t0, z, rhs);
+                    rk.attempt(t0, z, h, rhs);
+                    rk
+                }
+                let fresh = |rhs: &mut _| fresh(tab, &z, (t0, h), rhs);
+                let mut whole = fresh(&mut rhs);
+                whole.build_interpolant(t0, &z, &mut rhs);
+                let mut states = fresh(&mut rhs);
+                states.build_states_interpolant(t0, &z, &mut rhs);
+                let mut some = fresh(&mut rhs);
+                some.build_guard_interpolant(t0, &z, &mut rhs, &[1]);
+                // The read state: its polynomial and its values, the whole build's.
+                let (mut a, mut b) = ([0.0; CAP], [0.0; CAP]);
+                let (la, lb) = (
+                    some.interpolant().component_form(1, &mut a),
+                    whole.interpolant().component_form(1, &mut b),
+                );
+                assert_eq!(
+                    (la, a.map(f64::to_bits)),
+                    (lb, b.map(f64::to_bits)),
+                    "order {} nz {nz}",
+                    tab.order
+                );
+                let (part, full) = (dense_bits(&some, 3), dense_bits(&whole, 3));
+                for (k, (p, f)) in part.iter().zip(&full).enumerate() {
+                    let (comp, deriv) = (k % 3, (k / 3) % 2 == 1);
+                    if comp == 1 {
+                        assert_eq!(p, f, "order {} nz {nz} value {k}", tab.order);
+                    } else {
+                        // Not built: the start value, at rest.
+                        let want = if deriv { 0.0 } else { z[comp] };
+                        assert_eq!(f64::from_bits(*p), want, "order {} nz {nz} value {k}", tab.order);
+                    }
+                }
+                some.complete_states_interpolant(t0, &z);
+                assert_eq!(dense_bits(&some, 3), dense_bits(&states, 3), "order {} nz {nz}", tab.order);
+                some.complete_interpolant(t0, &z, &mut rhs);
+                assert_eq!(dense_bits(&some, nz), dense_bits(&whole, nz), "order {} nz {nz}", tab.order);
+            }
+        }
     }
 
     #[test]

@@ -226,6 +226,19 @@ pub trait Stepper {
     fn build_states_interpolant<R: Rhs>(&mut self, t0: f64, z: &[f64], rhs: &mut R) {
         self.build_interpolant(t0, z, rhs)
     }
+    /// [`Self::build_states_interpolant`] with the polynomials of the states `states` alone
+    /// (ascending): what the walk over guards that read only those states needs. The other
+    /// states read as their values at the step's start until
+    /// [`Self::complete_states_interpolant`] (or [`Self::complete_interpolant`]) builds them, to
+    /// the bit what a whole build gives; nothing but a guard that does not read them may read
+    /// them before. By default the states' whole dense output.
+    fn build_guard_interpolant<R: Rhs>(&mut self, t0: f64, z: &[f64], rhs: &mut R, states: &[u32]) {
+        let _ = states;
+        self.build_states_interpolant(t0, z, rhs)
+    }
+    /// Builds the states' polynomials [`Self::build_guard_interpolant`] left out, from the same
+    /// attempt's stages (nothing when they are built).
+    fn complete_states_interpolant(&mut self, _t0: f64, _z: &[f64]) {}
     /// Completes a dense output [`Self::build_states_interpolant`] built for the states alone,
     /// from the same attempt's stages (nothing when it is whole).
     fn complete_interpolant<R: Rhs>(&mut self, _t0: f64, _z: &[f64], _rhs: &mut R) {}
@@ -249,6 +262,12 @@ pub trait Stepper {
     /// flow switch's other branch (docs/language.md, rule 2). The default visits none.
     fn visit_stage_states<V: FnMut(f64, &[f64])>(&self, visit: V) {
         let _ = visit;
+    }
+    /// Whether the attempts from now on keep their stages' states for
+    /// [`Self::visit_stage_states`] (the integrator asks in modes with flow switches only; a
+    /// method may then panic when asked for them after an attempt that did not keep them).
+    fn keep_stage_states(&mut self, keep: bool) {
+        let _ = keep;
     }
     /// The stretches of the run each method integrated, for a stepper that switches between
     /// methods (`auto::Auto`), up to the current point `t`; `None` for a single method.
