@@ -7,6 +7,7 @@ mod support;
 mod adjoint;
 mod adjoint_checkpoints;
 mod adjoint_kernels;
+mod adjoint_samples;
 mod amici_events;
 mod arrays;
 mod check_grad;
