@@ -94,6 +94,10 @@ pub struct TapeStep<'a> {
     pub f1: &'a [f64],
 }
 
+/// A mode, its knot sets at an instant (`(time, set)`, as the breakpoints list them) and whether
+/// the flow jumps there (`TapeEntry::KnotsMet`).
+pub type KnotsOfMode<'a> = (usize, &'a [(f64, u32)], bool);
+
 /// How a sample of `SimOptions::at` was read, for the adjoint tape. A sample read off a step is
 /// a branch from the step's start: `taped` says whether that step is the last one told to the
 /// tape (a step cut at an event instant is told before its samples are taken) or the next one.
@@ -236,9 +240,9 @@ pub enum TapeEntry<'a> {
         /// The state it fired at.
         x: &'a [f64],
         /// The mode the events were met in, its knot sets at `t`, whether the flow jumps there.
-        old: (usize, &'a [(f64, u32)], bool),
+        old: KnotsOfMode<'a>,
         /// The same for the mode after them, crossed after them.
-        new: Option<(usize, &'a [(f64, u32)], bool)>,
+        new: Option<KnotsOfMode<'a>>,
     },
     /// Something the backward pass does not carry (yet): named for the refusal.
     Unsupported(&'static str),
