@@ -318,7 +318,10 @@ impl Tape {
 
     /// The memory the tape holds, in bytes.
     pub fn bytes(&self) -> usize {
-        self.pieces.capacity() * std::mem::size_of::<Piece>() + self.store.capacity() * 8
+        self.pieces.capacity() * std::mem::size_of::<Piece>()
+            + self.store.capacity() * 8
+            + self.samples.capacity() * std::mem::size_of::<SampleAt>()
+            + self.knot_sets.capacity() * std::mem::size_of::<(f64, u32)>()
     }
 }
 
