@@ -23,7 +23,7 @@ use super::method::rk::Rk;
 use super::method::stepper::{Interpolant, Rhs, Stepper};
 use super::mode_rhs::rhs_for;
 use super::options::SimOptions;
-use super::recorder::{Point, PointKind, Recorder, TapeEntry, TapeStep};
+use super::recorder::{Point, PointKind, Recorder, TapeEntry, TapeSample, TapeStep};
 use super::result::{
     EndCusp, EventRecord, FinalState, MethodSegment, SimError, SimResult, SimStats, SimWarning, StopReason,
     VoidCause,
@@ -851,12 +851,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         let before_knot = plan.on_knot;
         if look.sample_due {
             self.work.z_start.copy_from_slice(&self.work.z);
-            if self.land_samples(t0, t1, before_knot, rhs) {
+            if self.land_samples(t0, t1, before_knot, rhs, (plan, false)) {
                 // The step itself again (the same step: samples do not change the run), for
                 // its end state.
                 self.work.stepper.land(t0, &self.work.z, plan.h, rhs);
             }
-            self.sample_step(t1, before_knot);
+            self.sample_step(t1, before_knot, Some((plan, false)));
         }
         let at_start = if self.work.stepper.masked() { self.start_derivative_singularity() } else { None };
         if self.tapes {
@@ -875,7 +875,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         self.work.det.advance();
         if plan.on_knot {
             self.cross_knots();
+            let from = self.sampler.taken();
             self.sampler.take_here(&mut self.work.output_jac, t1, self.mode, &self.work.z[..]);
+            self.tape_samples(from, TapeSample::Here);
         }
         self.record(PointKind::Step);
         self.h = h_next;
@@ -906,13 +908,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             self.note_knots_apart(crossed, t);
         }
         if crossed.jumps && self.tapes {
-            let entry = match crossed.set {
-                Some(set) if crossed.jumping == 1 => {
-                    TapeEntry::Knot { set: set as usize, t, jump: &self.work.knots.jump_new }
-                }
-                _ => TapeEntry::Unsupported("input knots of several pwc inputs at one time"),
-            };
-            self.recorder.tape(&entry);
+            // Every knot of the instant, of one input or several (the tape's transpose reads
+            // their common motion as `Knots::jump` did).
+            let jump = &self.work.knots.jump_new;
+            self.recorder.tape(&TapeEntry::Knot { sets: &self.work.knot_sets, mode, t, jump });
         }
         if crossed.jumps || self.sens_like {
             let mut rhs = rhs_for(self.sys, self.p, n, mode);
@@ -943,7 +942,8 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// run stops there.
     fn stop_not_finite(&mut self, pos: usize, t: f64, look: Look) -> StepOutcome {
         if look.sample_due || self.sampler.wanted(&*self.recorder, t) {
-            self.sample_step(t, true);
+            // The run stops on a fault: no gradient, nothing to tape.
+            self.sample_step(t, true, None);
         }
         self.work.stepper.interpolant().eval(t, &mut self.work.z);
         self.t = t;
@@ -1018,8 +1018,8 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         }
         // Samples before the instant, taken now that the step stands.
         if sampling {
-            self.land_samples(t0, t_fire, true, rhs);
-            self.sample_step(t_fire, true);
+            self.land_samples(t0, t_fire, true, rhs, (plan, true));
+            self.sample_step(t_fire, true, Some((plan, true)));
         }
         self.t = t_fire;
         self.landing.clear();
@@ -1303,7 +1303,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             estimate = self.restart();
         }
         self.record(PointKind::AfterEvents);
+        let from = self.sampler.taken();
         self.sampler.take_here(&mut self.work.output_jac, self.t, self.mode, &self.work.z[..]);
+        self.tape_samples(from, TapeSample::Here);
         for (void, s) in self.work.void.iter_mut().zip(&self.work.z[self.n..]) {
             *void |= s.is_nan();
         }
@@ -1367,6 +1369,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         if crossed.jumps {
             self.work.knots.apply_new(&mut self.work.z[n..], n);
             self.note_knots_apart(crossed, t);
+            if self.tapes {
+                let jump = &self.work.knots.jump_new;
+                self.recorder.tape(&TapeEntry::Knot { sets: &self.work.knot_sets, mode, t, jump });
+            }
         }
         let old = self.work.knots.old;
         let Some(d) = self.instant.filter(|_| self.events.len() > first && (old.jumps || crossed.jumps))
@@ -1389,6 +1395,14 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         } else {
             self.void_apart(first)
         };
+        if self.tapes {
+            let e = &self.events[first];
+            let x = &self.work.before.0;
+            let old_sets = self.work.breakpoints.knots_at(t, e.mode_before);
+            let (old, new) =
+                ((e.mode_before, old_sets, old.jumps), Some((mode, &self.work.knot_sets[..], crossed.jumps)));
+            self.recorder.tape(&TapeEntry::KnotsMet { t, event: e.event, x, old, new });
+        }
         if voided {
             let set = old.set.or(crossed.set).unwrap_or(0) as usize;
             let e = &self.events[first];
@@ -1461,6 +1475,12 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
             if let Some(dtime) = self.events[first].dtime.as_mut().filter(|_| !time_event) {
                 dtime[j] = f64::NAN;
             }
+        }
+        if self.tapes {
+            let e = &self.events[first];
+            let old = (e.mode_before, self.work.breakpoints.knots_at(self.t, e.mode_before), true);
+            let (t, x) = (self.t, &self.work.before.0);
+            self.recorder.tape(&TapeEntry::KnotsMet { t, event: e.event, x, old, new: None });
         }
         if voided {
             let set = self.work.knots.old.set.unwrap_or(0) as usize;
@@ -1704,9 +1724,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 _ => None,
             };
             if self.tapes {
-                let entry = if self.left_of_knot {
-                    TapeEntry::Unsupported("an event on an input knot")
-                } else {
+                let entry = {
                     TapeEntry::Jump {
                         event: ev,
                         t,
@@ -1716,10 +1734,11 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                         velocity: self.work.jump.measured_velocity(t, mode_before, x),
                         cascade: given.is_some(),
                         first_of_instant: self.instant.is_none() && !cascade,
+                        on_knots: self.left_of_knot,
                     }
                 };
                 self.recorder.tape(&entry);
-                if onto_guard && self.instant.is_some() && !self.left_of_knot {
+                if onto_guard && self.instant.is_some() {
                     // Its `dt/dp` is `onto_guard_dte`: the backward pass voids what it reaches.
                     self.recorder.tape(&TapeEntry::OntoGuard);
                 }
@@ -2065,7 +2084,16 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// step retaken to end there (`Stepper::land`), as accurate as a step end; a retaken step
     /// that fails its error test leaves the rest to the dense output ([`Self::sample_step`]).
     /// Returns whether a step was retaken (the stepper's last attempt is then not the step's).
-    fn land_samples<F: Rhs>(&mut self, t0: f64, t_seg_end: f64, before_instant: bool, rhs: &mut F) -> bool {
+    /// `tape`: the step planned and whether it is already on the adjoint tape (each landed
+    /// sample goes there as the end of its retaken step).
+    fn land_samples<F: Rhs>(
+        &mut self,
+        t0: f64,
+        t_seg_end: f64,
+        before_instant: bool,
+        rhs: &mut F,
+        tape: (Plan, bool),
+    ) -> bool {
         if !self.sampler.due(t_seg_end, before_instant) || !self.lands_on_events() {
             return false;
         }
@@ -2078,15 +2106,54 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 break;
             }
             let end = self.work.stepper.end_state();
+            let from = self.sampler.taken();
             self.sampler.take_here(&mut self.work.output_jac, ts, self.mode, end);
+            if let Some(pair) = self.work.stepper.tape_pair() {
+                let (plan, taped) = tape;
+                let (ceiling, mode) = (Self::ceiling(plan), self.mode);
+                self.tape_samples(from, TapeSample::Landed { pair, t0, h: ts - t0, ceiling, mode, taped });
+            }
         }
         landed
     }
 
-    fn sample_step(&mut self, t_seg_end: f64, before_instant: bool) {
+    /// The samples due up to `t_seg_end` (before it when `before_instant`) from the dense
+    /// output of the step just attempted; `tape`: that step as planned and whether it is
+    /// already on the adjoint tape (the samples go there as read off its dense output).
+    fn sample_step(&mut self, t_seg_end: f64, before_instant: bool, tape: Option<(Plan, bool)>) {
         let dense = self.work.stepper.interpolant();
         self.sampler.record_dense(self.recorder, &mut self.work.record_buf, dense, self.mode, t_seg_end);
+        let from = self.sampler.taken();
         self.sampler.take_dense(&mut self.work.output_jac, dense, self.mode, t_seg_end, before_instant);
+        if let (Some((plan, taped)), Some(pair)) = (tape, self.work.stepper.tape_pair()) {
+            let (ceiling, mode) = (Self::ceiling(plan), self.mode);
+            for row in from..self.sampler.taken() {
+                let t = self.sampler.time(row);
+                let from = TapeSample::Dense { pair, t0: plan.t0, h: plan.h, ceiling, mode, t, taped };
+                if self.tapes {
+                    self.recorder.tape(&TapeEntry::Sample { row, from });
+                }
+            }
+        }
+    }
+
+    /// The latest time a step planned as `plan` reads the flow at (just before a knot it ends on).
+    fn ceiling(plan: Plan) -> f64 {
+        if plan.on_knot {
+            plan.t1.next_down()
+        } else {
+            f64::INFINITY
+        }
+    }
+
+    /// Tells the adjoint tape of the samples of `at` taken from row `from` on, read as `how`.
+    fn tape_samples(&mut self, from: usize, how: TapeSample) {
+        if !self.tapes {
+            return;
+        }
+        for row in from..self.sampler.taken() {
+            self.recorder.tape(&TapeEntry::Sample { row, from: how });
+        }
     }
 
     /// Records the current point as `kind`, if the recorder wants it.
@@ -2157,7 +2224,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     /// trajectory is the recorder's to give.
     pub fn finish(mut self, stopped_by: StopReason) -> SimResult {
         let _ieee = IeeeArithmetic::enter();
+        let from = self.sampler.taken();
         self.sampler.take_here(&mut self.work.output_jac, self.t, self.mode, &self.work.z[..]);
+        self.tape_samples(from, TapeSample::Here);
         let samples = self.sampler.finish(&self.events);
         let (n, m, k) = (self.n, self.m, self.info.n_outputs());
         let t = self.t;

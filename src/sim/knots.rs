@@ -78,6 +78,47 @@ pub(crate) fn first_time_past(s: impl Fn(f64) -> f64, k: f64, rising: bool, esti
     Some(hi)
 }
 
+/// The motion `dt_k/dp` (into `dt`, m; `sp` scratch of m) of the knots of jumping inputs of
+/// `mode` among `sets`, met at `t`: their common motion, NaN for a parameter that moves them
+/// apart (`Crossed::apart`). What the forward sensitivities and the adjoint's transpose of a
+/// knot both read (`Knots::jump`, `adjoint::backward::knot_backward`). `Crossed::jumps` is left
+/// for the caller, which knows the flow's jump.
+pub(crate) fn motion<S: HybridSystem + ?Sized>(
+    sys: &S,
+    p: &[f64],
+    mode: usize,
+    t: f64,
+    sets: &[(f64, u32)],
+    sp: &mut [f64],
+    dt: &mut [f64],
+) -> Crossed {
+    let info = sys.info();
+    dt.fill(0.0);
+    let mut crossed = Crossed::default();
+    let mut first = true;
+    for &(_, set) in sets {
+        if !info.knots.get(set as usize).is_some_and(|k| k.jumps && k.mode == mode) {
+            continue;
+        }
+        crossed.jumping += 1;
+        crossed.set.get_or_insert(set);
+        let rate = sys.knot_position_grad(set as usize, t, p, sp);
+        for (d, &sp) in dt.iter_mut().zip(sp.iter()) {
+            // `dt_k/dp = -s_p / s_t`; a parameter that does not move the position does not
+            // move the knot.
+            let here = if sp == 0.0 { 0.0 } else { -sp / rate };
+            if first {
+                *d = here;
+            } else if !same(*d, here) {
+                *d = f64::NAN;
+                crossed.apart = true;
+            }
+        }
+        first = false;
+    }
+    crossed
+}
+
 /// More than the doublings from the least spacing to overflow (about 2,100), and than the
 /// halvings from the widest finite bracket to adjacent floats.
 const SEARCH_STEPS: usize = 4096;
@@ -192,33 +233,10 @@ impl Knots {
         sets: &[(f64, u32)],
         old: bool,
     ) -> Crossed {
-        let info = sys.info();
         let (jump, dt) =
             if old { (&mut self.jump_old, &mut self.dt_old) } else { (&mut self.jump_new, &mut self.dt_new) };
         jump.fill(0.0);
-        dt.fill(0.0);
-        let mut crossed = Crossed::default();
-        let mut first = true;
-        for &(_, set) in sets {
-            if !info.knots.get(set as usize).is_some_and(|k| k.jumps && k.mode == mode) {
-                continue;
-            }
-            crossed.jumping += 1;
-            crossed.set.get_or_insert(set);
-            let rate = sys.knot_position_grad(set as usize, t, p, &mut self.sp);
-            for (d, &sp) in dt.iter_mut().zip(&self.sp) {
-                // `dt_k/dp = -s_p / s_t`; a parameter that does not move the position does not
-                // move the knot.
-                let here = if sp == 0.0 { 0.0 } else { -sp / rate };
-                if first {
-                    *d = here;
-                } else if !same(*d, here) {
-                    *d = f64::NAN;
-                    crossed.apart = true;
-                }
-            }
-            first = false;
-        }
+        let mut crossed = motion(sys, p, mode, t, sets, &mut self.sp, dt);
         if crossed.jumping == 0 {
             crossed.apart = false;
             if old {

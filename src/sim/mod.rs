@@ -55,7 +55,7 @@ pub use method::rosenbrock::{Rosenbrock, RowDense};
 pub use method::stepper::{Interpolant, Rhs, Stepper, TapePair};
 pub use options::*;
 pub use recorder::{
-    NoRecorder, Point, PointKind, Recorder, RowSchedule, TapeEntry, TapeStep, TrajectoryRecorder,
+    NoRecorder, Point, PointKind, Recorder, RowSchedule, TapeEntry, TapeSample, TapeStep, TrajectoryRecorder,
 };
 pub use result::*;
 pub use run::{run, Driver, Runner, SystemRef, MAX_SAMPLED_ROWS, MIN_RTOL};

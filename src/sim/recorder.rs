@@ -94,6 +94,53 @@ pub struct TapeStep<'a> {
     pub f1: &'a [f64],
 }
 
+/// A mode, its knot sets at an instant (`(time, set)`, as the breakpoints list them) and whether
+/// the flow jumps there (`TapeEntry::KnotsMet`).
+pub type KnotsOfMode<'a> = (usize, &'a [(f64, u32)], bool);
+
+/// How a sample of `SimOptions::at` was read, for the adjoint tape. A sample read off a step is
+/// a branch from the step's start: `taped` says whether that step is the last one told to the
+/// tape (a step cut at an event instant is told before its samples are taken) or the next one.
+#[derive(Clone, Copy, Debug)]
+pub enum TapeSample {
+    /// The current point itself (the state after an instant's events, on a knot, at the stop).
+    Here,
+    /// The dense output of the step from `t0` of size `h` (the attempt the step's interpolant
+    /// was built from) read at `t`.
+    Dense {
+        /// The method.
+        pair: TapePair,
+        /// The step's start.
+        t0: f64,
+        /// The attempt's size.
+        h: f64,
+        /// The latest time the flow is read at.
+        ceiling: f64,
+        /// The mode.
+        mode: usize,
+        /// The time read.
+        t: f64,
+        /// The step is the last one on the tape (else the next).
+        taped: bool,
+    },
+    /// The end of the step from `t0` retaken with size `h` to end on the sample's time
+    /// (`Stepper::land`).
+    Landed {
+        /// The method.
+        pair: TapePair,
+        /// The step's start.
+        t0: f64,
+        /// The retaken size.
+        h: f64,
+        /// The latest time the flow is read at.
+        ceiling: f64,
+        /// The mode.
+        mode: usize,
+        /// The step is the last one on the tape (else the next).
+        taped: bool,
+    },
+}
+
 /// One piece of a run as the adjoint tape sees it: the primal values the backward pass
 /// recomputes the piece from. States are the `n` states, without sensitivities.
 #[derive(Clone, Copy, Debug)]
@@ -125,6 +172,9 @@ pub enum TapeEntry<'a> {
         cascade: bool,
         /// It is the instant's first event (whose `dt/dp` later cascades take).
         first_of_instant: bool,
+        /// The instant is on input knots: the flows on both sides are read on the knots'
+        /// earlier side (at `t.next_down()`), and the knots are crossed after it.
+        on_knots: bool,
     },
     /// The flow switch `event` crossed at `t` in `mode` at the state `x`, its flow read before
     /// it at `pre` and past it at `post` (the state stays; the sensitivities jump by
@@ -143,11 +193,14 @@ pub enum TapeEntry<'a> {
         /// A time and state just past it.
         post: (f64, &'a [f64]),
     },
-    /// The `pwc` knot of knot set `set` crossed at `t`, where the flow jumps by `jump`
-    /// (`f- - f+`): the sensitivities jump by `jump dt_k/dp`.
+    /// The `pwc` knots of the knot sets `sets` (those of `mode` among them whose input jumps)
+    /// crossed at `t`, where the flow jumps by `jump` (`f- - f+`): the sensitivities jump by
+    /// `jump dt_k/dp` (`dt_k/dp` the knots' common motion, `knots::motion`).
     Knot {
-        /// The knot set (`SystemInfo::knots`).
-        set: usize,
+        /// The knot sets met at `t` (`(time, set)`, as the breakpoints list them).
+        sets: &'a [(f64, u32)],
+        /// The mode the knots are crossed in.
+        mode: usize,
         /// The knot's time.
         t: f64,
         /// The flow's jump there.
@@ -178,6 +231,31 @@ pub enum TapeEntry<'a> {
     BenignGraze(&'a [f64]),
     /// No sensitivity survives this point (a flow switch at another event's instant).
     VoidAll,
+    /// The sample of `SimOptions::at` at row `row` of the run's samples, taken as `from` says.
+    Sample {
+        /// Its row in `SimResult::samples`.
+        row: usize,
+        /// How it was read.
+        from: TapeSample,
+    },
+    /// The events of the instant at `t` met input knots where the flow jumps: in the mode they
+    /// were met in (`old`: the mode, the knot sets there, whether the flow jumps) and the mode
+    /// after them (`new`, crossed after them, `None` at a stop). Forward mode finds the
+    /// derivatives by a parameter that moves the instant and the knots apart not to exist
+    /// (`Jump::knot_order`); the backward pass refuses a run where a parameter may do so (the
+    /// recorded run, without parameters, cannot tell).
+    KnotsMet {
+        /// The instant.
+        t: f64,
+        /// The instant's first event (whose time derivative the instant takes).
+        event: usize,
+        /// The state it fired at.
+        x: &'a [f64],
+        /// The mode the events were met in, its knot sets at `t`, whether the flow jumps there.
+        old: KnotsOfMode<'a>,
+        /// The same for the mode after them, crossed after them.
+        new: Option<KnotsOfMode<'a>>,
+    },
     /// Something the backward pass does not carry (yet): named for the refusal.
     Unsupported(&'static str),
 }

@@ -1003,6 +1003,37 @@ impl Samples {
         }
     }
 
+    /// The same rows with room for the derivatives by `m` parameters, NaN until
+    /// [`Self::set_derivatives`] fills them (the adjoint's recorded run carries none).
+    pub(crate) fn widen(&mut self, m: usize) {
+        let (n, m0, k) = self.shape;
+        if m == m0 {
+            return;
+        }
+        let rows = self.len();
+        let (zw0, zw) = (n + n * m0, n + n * m);
+        let mut z = vec![f64::NAN; rows * zw];
+        for r in 0..rows {
+            z[r * zw..r * zw + n].copy_from_slice(&self.z[r * zw0..r * zw0 + n]);
+        }
+        self.z = z;
+        self.doutputs = vec![f64::NAN; rows * k * m];
+        self.shape = (n, m, k);
+    }
+
+    /// Row `row`'s derivatives of state (or, `output`, output) `index` by each parameter.
+    pub(crate) fn set_derivatives(&mut self, row: usize, output: bool, index: usize, d: &[f64]) {
+        let (n, m, k) = self.shape;
+        let (zw, dyw) = (n + n * m, k * m);
+        for (j, &v) in d.iter().enumerate().take(m) {
+            if output {
+                self.doutputs[row * dyw + j * k + index] = v;
+            } else {
+                self.z[row * zw + n + j * n + index] = v;
+            }
+        }
+    }
+
     /// The first row at time `t` (the times are ascending), if one was asked for.
     pub fn at_time(&self, t: f64) -> Option<Sample<'_>> {
         let i = self.time.partition_point(|&s| s < t);

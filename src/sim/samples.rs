@@ -37,6 +37,16 @@ impl<'a, S: HybridSystem + ?Sized> Sampler<'a, S> {
         self.at.get(self.taken.len()).copied()
     }
 
+    /// How many times of `at` were taken so far (the next row's index).
+    pub fn taken(&self) -> usize {
+        self.taken.len()
+    }
+
+    /// The time of row `row` of `at`.
+    pub fn time(&self, row: usize) -> f64 {
+        self.at[row]
+    }
+
     /// Whether the next time of `at` is at most `t` (before `t` when `strict`).
     pub fn due(&self, t: f64, strict: bool) -> bool {
         self.at.get(self.taken.len()).is_some_and(|&ts| ts < t || (!strict && ts == t))

@@ -418,15 +418,20 @@ fn the_adjoint_carries_auto_runs_that_switch_methods_mid_run() {
     }
 }
 
+/// A time event on a `pwc` knot that its parameter `T` moves apart from the knot: the
+/// derivatives by `T` do not exist on one side (forward mode's `knot_order`), which the adjoint
+/// does not carry yet.
+const APART: &str = "model apart\nparam u[4] = 0\nparam T = 0.5\nparam a = 0.3\nstate x = 1\n\
+                     der(x) = pwc(t, 0, 2, u) * x\nevent kick when t >= T {\n x := x + a\n}\n";
+
 #[test]
 fn what_the_adjoint_does_not_carry_yet_is_refused_by_name_never_approximated() {
-    let (compiled, p) = compiled(BALL, &[]);
-    let opts =
-        SimOptions { t_end: 2.5, at: vec![0.5, 1.0], sens_error_control: false, ..SimOptions::default() };
+    let (compiled, p) = compiled(APART, &[("u", &[1.0, -2.0, 0.5, 3.0])]);
+    let opts = SimOptions { t_end: 1.0, sens_error_control: false, ..SimOptions::default() };
     let recorded = record(compiled.system(), &p, &opts).expect("records");
-    let seed = Seed { state: vec![1.0, 0.0], ..Seed::default() };
-    let err = recorded.gradient(compiled.system(), &p, &seed).expect_err("samples are not carried yet");
-    assert!(matches!(err, AdjointError::Unsupported(w) if w.contains("--at")), "{err}");
+    let seed = Seed { state: vec![1.0], ..Seed::default() };
+    let err = recorded.gradient(compiled.system(), &p, &seed).expect_err("not carried yet");
+    assert!(matches!(err, AdjointError::Unsupported(w) if w.contains("input knot")), "{err}");
 }
 
 /// Runs `src` through the door with `sens`, every parameter differentiated.
@@ -489,16 +494,60 @@ fn sens_auto_takes_the_adjoint_only_when_the_quantities_are_few_against_the_para
 
 #[test]
 fn sens_adjoint_on_a_run_it_does_not_carry_computes_forward_and_says_so() {
-    let opts = SimOptions { t_end: 2.5, at: vec![0.5], sens: Sens::Adjoint, ..SimOptions::default() };
-    let run = door_run(BALL, &[], &opts);
+    let opts =
+        SimOptions { t_end: 1.0, rtol: 1e-10, atol: 1e-12, sens: Sens::Adjoint, ..SimOptions::default() };
+    let run = door_run(APART, &[("u", &[1.0, -2.0, 0.5, 3.0])], &opts);
     assert_eq!(run.result().stats.sens, Some(Sens::Forward));
     let said: Vec<String> = run.warnings().iter().map(|w| w.to_string()).collect();
-    assert!(said.iter().any(|w| w.contains("adjoint does not carry") && w.contains("--at")), "{said:?}");
-    // The first touchdown at sqrt(2 h0 / g): dt/dh0 = 1 / sqrt(2 g h0), from forward mode.
-    let (g, h0) = (9.81f64, 1.0f64);
-    let want = 1.0 / (2.0 * g * h0).sqrt();
-    let got = run.devent_time(0, "h0").expect("exists");
-    assert!((got - want).abs() < 1e-6 * want, "{got} vs {want}");
+    assert!(
+        said.iter().any(|w| w.contains("adjoint does not carry") && w.contains("input knot")),
+        "{said:?}"
+    );
+    // x(1) = (e^0.5 + a) e^-1: dx/da = e^-1, from forward mode.
+    let got = run.dstate("x", "a").expect("exists");
+    assert!((got - (-1.0f64).exp()).abs() < 1e-8, "{got}");
+}
+
+#[test]
+fn the_adjoint_carries_events_on_input_knots_fixed_or_moving_with_them() {
+    // `kick` at 0.5 on u's fixed knot (no parameter moves either); `drop` at T on w's knot at
+    // T (pwc over [0, 2 T] of two values), which T moves with it; the flows jump at both, by
+    // amounts the resets change.
+    let src = "model onknot\nparam u[4] = 0\nparam w[2] = 0\nparam T = 0.8\nparam a = 0.3\n\
+               state x = 1\nstate y = 0\n\
+               der(x) = pwc(t, 0, 2, u) * x - 0.2 * y\nder(y) = pwc(t, 0, 2 * T, w) * (1 + x)\n\
+               event kick when t >= 0.5 {\n x := x + a\n}\n\
+               event drop when t >= T {\n y := y - a * x\n}\n";
+    let (u, w) = ([1.0, -2.0, 0.5, 3.0], [0.7, -1.3]);
+    check_source("onknot", src, &[("u", &u), ("w", &w)], 2.0, (2, 4));
+    // On the knots: u's at 0.5 (4 values over [0, 2]), w's at T.
+    let vectors: [(&str, &[f64]); 2] = [("u", &u), ("w", &w)];
+    let (sys, p) = compiled(src, &vectors);
+    let r = run(sys.system(), &p, &SimOptions { t_end: 2.0, ..SimOptions::default() }).unwrap();
+    let times: Vec<f64> = r.events.iter().map(|e| e.time).collect();
+    assert_eq!(times, [0.5, 0.8]);
+    // A state event on a knot, or a time event its parameter moves apart from the knot, is
+    // still refused (whether forward mode finds a derivative missing or not).
+    let apart = src.replace("t >= 0.5", "t >= 0.2 + a");
+    let (sys, p) = compiled(&apart, &vectors);
+    let opts = SimOptions { t_end: 2.0, sens_error_control: false, ..SimOptions::default() };
+    let recorded = record(sys.system(), &p, &opts).expect("records");
+    assert_eq!(recorded.result.events[0].time, 0.5);
+    let err = recorded.gradient(sys.system(), &p, &Seed { state: vec![1.0, 0.0], ..Seed::default() });
+    assert!(matches!(err, Err(AdjointError::Unsupported(w)) if w.contains("input knot")), "{err:?}");
+}
+
+#[test]
+fn the_adjoint_carries_knots_of_several_pwc_inputs_at_one_time() {
+    // u and w share their knots (0.5, 1, 1.5); r and q share theirs at multiples of T / 3,
+    // which T moves together.
+    let src = "model twin\nparam u[4] = 0\nparam w[4] = 0\nparam r[3] = 0\nparam q[3] = 0\n\
+               param T = 1.2\nparam k = 0.5\nstate x = 1\nstate v = 0\n\
+               der(x) = v\nder(v) = pwc(t, 0, 2, u) + pwc(t, 0, 2, w) * x - k * v \
+               + pwc(t, 0, T, r) * v + pwc(t, 0, T, q)\n";
+    let (u, w) = ([1.0, -2.0, 0.5, 3.0], [0.2, 1.5, -0.7, 0.4]);
+    let (r, q) = ([0.3, -0.4, 0.9], [1.1, -0.6, 0.25]);
+    check_source("twin", src, &[("u", &u), ("w", &w), ("r", &r), ("q", &q)], 2.0, (0, 10));
 }
 
 /// `|got - want| <= tol max(|want|, 1)`.

@@ -8,6 +8,7 @@ mod adjoint;
 mod adjoint_checkpoints;
 mod adjoint_existence;
 mod adjoint_kernels;
+mod adjoint_samples;
 mod amici_events;
 mod arrays;
 mod check_grad;

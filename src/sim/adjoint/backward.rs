@@ -232,6 +232,9 @@ fn row_backward<S: HybridSystem + ?Sized>(
 pub(super) struct Jump<'a> {
     pub event: usize,
     pub t: f64,
+    /// Where the flows on both sides are read: `t`, or just before it on input knots (forward
+    /// mode's `CrossingContext::left_of_knot`).
+    pub t_flow: f64,
     pub mode_before: usize,
     pub mode_after: usize,
     pub x: &'a [f64],
@@ -260,7 +263,7 @@ pub(super) fn jump_backward<S: HybridSystem + ?Sized>(
     let m = pbar.len();
     let (t, x) = (jump.t, jump.x);
     let mut f_minus = vec![0.0; n];
-    sys.flow(jump.mode_before, t, x, p, &mut f_minus);
+    sys.flow(jump.mode_before, jump.t_flow, x, p, &mut f_minus);
     let velocity = jump.velocity.unwrap_or(&f_minus);
     let (mut gx, mut gp) = (vec![0.0; n], vec![0.0; m]);
     let gt = sys.guard_grad(jump.event, t, x, p, &mut gx, &mut gp);
@@ -271,7 +274,7 @@ pub(super) fn jump_backward<S: HybridSystem + ?Sized>(
     sys.reset_jac(jump.event, t, x, p, &mut rx, &mut rp, &mut rt);
     let mut f_plus = vec![0.0; n];
     if !total {
-        sys.flow(jump.mode_after, t, &x_plus, p, &mut f_plus);
+        sys.flow(jump.mode_after, jump.t_flow, &x_plus, p, &mut f_plus);
     }
     let through = if total { velocity } else { &f_minus };
     // u = v . lam + time_bar, with v = R_x f- + R_t - f+ the velocity's jump through the reset.
@@ -333,24 +336,30 @@ pub(super) fn switch_backward<S: HybridSystem + ?Sized>(
     }
 }
 
-/// A `pwc` knot's jump `S+ = S- + J dt_k/dp` (`J` the flow's jump, `dt_k/dp = -s_p / s_t` from
-/// the knot position `s`), transposed: `lam` passes unchanged, the parameters that move the knot
-/// gain `(J . lam) dt_k/dp`.
+/// The `pwc` knots' jump `S+ = S- + J dt_k/dp` (`J` the flow's jump, `dt_k/dp = -s_p / s_t`
+/// from the knot positions `s`: the knots of `sets` met at `t` in `mode` move together, or
+/// apart with a NaN motion, as forward mode reads it, `knots::motion`), transposed: `lam` passes
+/// unchanged, the parameters that move the knots gain `(J . lam) dt_k/dp`. A parameter that
+/// moves knots of one instant apart has no derivative where `J . lam` is not zero (forward
+/// mode's column is NaN where the flow jumps).
+#[allow(clippy::too_many_arguments)]
 pub(super) fn knot_backward<S: HybridSystem + ?Sized>(
     sys: &S,
     p: &[f64],
-    set: usize,
+    sets: &[(f64, u32)],
+    mode: usize,
     t: f64,
     jump: &[f64],
     lam: &[f64],
     pbar: &mut [f64],
 ) {
-    let mut sp = vec![0.0; pbar.len()];
-    let rate = sys.knot_position_grad(set, t, p, &mut sp);
+    let m = pbar.len();
+    let (mut sp, mut dt) = (vec![0.0; m], vec![0.0; m]);
+    crate::sim::knots::motion(sys, p, mode, t, sets, &mut sp, &mut dt);
     let u: f64 = jump.iter().zip(lam).map(|(a, b)| a * b).sum();
-    for (pb, &sp) in pbar.iter_mut().zip(&sp) {
-        if sp != 0.0 {
-            *pb += u * (-sp / rate);
+    for (pb, &dt) in pbar.iter_mut().zip(&dt) {
+        if dt != 0.0 && !(dt.is_nan() && u == 0.0) {
+            *pb += u * dt;
         }
     }
 }

@@ -8,8 +8,10 @@
 //! (`backward.rs`), one pass per quantity, and equals the forward sensitivities of that run to
 //! round-off. Where forward mode says a derivative does not exist (a grazing crossing, a reset
 //! onto a guard, a flow switch at another event's instant) it says the same, per parameter
-//! (`exist.rs`). What the backward pass does not carry yet (an event on a knot, samples at
-//! `--at` times) is named in [`AdjointError::Unsupported`] rather than approximated.
+//! (`exist.rs`). What the backward pass does not carry yet (an event on knots that a parameter
+//! may move apart from them) is named in [`AdjointError::Unsupported`] rather than approximated.
+//! Samples at `--at` times are branches off the tape (`SampleAt`), seeded where the backward walk
+//! reaches them.
 //!
 //! Memory: the tape keeps a few scalars per step, the start state (`n` numbers) only at
 //! checkpoints ([`Checkpoints`]: by default about `2 sqrt(steps)` of them), and `2n` per event
@@ -22,7 +24,7 @@ mod plain;
 mod replay;
 mod row;
 
-use super::recorder::{Point, PointKind, Recorder, TapeEntry, TapeStep};
+use super::recorder::{Point, PointKind, Recorder, TapeEntry, TapeSample, TapeStep};
 use super::result::{SimError, SimResult, StopReason};
 use super::run::Runner;
 use super::system::HybridSystem;
@@ -106,6 +108,7 @@ enum Piece {
         velocity: Option<usize>,
         cascade: bool,
         first_of_instant: bool,
+        on_knots: bool,
     },
     Switch {
         event: usize,
@@ -116,7 +119,9 @@ enum Piece {
         post: (f64, usize),
     },
     Knot {
-        set: usize,
+        /// `Tape::knot_sets[sets.0..sets.1]`.
+        sets: (usize, usize),
+        mode: usize,
         t: f64,
         jump: usize,
     },
@@ -128,6 +133,14 @@ enum Piece {
     },
     /// No sensitivity survives this point (a flow switch at another event's instant).
     Void,
+    /// `TapeEntry::KnotsMet`, its knot sets in `Tape::knot_sets` (old, then new).
+    KnotsMet {
+        t: f64,
+        event: usize,
+        x: usize,
+        old: (usize, (usize, usize), bool),
+        new: Option<(usize, (usize, usize), bool)>,
+    },
 }
 
 /// A step's primal values, its start state at `x` in the tape's store ([`NOT_KEPT`]: recomputed
@@ -142,6 +155,19 @@ struct StepAt {
     mode: usize,
     x: usize,
     f0: usize,
+}
+
+/// A sample of `SimOptions::at` on the tape: its row in the run's samples, the point it is
+/// taken at (`point`: before the piece of that index, after the one before it), and, for a
+/// sample read off a step, that step (the piece at `point`, whose start state the branch leaves
+/// from) as the sample read it: its dense output at a time, or its end retaken to the sample's
+/// time. Kept beside the pieces, so that samples never break a chain of steps recomputed from
+/// one checkpoint.
+#[derive(Clone, Copy, Debug)]
+struct SampleAt {
+    row: usize,
+    point: usize,
+    branch: Option<(StepAt, StepEnd)>,
 }
 
 /// The tape's view of the chain of steps it is recording: whether the next step may be
@@ -192,6 +218,10 @@ pub struct Tape {
     /// What the tape says of the existence of some pieces' derivatives (`exist.rs`), by piece,
     /// in order.
     marks: Vec<(usize, exist::Mark)>,
+    /// The samples of `SimOptions::at`, in the order they were taken.
+    samples: Vec<SampleAt>,
+    /// The knot sets of the `Piece::Knot`s.
+    knot_sets: Vec<(f64, u32)>,
     /// The factorisation the run's Rosenbrock steps used (the backward pass recomputes them
     /// with it).
     solver: super::LinearSolver,
@@ -262,6 +292,27 @@ impl Tape {
         at
     }
 
+    /// The sample at `row` taken as `from` says: at the current end of the tape, or as a branch
+    /// from the start of the step last told (`taped`) or told next.
+    fn sample(&mut self, row: usize, from: TapeSample) {
+        let branch = |pair, t0, h, ceiling, mode, end| {
+            let at = StepAt { pair, t0, h, ceiling, mode, x: NOT_KEPT, f0: NOT_KEPT };
+            Some((at, end))
+        };
+        let (point, branch) = match from {
+            TapeSample::Here => (self.pieces.len(), None),
+            TapeSample::Dense { pair, t0, h, ceiling, mode, t, taped } => {
+                let point = self.pieces.len().saturating_sub(usize::from(taped));
+                (point, branch(pair, t0, h, ceiling, mode, StepEnd::Dense(t)))
+            }
+            TapeSample::Landed { pair, t0, h, ceiling, mode, taped } => {
+                let point = self.pieces.len().saturating_sub(usize::from(taped));
+                (point, branch(pair, t0, h, ceiling, mode, StepEnd::End))
+            }
+        };
+        self.samples.push(SampleAt { row, point, branch });
+    }
+
     /// How many step start states it keeps (the checkpoints).
     pub fn kept_states(&self) -> usize {
         self.pieces.iter().filter(|p| matches!(p, Piece::Step { at, .. } if at.x != NOT_KEPT)).count()
@@ -307,7 +358,10 @@ impl Tape {
 
     /// The memory the tape holds, in bytes.
     pub fn bytes(&self) -> usize {
-        self.pieces.capacity() * std::mem::size_of::<Piece>() + self.store.capacity() * 8
+        self.pieces.capacity() * std::mem::size_of::<Piece>()
+            + self.store.capacity() * 8
+            + self.samples.capacity() * std::mem::size_of::<SampleAt>()
+            + self.knot_sets.capacity() * std::mem::size_of::<(f64, u32)>()
     }
 }
 
@@ -323,6 +377,10 @@ impl Recorder for Tape {
         true
     }
     fn tape(&mut self, entry: &TapeEntry<'_>) {
+        if let TapeEntry::Sample { row, from } = *entry {
+            self.sample(row, from);
+            return;
+        }
         // Any piece but a step breaks the chain of steps recomputed from one checkpoint.
         if !matches!(entry, TapeEntry::Step(_) | TapeEntry::Landed(..) | TapeEntry::Dense(..)) {
             self.chain.open = false;
@@ -337,10 +395,30 @@ impl Recorder for Tape {
                 let end = StepEnd::Dense(t);
                 Piece::Step { at: self.step_at(s, end), end }
             }
-            TapeEntry::Jump { event, t, mode_before, mode_after, x, velocity, cascade, first_of_instant } => {
+            TapeEntry::Jump {
+                event,
+                t,
+                mode_before,
+                mode_after,
+                x,
+                velocity,
+                cascade,
+                first_of_instant,
+                on_knots,
+            } => {
                 let x = self.keep(x);
                 let velocity = velocity.map(|v| self.keep(v));
-                Piece::Jump { event, t, mode_before, mode_after, x, velocity, cascade, first_of_instant }
+                Piece::Jump {
+                    event,
+                    t,
+                    mode_before,
+                    mode_after,
+                    x,
+                    velocity,
+                    cascade,
+                    first_of_instant,
+                    on_knots,
+                }
             }
             TapeEntry::Switch { event, t, mode, x, pre, post } => {
                 let x = self.keep(x);
@@ -348,7 +426,11 @@ impl Recorder for Tape {
                 let post = (post.0, self.keep(post.1));
                 Piece::Switch { event, t, mode, x, pre, post }
             }
-            TapeEntry::Knot { set, t, jump } => Piece::Knot { set, t, jump: self.keep(jump) },
+            TapeEntry::Knot { sets, mode, t, jump } => {
+                let start = self.knot_sets.len();
+                self.knot_sets.extend_from_slice(sets);
+                Piece::Knot { sets: (start, self.knot_sets.len()), mode, t, jump: self.keep(jump) }
+            }
             TapeEntry::Drift { dt, mode, t, x } => Piece::Drift { dt, mode, t, x: self.keep(x) },
             TapeEntry::VoidAll => Piece::Void,
             // Marks of the piece just recorded.
@@ -363,6 +445,17 @@ impl Recorder for Tape {
                 self.marks.push((last, mark));
                 return;
             }
+            TapeEntry::KnotsMet { t, event, x, old, new } => {
+                let mut sets = |s: &[(f64, u32)]| {
+                    let start = self.knot_sets.len();
+                    self.knot_sets.extend_from_slice(s);
+                    (start, self.knot_sets.len())
+                };
+                let old = (old.0, sets(old.1), old.2);
+                let new = new.map(|new| (new.0, sets(new.1), new.2));
+                Piece::KnotsMet { t, event, x: self.keep(x), old, new }
+            }
+            TapeEntry::Sample { .. } => unreachable!("taken above"),
             TapeEntry::Unsupported(what) => {
                 self.unsupported.get_or_insert(what);
                 return;
@@ -374,7 +467,8 @@ impl Recorder for Tape {
 
 /// What a gradient is taken of: `sum_i state_i x_i + sum_i outputs_i y_i` at the run's end plus
 /// `sum weight t_K` over the event times `event_times` (`(K, weight)`, `K` an index into the
-/// run's events). Empty `state`/`outputs`: zero.
+/// run's events), plus the weighted values of samples of `SimOptions::at` (`samples`). Empty
+/// `state`/`outputs`: zero.
 #[derive(Clone, Debug, Default)]
 pub struct Seed {
     /// Weights of the final states (`n`, or empty).
@@ -383,12 +477,27 @@ pub struct Seed {
     pub outputs: Vec<f64>,
     /// Weights of event times.
     pub event_times: Vec<(usize, f64)>,
+    /// Weights of the values at samples of `SimOptions::at`.
+    pub samples: Vec<SampleSeed>,
     /// At a stop event: the total derivative of the final values (carried to the stop's time,
     /// `FinalState::dstate_total`) rather than `dstate`.
     pub total: bool,
     /// Events fired at `t_end`: the final values before them (`SimResult::end_cusp`, the other
     /// side of the cusp) rather than after.
     pub before_end_events: bool,
+}
+
+/// The weights of one sample's values in a [`Seed`]: `sum_i state_i x_i(t_s) + sum_i outputs_i
+/// y_i(t_s)` at the sample of row `row` of `SimResult::samples` (a time the run reached). Empty
+/// `state`/`outputs`: zero.
+#[derive(Clone, Debug, Default)]
+pub struct SampleSeed {
+    /// The sample's row.
+    pub row: usize,
+    /// Weights of its states (`n`, or empty).
+    pub state: Vec<f64>,
+    /// Weights of its outputs (`k`, or empty).
+    pub outputs: Vec<f64>,
 }
 
 /// A run recorded for the adjoint: its result (values, events; no gradients) and its tape.
@@ -419,9 +528,6 @@ pub fn record_with<S: HybridSystem + ?Sized>(
     opts.sens_error_control = false;
     opts.trajectory = super::TrajectoryRequest::None;
     let mut tape = Tape { solver: opts.linear_solver, checkpoints, ..Tape::default() };
-    if !opts.at.is_empty() {
-        tape.unsupported = Some("samples at given times (--at)");
-    }
     let result = Runner::new(&plain, &opts)?.run_forward_with(p, &mut tape)?;
     Ok(Recorded { result, tape })
 }
@@ -480,6 +586,21 @@ pub(crate) fn run_by_adjoint<S: HybridSystem + ?Sized>(
     if result.end_cusp.is_some() {
         finals(&mut seeds, false, true);
     }
+    // The values at the samples of `--at` the run reached, a row each asked for.
+    let mut sample_rows = Vec::new();
+    for (row, sample) in result.samples.iter().enumerate().filter(|(_, s)| s.reached) {
+        for (output, count) in [(false, n), (true, k)] {
+            for i in (0..count).filter(|&i| of.is_none_or(|o| o.sample(output, i, sample.time))) {
+                let w = SampleSeed {
+                    row,
+                    state: if output { Vec::new() } else { unit(n, i) },
+                    outputs: if output { unit(k, i) } else { Vec::new() },
+                };
+                seeds.push(Seed { samples: vec![w], ..Seed::default() });
+                sample_rows.push((row, output, i));
+            }
+        }
+    }
     if auto && !prefers_adjoint(seeds.len(), m) {
         return Ok(Err(AdjointError::Unsupported("(auto) a run with more quantities than parameters")));
     }
@@ -515,6 +636,11 @@ pub(crate) fn run_by_adjoint<S: HybridSystem + ?Sized>(
     if let Some(cusp) = &mut result.end_cusp {
         cusp.dstate = existing(columns(&states_wanted));
         cusp.doutputs = existing(columns(&outputs_wanted));
+    }
+    result.samples.widen(m);
+    for (row, output, i) in sample_rows {
+        let d = rows.next().expect("a row per seed");
+        result.samples.set_derivatives(row, output, i, &d);
     }
     result.stats.sens = Some(super::Sens::Adjoint);
     Ok(Ok(result))
@@ -561,11 +687,25 @@ impl Recorded {
             if let Some(&(bad, _)) = seed.event_times.iter().find(|&&(e, _)| e >= events) {
                 return Err(AdjointError::Seed(format!("event {bad} of a run with {events}")));
             }
+            for s in &seed.samples {
+                if !self.result.samples.get(s.row).is_some_and(|row| row.reached) {
+                    return Err(AdjointError::Seed(format!(
+                        "sample {} is not a time the run reached",
+                        s.row
+                    )));
+                }
+                if !(s.state.is_empty() || s.state.len() == n)
+                    || !(s.outputs.is_empty() || s.outputs.len() == k)
+                {
+                    return Err(AdjointError::Seed(format!("{n} state and {k} output weights expected")));
+                }
+            }
         }
         let rows = seeds.len();
         if m == 0 || rows == 0 {
             return Ok(vec![Vec::new(); rows]);
         }
+        self.check_knots_met(sys, p)?;
         // The seeds' rows, then the auxiliary rows of the events whose time's derivative may not
         // exist (`exist.rs`): `all` in every piece's transpose.
         let plan = exist::Plan::new(&self.tape);
@@ -626,6 +766,9 @@ impl Recorded {
         let mut replay = Replay::new(self.tape.solver);
         // Made on the first segment recomputed: a tape of checkpoints only never needs it.
         let mut plain = None;
+        let mut samples = SampleCotangents::new(self, seeds, sys, p, &mut pbars);
+        // The samples taken at the run's end.
+        samples.inject(sys, p, pieces.len(), None, &mut lams, &mut pbars, &mut scratch)?;
         for (index, piece) in pieces.iter().enumerate().rev() {
             match *piece {
                 Piece::Step { at, end } => {
@@ -659,6 +802,9 @@ impl Recorded {
                         end,
                     };
                     step_backward(sys, p, &step, &mut lams, &mut pbars, &mut scratch);
+                    // The samples taken at the step's start, and read off it.
+                    samples.inject(sys, p, index, Some(&step), &mut lams, &mut pbars, &mut scratch)?;
+                    continue;
                 }
                 Piece::Jump {
                     event: ev,
@@ -669,11 +815,13 @@ impl Recorded {
                     velocity,
                     cascade,
                     first_of_instant,
+                    on_knots,
                 } => {
                     event -= 1;
                     let jump = Jump {
                         event: ev,
                         t,
+                        t_flow: if on_knots { t.next_down() } else { t },
                         mode_before,
                         mode_after,
                         x: &store[x..x + n],
@@ -773,13 +921,16 @@ impl Recorded {
                         }
                     }
                 }
-                Piece::Knot { set, t, jump } => {
+                Piece::KnotsMet { .. } => {}
+                Piece::Knot { sets, mode, t, jump } => {
+                    let sets = &self.tape.knot_sets[sets.0..sets.1];
                     for r in (0..all).filter(|&r| !skips(r, index)) {
                         let (lam, pbar) = (&lams[r * n..(r + 1) * n], &mut pbars[r * m..(r + 1) * m]);
-                        knot_backward(sys, p, set, t, &store[jump..jump + n], lam, pbar);
+                        knot_backward(sys, p, sets, mode, t, &store[jump..jump + n], lam, pbar);
                     }
                 }
             }
+            samples.inject(sys, p, index, None, &mut lams, &mut pbars, &mut scratch)?;
         }
         // The initial state's own dependence on the parameters.
         let mut s0 = vec![0.0; n * m];
@@ -801,6 +952,45 @@ fn existing(d: Vec<f64>) -> Option<Vec<f64>> {
     (d.is_empty() || d.iter().any(|v| !v.is_nan())).then_some(d)
 }
 
+impl Recorded {
+    /// Refuses a run with an instant on input knots where the flow jumps that a parameter may
+    /// move apart from the knots (forward mode's `knot_order` and `void_apart` then find
+    /// derivatives that do not exist on one side, which the backward pass does not carry): the
+    /// instant must be a time event's whose time moves with every parameter exactly as the
+    /// knots where the flow jumps do (`same`, as forward mode compares them), else it is
+    /// refused. A state event's time moves with the state's sensitivities, which the backward
+    /// pass does not have: refused.
+    fn check_knots_met<S: HybridSystem + ?Sized>(&self, sys: &S, p: &[f64]) -> Result<(), AdjointError> {
+        use super::event::jump::same;
+        let info = sys.info();
+        let (n, m) = (info.n_states(), info.n_grad());
+        let refused =
+            "an event on an input knot where the flow jumps that a parameter may move apart from it";
+        for piece in &self.tape.pieces {
+            let Piece::KnotsMet { t, event, x, old, new } = *piece else { continue };
+            if info.events[event].guard != super::system::GuardShape::Time {
+                return Err(AdjointError::Unsupported(refused));
+            }
+            // A time guard: `g_x = 0`, so `dt_e/dp = -g_p / g_t`.
+            let (mut gx, mut gp) = (vec![0.0; n], vec![0.0; m]);
+            let gt = sys.guard_grad(event, t, &self.tape.store[x..x + n], p, &mut gx, &mut gp);
+            let a: Vec<f64> = gp.iter().map(|&g| if g == 0.0 { 0.0 } else { -g / gt }).collect();
+            let (mut sp, mut dt) = (vec![0.0; m], vec![0.0; m]);
+            for (mode, sets, jumps) in std::iter::once(old).chain(new) {
+                if !jumps {
+                    continue;
+                }
+                let sets = &self.tape.knot_sets[sets.0..sets.1];
+                super::knots::motion(sys, p, mode, t, sets, &mut sp, &mut dt);
+                if a.iter().zip(&dt).any(|(&a, &d)| !(a.is_nan() || same(a, d))) {
+                    return Err(AdjointError::Unsupported(refused));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 /// The steps of the segment whose last step is the piece `last`: from the checkpoint before it
 /// (its start state and start derivative kept) to `last`, all steps (the tape breaks a chain at
 /// any other piece).
@@ -816,4 +1006,129 @@ fn segment(pieces: &[Piece], last: usize) -> Vec<StepAt> {
     }
     steps.reverse();
     steps
+}
+
+/// The samples' part of a backward pass: per sample on the tape, the rows whose seeds weigh it
+/// and the cotangent of its state there (the states' weights plus `y_x^T` the outputs'; the
+/// outputs' `y_p^T` share goes to the parameters at once, as forward mode's `y_x S + y_p`),
+/// injected where the walk reaches the sample's point: into the cotangent there, or, for a
+/// sample read off a step, through that step's dense output or retaken end into the cotangent
+/// of its start.
+struct SampleCotangents<'t> {
+    taken: &'t [SampleAt],
+    /// Per sample on the tape, `(row, cotangent of its state)`.
+    bars: Vec<Vec<(usize, Vec<f64>)>>,
+    /// The samples not yet injected are `taken[..next]` (the walk goes backward).
+    next: usize,
+    /// Scratch for a branch: its rows' cotangents and parameter shares.
+    lams: Vec<f64>,
+    pbars: Vec<f64>,
+    /// States and differentiated parameters.
+    n: usize,
+    m: usize,
+}
+
+impl<'t> SampleCotangents<'t> {
+    fn new<S: HybridSystem + ?Sized>(
+        recorded: &'t Recorded,
+        seeds: &[Seed],
+        sys: &S,
+        p: &[f64],
+        pbars: &mut [f64],
+    ) -> SampleCotangents<'t> {
+        let info = sys.info();
+        let (n, m, k) = (info.n_states(), info.n_grad(), info.n_outputs());
+        let taken = &recorded.tape.samples[..];
+        let mut bars: Vec<Vec<(usize, Vec<f64>)>> = vec![Vec::new(); taken.len()];
+        // The tape's samples by row (a row is taken once).
+        let mut on_tape = vec![usize::MAX; recorded.result.samples.len()];
+        for (i, s) in taken.iter().enumerate() {
+            if let Some(slot) = on_tape.get_mut(s.row) {
+                *slot = i;
+            }
+        }
+        let (mut yx, mut yp, mut yt) = (vec![0.0; k * n], vec![0.0; k * m], vec![0.0; k]);
+        for (r, seed) in seeds.iter().enumerate() {
+            for w in &seed.samples {
+                let sample = recorded.result.samples.get(w.row).expect("checked: a reached sample");
+                let mut xbar = vec![0.0; n];
+                xbar.iter_mut().zip(&w.state).for_each(|(x, w)| *x = *w);
+                if !w.outputs.is_empty() {
+                    sys.output_jac(sample.time, sample.state, p, &mut yx, &mut yp, &mut yt);
+                    let pbar = &mut pbars[r * m..(r + 1) * m];
+                    for (i, &wi) in w.outputs.iter().enumerate() {
+                        for (c, x) in xbar.iter_mut().enumerate() {
+                            *x += wi * yx[i * n + c];
+                        }
+                        for (j, pb) in pbar.iter_mut().enumerate() {
+                            *pb += wi * yp[j * k + i];
+                        }
+                    }
+                }
+                match on_tape.get(w.row).copied().filter(|&i| i != usize::MAX) {
+                    Some(i) => bars[i].push((r, xbar)),
+                    // Checked reached, so taken: a tape without it holds nothing to inject.
+                    None => debug_assert!(false, "a reached sample is on the tape"),
+                }
+            }
+        }
+        SampleCotangents { taken, bars, next: taken.len(), lams: Vec::new(), pbars: Vec::new(), n, m }
+    }
+
+    /// Injects the samples taken at `point` into `lams`/`pbars` (rows of n and m), the walk
+    /// being there: `step` is the piece at `point` when it is a step (its start state is the
+    /// branch's).
+    #[allow(clippy::too_many_arguments)]
+    fn inject<S: HybridSystem + ?Sized>(
+        &mut self,
+        sys: &S,
+        p: &[f64],
+        point: usize,
+        step: Option<&Step<'_>>,
+        lams: &mut [f64],
+        pbars: &mut [f64],
+        scratch: &mut Scratch,
+    ) -> Result<(), AdjointError> {
+        while self.next > 0 && self.taken[self.next - 1].point >= point {
+            self.next -= 1;
+            let sample = self.taken[self.next];
+            let bars = &self.bars[self.next];
+            if bars.is_empty() {
+                continue;
+            }
+            let (n, m) = (self.n, self.m);
+            let Some((at, end)) = sample.branch else {
+                for (r, xbar) in bars {
+                    lams[r * n..(r + 1) * n].iter_mut().zip(xbar).for_each(|(l, x)| *l += x);
+                }
+                continue;
+            };
+            let Some(step) = step.filter(|s| s.t0 == at.t0 && s.mode == at.mode) else {
+                return Err(AdjointError::Unsupported("a sample read off a step the tape does not hold"));
+            };
+            let branch = Step {
+                pair: at.pair,
+                t0: at.t0,
+                h: at.h,
+                ceiling: at.ceiling,
+                mode: at.mode,
+                x0: step.x0,
+                end,
+            };
+            self.lams.clear();
+            for (_, xbar) in bars {
+                self.lams.extend_from_slice(xbar);
+            }
+            self.pbars.clear();
+            self.pbars.resize(bars.len() * m, 0.0);
+            step_backward(sys, p, &branch, &mut self.lams, &mut self.pbars, scratch);
+            for (b, (r, _)) in bars.iter().enumerate() {
+                let (lam, x0bar) = (&mut lams[r * n..(r + 1) * n], &self.lams[b * n..(b + 1) * n]);
+                lam.iter_mut().zip(x0bar).for_each(|(l, x)| *l += x);
+                let (pbar, share) = (&mut pbars[r * m..(r + 1) * m], &self.pbars[b * m..(b + 1) * m]);
+                pbar.iter_mut().zip(share).for_each(|(pb, s)| *pb += s);
+            }
+        }
+        Ok(())
+    }
 }
