@@ -1912,7 +1912,7 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         if self.tapes && voids {
             self.recorder.tape(&TapeEntry::VoidAll);
         } else if self.tapes && self.left_of_knot {
-            self.recorder.tape(&TapeEntry::Unsupported("a flow switch at another event's instant"));
+            self.recorder.tape(&TapeEntry::Unsupported("a flow switch on an input knot"));
         }
         if voids {
             // The flow before the switch is not known: no sensitivity survives it. A run for the
