@@ -24,7 +24,7 @@ what suits it:
   recorded run and one backward pass, and no sensitivity column whatever the number of inputs
   (what a backward pass costs: docs/performance.md). Where the adjoint does
   not carry a run (what ``hybc run --sens adjoint`` does not carry yet, docs/cli.md: an
-  event on an input knot, ...; also samples at ``at=`` times, a run that ended
+  event on input knots where the flow jumps, ...; also a cotangent on a sample not reached, a run that ended
   early, or a pulled-back number that is not finite) the handler pulls back through the forward
   Jacobians instead: the numbers are right either way. ``sens="forward"`` makes reverse mode always go
   through the forward Jacobians, ``sens="auto"`` takes the adjoint from six inputs on

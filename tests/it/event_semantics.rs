@@ -439,8 +439,8 @@ fn every_event_semantics_test_holds_landing_on_events_or_not() {
 /// The adjoint through every rule (issue #40, section 3): each test above, under each method and
 /// landing on event instants or not, with every run that has gradients also run by the adjoint
 /// and by forward sensitivities taking the same steps (`support::runs::check_adjoint`: equal
-/// to 1e-10, the same entries not existing, or the refusal named). The tests' own assertions
-/// hold as before; what the adjoint does not carry yet is counted, and most runs are carried.
+/// to 1e-10, the same entries not existing). The tests' own assertions hold as before; the
+/// runs the adjoint leaves to forward mode are those that ended early (a stuck contact).
 #[test]
 fn every_event_semantics_test_gives_the_same_gradients_by_the_adjoint() {
     use crate::support::runs::{every_test_landing, every_test_with, with_adjoint_check};
@@ -457,7 +457,7 @@ fn every_event_semantics_test_gives_the_same_gradients_by_the_adjoint() {
     assert!(failed.is_empty(), "failures: {failed:?}");
     eprintln!("the adjoint against forward: {checked} runs with gradients, {carried} carried by the adjoint");
     assert!(checked >= 40, "only {checked} runs with gradients were checked");
-    assert!(2 * carried >= checked, "the adjoint carried only {carried} of {checked} runs");
+    assert!(carried >= 40, "the adjoint carried only {carried} of {checked} runs");
 }
 
 /// Rule 1, the lateness: an event fires at the first floating-point time past its crossing, and

@@ -368,12 +368,12 @@ fn forward_sensitivities_that_cannot_be_prepared_are_an_error_saying_why() {
         assert!((grad[j] - want).abs() <= 1e-12 * want.abs().max(1.0), "d y / d p{j}: {} vs {want}", grad[j]);
     }
     // A run asked of the adjoint does not ask either (its simulator is built before it knows
-    // which mode will run); where the adjoint declines (samples at given times) and the run
-    // falls back to forward, the refusal is the same error.
+    // which mode will run); where the adjoint declines (`auto` with more quantities than a
+    // fifth of the parameters) and the run falls back to forward, the refusal is the same error.
     let by_adjoint = SimOptions { sens: hybc::sim::Sens::Adjoint, ..o.clone() };
     let r = run(&sys, &[G, E, 1.0], &by_adjoint).expect("the adjoint runs");
     assert_eq!(r.stats.sens, Some(hybc::sim::Sens::Adjoint));
-    let declined = SimOptions { at: vec![1.0], ..by_adjoint };
+    let declined = SimOptions { sens: hybc::sim::Sens::Auto, ..by_adjoint };
     let err = run(&sys, &[G, E, 1.0], &declined).expect_err("falls back to forward, refused");
     assert!(matches!(err, SimError::NoSensitivities { .. }), "{err:?}");
 }

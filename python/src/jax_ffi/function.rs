@@ -23,7 +23,7 @@ use std::sync::Mutex;
 use rayon::prelude::*;
 
 use super::status;
-use hybc::sim::adjoint::{self, Seed};
+use hybc::sim::adjoint::{self, SampleSeed, Seed};
 use hybc::sim::{EventRecord, SimOptions, SimResult, SystemInfo};
 use hybc::{Sens, StopReason};
 
@@ -374,7 +374,7 @@ impl Function {
             }
             return;
         }
-        if self.by_adjoint && self.samples == 0 && self.pull_back_by_adjoint(&w.p, &mut pulls) {
+        if self.by_adjoint && self.pull_back_by_adjoint(&w.p, &mut pulls) {
             Counts::add(&self.counts.adjoint, pulls.len());
             return;
         }
@@ -424,7 +424,7 @@ impl Function {
         // The values at a stop event carry the total derivative, as `fill` reads them.
         let total = matches!(result.stopped_by, StopReason::Event { .. });
         let fired = result.events.len();
-        let seeds: Vec<Seed> = pulls
+        let seeds: Option<Vec<Seed>> = pulls
             .iter()
             .map(|pull| {
                 let (mut state, mut outputs) = (vec![0.0; n_states], vec![0.0; n_outputs]);
@@ -448,9 +448,36 @@ impl Function {
                         }
                     }
                 }
-                Seed { state, outputs, event_times, total, ..Seed::default() }
+                // The values at the `at` times: a row of columns per sample, after the end's.
+                let c = self.columns.len();
+                let samples = pull.ct_values[c..]
+                    .chunks(c.max(1))
+                    .enumerate()
+                    .filter(|(_, cts)| cts.iter().any(|&c| c != 0.0))
+                    .map(|(row, cts)| {
+                        let (mut state, mut outputs) = (vec![0.0; n_states], vec![0.0; n_outputs]);
+                        for (col, &c) in self.columns.iter().zip(cts) {
+                            match *col {
+                                Selector::Output(i) => outputs[i] += c,
+                                Selector::State(i) => state[i] += c,
+                                // An event column reads no value at a sample (`fill`): what a
+                                // cotangent there means is forward mode's to say.
+                                Selector::EventTime { .. } | Selector::LastFiring { .. } => {
+                                    return None;
+                                }
+                            }
+                        }
+                        Some(SampleSeed { row, state, outputs })
+                    })
+                    .collect::<Option<Vec<_>>>();
+                samples.map(|samples| Seed { state, outputs, event_times, total, samples, ..Seed::default() })
             })
-            .collect();
+            .collect::<Option<Vec<_>>>();
+        // A cotangent on a sample not reached (the run stopped before it) or on an event column
+        // of a sample: forward mode's NaN rules apply, through the Jacobians.
+        let unreached =
+            |seed: &Seed| seed.samples.iter().any(|s| !result.samples.get(s.row).is_some_and(|v| v.reached));
+        let Some(seeds) = seeds.filter(|seeds| !seeds.iter().any(unreached)) else { return false };
         let Ok(rows) = recorded.gradients(sys, p, &seeds) else { return false };
         // A non-finite entry: some derivative along the run does not exist (an infinite slope, a
         // grazing time). The backward pass mixes every state's cotangent into every parameter's
