@@ -658,3 +658,39 @@ fn flow_vjp_add_adds_what_flow_vjp_writes() {
         }
     }
 }
+
+/// Issue #40's closed forms of many knots, by the adjoint: `der(x) = pwl(t, 0, 1, u)` over
+/// 10,000 knots integrates to the trapezoid rule, so `dx(1)/du_k` is the spacing `h`, halved at
+/// the two ends; and a double integrator `p' = v`, `v' = pwc(t, 0, T, u)` over N pieces of width
+/// `w`, with the terminal cost `J = p(T) + v(T)^2 / 2`: `dv/du_k = w`,
+/// `dp/du_k = w (T - t_k - w / 2)` (`t_k = k w`), so `dJ/du_k = dp/du_k + v(T) w`.
+#[test]
+fn the_adjoint_gives_the_closed_forms_of_many_knots() {
+    let opts = SimOptions { rtol: 1e-12, atol: 1e-14, sens: Sens::Adjoint, ..SimOptions::default() };
+    let n = 10_000;
+    let u: Vec<f64> = (0..n).map(|k| ((k * 7) % 13) as f64 / 6.0 - 1.0).collect();
+    let src = format!("model area\nparam u[{n}] = 0\nstate x = 0\nder(x) = pwl(t, 0, 1, u)\n");
+    let run = door_run(&src, &[("u", &u)], &SimOptions { t_end: 1.0, ..opts.clone() });
+    assert_eq!(run.result().stats.sens, Some(Sens::Adjoint));
+    let h = 1.0 / (n - 1) as f64;
+    for k in [0, 1, 2, 4_999, n - 2, n - 1] {
+        let want = if k == 0 || k == n - 1 { h / 2.0 } else { h };
+        near(run.dstate("x", &format!("u[{k}]")).unwrap(), want, 1e-12, &format!("dx/du[{k}]"));
+    }
+    let pieces = 200;
+    let big_t = 2.0;
+    let u: Vec<f64> = (0..pieces).map(|k| ((k * 5) % 9) as f64 / 4.0 - 1.0).collect();
+    let src = format!(
+        "model drive\nparam u[{pieces}] = 0\nparam T = {big_t}\nstate p = 0\nstate v = 0\n\
+         der(p) = v\nder(v) = pwc(t, 0, T, u)\noutput J = p + v^2 / 2\n"
+    );
+    let run = door_run(&src, &[("u", &u)], &SimOptions { t_end: big_t, ..opts });
+    assert_eq!(run.result().stats.sens, Some(Sens::Adjoint));
+    let w = big_t / pieces as f64;
+    let v_end = w * u.iter().sum::<f64>();
+    for k in [0, 1, 77, pieces - 2, pieces - 1] {
+        let dp = w * (big_t - k as f64 * w - w / 2.0);
+        near(run.doutput("J", &format!("u[{k}]")).unwrap(), dp + v_end * w, 1e-11, &format!("dJ/du[{k}]"));
+        near(run.dstate("v", &format!("u[{k}]")).unwrap(), w, 1e-12, &format!("dv/du[{k}]"));
+    }
+}
