@@ -19,15 +19,9 @@ use hybc::sim::adjoint::{record, Seed};
 use hybc::sim::{run, SimOptions};
 use hybc::Model;
 
-fn source(k: usize) -> String {
-    format!(
-        "model pushed_ball\nparam g = 9.81\nparam e = 0.8\nparam u[{k}] = 0.5\n\
-         state y = 1\nstate v = 0\n\
-         der(y) = v\nder(v) = -g + pwl(t, 0, 2.5, u)\n\
-         event touchdown when y <= 0 {{\n v := -e * v\n}}\n\
-         output energy = 0.5 * v^2 + g * y\n"
-    )
-}
+#[path = "../support/pushed_ball.rs"]
+mod pushed_ball;
+use pushed_ball::pushed_ball_source;
 
 fn median(mut xs: Vec<f64>) -> f64 {
     xs.sort_by(f64::total_cmp);
@@ -65,7 +59,7 @@ fn main() {
     println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     let (mut adjoint_curve, mut forward_curve) = (Vec::new(), Vec::new());
     for &k in &counts {
-        let model = Model::parse(&source(k)).expect("checks");
+        let model = Model::parse(&pushed_ball_source(k)).expect("checks");
         let plain_model = model.compile::<&str>(&[]).expect("compiles");
         let started = Instant::now();
         let with_grad = model.compile(&["u"]).expect("compiles");

@@ -17,20 +17,13 @@ use hybc::sim::adjoint::{record, Seed};
 use hybc::sim::{run, HybridSystem, Method, SimOptions};
 use hybc::Model;
 
+#[path = "../support/pushed_ball.rs"]
+mod pushed_ball;
+use pushed_ball::pushed_ball_source;
+
 #[path = "../support/chain.rs"]
 mod chain;
 use chain::link_chain_source;
-
-/// The ball pushed by a `pwl` force of `k` knots (2 states, `k` parameters read two at a time).
-fn ball(k: usize) -> String {
-    format!(
-        "model pushed_ball\nparam g = 9.81\nparam e = 0.8\nparam u[{k}] = 0.5\n\
-         state y = 1\nstate v = 0\n\
-         der(y) = v\nder(v) = -g + pwl(t, 0, 2.5, u)\n\
-         event touchdown when y <= 0 {{\n v := -e * v\n}}\n\
-         output energy = 0.5 * v^2 + g * y\n"
-    )
-}
 
 fn median(mut xs: Vec<f64>) -> f64 {
     xs.sort_by(f64::total_cmp);
@@ -85,7 +78,7 @@ fn main() {
             .into_iter()
             .map(|k| Case {
                 name: format!("ball, pwl of {k} knots"),
-                source: ball(k),
+                source: pushed_ball_source(k),
                 grad: "u",
                 opts: ball_opts.clone(),
             })

@@ -219,7 +219,7 @@ fn check_every_model(method: Method, land: Option<bool>) {
 
 /// Compiles `src` with every parameter (vector elements each) differentiated, at its defaults
 /// with the vectors `vectors` set.
-fn compiled(src: &str, vectors: &[(&str, &[f64])]) -> (hybc::Compiled, Vec<f64>) {
+pub(crate) fn compiled(src: &str, vectors: &[(&str, &[f64])]) -> (hybc::Compiled, Vec<f64>) {
     let model = hybc::Model::parse(src).unwrap_or_else(|e| panic!("{e}"));
     let names: Vec<String> = model.params().iter().map(|(name, _)| name.to_string()).collect();
     let compiled = model.compile(&names).expect("compiles");

@@ -9,18 +9,7 @@
 use hybc::sim::adjoint::{record_with, Checkpoints, SampleSeed, Seed};
 use hybc::sim::{run, HybridSystem, Method, Sens, SimOptions, SimResult};
 
-/// Compiles `src` with every parameter (vector elements each) differentiated, at its defaults
-/// with the vectors `vectors` set.
-fn compiled(src: &str, vectors: &[(&str, &[f64])]) -> (hybc::Compiled, Vec<f64>) {
-    let model = hybc::Model::parse(src).unwrap_or_else(|e| panic!("{e}"));
-    let names: Vec<String> = model.params().iter().map(|(name, _)| name.to_string()).collect();
-    let compiled = model.compile(&names).expect("compiles");
-    let mut params = compiled.params();
-    for (name, values) in vectors {
-        params.set_vector(name, values).expect("a vector of the model");
-    }
-    (compiled, params.values().to_vec())
-}
+use crate::adjoint::compiled;
 
 /// Forward mode's derivatives of every reached sample's states and outputs, with the seeds that
 /// ask for them: `(label, seed, row of m)`.
