@@ -792,6 +792,14 @@ impl Detector {
             let x_start = std::mem::take(&mut self.x_start);
             let (first, last, gt) = self.affine_grad(cx, ev, t0, &x_start);
             self.x_start = x_start;
+            // Most steps pass far from the guard: one bound of the whole step settles them.
+            if let Some((lo, hi)) = dense.affine_motion_hull(&self.affine_gx[first..last], gt * h) {
+                let whole = Interval::new(lo, hi) + Interval::point(self.g0[pos]);
+                if whole.clear_of_zero(margin) {
+                    self.close_samples(pos);
+                    return;
+                }
+            }
             let poly = self.affine_poly(dense, first, last, gt * h);
             guard_poly.1 = poly.write_to(&mut guard_poly.0);
         }
@@ -862,6 +870,11 @@ impl Detector {
                 self.pieces.stop();
             }
         }
+        self.close_samples(pos);
+    }
+
+    /// Ends the samples of the guard at `pos` at the step's end, unless they reached it.
+    fn close_samples(&mut self, pos: usize) {
         let t1 = self.step_end;
         if self.samples.last().is_some_and(|last| last.t < t1) {
             self.samples.push(Sample { t: t1, g: self.g1[pos], dg: self.dg1[pos], extremum: false });

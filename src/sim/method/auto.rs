@@ -442,6 +442,13 @@ impl Interpolant for AutoDense {
             self.rk.linear_form(w, coef)
         }
     }
+    fn affine_motion_hull(&self, entries: &[(u32, f64)], slope: f64) -> Option<(f64, f64)> {
+        if self.stiff {
+            self.row.affine_motion_hull(entries, slope)
+        } else {
+            self.rk.affine_motion_hull(entries, slope)
+        }
+    }
     fn component_form(&self, i: usize, coef: &mut [f64; CAP]) -> usize {
         if self.stiff {
             self.row.component_form(i, coef)

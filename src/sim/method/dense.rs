@@ -225,6 +225,38 @@ impl Interpolant for Dense {
         }
         expand_nested(&rho, nc, coef)
     }
+    /// From the nested form: with `s` and `1 - s` both in `[0, 1]`, the innermost coefficient
+    /// out, `I <- rho_k + [0, 1] I` and finally `[0, 1] I` (exact in real arithmetic for any
+    /// polynomial in this form, and tight where the motion is monotone or its extremum lies at
+    /// an end). The rounding: each `rho_k` is a sum of at most `entries + 1` products and each
+    /// level adds one rounding, so `4 (entries + K) eps` times the coefficients' magnitudes bounds
+    /// both this computation's error and that of evaluating the polynomial.
+    fn affine_motion_hull(&self, entries: &[(u32, f64)], slope: f64) -> Option<(f64, f64)> {
+        let nc = self.n_coef;
+        if nc < 2 {
+            return None;
+        }
+        let (mut rho, mut size) = ([0.0; MAX_COEF], 0.0);
+        for &(i, w) in entries {
+            let i = i as usize;
+            if i >= self.valid {
+                return None;
+            }
+            for (acc, &rk) in rho[1..nc].iter_mut().zip(&self.r[i * MAX_COEF + 1..i * MAX_COEF + nc]) {
+                *acc += w * rk;
+                size += (w * rk).abs();
+            }
+        }
+        rho[1] += slope;
+        size += slope.abs();
+        let (mut lo, mut hi) = (rho[nc - 1], rho[nc - 1]);
+        for &r in rho[1..nc - 1].iter().rev() {
+            lo = r + lo.min(0.0);
+            hi = r + hi.max(0.0);
+        }
+        let err = 4.0 * (entries.len() + nc) as f64 * f64::EPSILON * size;
+        Some((lo.min(0.0) - err, hi.max(0.0) + err))
+    }
     fn component_form(&self, i: usize, coef: &mut [f64; CAP]) -> usize {
         let nc = self.n_coef;
         let mut rho = [0.0; CAP];
@@ -337,6 +369,49 @@ mod tests {
                 let want = combine(t0 + s * h) - combine(t0);
                 assert!((form.eval(s) - want).abs() < 1e-14, "{s}: {} vs {want}", form.eval(s));
             }
+        }
+    }
+
+    #[test]
+    fn the_affine_motion_hull_holds_the_motion_and_is_tight_where_it_is_monotone() {
+        // Two components with interior extrema (y' = cos(5t), z' = t^2 sin(3t)) and a monotone
+        // one (u' = 1 + t^2), combined with a slope: the hull holds the motion at 2001 points of
+        // the step; for the monotone motion its ends are the motion's ends within round-off.
+        use super::super::stepper::Interpolant;
+        for tab in [&DOPRI5, &DOP853] {
+            let mut rk = Rk::new(tab, 3, 3, 3, 1e-8, 1e-8);
+            let mut rhs = |t: f64, _y: &[f64], dy: &mut [f64]| {
+                dy[0] = (5.0 * t).cos();
+                dy[1] = t * t * (3.0 * t).sin();
+                dy[2] = 1.0 + t * t;
+            };
+            let (t0, h, y0) = (0.3, 0.9, [0.1, -0.4, 2.0]);
+            rk.restart(t0, &y0, &mut rhs);
+            rk.attempt(t0, &y0, h, &mut rhs);
+            rk.build_interpolant(t0, &y0, &mut rhs);
+            let dense = rk.interpolant();
+            let motion = |w: &[(u32, f64)], slope: f64, s: f64| {
+                let (mut v, mut v0) = ([0.0; 3], [0.0; 3]);
+                dense.eval(t0 + s * h, &mut v);
+                dense.eval(t0, &mut v0);
+                w.iter().map(|&(i, wi)| wi * (v[i as usize] - v0[i as usize])).sum::<f64>() + slope * s
+            };
+            for (w, slope) in
+                [(vec![(0, 2.0), (1, -3.0)], 0.25), (vec![(1, 1.0)], -0.1), (vec![(0, 1.0)], 0.0)]
+            {
+                let (lo, hi) = dense.affine_motion_hull(&w, slope).expect("a hull");
+                let (mut min, mut max) = (f64::INFINITY, f64::NEG_INFINITY);
+                for i in 0..=2000 {
+                    let m = motion(&w, slope, i as f64 / 2000.0);
+                    (min, max) = (min.min(m), max.max(m));
+                }
+                assert!(lo <= min && max <= hi, "{w:?}: [{lo}, {hi}] against [{min}, {max}]");
+            }
+            let w = [(2, 1.5)];
+            let (lo, hi) = dense.affine_motion_hull(&w, 0.0).expect("a hull");
+            let end = motion(&w, 0.0, 1.0);
+            // Within the widening for round-off, `4 (1 + K) eps` times the coefficients.
+            assert!(lo.abs() < 1e-13 && (hi - end).abs() < 1e-13 * end, "[{lo}, {hi}] against [0, {end}]");
         }
     }
 }

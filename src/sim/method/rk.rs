@@ -232,35 +232,38 @@ impl Rk {
         centred_sum(&self.k, self.nz, &self.tab.e, &mut self.err5[..ne]);
         let with3 = self.tab.e3.is_some();
         if !MASKED && self.excluded.is_empty() {
-            // Every component counts: the blocks' sums directly (`errnorm::plain_block_norm`).
+            // Every component counts: the scaled errors first, in one pass over the components
+            // with nothing carried from one to the next (so the compiler gives it vector
+            // divisions: a division per component, one block at a time, was most of the norm's
+            // time with one state and many parameters), then the blocks' sums of their squares
+            // in component order (`errnorm::plain_block_norm`): `BlockNorm`'s norm to the bit.
             let (atol, rtol) = (self.atol, self.rtol);
             self.outside = (0.0, 0);
-            let (y, y1, e5) = (&y[..ne], &self.y_new[..ne], &self.err5[..ne]);
+            let (y, y1) = (&y[..ne], &self.y_new[..ne]);
+            let squares = |r: &[f64]| r.iter().fold(0.0, |sum, r| sum + r * r);
             return match &self.tab.e3 {
                 Some(e3) => {
                     centred_sum(&self.k, self.nz, e3, &mut self.err3[..ne]);
+                    let (r5, r3) = (&mut self.err5[..ne], &mut self.err3[..ne]);
+                    let ends = y.iter().zip(y1);
+                    for ((y0, y1), (e5, e3)) in ends.zip(r5.iter_mut().zip(r3.iter_mut())) {
+                        let h_sc = h / (atol + rtol * y0.abs().max(y1.abs()));
+                        *e5 *= h_sc;
+                        *e3 *= h_sc;
+                    }
+                    let (r5, r3) = (&self.err5[..ne], &self.err3[..ne]);
                     plain_block_norm(n_states, ne, true, |range| {
-                        let (mut sum5, mut sum3) = (0.0, 0.0);
-                        let ends = y[range.clone()].iter().zip(&y1[range.clone()]);
-                        for ((y0, y1), (e5, e3)) in ends.zip(e5[range.clone()].iter().zip(&self.err3[range]))
-                        {
-                            let h_sc = h / (atol + rtol * y0.abs().max(y1.abs()));
-                            let (r5, r3) = (e5 * h_sc, e3 * h_sc);
-                            sum5 += r5 * r5;
-                            sum3 += r3 * r3;
-                        }
-                        (sum5, sum3)
+                        (squares(&r5[range.clone()]), squares(&r3[range]))
                     })
                 }
-                None => plain_block_norm(n_states, ne, false, |range| {
-                    let mut sum5 = 0.0;
-                    for ((y0, y1), e5) in y[range.clone()].iter().zip(&y1[range.clone()]).zip(&e5[range]) {
+                None => {
+                    for ((y0, y1), e5) in y.iter().zip(y1).zip(&mut self.err5[..ne]) {
                         let sc = atol + rtol * y0.abs().max(y1.abs());
-                        let r5 = h * e5 / sc;
-                        sum5 += r5 * r5;
+                        *e5 = h * *e5 / sc;
                     }
-                    (sum5, 0.0)
-                }),
+                    let r5 = &self.err5[..ne];
+                    plain_block_norm(n_states, ne, false, |range| (squares(&r5[range]), 0.0))
+                }
             };
         }
         let mut norm = BlockNorm::new(n_states, &self.excluded);

@@ -150,6 +150,14 @@ pub trait Interpolant {
         }
         Poly::through(&nodes[..count], &values[..count]).write_to(coef)
     }
+    /// A bound `[lo, hi]` of `sum_k w_k (P_k(s) - P_k(0)) + slope s` over all of `s` in `[0, 1]`
+    /// for the gradient entries `(k, w_k)`, widened by the rounding of its own computation and
+    /// of the polynomial's: a cheaper, coarser [`Self::linear_form`] for a step far from every
+    /// guard, which then needs neither the power basis nor its Bernstein pieces. `None` when
+    /// the method has no such bound (the detector then walks the polynomial).
+    fn affine_motion_hull(&self, _entries: &[(u32, f64)], _slope: f64) -> Option<(f64, f64)> {
+        None
+    }
     /// [`Self::linear_form`] of the single component `i` (`P_i(s) - P_i(0)`), `i` below the
     /// number of components: what the event detector bounds a nonlinear guard's states with.
     /// The default calls `linear_form` with a unit vector; a method with coefficients of its own
