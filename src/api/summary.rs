@@ -187,13 +187,23 @@ fn summary(model: &sema::Model) -> String {
             let _ = writeln!(out, "    stop");
         }
     }
-    let switches: Vec<_> = model.events.iter().filter(|e| e.implicit).collect();
+    let switches: Vec<_> = model.events.iter().filter(|e| e.implicit && !e.kink).collect();
     if !switches.is_empty() {
         let _ = writeln!(
             out,
             "flow switches (where a flow jumps: located like events, the gradients jump there)"
         );
         for ev in switches {
+            let _ = writeln!(out, "  {}: at {} = 0", ev.name, show.show(&ev.guard));
+        }
+    }
+    let kinks: Vec<_> = model.events.iter().filter(|e| e.kink).collect();
+    if !kinks.is_empty() {
+        let _ = writeln!(
+            out,
+            "kinks (of `min`, `max`, `abs`: located like events, steps land on them; nothing jumps)"
+        );
+        for ev in kinks {
             let _ = writeln!(out, "  {}: at {} = 0", ev.name, show.show(&ev.guard));
         }
     }

@@ -150,6 +150,7 @@ pub fn system_info(model: &Model, grad_params: &[sema::ParamIdx]) -> SystemInfo 
                 is_stop: e.is_stop,
                 has_condition: e.condition.is_some(),
                 implicit: e.implicit,
+                kink: e.kink,
                 // Filled from the lowered functions by `classify_events` (the compiled model and
                 // the interpreter call it); until then the cautious defaults.
                 guard: sim::GuardShape::Nonlinear,

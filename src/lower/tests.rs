@@ -47,6 +47,7 @@ fn ball() -> Model {
             owner: None,
             span,
             implicit: false,
+            kink: false,
         }],
         outputs: vec![Output {
             name: "energy".into(),

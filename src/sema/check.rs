@@ -524,6 +524,7 @@ impl<'a> Checker<'a> {
             owner: pe.owner,
             span: d.name.span,
             implicit: false,
+            kink: false,
         }
     }
 

@@ -159,6 +159,8 @@ pub struct Event {
     /// Not declared but implied by a discontinuous flow (see `switches`): located and jumped
     /// over like an event, never reported as one.
     pub implicit: bool,
+    /// A flow switch where nothing jumps: the kink of a `min`, `max` or `abs` (see `switches`).
+    pub kink: bool,
 }
 
 /// An output.

@@ -8,7 +8,12 @@
 //! The integrator locates it like any event and applies the saltation with the flow on each side
 //! (`sim::EventInfo::implicit`), but does not report it as an event.
 //!
-//! `min`, `max` and `abs` are continuous: their kinks change no sensitivity and need no event.
+//! `min`, `max` and `abs` are continuous, but where their arguments cross (`max(a, b)` at
+//! `a - b = 0`, `abs(a)` at `a = 0`) the flow's derivatives jump, and so does the flow of the
+//! sensitivities (`d max(ramp t - 0.1, 0) / d ramp` is `t` on one side, 0 on the other): a step
+//! that straddles such a kink is as inaccurate as its error estimate is blind to it, and the error
+//! control crept up on one in dozens of rejected steps. So each kink that moves is a switch too
+//! (`Event::kink`), named `kink of mode M`: located, landed on, crossed; nothing jumps there.
 //!
 //! Inputs (`pwl`, `pwc`) in a mode's flows are not events: their knots are listed with the mode
 //! (`Mode::inputs`), and the integrator keeps their times, computed from the parameters when a
@@ -33,18 +38,34 @@ pub(crate) fn add_flow_switches(model: &mut Model) {
         for flow in &model.modes[m].flows {
             let _ = walk.expr(flow, &mut switches);
         }
-        let guards = switches.found;
+        let switches_found = switches.found.len();
+        let mut guards = switches.found;
+        for kink in switches.kinks {
+            // A kink on the surface of a switch already found (`max(0, -y)` beside `if y < 0`)
+            // is crossed with it.
+            if !guards.iter().any(|g| zero_set_form(g) == kink) {
+                guards.push(kink);
+            }
+        }
         let mode = &model.modes[m];
-        let count = guards.len();
+        let kinks = guards.len() - switches_found;
+        let name = |k: usize| {
+            let (what, k, count) = if k < switches_found {
+                ("flow switch", k, switches_found)
+            } else {
+                ("kink", k - switches_found, kinks)
+            };
+            if count == 1 {
+                format!("{what} of mode {}", mode.name)
+            } else {
+                format!("{what} {} of mode {}", k + 1, mode.name)
+            }
+        };
         let new_events: Vec<Event> = guards
             .into_iter()
             .enumerate()
             .map(|(k, guard)| Event {
-                name: if count == 1 {
-                    format!("flow switch of mode {}", mode.name)
-                } else {
-                    format!("flow switch {} of mode {}", k + 1, mode.name)
-                },
+                name: name(k),
                 guard,
                 direction: Direction::Either,
                 condition: None,
@@ -54,6 +75,7 @@ pub(crate) fn add_flow_switches(model: &mut Model) {
                 owner: Some(super::ModeId(m as u16)),
                 span: mode.span,
                 implicit: true,
+                kink: k >= switches_found,
             })
             .collect();
         model.modes[m].inputs = switches.inputs;
@@ -61,6 +83,19 @@ pub(crate) fn add_flow_switches(model: &mut Model) {
             model.modes[m].events.push(EventIdx(model.events.len() as u32));
             model.events.push(event);
         }
+    }
+}
+
+/// `e` without what leaves the set where it is zero unchanged: a negation, and a zero added or
+/// subtracted (`0 - -y` and `y - 0` are both `y`), so that a kink and a switch on one surface are
+/// found to be one.
+fn zero_set_form(e: &Expr) -> Expr {
+    let zero = |e: &Expr| matches!(e, Expr::Num(v) if *v == 0.0);
+    match e {
+        Expr::Neg(a) => zero_set_form(a),
+        Expr::Binary(super::BinOp::Sub | super::BinOp::Add, a, b) if zero(b) => zero_set_form(a),
+        Expr::Binary(super::BinOp::Sub | super::BinOp::Add, a, b) if zero(a) => zero_set_form(b),
+        _ => e.clone(),
     }
 }
 
@@ -85,6 +120,11 @@ pub(crate) fn reads_pwc(e: &Expr) -> bool {
 /// whose `let`s share subexpressions costs its size, not the size of the expanded tree.
 struct Switches {
     found: Vec<Expr>,
+    /// Where a `min`, `max` or `abs` that moves has its kink: the flow is continuous there, but
+    /// its derivatives jump (the sensitivities' flow too), so a step that straddles one is as
+    /// inaccurate as its error estimate is blind to it, and the error control crept up on the
+    /// engine's throttle kink in 75 rejected steps. They are switches whose jump is zero.
+    kinks: Vec<Expr>,
     /// The inputs found, without repeats: their knots are the mode's breakpoints.
     inputs: Vec<Input>,
     moving: Walk<()>,
@@ -92,12 +132,19 @@ struct Switches {
 
 impl Switches {
     fn new() -> Switches {
-        Switches { found: Vec::new(), inputs: Vec::new(), moving: Walk::new() }
+        Switches { found: Vec::new(), kinks: Vec::new(), inputs: Vec::new(), moving: Walk::new() }
     }
 
     fn push(&mut self, guard: Expr) {
         if self.moves(&guard) && !self.found.contains(&guard) {
             self.found.push(guard);
+        }
+    }
+
+    fn push_kink(&mut self, guard: Expr) {
+        let guard = zero_set_form(&guard);
+        if self.moves(&guard) && !self.kinks.contains(&guard) {
+            self.kinks.push(guard);
         }
     }
 
@@ -126,6 +173,16 @@ impl Visit for Switches {
             Expr::Call(Func::Sign, args) => {
                 if let Some(a) = args.first() {
                     self.push(a.clone());
+                }
+            }
+            Expr::Call(Func::Abs, args) => {
+                if let Some(a) = args.first() {
+                    self.push_kink(a.clone());
+                }
+            }
+            Expr::Call(Func::Min | Func::Max, args) => {
+                if let [a, b] = &args[..] {
+                    self.push_kink(Expr::Binary(super::BinOp::Sub, Box::new(a.clone()), Box::new(b.clone())));
                 }
             }
             // An input's knots are its switches; its window reads parameters only.

@@ -1908,7 +1908,10 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
     fn cross_switch(&mut self, ev: usize, pos: usize, crossing: Crossing, after_an_event: bool) {
         let (n, t) = (self.n, self.t);
         self.stats.switches += 1;
-        let voids = after_an_event || crossing.on_guard;
+        // The flow is continuous at a kink: nothing jumps there, whatever else happened at this
+        // instant; the run goes on from past it as from past any switch.
+        let kink = self.info.events[ev].kink;
+        let voids = !kink && (after_an_event || crossing.on_guard);
         if self.tapes && voids {
             self.recorder.tape(&TapeEntry::VoidAll);
         } else if self.tapes && self.left_of_knot {
@@ -1971,6 +1974,9 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
         if self.switch_post.is_none_or(|tp| t_post > tp) {
             self.switch_post = Some(t_post);
             self.work.switch_flow.1.copy_from_slice(x_post);
+        }
+        if kink {
+            return;
         }
         let (x, s) = self.work.z.split_at_mut(n);
         let sides = ((crossing.t_pre, &x_pre[..]), (t_post, &x_post[..]));

@@ -57,6 +57,10 @@ pub struct EventInfo {
     /// it the state is kept, the sensitivities jump by `(f- - f+) dt/dp` with the flow evaluated
     /// on each side, and nothing is recorded as an event.
     pub implicit: bool,
+    /// A flow switch where the flow is continuous (a `min`, `max` or `abs` kink): steps land on it
+    /// as on any switch, and nothing jumps there, the sensitivities included (docs/language.md,
+    /// "Expressions"), so no crossing of it voids a gradient.
+    pub kink: bool,
     /// How the guard depends on time and the state, which decides how its crossings are searched.
     pub guard: GuardShape,
     /// Whether the reset acts on the guard's motion: it assigns a state that the guard or its

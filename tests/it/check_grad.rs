@@ -422,6 +422,7 @@ impl Ripple {
                     is_stop: false,
                     has_condition: false,
                     implicit: false,
+                    kink: false,
                     guard: GuardShape::Nonlinear,
                     contact: false,
                 }],

@@ -1,6 +1,7 @@
 //! Flows that jump (`if` and `sign` of the time or the state): the switch is located like an event
 //! and the sensitivities take the saltation jump `(f- - f+) dt/dp` there, so the gradients match
-//! the closed forms. Without it they are silently wrong: in `rising_state_switch` the reported
+//! the closed forms; the kinks of `min`, `max` and `abs` are located and landed on the same way,
+//! and nothing jumps there. Without it they are silently wrong: in `rising_state_switch` the reported
 //! dx/dp would be 1 instead of 2. Values and gradients to relative 1e-8 at rtol 1e-10.
 
 use crate::support::cli::hybc;
@@ -75,15 +76,99 @@ fn time_switch_through_sign() {
 }
 
 #[test]
-fn continuous_kinks_and_parameter_switches_are_not_switches() {
-    // min, max and abs keep the flow continuous (no jump in the sensitivities); a condition on
-    // parameters alone never changes during a run.
+fn parameter_switches_and_kinks_that_never_move_are_not_switches() {
+    // A condition on parameters alone never changes during a run, nor does a `min` of parameters;
+    // a kink that moves but is never crossed (x stays below 2) is located on no step.
     let src = "model s\nparam p = 1\nstate x = 1\n\
-               der(x) = min(max(t - 0.2, 0), 1) + abs(x - 2) + (if p > 0 then 1 else 2)\n";
-    let r = simulate(src, &[1.0], 1.0);
+               der(x) = min(p, 2) + abs(x - 2) * 0.1 + (if p > 0 then 1 else 2)\n";
+    let r = simulate(src, &[1.0], 0.3);
     assert_eq!(r.stats.switches, 0);
+    let out = hybc(&["check", "models/ball.hyb"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(!text.contains("flow switch") && !text.contains("kink"), "{text}");
+}
+
+#[test]
+fn a_kink_is_crossed_where_nothing_jumps_and_its_gradients_are_the_closed_forms() {
+    // x = e^(-a t), y' = max(x - c, 0): the kink at t* = ln(1/c) / a, after which y stays at
+    // y = (1 - c) / a - c ln(1/c) / a, with dy/da = -y / a and dy/dc = -ln(1/c) / a (the kink
+    // moves, but nothing jumps there: its time derivative is not needed). Integrated across
+    // the kink, the sensitivities' flow jumps (d max / dc is -1, then 0) and a step that
+    // straddles it was 2e-8 off.
+    let src = "model s\nparam a = 1\nparam c = 0.3\nstate x = 1\nstate y = 0\n\
+               der(x) = -a * x\nder(y) = max(x - c, 0)\n";
+    for (a, c) in [(1.0, 0.3), (2.0, 0.7)] {
+        let r = simulate(src, &[a, c], 3.0);
+        let f = &r.final_state;
+        let ds = f.dstate.clone().expect("gradients");
+        let l = (1.0 / c).ln();
+        let y = (1.0 - c) / a - c * l / a;
+        assert_relative_eq!(f.state[1], y, max_relative = TOL);
+        // `dstate` is parameter-major: [dx/da, dy/da, dx/dc, dy/dc].
+        assert_relative_eq!(ds[1], -y / a, max_relative = TOL);
+        assert_relative_eq!(ds[3], -l / a, max_relative = TOL);
+        assert_eq!(r.stats.switches, 1);
+        assert!(r.events.is_empty(), "a kink is not an event: {:?}", r.events);
+    }
     let out = hybc(&["check", "models/engine_redline.hyb"]);
-    assert!(!String::from_utf8_lossy(&out.stdout).contains("flow switch"));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("kink 2 of mode fueled: at ramp * t - 0.1 = 0"), "{text}");
+    assert!(!text.contains("flow switch"), "{text}");
+}
+
+#[test]
+fn a_kink_met_tangentially_still_has_gradients() {
+    // y' = max(c - (t - 1)^2, 0): with c > 0 the kink is crossed twice, y = 4 c^(3/2) / 3 and
+    // dy/dc = 2 sqrt(c); with c = 0 it is touched at t = 1 (grazing), and y = 0 with
+    // dy/dc = 0 (one-sided, both sides agree): a grazing kink voids nothing, where a
+    // grazing switch whose flow jumps would.
+    let src = "model s\nparam c = 0.01\nstate y = 0\nder(y) = max(c - (t - 1)^2, 0)\n";
+    let r = simulate(src, &[0.01], 2.0);
+    let (y, dy) = final_x(&r);
+    assert_relative_eq!(y, 4.0 * 0.001 / 3.0, max_relative = TOL);
+    assert_relative_eq!(dy[0], 0.2, max_relative = TOL);
+    assert_eq!(r.stats.switches, 2);
+    let r = simulate(src, &[0.0], 2.0);
+    let (y, dy) = final_x(&r);
+    assert!(y.abs() < 1e-12, "{y}");
+    assert!(dy[0].abs() < 1e-8, "dy/dc = {} at a touch", dy[0]);
+    assert!(r.warnings.is_empty(), "{:?}", r.warnings);
+}
+
+#[test]
+fn the_adjoint_crosses_kinks_as_forward_mode_does() {
+    // The kink models above with parameters in the model text, and the engine: the adjoint's
+    // derivatives equal forward mode's with the same steps (`support::runs::check_adjoint`).
+    let models = [
+        "model s\nparam a = 2\nparam c = 0.7\nstate x = 1\nstate y = 0\n\
+         der(x) = -a * x\nder(y) = max(x - c, 0)\nsimulate t_end = 3, rtol = 1e-10, atol = 1e-12\n",
+        "model s\nparam c = 0.01\nstate y = 0\nder(y) = max(c - (t - 1)^2, 0)\n\
+         simulate t_end = 2, rtol = 1e-10, atol = 1e-12\n",
+        "model s\nparam c = 0\nstate y = 0\nder(y) = max(c - (t - 1)^2, 0)\n\
+         simulate t_end = 2, rtol = 1e-10, atol = 1e-12\n",
+        &std::fs::read_to_string("models/engine_redline.hyb").expect("the engine"),
+    ];
+    let (checked, carried) = crate::support::runs::with_adjoint_check(|| {
+        for text in models {
+            let model = hybc::Model::parse(text).unwrap_or_else(|e| panic!("{e}"));
+            let names: Vec<String> = model.param_names().map(str::to_owned).collect();
+            let grad: Vec<&str> = names.iter().map(String::as_str).collect();
+            crate::support::runs::run(text, &grad, |_| {});
+        }
+    });
+    assert_eq!((checked, carried), (4, 4));
+}
+
+#[test]
+fn steps_land_on_a_kink_instead_of_creeping_up_to_it() {
+    // The engine's throttle `min(max(ramp t - 0.1, 0), 1)`: the sensitivities' flow jumps at
+    // t = 0.2, where the error control used to shrink the step 75 times in a row, down to 1e-12,
+    // before passing it (`--grad all`); landed on, the run takes at most a couple of rejections.
+    let out = hybc(&["run", "models/engine_redline.hyb", "--grad", "all", "--format", "json"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    let rejected = json["stats"]["rejected"].as_u64().expect("a count");
+    assert!(rejected <= 3, "{rejected} rejected steps");
+    assert_eq!(json["stats"]["switches"], 1);
 }
 
 #[test]

@@ -1,10 +1,11 @@
 //! Random hybrid models drawn from the language's forms (`model.rs`): chains of integrators
 //! whose tops are `a + b t` per mode, flow switches (`if` on a state) on a top, damped tops (for
-//! the relations alone), events with affine, product and time guards in every direction, `sin` and
-//! `abs` guards (for the relations alone), enabling conditions, affine resets (bounces, kicks,
-//! assignments, which also make cascades), mode switches, stops, a time event near or on
-//! `t_end`, and starts on or a hair from a guard (down to subnormal distances). Model `i` of seed `s` is a function of `(s,
-//! i)` alone, so a violation is reproduced from the two numbers.
+//! the relations alone; half of them damped on one side only, a kink), events with affine,
+//! product and time guards in every direction, `sin` and `abs` guards (for the relations alone),
+//! enabling conditions, affine resets (bounces, kicks, assignments, which also make cascades),
+//! mode switches, stops, a time event near or on `t_end`, and starts on or a hair from a guard
+//! (down to subnormal distances). Model `i` of seed `s` is a function of `(s, i)` alone, so a
+//! violation is reproduced from the two numbers.
 
 use rand_chacha::ChaCha8Rng;
 use rand_core::{Rng, SeedableRng};
@@ -103,9 +104,14 @@ pub fn model(seed: u64, index: u64) -> GenModel {
     // A switch on a chain's top, on a state's level a little away from its start.
     let mut switches = Vec::new();
     let mut damping = Vec::new();
+    let mut kinked = Vec::new();
     for chain in &chains {
         let damped = d.chance(0.1);
-        damping.push(if damped { DAMPING[d.below(DAMPING.len())] } else { 0.0 });
+        // Half the damped chains, by the damping drawn (no draw of their own, so that the models
+        // drawn after them stay the same), are damped on one side only: a kink.
+        let which = if damped { Some(d.below(DAMPING.len())) } else { None };
+        damping.push(which.map_or(0.0, |k| DAMPING[k]));
+        kinked.push(which.is_some_and(|k| k % 2 == 1));
         // A damped chain has no exact reference to tell a sliding switch (one whose branches
         // push its own top back at the level from both sides): its switch reads another state.
         let top = *chain.last().expect("a chain has a state");
@@ -248,5 +254,5 @@ pub fn model(seed: u64, index: u64) -> GenModel {
             t_end = at + NEAR_END[d.below(NEAR_END.len())] * t_end;
         }
     }
-    GenModel { params: d.params, init, chains, tops, switches, damping, events, t_end }
+    GenModel { params: d.params, init, chains, tops, switches, damping, kinked, events, t_end }
 }

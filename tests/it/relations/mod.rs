@@ -727,6 +727,7 @@ fn the_one_sided_check_confirms_a_cusp_and_refuses_a_smooth_value() {
         tops: vec![vec![Top { a: Coef::c(2.0), b: 0.0 }]],
         switches: vec![None],
         damping: vec![0.0],
+        kinked: vec![false],
         events: vec![Event {
             name: "e0".into(),
             mode: None,

@@ -139,6 +139,9 @@ pub struct GenModel {
     pub switches: Vec<Option<Switch>>,
     /// Per chain, `k` in `der(top) = ... - k top` (0: none); a damped chain is not polynomial.
     pub damping: Vec<f64>,
+    /// Per chain, whether its damping acts on one side only, `- k max(top, 0)`: a kink of the
+    /// flow (a switch where nothing jumps, docs/language.md "Expressions").
+    pub kinked: Vec<bool>,
     pub events: Vec<Event>,
     pub t_end: f64,
 }
@@ -258,7 +261,9 @@ impl GenModel {
                     s.then.text()
                 );
             }
-            if self.damping[c] != 0.0 {
+            if self.damping[c] != 0.0 && self.kinked[c] {
+                rate = format!("{rate} - {} * max({x}, 0)", num(self.damping[c]));
+            } else if self.damping[c] != 0.0 {
                 rate = format!("{rate} - {} * {x}", num(self.damping[c]));
             }
             let _ = writeln!(out, "{indent}der({x}) = {rate}");

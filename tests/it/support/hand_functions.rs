@@ -99,6 +99,7 @@ pub fn ball_info(grad_params: Vec<usize>) -> SystemInfo {
             is_stop: false,
             has_condition: true,
             implicit: false,
+            kink: false,
             guard: GuardShape::Affine,
             contact: true,
         }],

@@ -40,6 +40,7 @@ impl Ball {
             is_stop: floor_stop,
             has_condition: false,
             implicit: false,
+            kink: false,
             guard: GuardShape::Affine,
             contact: true,
         }];
@@ -52,6 +53,7 @@ impl Ball {
                 is_stop: false,
                 has_condition: true,
                 implicit: false,
+                kink: false,
                 guard: GuardShape::Affine,
                 contact: true,
             });
@@ -186,6 +188,7 @@ impl Thermostat {
             is_stop: false,
             has_condition: false,
             implicit: false,
+            kink: false,
             guard: GuardShape::Affine,
             contact: false,
         };
@@ -298,6 +301,7 @@ impl Counter {
             is_stop: false,
             has_condition: false,
             implicit: false,
+            kink: false,
             guard: GuardShape::Affine,
             contact: false,
         };
@@ -425,6 +429,7 @@ impl Oscillator {
                     is_stop: false,
                     has_condition: false,
                     implicit: false,
+                    kink: false,
                     guard: GuardShape::Affine,
                     contact: false,
                 }],
