@@ -792,8 +792,15 @@ impl Detector {
             let x_start = std::mem::take(&mut self.x_start);
             let (first, last, gt) = self.affine_grad(cx, ev, t0, &x_start);
             self.x_start = x_start;
-            // Most steps pass far from the guard: one bound of the whole step settles them.
-            if let Some((lo, hi)) = dense.affine_motion_hull(&self.affine_gx[first..last], gt * h) {
+            // Most steps pass far from the guard: one bound of the whole step settles them (not
+            // worth computing when the ends already differ in sign or one is on zero).
+            let ends_apart = self.g0[pos] * self.g1[pos] > 0.0;
+            let hull = if ends_apart {
+                dense.affine_motion_hull(&self.affine_gx[first..last], gt * h)
+            } else {
+                None
+            };
+            if let Some((lo, hi)) = hull {
                 let whole = Interval::new(lo, hi) + Interval::point(self.g0[pos]);
                 if whole.clear_of_zero(margin) {
                     self.close_samples(pos);
