@@ -187,23 +187,17 @@ fn summary(model: &sema::Model) -> String {
             let _ = writeln!(out, "    stop");
         }
     }
-    let switches: Vec<_> = model.events.iter().filter(|e| e.implicit && !e.kink).collect();
-    if !switches.is_empty() {
-        let _ = writeln!(
-            out,
-            "flow switches (where a flow jumps: located like events, the gradients jump there)"
-        );
-        for ev in switches {
-            let _ = writeln!(out, "  {}: at {} = 0", ev.name, show.show(&ev.guard));
+    // The implicit events, each kind under its heading: the switches, then the kinks.
+    let kinds = [
+        (false, "flow switches (where a flow jumps: located like events, the gradients jump there)"),
+        (true, "kinks (of `min`, `max`, `abs`: located like events, steps land on them; nothing jumps)"),
+    ];
+    for (kink, heading) in kinds {
+        let mut events = model.events.iter().filter(|e| e.implicit && e.kink == kink).peekable();
+        if events.peek().is_some() {
+            let _ = writeln!(out, "{heading}");
         }
-    }
-    let kinks: Vec<_> = model.events.iter().filter(|e| e.kink).collect();
-    if !kinks.is_empty() {
-        let _ = writeln!(
-            out,
-            "kinks (of `min`, `max`, `abs`: located like events, steps land on them; nothing jumps)"
-        );
-        for ev in kinks {
+        for ev in events {
             let _ = writeln!(out, "  {}: at {} = 0", ev.name, show.show(&ev.guard));
         }
     }
