@@ -1724,18 +1724,16 @@ impl<'a, S: HybridSystem + ?Sized, R: Recorder, St: Stepper> Integrator<'a, S, R
                 _ => None,
             };
             if self.tapes {
-                let entry = {
-                    TapeEntry::Jump {
-                        event: ev,
-                        t,
-                        mode_before,
-                        mode_after,
-                        x,
-                        velocity: self.work.jump.measured_velocity(t, mode_before, x),
-                        cascade: given.is_some(),
-                        first_of_instant: self.instant.is_none() && !cascade,
-                        on_knots: self.left_of_knot,
-                    }
+                let entry = TapeEntry::Jump {
+                    event: ev,
+                    t,
+                    mode_before,
+                    mode_after,
+                    x,
+                    velocity: self.work.jump.measured_velocity(t, mode_before, x),
+                    cascade: given.is_some(),
+                    first_of_instant: self.instant.is_none() && !cascade,
+                    on_knots: self.left_of_knot,
                 };
                 self.recorder.tape(&entry);
                 if onto_guard && self.instant.is_some() {

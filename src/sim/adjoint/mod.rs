@@ -546,22 +546,19 @@ pub(crate) fn run_by_adjoint<S: HybridSystem + ?Sized>(
     // The final states and outputs asked for are rows whatever the run does (events and a stop
     // only add rows): where they alone outweigh the parameters, `auto` is forward before any
     // recording run, so choosing costs nothing where forward mode wins anyway.
-    let finals_wanted = opts
-        .of
-        .as_ref()
-        .map_or(n + k, |o| (0..n).filter(|&i| o.state(i)).count() + (0..k).filter(|&i| o.output(i)).count());
+    // The quantities asked for (`SimOptions::of`; all by default), a backward pass each.
+    let of = opts.of.as_ref();
+    let states_wanted: Vec<bool> = (0..n).map(|i| of.is_none_or(|o| o.state(i))).collect();
+    let outputs_wanted: Vec<bool> = (0..k).map(|i| of.is_none_or(|o| o.output(i))).collect();
+    let finals_wanted = states_wanted.iter().chain(&outputs_wanted).filter(|&&w| w).count();
     if auto && !prefers_adjoint(finals_wanted, m) {
         return Ok(Err(AdjointError::Unsupported("(auto) a run with more quantities than parameters")));
     }
     let recorded = record(sys, p, opts)?;
     let result = &recorded.result;
     let at_stop = matches!(result.stopped_by, StopReason::Event { .. });
-    // The quantities asked for (`SimOptions::of`; all by default), a backward pass each.
-    let of = opts.of.as_ref();
     let names: Vec<&str> = result.events.iter().map(|e| &*e.name).collect();
     let events_wanted = of.map_or_else(|| vec![true; names.len()], |o| o.events(info, &names));
-    let states_wanted: Vec<bool> = (0..n).map(|i| of.is_none_or(|o| o.state(i))).collect();
-    let outputs_wanted: Vec<bool> = (0..k).map(|i| of.is_none_or(|o| o.output(i))).collect();
     let unit = |len: usize, i: usize| {
         let mut w = vec![0.0; len];
         w[i] = 1.0;
