@@ -214,15 +214,10 @@ fn a_reset_onto_a_guard_voids_in_the_adjoint_what_it_voids_forward() {
     assert!(r.warnings.is_empty() && r.final_state.dstate.as_ref().unwrap().iter().all(|v| v.is_finite()));
 }
 
-/// The dip of tests/it/flow_switches.rs: a parabola that dips `c` (1e-11 against atol 1e-12:
-/// a graze) below a floor whose damper `if y < 0 then k v` vanishes with the speed (benign), and
-/// `PUSH`, a force `k` switched on instead (a graze with no derivative by a and c).
-const DIP: &str = "model dip\nparam a = 1\nparam c = 1e-11\nparam k = 5\n\
-                   state y = 0.5 * a - c\nstate v = -a\nder(y) = v\n\
-                   der(v) = a - (if y < 0 then k * v else 0)\n";
-const PUSH: &str = "model push\nparam a = 1\nparam c = 1e-11\nparam k = 5\n\
-                    state y = 0.5 * a - c\nstate v = -a\nder(y) = v\n\
-                    der(v) = a - (if y < 0 then k else 0)\n";
+// The dip of tests/it/flow_switches.rs: a parabola that dips `c` (1e-11 against atol 1e-12: a
+// graze) below a floor whose damper `if y < 0 then k v` vanishes with the speed (benign), and
+// `PUSH`, a force `k` switched on instead (a graze with no derivative by a and c).
+use crate::flow_switches::{DIP, PUSH};
 
 #[test]
 fn grazing_flow_switches_are_transposed_benign_or_not() {

@@ -211,12 +211,12 @@ fn switch_at_the_instant_of_an_event_that_moved_the_state_voids_the_gradients() 
 /// `if y < 0 then k v`, switches on inside it. The flow's jump at the switch, `k v`, vanishes with
 /// the crossing speed `v`; `PUSH` is the same floor with a force `k` switched on instead, a jump
 /// that does not vanish.
-const DIP: &str = "model dip\nparam a = 1\nparam c = 1e-11\nparam k = 5\n\
-                   state y = 0.5 * a - c\nstate v = -a\nder(y) = v\n\
-                   der(v) = a - (if y < 0 then k * v else 0)\n";
-const PUSH: &str = "model push\nparam a = 1\nparam c = 1e-11\nparam k = 5\n\
-                    state y = 0.5 * a - c\nstate v = -a\nder(y) = v\n\
-                    der(v) = a - (if y < 0 then k else 0)\n";
+pub(crate) const DIP: &str = "model dip\nparam a = 1\nparam c = 1e-11\nparam k = 5\n\
+                              state y = 0.5 * a - c\nstate v = -a\nder(y) = v\n\
+                              der(v) = a - (if y < 0 then k * v else 0)\n";
+pub(crate) const PUSH: &str = "model push\nparam a = 1\nparam c = 1e-11\nparam k = 5\n\
+                               state y = 0.5 * a - c\nstate v = -a\nder(y) = v\n\
+                               der(v) = a - (if y < 0 then k else 0)\n";
 
 /// `(t2 - 1)^2` for the dip model, `t2` the exit from the floor, exactly: the entry is at
 /// `1 - r`, `r = sqrt(2 c / a)`, with `v = -a r`; inside, `v' = a - k v` gives
